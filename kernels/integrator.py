@@ -1,0 +1,546 @@
+"""Batched implicit adaptive time integration of the pad model (one Warp thread per member).
+
+Scheme (docs/model.md, "Time integration"):
+- TR-BDF2 written as a stiffly accurate ESDIRK (Hosea & Shampine 1996): L-stable, order 2, with
+  an embedded order-3 solution for the local error estimate; the explicit first stage reuses
+  f(y_n) from the previous step (FSAL). Each member has its own step size.
+- A backward-Euler step of ``initial_step`` starts the run and restarts it after the sudden disc
+  stop (a jump of the disc velocity makes the FSAL stage and the algebraic plate state invalid).
+- Steps land exactly on the protocol's breakpoints (ramp ends, disc start, stop, end).
+- Each implicit stage is solved by Newton's method on the unknowns (V_0..V_{N-1}, delta0, a):
+  the pad velocity at every node and the plate's compression and tilt. At a given V the stage
+  equations of the contact age and of the elastic friction stress are linear and are solved in
+  closed form per node (model_terms.interface_friction), so the Newton matrix is tridiagonal
+  in V, bordered by two columns (delta0, a) and two dense rows (force and moment balance of the
+  plate). It is solved by the Thomas algorithm with three right-hand sides and a 2x2 Schur
+  complement: O(N) work and memory per member.
+- Layout: every field array is (component, node, member) with the member index fastest, so that
+  neighbouring GPU threads read neighbouring addresses.
+"""
+
+
+import math
+
+import warp as wp
+
+from .model_terms import disc_velocity_at, make_model_terms, next_breakpoint, normal_force_at
+from .params import (
+    STATUS_MAX_STEPS,
+    STATUS_NON_FINITE,
+    STATUS_STEP_UNDERFLOW,
+    IntegratorState,
+    MemberParams,
+    SolverSettings,
+)
+from .reductions import record_friction_point
+
+# state components (first index of the state array and second index of the stage-derivative array)
+C_U, C_V, C_TAU, C_PHI = 0, 1, 2, 3
+N_COMPONENTS = 4
+# work slots: stage constants z (same order as the components), Newton iterate, Thomas and border rows
+W_ZU, W_ZV, W_ZT, W_ZP, W_V, W_CP, W_R0, W_R1, W_R2, W_C1, W_C2, W_DIAG = range(12)
+N_WORK = 12
+N_STAGE_SLOTS = 3
+
+# TR-BDF2 as an ESDIRK: c = (0, 2g, 1); A = [[0,0,0],[g,g,0],[w,w,g]]; b = (w, w, g)
+GAMMA = 1.0 - math.sqrt(2.0) / 2.0
+W_TRB = math.sqrt(2.0) / 4.0
+C2 = 2.0 * GAMMA
+B_HAT = ((1.0 - W_TRB) / 3.0, (3.0 * W_TRB + 1.0) / 3.0, GAMMA / 3.0)
+ERR1, ERR2, ERR3 = W_TRB - B_HAT[0], W_TRB - B_HAT[1], GAMMA - B_HAT[2]
+EXTRAPOLATE_STAGE3 = 1.0 / C2  # linear extrapolation of V from t_n and t_n + c2*h to t_n + h
+ORDER_ESTIMATE = 3.0  # the local error of the order-2 solution is O(h^3)
+
+_CACHE: dict = {}
+
+
+def get_integrator(dtype: str, model) -> dict:
+    """Compiled kernels for one working precision and one set of model switches (cached)."""
+    key = (dtype, model)
+    if key not in _CACHE:
+        _CACHE[key] = _make_integrator(dtype, model)
+    return _CACHE[key]
+
+
+def _make_integrator(dtype: str, model):
+    ft = wp.float64 if dtype == "float64" else wp.float32
+    terms = make_model_terms(ft, model)
+    Coeffs = terms["Coeffs"]
+    make_coeffs = terms["make_coeffs"]
+    node_weight = terms["node_weight"]
+    node_moment_weight = terms["node_moment_weight"]
+    normal_stress = terms["normal_stress"]
+    elastic_force = terms["elastic_force"]
+    interface_friction = terms["interface_friction"]
+    inertia = bool(model.inertia)
+    tilt_on = bool(model.tilt)
+
+    array3 = wp.array3d(dtype=ft)
+    array4 = wp.array4d(dtype=ft)
+
+    @wp.func
+    def is_finite(x: ft):
+        return wp.isfinite(x)
+
+    @wp.func
+    def prepare_stage(
+        m: int, n: int, state: array3, K: array4, work: array3,
+        h: ft, a1: ft, s1: int, a2: ft, s2: int, n_terms: int, extrapolate: ft,
+    ):
+        """z = y_n + h*(a1*K[s1] + a2*K[s2]) (first n_terms terms) and the Newton start for V:
+        v_n + extrapolate*(V(stage s2) - v_n)."""
+        for i in range(n):
+            for comp in range(N_COMPONENTS):
+                z = state[comp, i, m]
+                if n_terms >= 1:
+                    z += h * a1 * K[s1, comp, i, m]
+                if n_terms >= 2:
+                    z += h * a2 * K[s2, comp, i, m]
+                work[comp, i, m] = z
+            v = state[C_V, i, m]
+            guess = v
+            if n_terms >= 2:
+                guess = v + extrapolate * (K[s2, C_U, i, m] - v)
+            work[W_V, i, m] = guess
+
+    @wp.func
+    def newton_solve(
+        c: Coeffs, p: MemberParams, s: SolverSettings, m: int, n: int, work: array3,
+        g: ft, t_stage: wp.float64, t_step: wp.float64, delta0_in: ft, tilt_in: ft,
+    ):
+        """Solve one implicit stage. Returns (converged, delta0, tilt, iterations, non_finite)."""
+        v_disc = ft(disc_velocity_at(p, t_stage, t_step))
+        force = normal_force_at(p, t_stage)
+        force_per_depth = ft(force / p.depth)
+        moment_per_depth = ft(force * p.eccentricity * wp.float64(0.5) * p.length / p.depth)
+        rtol = ft(s.rtol)
+        delta0 = delta0_in
+        tilt = tilt_in
+        converged = int(0)
+        non_finite = int(0)
+        iters = int(0)
+        prev_norm = ft(1.0e30)
+        for it in range(s.newton_max_iter):
+            iters = it + 1
+            # ---- pass 1: residuals, Jacobian rows, forward elimination (3 right-hand sides) ----
+            e1 = -force_per_depth
+            e2 = -moment_per_depth
+            d11 = ft(0.0)
+            d12 = ft(0.0)
+            d21 = ft(0.0)
+            d22 = ft(0.0)
+            c1_prev = ft(0.0)
+            c1_cur = ft(0.0)
+            c2_prev = ft(0.0)
+            c2_cur = ft(0.0)
+            cp_prev = ft(0.0)
+            r0_prev = ft(0.0)
+            r1_prev = ft(0.0)
+            r2_prev = ft(0.0)
+            u_l = ft(0.0)
+            u_c = work[W_ZU, 0, m] + g * work[W_V, 0, m]
+            for i in range(n):
+                u_r = ft(0.0)
+                if i < n - 1:
+                    u_r = work[W_ZU, i + 1, m] + g * work[W_V, i + 1, m]
+                vel = work[W_V, i, m]
+                sigma, ds_ul, ds_uc, ds_ur, ds_d0, ds_a = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
+                tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact = interface_friction(
+                    c, sigma, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m], g
+                )
+                f_el, df_ul, df_uc, df_ur, df_d0, df_a = elastic_force(c, i, n, u_l, u_c, u_r, delta0, tilt)
+                residual = -(f_el + tau_f - c.damping * vel)
+                jac_c = -g * (df_uc + dtf_dsig * ds_uc) + c.kif * dtf_ds + c.damping
+                if wp.static(inertia):
+                    residual += c.rhoH * (vel - work[W_ZV, i, m]) / g
+                    jac_c += c.rhoH / g
+                    work[W_DIAG, i, m] = jac_c
+                jac_l = -g * (df_ul + dtf_dsig * ds_ul)
+                jac_r = -g * (df_ur + dtf_dsig * ds_ur)
+                col_d0 = -(df_d0 + dtf_dsig * ds_d0)
+                col_a = -(df_a + dtf_dsig * ds_a)
+                # plate balance rows: force (1) and moment (2), per unit depth
+                wgt = node_weight(c, i, n)
+                wmom = node_moment_weight(c, i, n)
+                e1 += wgt * contact * sigma
+                e2 += wmom * contact * sigma + c.h_arm * wgt * tau_f
+                d11 += wgt * contact * ds_d0
+                d12 += wgt * contact * ds_a
+                d21 += (wmom * contact + c.h_arm * wgt * dtf_dsig) * ds_d0
+                d22 += (wmom * contact + c.h_arm * wgt * dtf_dsig) * ds_a
+                q1 = wgt * contact * g
+                q2 = (wmom * contact + c.h_arm * wgt * dtf_dsig) * g
+                c1_prev += q1 * ds_ul
+                c1_cur += q1 * ds_uc
+                c1_next = q1 * ds_ur
+                c2_prev += q2 * ds_ul
+                c2_cur += q2 * ds_uc - c.h_arm * wgt * c.kif * dtf_ds
+                c2_next = q2 * ds_ur
+                if i > 0:
+                    work[W_C1, i - 1, m] = c1_prev
+                    work[W_C2, i - 1, m] = c2_prev
+                c1_prev = c1_cur
+                c1_cur = c1_next
+                c2_prev = c2_cur
+                c2_cur = c2_next
+                # Thomas forward sweep
+                den = jac_c - jac_l * cp_prev
+                cp = jac_r / den
+                r0 = (-residual - jac_l * r0_prev) / den
+                r1 = (col_d0 - jac_l * r1_prev) / den
+                work[W_CP, i, m] = cp
+                work[W_R0, i, m] = r0
+                work[W_R1, i, m] = r1
+                if wp.static(tilt_on):
+                    r2 = (col_a - jac_l * r2_prev) / den
+                    work[W_R2, i, m] = r2
+                    r2_prev = r2
+                cp_prev = cp
+                r0_prev = r0
+                r1_prev = r1
+                u_l = u_c
+                u_c = u_r
+            work[W_C1, n - 1, m] = c1_prev
+            work[W_C2, n - 1, m] = c2_prev
+            # ---- pass 2: back substitution, and the border products C*y ----
+            y0_next = ft(0.0)
+            y1_next = ft(0.0)
+            y2_next = ft(0.0)
+            s10 = ft(0.0)
+            s11 = ft(0.0)
+            s12 = ft(0.0)
+            s20 = ft(0.0)
+            s21 = ft(0.0)
+            s22 = ft(0.0)
+            for k in range(n):
+                i = n - 1 - k
+                cp = work[W_CP, i, m]
+                y0 = work[W_R0, i, m] - cp * y0_next
+                y1 = work[W_R1, i, m] - cp * y1_next
+                work[W_R0, i, m] = y0
+                work[W_R1, i, m] = y1
+                c1 = work[W_C1, i, m]
+                s10 += c1 * y0
+                s11 += c1 * y1
+                y0_next = y0
+                y1_next = y1
+                if wp.static(tilt_on):
+                    y2 = work[W_R2, i, m] - cp * y2_next
+                    work[W_R2, i, m] = y2
+                    c2 = work[W_C2, i, m]
+                    s12 += c1 * y2
+                    s20 += c2 * y0
+                    s21 += c2 * y1
+                    s22 += c2 * y2
+                    y2_next = y2
+            # ---- Schur complement for (d delta0, d tilt) ----
+            d_delta0 = ft(0.0)
+            d_tilt = ft(0.0)
+            if wp.static(tilt_on):
+                a11 = d11 - s11
+                a12 = d12 - s12
+                a21 = d21 - s21
+                a22 = d22 - s22
+                b1 = -e1 - s10
+                b2 = -e2 - s20
+                det = a11 * a22 - a12 * a21
+                d_delta0 = (b1 * a22 - a12 * b2) / det
+                d_tilt = (a11 * b2 - a21 * b1) / det
+            else:
+                d_delta0 = (-e1 - s10) / (d11 - s11)
+            # ---- pass 3: update and error-weighted norm of the update ----
+            norm = ft(0.0)
+            for i in range(n):
+                dv = work[W_R0, i, m] - work[W_R1, i, m] * d_delta0
+                if wp.static(tilt_on):
+                    dv -= work[W_R2, i, m] * d_tilt
+                vel = work[W_V, i, m] + dv
+                work[W_V, i, m] = vel
+                u = work[W_ZU, i, m] + g * vel
+                norm = wp.max(norm, wp.abs(dv) / (rtol * (c.v_scale + wp.abs(vel))))
+                norm = wp.max(norm, g * wp.abs(dv) / (rtol * (c.u_scale + wp.abs(u))))
+            delta0 = delta0 + d_delta0
+            tilt = tilt + d_tilt
+            norm = wp.max(norm, wp.abs(d_delta0) / (rtol * (c.delta_scale + wp.abs(delta0))))
+            norm = wp.max(norm, wp.abs(d_tilt) / (rtol * (c.tilt_scale + wp.abs(tilt))))
+            if not is_finite(norm):
+                non_finite = 1
+                break
+            if norm <= ft(s.newton_tol):
+                converged = 1
+                break
+            # stagnation inside the error tolerance: the update has reached the round-off level of
+            # the working precision (float32), further iterations cannot improve it
+            if it > 0 and norm <= ft(1.0) and norm > ft(0.5) * prev_norm:
+                converged = 1
+                break
+            prev_norm = norm
+        return converged, delta0, tilt, iters, non_finite
+
+    @wp.func
+    def finalize_stage(
+        c: Coeffs, p: MemberParams, m: int, n: int, work: array3, K: array4, slot: int,
+        g: ft, t_stage: wp.float64, t_step: wp.float64, delta0: ft, tilt: ft,
+    ):
+        """Stage derivatives K[slot] = f(Y) of the converged stage; returns
+        (int tau_f dx, int sigma_n^+ dx, min sigma_n) per unit depth."""
+        v_disc = ft(disc_velocity_at(p, t_stage, t_step))
+        sum_tau = wp.float64(0.0)
+        sum_sigma = wp.float64(0.0)
+        min_sigma = wp.float64(1.0e300)
+        u_l = ft(0.0)
+        u_c = work[W_ZU, 0, m] + g * work[W_V, 0, m]
+        for i in range(n):
+            u_r = ft(0.0)
+            if i < n - 1:
+                u_r = work[W_ZU, i + 1, m] + g * work[W_V, i + 1, m]
+            vel = work[W_V, i, m]
+            sigma, ds_ul, ds_uc, ds_ur, ds_d0, ds_a = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
+            tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact = interface_friction(
+                c, sigma, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m], g
+            )
+            K[slot, C_U, i, m] = vel
+            if wp.static(inertia):
+                K[slot, C_V, i, m] = (vel - work[W_ZV, i, m]) / g
+            else:
+                K[slot, C_V, i, m] = ft(0.0)
+            K[slot, C_TAU, i, m] = rate_tau
+            K[slot, C_PHI, i, m] = rate_phi
+            wgt = wp.float64(node_weight(c, i, n))
+            sum_tau += wgt * wp.float64(tau_f)
+            sum_sigma += wgt * wp.float64(contact * sigma)
+            min_sigma = wp.min(min_sigma, wp.float64(sigma))
+            u_l = u_c
+            u_c = u_r
+        return sum_tau, sum_sigma, min_sigma
+
+    @wp.func
+    def error_norm(
+        c: Coeffs, s: SolverSettings, m: int, n: int, state: array3, K: array4, work: array3,
+        s1: int, s2: int, s3: int, h: ft,
+    ):
+        """Max over nodes and differential components of |h*sum (b - b_hat) K| / (rtol*(scale + |y|)).
+
+        The velocity's estimate is filtered by the diagonal of (I - gamma*h*J)^-1 (Hairer & Wanner,
+        IV.8; Shampine): the pad velocity is stiff and overdamped, and its raw estimate does not
+        vanish for modes that the L-stable scheme damps correctly."""
+        g = ft(GAMMA) * h
+        rtol = ft(s.rtol)
+        err = ft(0.0)
+        for i in range(n):
+            for comp in range(N_COMPONENTS):
+                use = True
+                scale = c.u_scale
+                if comp == C_V:
+                    scale = c.v_scale
+                    use = wp.static(inertia)
+                if comp == C_TAU:
+                    scale = c.tau_scale
+                if comp == C_PHI:
+                    scale = c.phi_scale
+                if use:
+                    k1 = K[s1, comp, i, m]
+                    k2 = K[s2, comp, i, m]
+                    k3 = K[s3, comp, i, m]
+                    y = state[comp, i, m]
+                    y_new = y + h * (ft(W_TRB) * (k1 + k2) + ft(GAMMA) * k3)
+                    e = h * (ft(ERR1) * k1 + ft(ERR2) * k2 + ft(ERR3) * k3)
+                    if comp == C_V:
+                        e = e * c.rhoH / (g * work[W_DIAG, i, m])
+                    wgt = rtol * (scale + wp.max(wp.abs(y), wp.abs(y_new)))
+                    err = wp.max(err, wp.abs(e) / wgt)
+                    if not is_finite(e):
+                        err = ft(1.0e30)
+        return err
+
+    @wp.func
+    def advance_state(m: int, n: int, state: array3, K: array4, s1: int, s2: int, s3: int, h: ft, be: int):
+        """y_{n+1} = y_n + h * sum_j b_j K_j (backward Euler when be = 1: y_n + h*K[s3]);
+        the velocity is the last stage's (stiffly accurate, and algebraic without inertia)."""
+        for i in range(n):
+            for comp in range(N_COMPONENTS):
+                if comp == C_V:
+                    state[comp, i, m] = K[s3, C_U, i, m]
+                else:
+                    k3 = K[s3, comp, i, m]
+                    if be == 1:
+                        state[comp, i, m] = state[comp, i, m] + h * k3
+                    else:
+                        k = ft(W_TRB) * (K[s1, comp, i, m] + K[s2, comp, i, m]) + ft(GAMMA) * k3
+                        state[comp, i, m] = state[comp, i, m] + h * k
+
+    @wp.func
+    def accept_point(
+        st: IntegratorState, p: MemberParams, t_new: wp.float64, sum_tau: wp.float64,
+        sum_sigma: wp.float64, min_sigma: wp.float64,
+    ):
+        st.t = t_new
+        st.steps_accepted = st.steps_accepted + 1
+        sign_v = wp.float64(1.0)
+        if p.disc_velocity < wp.float64(0.0):
+            sign_v = wp.float64(-1.0)
+        mu = wp.float64(0.0)
+        if sum_sigma > wp.float64(0.0):
+            mu = sign_v * sum_tau / sum_sigma
+        st = record_friction_point(st, t_new, mu)
+        if min_sigma < wp.float64(0.0) and normal_force_at(p, t_new) > wp.float64(0.0):
+            st.lift_off = 1
+        if t_new == p.stop_time:
+            st.restart = 1
+        return st
+
+    @wp.func
+    def reject(st: IntegratorState, s: SolverSettings, h_next: wp.float64, newton_failed: int, non_finite: int):
+        st.steps_rejected = st.steps_rejected + 1
+        st.newton_failures = st.newton_failures + newton_failed
+        st.last_failure_non_finite = non_finite
+        st.h = h_next
+        if h_next < s.min_step:
+            st.done = 1
+            if non_finite == 1:
+                st.status = STATUS_NON_FINITE
+            else:
+                st.status = STATUS_STEP_UNDERFLOW
+        return st
+
+    @wp.kernel(module="unique")
+    def integrate(
+        params: wp.array(dtype=MemberParams),
+        settings: SolverSettings,
+        states: wp.array(dtype=IntegratorState),
+        state: array3,
+        K: array4,
+        work: array3,
+        launch_steps: int,
+    ):
+        """Advance each member by at most ``launch_steps`` attempted steps (or to its end_time)."""
+        m = wp.tid()
+        st = states[m]
+        if st.done != 0:
+            return
+        p = params[m]
+        n = state.shape[1]
+        c = make_coeffs(p, n)
+        delta0 = ft(st.delta0)
+        tilt = ft(st.tilt)
+        for _attempt in range(launch_steps):
+            t = st.t
+            if t >= p.end_time:
+                st.done = 1
+                break
+            if st.steps_accepted + st.steps_rejected >= settings.max_steps:
+                st.status = STATUS_MAX_STEPS
+                st.done = 1
+                break
+            bp = next_breakpoint(p, t)
+            h = wp.min(st.h, settings.max_step)
+            clipped = int(0)
+            if h >= bp - t:
+                h = bp - t
+                clipped = 1
+            t_new = t + h
+            if clipped == 1:
+                t_new = bp
+            s1 = st.fsal
+            s2 = (s1 + 1) % 3
+            s3 = (s1 + 2) % 3
+            if st.restart != 0:
+                # backward Euler (re)start: one implicit stage, accepted without error estimate
+                g = ft(h)
+                prepare_stage(m, n, state, K, work, ft(h), ft(0.0), s1, ft(0.0), s1, 0, ft(0.0))
+                ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, g, t_new, t, delta0, tilt)
+                st.newton_iterations = st.newton_iterations + iters
+                if ok == 1:
+                    sum_tau, sum_sigma, min_sigma = finalize_stage(c, p, m, n, work, K, s3, g, t_new, t, d0, a)
+                    advance_state(m, n, state, K, s1, s2, s3, ft(h), 1)
+                    delta0 = d0
+                    tilt = a
+                    st.restart = 0
+                    st.fsal = s3
+                    st.h = settings.initial_step
+                    st.npts = 0  # mu(t) may jump here: no parabola across the discontinuity
+                    st = accept_point(st, p, t_new, sum_tau, sum_sigma, min_sigma)
+                else:
+                    st = reject(st, settings, h * wp.float64(0.25), 1, bad)
+                    if st.done != 0:
+                        break
+                continue
+            g = ft(wp.float64(GAMMA) * h)
+            # stage 2 (trapezoidal stage, at t + 2*gamma*h)
+            prepare_stage(m, n, state, K, work, ft(h), ft(GAMMA), s1, ft(0.0), s1, 1, ft(0.0))
+            ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, g, t + wp.float64(C2) * h, t, delta0, tilt)
+            st.newton_iterations = st.newton_iterations + iters
+            sum_tau = wp.float64(0.0)
+            sum_sigma = wp.float64(0.0)
+            min_sigma = wp.float64(0.0)
+            if ok == 1:
+                finalize_stage(c, p, m, n, work, K, s2, g, t + wp.float64(C2) * h, t, d0, a)
+                # stage 3 (BDF2 stage, at t + h)
+                prepare_stage(m, n, state, K, work, ft(h), ft(W_TRB), s1, ft(W_TRB), s2, 2, ft(EXTRAPOLATE_STAGE3))
+                ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, g, t_new, t, d0, a)
+                st.newton_iterations = st.newton_iterations + iters
+                if ok == 1:
+                    sum_tau, sum_sigma, min_sigma = finalize_stage(c, p, m, n, work, K, s3, g, t_new, t, d0, a)
+            if ok != 1:
+                st = reject(st, settings, h * wp.float64(0.25), 1, bad)
+                if st.done != 0:
+                    break
+                continue
+            err = wp.float64(error_norm(c, settings, m, n, state, K, work, s1, s2, s3, ft(h)))
+            factor = wp.float64(5.0)
+            if err > wp.float64(0.0):
+                factor = wp.min(wp.float64(5.0), wp.max(wp.float64(0.2), wp.float64(0.9) * wp.pow(err, wp.float64(-1.0 / ORDER_ESTIMATE))))
+            if err <= wp.float64(1.0):
+                advance_state(m, n, state, K, s1, s2, s3, ft(h), 0)
+                delta0 = d0
+                tilt = a
+                st.fsal = s3
+                h_next = h * factor
+                if clipped == 1:
+                    h_next = wp.max(h_next, st.h)
+                st.h = h_next
+                st = accept_point(st, p, t_new, sum_tau, sum_sigma, min_sigma)
+                if st.restart != 0:
+                    st.h = settings.initial_step
+            else:
+                st = reject(st, settings, h * wp.min(factor, wp.float64(0.9)), 0, 0)
+                if st.done != 0:
+                    break
+        st.delta0 = wp.float64(delta0)
+        st.tilt = wp.float64(tilt)
+        states[m] = st
+
+    @wp.kernel(module="unique")
+    def evaluate_fields(
+        params: wp.array(dtype=MemberParams),
+        states: wp.array(dtype=IntegratorState),
+        state: array3,
+        normal_stress_out: wp.array2d(dtype=ft),
+        friction_stress_out: wp.array2d(dtype=ft),
+    ):
+        """Interface normal stress (Pa, contact part max(sigma_n, 0)) and friction stress (Pa) of
+        the current state of each member, nodes x members."""
+        m = wp.tid()
+        st = states[m]
+        p = params[m]
+        n = state.shape[1]
+        c = make_coeffs(p, n)
+        delta0 = ft(st.delta0)
+        tilt = ft(st.tilt)
+        v_disc = ft(disc_velocity_at(p, st.t, st.t))
+        u_l = ft(0.0)
+        u_c = state[C_U, 0, m]
+        for i in range(n):
+            u_r = ft(0.0)
+            if i < n - 1:
+                u_r = state[C_U, i + 1, m]
+            sigma, ds_ul, ds_uc, ds_ur, ds_d0, ds_a = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
+            tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact = interface_friction(
+                c, sigma, state[C_V, i, m], v_disc, state[C_TAU, i, m], state[C_PHI, i, m], ft(0.0)
+            )
+            normal_stress_out[i, m] = contact * sigma
+            friction_stress_out[i, m] = tau_f
+            u_l = u_c
+            u_c = u_r
+
+    return dict(integrate=integrate, evaluate_fields=evaluate_fields, ft=ft, Coeffs=Coeffs)

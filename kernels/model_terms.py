@@ -1,0 +1,294 @@
+"""Model terms of SPEC sections 3-6 as Warp functions, with the exact partial derivatives the
+implicit integrator needs.
+
+Everything here is a pure function of its arguments. ``make_model_terms(ft, model)`` builds the
+functions for one floating-point type ``ft`` (wp.float32 or wp.float64) and one set of model
+switches; switched-off terms are removed at compile time (``wp.static``).
+
+Discretisation (docs/model.md, "Space"): nodes x_i = -L/2 + i*dx, i = 0..N-1, dx = L/(N-1), with
+control volumes of width w_i = dx (interior) and dx/2 (the two edge nodes). The axial force per
+unit depth N(x) = M*H*u_x - lambda*delta(x) is evaluated on the control-volume faces and is zero at
+the free edges, so the elastic force sums to zero over the pad exactly.
+"""
+
+
+import warp as wp
+
+from .params import MemberParams
+
+# ------------------------------------------------------------------------------------------------
+# Load protocol (float64: times of order 20 s need more than float32's 1e-6 s resolution).
+# ------------------------------------------------------------------------------------------------
+
+
+@wp.func
+def normal_force_at(p: MemberParams, t: wp.float64):
+    """Normal force F(t) in N: linear ramp 0 -> normal_force over force_ramp_time, then constant."""
+    if t >= p.force_ramp_time:
+        return p.normal_force
+    if t <= wp.float64(0.0):
+        return wp.float64(0.0)
+    return p.normal_force * t / p.force_ramp_time
+
+
+@wp.func
+def disc_velocity_at(p: MemberParams, t: wp.float64, step_start: wp.float64):
+    """Disc velocity v_d(t) in m/s. ``step_start`` is the start of the current step: the sudden stop
+    applies to steps that start at or after stop_time, so a step that ends on stop_time sees the
+    left limit (steps are clipped to land on stop_time exactly)."""
+    if step_start >= p.stop_time:
+        return wp.float64(0.0)
+    if t <= p.rest_until:
+        return wp.float64(0.0)
+    if t >= p.rest_until + p.velocity_ramp_time:
+        return p.disc_velocity
+    return p.disc_velocity * (t - p.rest_until) / p.velocity_ramp_time
+
+
+@wp.func
+def next_breakpoint(p: MemberParams, t: wp.float64):
+    """First protocol time after t where the load is not smooth (ramp ends, disc start, stop, end)."""
+    bp = p.end_time
+    if p.force_ramp_time > t and p.force_ramp_time < bp:
+        bp = p.force_ramp_time
+    if p.rest_until > t and p.rest_until < bp:
+        bp = p.rest_until
+    t_ramp_end = p.rest_until + p.velocity_ramp_time
+    if t_ramp_end > t and t_ramp_end < bp:
+        bp = t_ramp_end
+    if p.stop_time > t and p.stop_time < bp:
+        bp = p.stop_time
+    return bp
+
+
+def make_model_terms(ft, model):
+    """Warp functions of the model for scalar type ``ft`` and switches ``model`` (a Model)."""
+    poisson = bool(model.poisson_coupling)
+    viscous = bool(model.viscous_friction)
+    tilt_on = bool(model.tilt)
+
+    @wp.struct
+    class Coeffs:
+        """Per-member coefficients in the working precision (SI units)."""
+
+        MH: ft  # P-wave modulus times height, N/m
+        M_over_H: ft  # Pa/m
+        lam: ft  # Lame lambda, Pa
+        G: ft  # Pa
+        two_G_over_H: ft  # Pa/m
+        rhoH: ft  # kg/m^2
+        damping: ft  # Pa s/m
+        kif: ft  # interface velocity factor
+        Kh: ft  # interface stiffness mu0/h, Pa/m
+        inv_hardness: ft  # 1/Pa
+        eta_vstar: ft  # eta * v_star, Pa
+        vstar: ft  # m/s
+        b: ft
+        phi0: ft  # s
+        inv_D: ft  # 1/m
+        dx: ft  # m
+        inv_dx: ft  # 1/m
+        L: ft  # m
+        h_arm: ft  # m
+        # natural scales for error weights
+        tau_scale: ft
+        u_scale: ft
+        v_scale: ft
+        phi_scale: ft
+        delta_scale: ft
+        tilt_scale: ft
+
+    @wp.func
+    def make_coeffs(p: MemberParams, n: int):
+        c = Coeffs()
+        nu = p.poisson_ratio
+        M = wp.float64(2.0) * p.shear_modulus * (wp.float64(1.0) - nu) / (wp.float64(1.0) - wp.float64(2.0) * nu)
+        lam = wp.float64(2.0) * p.shear_modulus * nu / (wp.float64(1.0) - wp.float64(2.0) * nu)
+        c.MH = ft(M * p.height)
+        c.M_over_H = ft(M / p.height)
+        c.lam = ft(lam)
+        c.G = ft(p.shear_modulus)
+        c.two_G_over_H = ft(wp.float64(2.0) * p.shear_modulus / p.height)
+        c.rhoH = ft(p.density * p.height)
+        c.damping = ft(p.damping)
+        c.kif = ft(p.interface_velocity_factor)
+        c.Kh = ft(p.interface_stiffness)
+        c.inv_hardness = ft(wp.float64(1.0) / p.hardness)
+        c.eta_vstar = ft(p.viscous_coefficient * p.reference_velocity)
+        c.vstar = ft(p.reference_velocity)
+        c.b = ft(p.aging_coefficient)
+        c.phi0 = ft(p.aging_time)
+        c.inv_D = ft(wp.float64(1.0) / p.memory_length)
+        dx = p.length / wp.float64(n - 1)
+        c.dx = ft(dx)
+        c.inv_dx = ft(wp.float64(1.0) / dx)
+        c.L = ft(p.length)
+        c.h_arm = ft(p.torque_arm)
+        sigma0 = p.normal_force / (p.depth * p.length)
+        u_scale = sigma0 * p.height / (wp.float64(2.0) * p.shear_modulus)
+        c.tau_scale = ft(sigma0)
+        c.u_scale = ft(u_scale)
+        c.v_scale = ft(u_scale * wp.max(wp.abs(p.disc_velocity), p.reference_velocity) / p.memory_length)
+        c.phi_scale = ft(p.aging_time)
+        c.delta_scale = ft(sigma0 / M * p.height)
+        c.tilt_scale = ft(sigma0 / M * p.height / p.length)
+        return c
+
+    @wp.func
+    def node_x(c: Coeffs, i: int):
+        """Position of node i, m."""
+        return ft(-0.5) * c.L + ft(float(i)) * c.dx
+
+    @wp.func
+    def node_weight(c: Coeffs, i: int, n: int):
+        """Control-volume width w_i (trapezoid weight for integrals over x), m."""
+        if i == 0 or i == n - 1:
+            return ft(0.5) * c.dx
+        return c.dx
+
+    @wp.func
+    def node_moment_weight(c: Coeffs, i: int, n: int):
+        """Weight W1_i with sum_i W1_i f_i = integral x f(x) dx exactly for piecewise-linear f, m^2."""
+        x = node_x(c, i)
+        if i == 0:
+            return c.dx * (ft(0.5) * x + c.dx / ft(6.0))
+        if i == n - 1:
+            return c.dx * (ft(0.5) * x - c.dx / ft(6.0))
+        return x * c.dx
+
+    @wp.func
+    def normal_stress(c: Coeffs, i: int, n: int, u_l: ft, u_c: ft, u_r: ft, delta0: ft, tilt: ft):
+        """Interface normal stress sigma_n at node i (Pa, compressive > 0) and its derivatives
+        with respect to u_{i-1}, u_i, u_{i+1}, delta0 and the tilt a.
+
+        sigma_n = M*delta(x_i)/H - lambda*k_if*eps_i, with eps_i the mean of the axial strains on
+        the two faces of the control volume; on a free edge the face strain is
+        lambda*delta(edge)/(M*H) (zero axial force)."""
+        x = node_x(c, i)
+        sigma = c.M_over_H * (delta0 - tilt * x)
+        d_d0 = c.M_over_H
+        d_a = -c.M_over_H * x
+        d_ul = ft(0.0)
+        d_uc = ft(0.0)
+        d_ur = ft(0.0)
+        if wp.static(poisson):
+            # eps = k_if * (e_left + e_right) / 2, sigma -= lam * eps
+            f = ft(0.5) * c.kif * c.lam
+            e_l = ft(0.0)
+            e_r = ft(0.0)
+            if i == 0:
+                x_edge = ft(-0.5) * c.L
+                e_l = c.lam * (delta0 - tilt * x_edge) / c.MH
+                d_d0 -= f * c.lam / c.MH
+                d_a += f * c.lam * x_edge / c.MH
+            else:
+                e_l = (u_c - u_l) * c.inv_dx
+                d_ul += f * c.inv_dx
+                d_uc -= f * c.inv_dx
+            if i == n - 1:
+                x_edge = ft(0.5) * c.L
+                e_r = c.lam * (delta0 - tilt * x_edge) / c.MH
+                d_d0 -= f * c.lam / c.MH
+                d_a += f * c.lam * x_edge / c.MH
+            else:
+                e_r = (u_r - u_c) * c.inv_dx
+                d_uc += f * c.inv_dx
+                d_ur -= f * c.inv_dx
+            sigma -= f * (e_l + e_r)
+        return sigma, d_ul, d_uc, d_ur, d_d0, d_a
+
+    @wp.func
+    def elastic_force(c: Coeffs, i: int, n: int, u_l: ft, u_c: ft, u_r: ft, delta0: ft, tilt: ft):
+        """Elastic force density on node i (Pa): dN/dx - (2G/H)*u + G*a, and its derivatives with
+        respect to u_{i-1}, u_i, u_{i+1}, delta0 and a."""
+        k = c.MH * c.inv_dx
+        div = ft(0.0)
+        d_ul = ft(0.0)
+        d_uc = ft(0.0)
+        d_ur = ft(0.0)
+        d_d0 = ft(0.0)
+        d_a = c.G
+        if i > 0 and i < n - 1:
+            # interior: (N_{i+1/2} - N_{i-1/2})/dx, the lambda*delta terms give exactly lambda*a
+            div = k * (u_r - ft(2.0) * u_c + u_l) * c.inv_dx + c.lam * tilt
+            d_ul = k * c.inv_dx
+            d_ur = k * c.inv_dx
+            d_uc = ft(-2.0) * k * c.inv_dx
+            d_a += c.lam
+        else:
+            w = ft(0.5) * c.dx
+            if i == 0:
+                x_face = node_x(c, 0) + ft(0.5) * c.dx
+                flux = k * (u_r - u_c) - c.lam * (delta0 - tilt * x_face)
+                div = flux / w
+                d_ur = k / w
+                d_uc = -k / w
+                d_d0 = -c.lam / w
+                d_a += c.lam * x_face / w
+            else:
+                x_face = node_x(c, n - 1) - ft(0.5) * c.dx
+                flux = k * (u_c - u_l) - c.lam * (delta0 - tilt * x_face)
+                div = -flux / w
+                d_ul = k / w
+                d_uc = -k / w
+                d_d0 = c.lam / w
+                d_a -= c.lam * x_face / w
+        force = div - c.two_G_over_H * u_c + c.G * tilt
+        d_uc -= c.two_G_over_H
+        if wp.static(not tilt_on):
+            d_a = ft(0.0)
+        return force, d_ul, d_uc, d_ur, d_d0, d_a
+
+    @wp.func
+    def interface_friction(c: Coeffs, sigma: ft, velocity: ft, v_disc: ft, z_tau: ft, z_phi: ft, g: ft):
+        """Friction law (SPEC section 5) at one node, solved implicitly over a stage of coefficient g.
+
+        The stage equations  phi = z_phi + g*dphi/dt  and  tau_el = z_tau + g*dtau_el/dt  are linear
+        in phi and tau_el for a given slip rate, so they are solved in closed form here; with g = 0
+        this evaluates the law at the state (phi = z_phi, tau_el = z_tau).
+
+        Returns tau_f (Pa), d tau_f/d sigma_n, d tau_f/d s (total, through phi and tau_el),
+        tau_el (Pa), phi (s), d tau_el/dt (Pa/s), d phi/dt (1), contact indicator (1 or 0).
+        """
+        s = v_disc - c.kif * velocity
+        a_s = wp.abs(s)
+        sg = wp.sign(s)
+        den = ft(1.0) + g * a_s * c.inv_D
+        phi = (z_phi + g) / den
+        dphi_ds = -phi * g * sg * c.inv_D / den
+        contact = ft(0.0)
+        if sigma >= ft(0.0):
+            contact = ft(1.0)
+        sigma_c = sigma * contact
+        aging = ft(1.0) + c.b * wp.log(ft(1.0) + phi / c.phi0)
+        daging_dphi = c.b / (c.phi0 + phi)
+        area = sigma_c * c.inv_hardness * aging
+        darea_dsigma = contact * c.inv_hardness * aging
+        darea_ds = sigma_c * c.inv_hardness * daging_dphi * dphi_ds
+        tau_el = (z_tau + g * c.Kh * area * s) / den
+        dtel_darea = g * c.Kh * s / den
+        dtel_ds = (g * c.Kh * area - tau_el * g * sg * c.inv_D) / den
+        tau_f = tau_el
+        dtf_darea = dtel_darea
+        dtf_ds = dtel_ds
+        if wp.static(viscous):
+            lg = wp.log(ft(1.0) + a_s / c.vstar)
+            tau_f += c.eta_vstar * area * sg * lg
+            dtf_darea += c.eta_vstar * sg * lg
+            dtf_ds += c.eta_vstar * area / (c.vstar + a_s)
+        dtf_ds += dtf_darea * darea_ds
+        dtf_dsigma = dtf_darea * darea_dsigma
+        rate_tau = c.Kh * area * s - tau_el * a_s * c.inv_D
+        rate_phi = ft(1.0) - phi * a_s * c.inv_D
+        return tau_f, dtf_dsigma, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact
+
+    return dict(
+        Coeffs=Coeffs,
+        make_coeffs=make_coeffs,
+        node_x=node_x,
+        node_weight=node_weight,
+        node_moment_weight=node_moment_weight,
+        normal_stress=normal_stress,
+        elastic_force=elastic_force,
+        interface_friction=interface_friction,
+    )

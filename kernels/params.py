@@ -1,0 +1,88 @@
+"""Warp structs shared by the kernels: per-member parameters, solver settings and integrator state.
+
+Parameters and times are float64 whatever the working precision: a float32 time has only ~2 us
+resolution at t = 20 s, coarser than the steps the detachment needs.
+"""
+
+
+import warp as wp
+
+# status codes of a member (netCDF flag_values / flag_meanings)
+STATUS_OK = 0
+STATUS_MAX_STEPS = 1
+STATUS_NON_FINITE = 2
+STATUS_STEP_UNDERFLOW = 3
+STATUS_MEANINGS = ("ok", "max_steps_reached", "non_finite_state", "step_size_underflow")
+
+
+@wp.struct
+class MemberParams:
+    """One member's physical parameters (SI), as resolved by warpfric.parameters."""
+
+    shear_modulus: wp.float64
+    poisson_ratio: wp.float64
+    density: wp.float64
+    memory_length: wp.float64
+    hardness: wp.float64
+    viscous_coefficient: wp.float64
+    reference_velocity: wp.float64
+    aging_coefficient: wp.float64
+    aging_time: wp.float64
+    interface_stiffness: wp.float64
+    height: wp.float64
+    length: wp.float64
+    depth: wp.float64
+    damping: wp.float64
+    normal_force: wp.float64
+    eccentricity: wp.float64
+    disc_velocity: wp.float64
+    force_ramp_time: wp.float64
+    rest_until: wp.float64
+    velocity_ramp_time: wp.float64
+    stop_time: wp.float64
+    end_time: wp.float64
+    interface_velocity_factor: wp.float64
+    torque_arm: wp.float64
+    initial_age: wp.float64
+
+
+MEMBER_PARAM_NAMES = tuple(MemberParams.vars.keys())
+
+
+@wp.struct
+class SolverSettings:
+    rtol: wp.float64
+    initial_step: wp.float64
+    min_step: wp.float64
+    max_step: wp.float64
+    newton_tol: wp.float64
+    max_steps: wp.int32
+    newton_max_iter: wp.int32
+
+
+@wp.struct
+class IntegratorState:
+    """Per-member integrator state that persists between launches, and the in-kernel reductions."""
+
+    t: wp.float64  # s, time of the state
+    h: wp.float64  # s, next step size
+    delta0: wp.float64  # m, mean compression of the pad
+    tilt: wp.float64  # rad, tilt a of the backing plate
+    mu_s: wp.float64  # static friction coefficient (running maximum, refined)
+    mu_s_time: wp.float64  # s
+    t1: wp.float64  # last two accepted (t, mu) points, for the parabolic refinement
+    mu1: wp.float64
+    t2: wp.float64
+    mu2: wp.float64
+    mu_final: wp.float64  # friction coefficient at the last accepted step
+    npts: wp.int32
+    steps_accepted: wp.int32
+    steps_rejected: wp.int32
+    newton_iterations: wp.int32
+    newton_failures: wp.int32
+    status: wp.int32
+    lift_off: wp.int32
+    fsal: wp.int32  # slot of K holding f(y_n)
+    restart: wp.int32  # 1: next step is a backward-Euler (re)start
+    last_failure_non_finite: wp.int32
+    done: wp.int32

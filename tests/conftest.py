@@ -1,0 +1,40 @@
+import numpy as np
+import pytest
+
+import warpfric as wf
+
+DEVICE = "cpu"
+
+
+def run(members=None, *, scene=None, model=None, nodes=40, rtol=1e-6, dtype="float64", **solver_kw):
+    """simulate on the CPU with small, fast defaults for tests."""
+    return wf.simulate(
+        members,
+        scene=scene or wf.Parameters(),
+        model=model or wf.Model(),
+        solver=wf.Solver(nodes=nodes, rtol=rtol, dtype=dtype, **solver_kw),
+        device=DEVICE,
+        progress=False,
+    )
+
+
+def moment_weights(x):
+    """Exact weights for int x f dx of a piecewise-linear f on the uniform grid x (independent of the
+    kernels' implementation: integrates the hat functions analytically)."""
+    dx = x[1] - x[0]
+    w = x * dx
+    w[0] = dx * (x[0] / 2 + dx / 6)
+    w[-1] = dx * (x[-1] / 2 - dx / 6)
+    return w
+
+
+def trapezoid_weights(x):
+    dx = x[1] - x[0]
+    w = np.full_like(x, dx)
+    w[0] = w[-1] = dx / 2
+    return w
+
+
+@pytest.fixture
+def paper_scene():
+    return wf.Parameters()

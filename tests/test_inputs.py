@@ -1,0 +1,77 @@
+"""Every invalid input raises ValueError naming the parameter, the value and the valid range,
+before any kernel runs."""
+
+import numpy as np
+import pytest
+
+import warpfric as wf
+
+
+def simulate(members=None, device="cpu", **kw):
+    return wf.simulate(members, device=device, progress=False, **kw)
+
+
+@pytest.mark.parametrize(
+    "members, words",
+    [
+        ({"length": 0.0}, ["length", "0.0", "(0, inf]"]),
+        ({"length": -0.1}, ["length", "-0.1"]),
+        ({"poisson_ratio": 0.5}, ["poisson_ratio", "0.5", "(-1, 0.5)"]),
+        ({"poisson_ratio": -1.0}, ["poisson_ratio", "-1.0"]),
+        ({"normal_force": -10.0}, ["normal_force", "-10.0"]),
+        ({"hardness": [5e8, -1.0]}, ["hardness", "-1.0"]),
+        ({"density": np.nan}, ["density", "nan"]),
+        ({"eccentricity": 1.0}, ["eccentricity", "1.0", "(-1, 1)"]),
+        ({"end_time": 19.0}, ["end_time", "19.0", "rest_until"]),
+        ({"viscous_coefficient": -1.0}, ["viscous_coefficient", "-1.0", "[0, inf]"]),
+        ({"frobnication": 1.0}, ["frobnication", "valid names"]),
+        ({"normal_force": [1.0, 2.0], "eccentricity": [0.0, 0.1, 0.2]}, ["broadcast", "normal_force", "eccentricity"]),
+        ({"normal_force": []}, ["empty"]),
+        ({"normal_force": "lots"}, ["normal_force", "lots"]),
+    ],
+)
+def test_bad_parameters(members, words):
+    with pytest.raises(ValueError) as err:
+        simulate(members)
+    for w in words:
+        assert w in str(err.value), (w, str(err.value))
+
+
+@pytest.mark.parametrize(
+    "kw, words",
+    [
+        (dict(nodes=2), ["nodes", "2", ">= 3"]),
+        (dict(dtype="float16"), ["dtype", "float16", "float32 or float64"]),
+        (dict(rtol=0.0), ["rtol", "0.0"]),
+        (dict(dtype="float32", rtol=1e-7), ["rtol", "1e-07", "float32"]),
+        (dict(max_steps=0), ["max_steps"]),
+        (dict(min_step=1.0, initial_step=1e-6), ["initial_step"]),
+        (dict(method="euler"), ["method", "euler"]),
+    ],
+)
+def test_bad_solver_settings(kw, words):
+    with pytest.raises(ValueError) as err:
+        wf.Solver(**kw)
+    for w in words:
+        assert w in str(err.value), (w, str(err.value))
+
+
+def test_bad_model_switch_and_device():
+    with pytest.raises(ValueError, match="inertia"):
+        wf.Model(inertia="yes")
+    with pytest.raises(ValueError, match="cuda:7"):
+        simulate(device="cuda:7")
+
+
+def test_members_from_xarray_dataset_and_broadcasting():
+    import xarray as xr
+
+    members = xr.Dataset({"eccentricity": ("member", [0.0, 0.1])})
+    ds = simulate(members, solver=wf.Solver(nodes=10, rtol=1e-4), scene=wf.Parameters(end_time=20.5))
+    assert ds.sizes["member"] == 2
+    grid = simulate({"normal_force": [[500.0], [1000.0]], "eccentricity": [0.0, 0.1, 0.2]},
+                    solver=wf.Solver(nodes=10, rtol=1e-4), scene=wf.Parameters(end_time=20.5))
+    assert grid.sizes["member"] == 6
+    np.testing.assert_array_equal(grid.normal_force.values, [500, 500, 500, 1000, 1000, 1000])
+    np.testing.assert_array_equal(grid.eccentricity.values, [0, 0.1, 0.2, 0, 0.1, 0.2])
+    assert grid.mu_s.attrs["units"] == "1" and grid.normal_force.attrs["units"] == "N"

@@ -1,0 +1,92 @@
+"""Resolve the members of an ensemble: the scene's scalars, overridden per member by broadcastable
+arrays, validated before any kernel runs."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from .parameters import PARAMETER_NAMES, Parameters, resolve_value, validate_value
+
+
+def _member_arrays(members: Any) -> dict[str, np.ndarray]:
+    """Mapping name -> array from a mapping or an xarray Dataset with dimension 'member'."""
+    if members is None:
+        return {}
+    try:
+        import xarray as xr
+    except ImportError:  # pragma: no cover - xarray is a dependency
+        xr = None
+    if xr is not None and isinstance(members, xr.Dataset):
+        out = {}
+        for name, var in members.data_vars.items():
+            if var.dims not in ((), ("member",)):
+                raise ValueError(
+                    f"members: variable {name!r} has dims {var.dims}; expected () or ('member',)"
+                )
+            out[str(name)] = var.values
+        return out
+    if isinstance(members, Mapping):
+        return {str(k): v for k, v in members.items()}
+    raise ValueError(
+        f"members: expected None, a mapping of parameter name -> array, or an xarray Dataset with "
+        f"dim 'member'; got {type(members).__name__}"
+    )
+
+
+def resolve_members(members: Any, scene: Parameters) -> tuple[dict[str, np.ndarray], tuple[str, ...]]:
+    """Return (values, varying): every parameter as a float64 array of shape (M,), and the names
+    of the parameters given per member. Raises ValueError naming the parameter, value and range."""
+    if not isinstance(scene, Parameters):
+        raise ValueError(f"scene: expected a warpfric.Parameters, got {type(scene).__name__}")
+    given = _member_arrays(members)
+    for name in given:
+        if name not in PARAMETER_NAMES:
+            raise ValueError(f"unknown parameter {name!r}; valid names: {', '.join(PARAMETER_NAMES)}")
+    arrays: dict[str, np.ndarray] = {}
+    for name in given:
+        arr = resolve_value(name, given[name])
+        if arr is None:
+            arr = np.asarray(np.nan)  # torque_arm None: the pad height, resolved below
+        arrays[name] = arr
+    try:
+        shape = np.broadcast_shapes(*(a.shape for a in arrays.values())) if arrays else ()
+    except ValueError:
+        shapes = ", ".join(f"{k}{tuple(v.shape)}" for k, v in arrays.items())
+        raise ValueError(f"members: the per-member arrays do not broadcast together: {shapes}") from None
+    n_members = int(np.prod(shape)) if shape else 1
+    if n_members == 0:
+        raise ValueError("members: the ensemble is empty (a per-member array has length 0)")
+    values: dict[str, np.ndarray] = {}
+    for f in dataclasses.fields(Parameters):
+        name = f.name
+        if name in arrays:
+            v = np.broadcast_to(arrays[name], shape).reshape(n_members).copy()
+        else:
+            scalar = resolve_value(name, getattr(scene, name))
+            v = np.full(n_members, np.nan if scalar is None else float(scalar))
+        values[name] = v
+    # torque_arm None (or NaN from a None in members) means "the pad height"
+    arm = values["torque_arm"]
+    values["torque_arm"] = np.where(np.isnan(arm), values["height"], arm) if (
+        scene.torque_arm is None or "torque_arm" in arrays
+    ) else arm
+    for name in PARAMETER_NAMES:
+        validate_value(name, values[name])
+    _check_protocol(values)
+    return values, tuple(name for name in PARAMETER_NAMES if name in given)
+
+
+def _check_protocol(values: dict[str, np.ndarray]) -> None:
+    """Cross-parameter rules of the load protocol."""
+    end, rest = values["end_time"], values["rest_until"]
+    bad = ~(end > rest)
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(
+            f"parameter 'end_time' = {end[i]!r} (s) ends before the disc starts to move; "
+            f"valid range (rest_until, inf) = ({rest[i]!r}, inf) s (member {i})"
+        )

@@ -1,0 +1,236 @@
+"""Parameter types: the physical scene, the model switches and the solver settings.
+
+All values are SI. ``Parameters`` holds every public name of SPEC section 8 with the paper's
+defaults (Table 1, PMMA). Any numeric field can vary between the members of an ensemble: pass
+per-member arrays through ``simulate(members=...)``; ``Parameters`` itself holds the scalar
+defaults that every member starts from (the "scene").
+
+Every field carries its unit, a long name and its valid range in ``dataclasses.field`` metadata;
+:func:`validate_value` checks a value (scalar or array) against that range and raises a
+``ValueError`` that names the parameter, the offending value and the valid range.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+INF = math.inf
+
+
+def _p(default, units, long_name, low, high, low_open=False, high_open=False, none_means=None):
+    """Field with its metadata: unit, CF long name and valid range [low, high] (or open ends)."""
+    return field(
+        default=default,
+        metadata=dict(
+            units=units,
+            long_name=long_name,
+            low=low,
+            high=high,
+            low_open=low_open,
+            high_open=high_open,
+            none_means=none_means,
+        ),
+    )
+
+
+@dataclass(frozen=True)
+class Parameters:
+    """The scene: material, friction law, geometry and load protocol of one pad (SI units).
+
+    Defaults are the paper's (Papangelo et al. 2014, Table 1, PMMA) and the protocol of its Fig. 2:
+    the normal force ramps 0 -> ``normal_force`` over ``force_ramp_time``, rests until
+    ``rest_until``, then the disc velocity ramps 0 -> ``disc_velocity`` over
+    ``velocity_ramp_time``; optional sudden disc stop at ``stop_time``; the run ends at
+    ``end_time``.
+    """
+
+    # --- pad material -------------------------------------------------------------------------
+    shear_modulus: float = _p(3.1e9, "Pa", "shear modulus G of the pad", 0.0, INF, low_open=True)
+    poisson_ratio: float = _p(0.35, "1", "Poisson ratio nu of the pad", -1.0, 0.5, True, True)
+    density: float = _p(1200.0, "kg m-3", "density rho of the pad", 0.0, INF, low_open=True)
+    # --- friction law (Bouchbinder / Bar-Sinai) ---------------------------------------------------
+    memory_length: float = _p(5e-7, "m", "memory length D (mean contact size)", 0.0, INF, True)
+    shear_strength: float = _p(
+        1.3e8, "Pa", "shear strength tau_c of the contacts (not used by the law, see docs)", 0.0, INF, True
+    )
+    hardness: float = _p(5.4e8, "Pa", "hardness sigma_H", 0.0, INF, low_open=True)
+    viscous_coefficient: float = _p(2.7e13, "Pa s m-1", "viscous friction coefficient eta", 0.0, INF)
+    reference_velocity: float = _p(1e-7, "m s-1", "reference velocity v_star", 0.0, INF, True)
+    aging_coefficient: float = _p(0.075, "1", "aging coefficient b", 0.0, INF)
+    aging_time: float = _p(3.33e-4, "s", "aging time scale phi0", 0.0, INF, low_open=True)
+    interface_stiffness: float = _p(3e14, "Pa m-1", "interface stiffness mu0/h", 0.0, INF, True)
+    # --- geometry -------------------------------------------------------------------------------
+    height: float = _p(0.015, "m", "pad height H", 0.0, INF, low_open=True)
+    length: float = _p(0.2, "m", "pad length L", 0.0, INF, low_open=True)
+    depth: float = _p(0.12, "m", "pad depth p", 0.0, INF, low_open=True)
+    damping: float = _p(0.0, "Pa s m-1", "numerical damping c of the pad", 0.0, INF)
+    # --- load protocol --------------------------------------------------------------------------
+    normal_force: float = _p(1000.0, "N", "maximum normal force F_max", 0.0, INF, low_open=True)
+    eccentricity: float = _p(0.0, "1", "normalised eccentricity 2e/L of the normal force", -1.0, 1.0, True, True)
+    disc_velocity: float = _p(1e-4, "m s-1", "maximum disc velocity v_max", -INF, INF, True, True)
+    force_ramp_time: float = _p(10.0, "s", "duration of the normal-force ramp", 0.0, INF)
+    rest_until: float = _p(20.0, "s", "time at which the disc starts to move", 0.0, INF)
+    velocity_ramp_time: float = _p(2.0, "s", "duration of the disc-velocity ramp", 0.0, INF)
+    stop_time: float | None = _p(
+        None, "s", "time of a sudden disc stop (None or inf: no stop)", 0.0, INF, True, False, none_means=INF
+    )
+    end_time: float = _p(22.0, "s", "end of the simulated time", 0.0, INF, low_open=True, high_open=True)
+    # --- open model choices (SPEC [choice]) ------------------------------------------------------
+    interface_velocity_factor: float = _p(
+        1.0, "1", "k_if: interface velocity = k_if * pad velocity", 0.0, INF, low_open=True, high_open=True
+    )
+    torque_arm: float | None = _p(
+        None, "m", "height h_arm of the friction torque arm (None: the pad height)", 0.0, INF, high_open=True
+    )
+    initial_age: float = _p(3.33e-4, "s", "initial contact age phi_init", 0.0, INF, high_open=True)
+
+
+PARAMETER_NAMES: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(Parameters))
+_FIELDS = {f.name: f for f in dataclasses.fields(Parameters)}
+
+
+def parameter_units(name: str) -> str:
+    """SI unit string (UDUNITS form) of a parameter."""
+    return _FIELDS[name].metadata["units"]
+
+
+def parameter_long_name(name: str) -> str:
+    return _FIELDS[name].metadata["long_name"]
+
+
+def _range_text(meta) -> str:
+    lo = "(" if meta["low_open"] else "["
+    hi = ")" if meta["high_open"] else "]"
+    return f"{lo}{meta['low']:g}, {meta['high']:g}{hi}"
+
+
+def resolve_value(name: str, value: Any, scene: Parameters | None = None):
+    """Return ``value`` as a float64 array, with None replaced by what None means for ``name``."""
+    if value is None:
+        if name == "torque_arm":
+            return None  # resolved against height by the caller
+        meta = _FIELDS[name].metadata
+        if meta["none_means"] is None:
+            raise ValueError(f"parameter {name!r}: value None is not allowed; valid range {_range_text(meta)}")
+        return np.asarray(meta["none_means"], dtype=np.float64)
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "biuf":
+        raise ValueError(
+            f"parameter {name!r}: value {value!r} is not a real number; valid range {_range_text(_FIELDS[name].metadata)}"
+        )
+    return arr.astype(np.float64)
+
+
+def validate_value(name: str, value: np.ndarray) -> None:
+    """Raise ValueError naming ``name``, the first bad value and the valid range."""
+    if name not in _FIELDS:
+        raise ValueError(f"unknown parameter {name!r}; valid names: {', '.join(PARAMETER_NAMES)}")
+    meta = _FIELDS[name].metadata
+    arr = np.asarray(value, dtype=np.float64)
+    lo, hi = meta["low"], meta["high"]
+    bad = np.isnan(arr)
+    bad |= (arr <= lo) if meta["low_open"] else (arr < lo)
+    bad |= (arr >= hi) if meta["high_open"] else (arr > hi)
+    if name == "stop_time":  # inf means "no stop" and is allowed
+        bad &= ~np.isposinf(arr)
+    if np.any(bad):
+        first = arr.reshape(-1)[np.flatnonzero(bad.reshape(-1))[0]]
+        raise ValueError(
+            f"parameter {name!r} = {first!r} ({parameter_units(name)}) is out of range; "
+            f"valid range {_range_text(meta)}"
+        )
+
+
+@dataclass(frozen=True)
+class Model:
+    """Model switches. Each combination compiles its own specialised kernel, so a term that is off
+    costs nothing at run time.
+
+    inertia:            pad inertia rho*H*u_tt (off: quasi-static pad, velocity is algebraic).
+    tilt:               the backing plate may tilt (off: it only translates; no moment balance).
+    poisson_coupling:   the -lambda*eps_xx term of the interface normal stress (SPEC section 4).
+    viscous_friction:   the viscous (velocity-strengthening) friction stress tau_vis.
+    """
+
+    inertia: bool = True
+    tilt: bool = True
+    poisson_coupling: bool = True
+    viscous_friction: bool = True
+
+    def __post_init__(self):
+        for f in dataclasses.fields(self):
+            v = getattr(self, f.name)
+            if not isinstance(v, (bool, np.bool_)):
+                raise ValueError(f"model switch {f.name!r} = {v!r}: must be True or False")
+
+
+_DTYPES = ("float32", "float64")
+FLOAT32_MIN_RTOL = 1e-5  # docs/performance.md: float32 stalls below this
+_METHODS = ("tr-bdf2",)
+
+
+@dataclass(frozen=True)
+class Solver:
+    """Numerical settings.
+
+    nodes:            N, grid nodes along the pad (>= 3), spacing L/(N-1).
+    dtype:            'float64' or 'float32' for the state and the arithmetic (time is always float64).
+    rtol:             relative local error tolerance of the adaptive step (1e-12 .. 1e-1).
+                      The absolute tolerance of each variable kind is rtol times its natural scale
+                      (docs/model.md, "Error control").
+    initial_step:     s, the first step and the backward-Euler restart step after a discontinuity.
+    min_step:         s, a member whose step falls below this stops with status step_size_underflow.
+    max_step:         s, largest step.
+    max_steps:        attempted steps (accepted + rejected) per member before status max_steps.
+    newton_max_iter:  Newton iterations per stage before the step is rejected.
+    newton_tol:       Newton convergence threshold in the error-weighted norm (units of rtol).
+    steps_per_launch: attempted steps per kernel launch (progress granularity; no effect on results).
+    method:           time integrator; 'tr-bdf2' (L-stable ESDIRK, order 2, embedded order 3).
+    """
+
+    nodes: int = 100
+    dtype: str = "float64"
+    rtol: float = 1e-5
+    initial_step: float = 1e-6
+    min_step: float = 1e-14
+    max_step: float = 1.0
+    max_steps: int = 100_000
+    newton_max_iter: int = 8
+    newton_tol: float = 0.03
+    steps_per_launch: int = 500
+    method: str = "tr-bdf2"
+
+    def __post_init__(self):
+        def need(cond, name, value, valid):
+            if not cond:
+                raise ValueError(f"solver setting {name!r} = {value!r} is invalid; valid: {valid}")
+
+        def is_int(v):
+            return isinstance(v, (int, np.integer)) and not isinstance(v, bool)
+
+        def is_real(v):
+            return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(v)
+
+        need(is_int(self.nodes) and self.nodes >= 3, "nodes", self.nodes, "an integer >= 3")
+        need(self.dtype in _DTYPES, "dtype", self.dtype, " or ".join(_DTYPES))
+        need(is_real(self.rtol) and 1e-12 <= self.rtol <= 0.1, "rtol", self.rtol, "a number in [1e-12, 0.1]")
+        need(self.dtype == "float64" or self.rtol >= FLOAT32_MIN_RTOL, "rtol", self.rtol,
+             f"a number in [{FLOAT32_MIN_RTOL:g}, 0.1] with dtype='float32' (float32 round-off stalls "
+             "the error control below that; use dtype='float64')")
+        for name in ("initial_step", "min_step", "max_step"):
+            v = getattr(self, name)
+            need(is_real(v) and v > 0, name, v, "a number > 0 (s)")
+        need(self.min_step <= self.initial_step <= self.max_step, "initial_step", self.initial_step,
+             f"min_step ({self.min_step:g}) <= initial_step <= max_step ({self.max_step:g})")
+        need(is_int(self.max_steps) and self.max_steps >= 1, "max_steps", self.max_steps, "an integer >= 1")
+        need(is_int(self.newton_max_iter) and 1 <= self.newton_max_iter <= 100, "newton_max_iter",
+             self.newton_max_iter, "an integer in [1, 100]")
+        need(is_real(self.newton_tol) and 0 < self.newton_tol <= 1, "newton_tol", self.newton_tol, "a number in (0, 1]")
+        need(is_int(self.steps_per_launch) and self.steps_per_launch >= 1, "steps_per_launch",
+             self.steps_per_launch, "an integer >= 1")
+        need(self.method in _METHODS, "method", self.method, " or ".join(_METHODS))

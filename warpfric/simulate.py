@@ -1,0 +1,270 @@
+"""warpfric.simulate: run an ensemble of pads on the CPU or a GPU and return an xarray Dataset."""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+from typing import Any
+
+import numpy as np
+import xarray as xr
+
+from . import __version__
+from .members import resolve_members
+from .parameters import Model, Parameters, Solver, parameter_long_name, parameter_units
+
+
+def _warp():
+    import warp as wp
+
+    wp.config.quiet = True
+    if wp.config.log_level < wp.LOG_WARNING:  # no per-kernel "Module ... load" lines
+        wp.config.log_level = wp.LOG_WARNING
+    wp.init()
+    return wp
+
+
+def default_device() -> str:
+    """'cuda:0' when Warp sees a CUDA device, else 'cpu'."""
+    wp = _warp()
+    return "cuda:0" if wp.get_cuda_device_count() > 0 else "cpu"
+
+
+def _check_device(device: str | None) -> str:
+    wp = _warp()
+    if device is None:
+        return default_device()
+    names = [str(d) for d in wp.get_devices()]
+    if str(device) == "cuda" and wp.get_cuda_device_count() > 0:
+        return "cuda:0"
+    if str(device) not in names:
+        raise ValueError(f"device {device!r} is not available; valid: {', '.join(names)} (or None)")
+    return str(device)
+
+
+class _Progress:
+    """One-line progress on stderr: members done and mean simulated-time fraction."""
+
+    def __init__(self, enabled: bool, n_members: int):
+        self.enabled = enabled
+        self.n = n_members
+        self.t0 = time.perf_counter()
+        self.last = 0.0
+
+    def update(self, done: int, fraction: float, final: bool = False):
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if not final and now - self.last < 0.5:
+            return
+        self.last = now
+        bar = "#" * int(30 * fraction) + "-" * (30 - int(30 * fraction))
+        sys.stderr.write(
+            f"\rwarpfric [{bar}] {100 * fraction:5.1f}% simulated time, "
+            f"{done}/{self.n} members done, {now - self.t0:7.1f} s"
+        )
+        if final:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+
+def simulate(
+    members: Any = None,
+    *,
+    scene: Parameters = Parameters(),
+    model: Model = Model(),
+    solver: Solver = Solver(),
+    device: str | None = None,
+    progress: bool | None = None,
+) -> xr.Dataset:
+    """Simulate an ensemble of pads through the load protocol; return the results as a Dataset.
+
+    members:  None (one member: the scene), a mapping ``name -> array`` or an xarray Dataset with
+              dim ``member``. Arrays broadcast together (e.g. shapes (3, 1) and (5,) give 15
+              members, flattened in C order); names are those of :class:`Parameters`.
+    scene:    :class:`Parameters` with the values of every parameter not given per member.
+    model:    :class:`Model` switches (each combination compiles its own kernel).
+    solver:   :class:`Solver` settings (grid, precision, tolerances, step bounds).
+    device:   Warp device ('cpu', 'cuda:0', ...); None: the first CUDA device if any, else 'cpu'.
+    progress: progress line on stderr; None: only when stderr is a terminal.
+
+    Returns an ``xarray.Dataset`` with dims ``member`` and ``x`` (node position, m): every input
+    parameter along ``member``; ``mu_s``, ``mu_s_time`` (s), ``status`` (flag values, see its
+    attrs), ``lift_off``, ``steps_accepted``, ``steps_rejected``, ``newton_iterations``,
+    ``final_time`` (s), ``plate_compression`` (m), ``plate_tilt`` (rad), ``mu_final``, and the final
+    state along (member, x): ``displacement`` (m), ``velocity`` (m/s), ``elastic_stress`` (Pa),
+    ``contact_age`` (s), ``normal_stress`` (Pa), ``friction_stress`` (Pa). Raises ValueError on
+    invalid input before any kernel runs.
+    """
+    if not isinstance(model, Model):
+        raise ValueError(f"model: expected a warpfric.Model, got {type(model).__name__}")
+    if not isinstance(solver, Solver):
+        raise ValueError(f"solver: expected a warpfric.Solver, got {type(solver).__name__}")
+    values, varying = resolve_members(members, scene)
+    device = _check_device(device)
+    wp = _warp()
+    from warpfric.kernels.integrator import C_PHI, N_COMPONENTS, N_STAGE_SLOTS, N_WORK, get_integrator
+    from warpfric.kernels.params import STATUS_MEANINGS, IntegratorState, MemberParams, SolverSettings
+
+    n_members = values["normal_force"].shape[0]
+    n = solver.nodes
+    kern = get_integrator(solver.dtype, model)
+    np_dtype = np.float64 if solver.dtype == "float64" else np.float32
+    ft = kern["ft"]
+
+    params_np = np.zeros(n_members, dtype=MemberParams.numpy_dtype())
+    for name in params_np.dtype.names:
+        params_np[name] = values[name]
+    states_np = np.zeros(n_members, dtype=IntegratorState.numpy_dtype())
+    states_np["h"] = solver.initial_step
+    states_np["restart"] = 1
+    states_np["mu_s"] = -np.inf
+    state_np = np.zeros((N_COMPONENTS, n, n_members), dtype=np_dtype)
+    state_np[C_PHI] = values["initial_age"][None, :]
+
+    settings = SolverSettings()
+    settings.rtol = solver.rtol
+    settings.initial_step = solver.initial_step
+    settings.min_step = solver.min_step
+    settings.max_step = solver.max_step
+    settings.newton_tol = solver.newton_tol
+    settings.max_steps = solver.max_steps
+    settings.newton_max_iter = solver.newton_max_iter
+
+    t_start = time.perf_counter()
+    with wp.ScopedDevice(device):
+        params = wp.array(params_np, dtype=MemberParams)
+        states = wp.array(states_np, dtype=IntegratorState)
+        state = wp.array(state_np, dtype=ft)
+        stages = wp.zeros((N_STAGE_SLOTS, N_COMPONENTS, n, n_members), dtype=ft)
+        work = wp.zeros((N_WORK, n, n_members), dtype=ft)
+        show = sys.stderr.isatty() if progress is None else bool(progress)
+        bar = _Progress(show, n_members)
+        end = values["end_time"]
+        while True:
+            wp.launch(
+                kern["integrate"],
+                dim=n_members,
+                inputs=[params, settings, states, state, stages, work, solver.steps_per_launch],
+            )
+            st = states.numpy()
+            n_done = int(st["done"].sum())
+            bar.update(n_done, float(np.mean(np.minimum(st["t"] / end, 1.0))))
+            if n_done == n_members:
+                break
+        bar.update(n_done, 1.0, final=True)
+        sigma_out = wp.zeros((n, n_members), dtype=ft)
+        tau_out = wp.zeros((n, n_members), dtype=ft)
+        wp.launch(kern["evaluate_fields"], dim=n_members, inputs=[params, states, state, sigma_out, tau_out])
+        fields = state.numpy()
+        sigma = sigma_out.numpy()
+        tau = tau_out.numpy()
+        wp.synchronize_device(device)
+    wall = time.perf_counter() - t_start
+    return _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, wall, STATUS_MEANINGS)
+
+
+_OUTPUT_ATTRS = {
+    "mu_s": ("1", "static friction coefficient: max over time of int tau_f dx / int sigma_n dx"),
+    "mu_s_time": ("s", "time of the maximum of the friction coefficient"),
+    "mu_final": ("1", "friction coefficient at the end of the run"),
+    "lift_off": ("1", "1 where the interface lifted off somewhere (sigma_n < 0) while loaded"),
+    "steps_accepted": ("1", "accepted time steps"),
+    "steps_rejected": ("1", "rejected time steps (error test or Newton failure)"),
+    "newton_iterations": ("1", "Newton iterations over all stages"),
+    "final_time": ("s", "time reached"),
+    "plate_compression": ("m", "mean compression delta0 of the pad at the final time"),
+    "plate_tilt": ("rad", "tilt a of the backing plate at the final time"),
+    "displacement": ("m", "height-averaged x-displacement u of the pad at the final time"),
+    "velocity": ("m s-1", "pad velocity du/dt at the final time"),
+    "elastic_stress": ("Pa", "elastic part tau_el of the friction stress at the final time"),
+    "contact_age": ("s", "contact age phi at the final time"),
+    "normal_stress": ("Pa", "interface contact pressure max(sigma_n, 0) at the final time"),
+    "friction_stress": ("Pa", "friction stress tau_f on the pad at the final time"),
+}
+
+
+def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, wall, meanings):
+    from warpfric.kernels.integrator import C_PHI, C_TAU, C_U, C_V
+
+    n_members = st.shape[0]
+    n = solver.nodes
+    member = np.arange(n_members)
+    length = values["length"]
+    x_rel = np.linspace(-0.5, 0.5, n)
+    data = {}
+    for name, arr in values.items():
+        attrs = {"units": parameter_units(name), "long_name": parameter_long_name(name)}
+        data[name] = xr.DataArray(arr, dims=("member",), attrs=attrs)
+    status = st["status"].astype(np.int32)
+    data["status"] = xr.DataArray(
+        status,
+        dims=("member",),
+        attrs={
+            "long_name": "member status",
+            "flag_values": np.arange(len(meanings), dtype=np.int32),
+            "flag_meanings": " ".join(meanings),
+        },
+    )
+    scalars = {
+        "mu_s": st["mu_s"],
+        "mu_s_time": st["mu_s_time"],
+        "mu_final": st["mu_final"],
+        "lift_off": st["lift_off"].astype(np.int8),
+        "steps_accepted": st["steps_accepted"],
+        "steps_rejected": st["steps_rejected"],
+        "newton_iterations": st["newton_iterations"],
+        "final_time": st["t"],
+        "plate_compression": st["delta0"],
+        "plate_tilt": st["tilt"],
+    }
+    failed = status != 0
+    for name, arr in scalars.items():
+        arr = np.asarray(arr)
+        if name in ("mu_s", "mu_s_time", "mu_final") and failed.any():
+            arr = np.where(failed, np.nan, arr)  # a failed member is never returned as a number
+        units, long_name = _OUTPUT_ATTRS[name]
+        data[name] = xr.DataArray(arr, dims=("member",), attrs={"units": units, "long_name": long_name})
+    per_node = {
+        "displacement": fields[C_U],
+        "velocity": fields[C_V],
+        "elastic_stress": fields[C_TAU],
+        "contact_age": fields[C_PHI],
+        "normal_stress": sigma,
+        "friction_stress": tau,
+    }
+    for name, arr in per_node.items():
+        units, long_name = _OUTPUT_ATTRS[name]
+        data[name] = xr.DataArray(
+            np.ascontiguousarray(arr.T), dims=("member", "x"), attrs={"units": units, "long_name": long_name}
+        )
+    coords = {
+        "member": member,
+        "x": xr.DataArray(
+            x_rel * float(length[0]) if np.all(length == length[0]) else x_rel,
+            dims=("x",),
+            attrs={"units": "m" if np.all(length == length[0]) else "1",
+                   "long_name": "node position along the pad" if np.all(length == length[0])
+                   else "node position / length (members differ in length)"},
+        ),
+    }
+    attrs = {
+        "title": "warpfric ensemble",
+        "Conventions": "CF-1.8",
+        "warpfric_version": __version__,
+        "device": device,
+        "wall_time_s": wall,
+        "varying_parameters": " ".join(varying),
+    }
+    for f in dataclasses.fields(model):
+        attrs[f"model_{f.name}"] = int(getattr(model, f.name))
+    for f in dataclasses.fields(solver):
+        attrs[f"solver_{f.name}"] = getattr(solver, f.name)
+    try:
+        import warp as wp
+
+        attrs["warp_version"] = wp.__version__
+    except Exception:  # pragma: no cover
+        pass
+    return xr.Dataset(data, coords=coords, attrs=attrs)
