@@ -1,9 +1,12 @@
+import os
+
 import numpy as np
 import pytest
 
 import warpfric as wf
 
-DEVICE = "cpu"
+# CPU by default (CI); WARPFRIC_TEST_DEVICE=cuda:0 runs the same assertions on a GPU
+DEVICE = os.environ.get("WARPFRIC_TEST_DEVICE", "cpu")
 
 
 def run(members=None, *, scene=None, model=None, nodes=40, rtol=1e-6, dtype="float64", **solver_kw):

@@ -3,11 +3,12 @@ before any kernel runs."""
 
 import numpy as np
 import pytest
+from conftest import DEVICE
 
 import warpfric as wf
 
 
-def simulate(members=None, device="cpu", **kw):
+def simulate(members=None, device=DEVICE, **kw):
     return wf.simulate(members, device=device, progress=False, **kw)
 
 
