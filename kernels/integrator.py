@@ -438,6 +438,8 @@ def _make_integrator(dtype: str, model):
             if h >= bp - t:
                 h = bp - t
                 clipped = 1
+            elif h > wp.float64(0.5) * (bp - t):
+                h = wp.float64(0.5) * (bp - t)  # two equal steps, not a long one and a sliver
             t_new = t + h
             if clipped == 1:
                 t_new = bp

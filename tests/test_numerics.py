@@ -65,3 +65,18 @@ def test_newton_converges_quadratically():
     ds = run(rtol=1e-6)
     stages = 2 * ds.steps_accepted.values[0]
     assert ds.newton_iterations.values[0] / stages < 3.0
+
+
+def test_float32_members_reach_the_ramp_end():
+    """Regression: these float32 members (from the 10,000-member benchmark, N = 200) stalled just
+    before the velocity ramp's end when a step clipped to the breakpoint left a sliver; the last
+    two steps before a breakpoint are now split evenly."""
+    members = {
+        "eccentricity": [0.06802473972597439, -0.01916448466915663, 0.075313056446496, -0.16269441192618112],
+        "normal_force": [2449.158389218588, 1436.6277291857823, 637.7688105267864, 1401.0899504810648],
+    }
+    f32 = run(members, nodes=200, rtol=1e-5, dtype="float32", max_steps=3000)
+    f64 = run(members, nodes=200, rtol=1e-5, dtype="float64")
+    assert list(f32.status.values) == [0, 0, 0, 0]
+    assert (f32.steps_accepted.values + f32.steps_rejected.values).max() < 600
+    np.testing.assert_allclose(f32.mu_s.values, f64.mu_s.values, rtol=1e-5)

@@ -1,7 +1,29 @@
 """warpfric: batched GPU/CPU ensembles of the friction detachment of an eccentrically loaded pad
 (Papangelo, Stingl, Hoffmann & Ciavarella 2014), on NVIDIA Warp."""
 
+import importlib.util as _ilu
+import os as _os
+import sys as _sys
+
 __version__ = "0.1.0"
+
+
+def _attach_kernels():
+    """The Warp kernels live in the top-level folder kernels/. An install maps it to
+    warpfric.kernels (pyproject.toml); in a plain source checkout (PYTHONPATH=repo) load it from
+    there under the same name."""
+    if _ilu.find_spec("warpfric.kernels") is not None:
+        return
+    src = _os.path.join(_os.path.dirname(_os.path.dirname(_os.path.abspath(__file__))), "kernels")
+    spec = _ilu.spec_from_file_location(
+        "warpfric.kernels", _os.path.join(src, "__init__.py"), submodule_search_locations=[src]
+    )
+    module = _ilu.module_from_spec(spec)
+    _sys.modules["warpfric.kernels"] = module
+    spec.loader.exec_module(module)
+
+
+_attach_kernels()
 
 from .parameters import PARAMETER_NAMES, Model, Parameters, Solver  # noqa: E402
 from .simulate import default_device, simulate  # noqa: E402
