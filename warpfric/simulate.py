@@ -49,6 +49,7 @@ class _Progress:
     def __init__(self, enabled: bool, n_members: int):
         self.enabled = enabled
         self.n = n_members
+        self.tty = sys.stderr.isatty()  # in a log, "\r" does not overwrite: only the final line
         self.t0 = time.perf_counter()
         self.last = 0.0
 
@@ -56,12 +57,12 @@ class _Progress:
         if not self.enabled:
             return
         now = time.perf_counter()
-        if not final and now - self.last < 0.5:
+        if not final and (not self.tty or now - self.last < 0.5):
             return
         self.last = now
         bar = "#" * int(30 * fraction) + "-" * (30 - int(30 * fraction))
         sys.stderr.write(
-            f"\rwarpfric [{bar}] {100 * fraction:5.1f}% simulated time, "
+            ("\r" if self.tty else "") + f"warpfric [{bar}] {100 * fraction:5.1f}% simulated time, "
             f"{done}/{self.n} members done, {now - self.t0:7.1f} s"
         )
         if final:
