@@ -30,9 +30,10 @@ from .params import (
     STATUS_STEP_UNDERFLOW,
     IntegratorState,
     MemberParams,
+    OutputSettings,
     SolverSettings,
 )
-from .reductions import record_friction_point
+from .reductions import crossing_time, detachment_velocity, record_friction_point
 
 # state components (first index of the state array and second index of the stage-derivative array)
 C_U, C_V, C_TAU, C_PHI = 0, 1, 2, 3
@@ -370,6 +371,70 @@ def _make_integrator(dtype: str, model):
                         state[comp, i, m] = state[comp, i, m] + h * k
 
     @wp.func
+    def track_fronts(
+        p: MemberParams, st: IntegratorState, m: int, n: int, state: array3, K: array4, s3: int,
+        t_old: wp.float64, t_new: wp.float64, arrival: wp.array2d(dtype=wp.float64), direction: int,
+    ):
+        """Fold an accepted step (before the state is advanced) into the front tracking: the running
+        maximum of the detachment velocity w, and each node's first crossing of st.front_level,
+        interpolated linearly in time. Window: from the disc start to the sudden stop (or the end)."""
+        if t_new <= p.rest_until or t_old >= p.stop_time:
+            return st
+        disc_sign = wp.float64(1.0)
+        if p.disc_velocity < wp.float64(0.0):
+            disc_sign = wp.float64(-1.0)
+        for i in range(n):
+            w_old = detachment_velocity(wp.float64(state[C_V, i, m]), disc_sign, direction)
+            w_new = detachment_velocity(wp.float64(K[s3, C_U, i, m]), disc_sign, direction)
+            st.front_max = wp.max(st.front_max, w_new)
+            if w_new >= st.front_level and not wp.isfinite(arrival[i, m]):
+                arrival[i, m] = crossing_time(st.front_level, t_old, w_old, t_new, w_new)
+        return st
+
+    @wp.func
+    def record_fields(
+        c: Coeffs, p: MemberParams, st: IntegratorState, m: int, n: int, state: array3,
+        t_old: wp.float64, t_new: wp.float64, delta0: ft, tilt: ft, times: wp.array(dtype=wp.float64),
+        previous: array3, record: array4,
+    ):
+        """Sample the fields (pad velocity, slip rate, contact pressure, friction stress) of a
+        recorded member at the grid times in (t_old, t_new], by linear interpolation between the
+        accepted points; ``previous`` holds the fields at t_old."""
+        slot = st.record_slot
+        n_times = times.shape[0]
+        k_end = st.record_next
+        while k_end < n_times:
+            if times[k_end] > t_new:
+                break
+            k_end += 1
+        v_disc = ft(disc_velocity_at(p, t_new, t_old))
+        span = t_new - t_old
+        u_l = ft(0.0)
+        u_c = state[C_U, 0, m]
+        for i in range(n):
+            u_r = ft(0.0)
+            if i < n - 1:
+                u_r = state[C_U, i + 1, m]
+            vel = state[C_V, i, m]
+            sigma, ds_ul, ds_uc, ds_ur, ds_d0, ds_a = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
+            tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact = interface_friction(
+                c, sigma, vel, v_disc, state[C_TAU, i, m], state[C_PHI, i, m], ft(0.0)
+            )
+            current = wp.vector(vel, v_disc - c.kif * vel, contact * sigma, tau_f, length=4, dtype=ft)
+            for k in range(st.record_next, k_end):
+                frac = ft(1.0)
+                if span > wp.float64(0.0):
+                    frac = ft(wp.clamp((times[k] - t_old) / span, wp.float64(0.0), wp.float64(1.0)))
+                for f in range(4):
+                    record[f, k, i, slot] = previous[f, i, slot] + frac * (current[f] - previous[f, i, slot])
+            for f in range(4):
+                previous[f, i, slot] = current[f]
+            u_l = u_c
+            u_c = u_r
+        st.record_next = k_end
+        return st
+
+    @wp.func
     def accept_point(
         st: IntegratorState, p: MemberParams, t_new: wp.float64, sum_tau: wp.float64,
         sum_sigma: wp.float64, min_sigma: wp.float64,
@@ -412,6 +477,11 @@ def _make_integrator(dtype: str, model):
         K: array4,
         work: array3,
         launch_steps: int,
+        outputs: OutputSettings,
+        arrival: wp.array2d(dtype=wp.float64),
+        record_times: wp.array(dtype=wp.float64),
+        record_previous: array3,
+        record: array4,
     ):
         """Advance each member by at most ``launch_steps`` attempted steps (or to its end_time)."""
         m = wp.tid()
@@ -454,9 +524,13 @@ def _make_integrator(dtype: str, model):
                 st.newton_iterations = st.newton_iterations + iters
                 if ok == 1:
                     sum_tau, sum_sigma, min_sigma = finalize_stage(c, p, m, n, work, K, s3, g, t_new, t, d0, a)
+                    if outputs.fronts == 1:
+                        st = track_fronts(p, st, m, n, state, K, s3, t, t_new, arrival, outputs.front_direction)
                     advance_state(m, n, state, K, s1, s2, s3, ft(h), 1)
                     delta0 = d0
                     tilt = a
+                    if st.record_slot >= 0:
+                        st = record_fields(c, p, st, m, n, state, t, t_new, d0, a, record_times, record_previous, record)
                     st.restart = 0
                     st.fsal = s3
                     st.h = settings.initial_step
@@ -493,9 +567,13 @@ def _make_integrator(dtype: str, model):
             if err > wp.float64(0.0):
                 factor = wp.min(wp.float64(5.0), wp.max(wp.float64(0.2), wp.float64(0.9) * wp.pow(err, wp.float64(-1.0 / ORDER_ESTIMATE))))
             if err <= wp.float64(1.0):
+                if outputs.fronts == 1:
+                    st = track_fronts(p, st, m, n, state, K, s3, t, t_new, arrival, outputs.front_direction)
                 advance_state(m, n, state, K, s1, s2, s3, ft(h), 0)
                 delta0 = d0
                 tilt = a
+                if st.record_slot >= 0:
+                    st = record_fields(c, p, st, m, n, state, t, t_new, d0, a, record_times, record_previous, record)
                 st.fsal = s3
                 h_next = h * factor
                 if clipped == 1:

@@ -60,6 +60,25 @@ class SolverSettings:
     newton_max_iter: wp.int32
 
 
+# how the detachment velocity w is read from the pad velocity u_t (docs/model.md, "Fronts")
+FRONT_AGAINST_DISC = 0  # w = -sign(v_max) * u_t: the pad springing back as the interface lets go
+FRONT_WITH_DISC = 1  # w = sign(v_max) * u_t
+FRONT_ABSOLUTE = 2  # w = |u_t|
+FRONT_DIRECTIONS = ("against_disc", "with_disc", "absolute")
+
+# fields that Record can sample (first index of the record array)
+RECORD_FIELDS = ("velocity", "slip_rate", "normal_stress", "friction_stress")
+
+
+@wp.struct
+class OutputSettings:
+    """What the integrator records besides mu_s."""
+
+    front_direction: wp.int32  # FRONT_* code
+    fronts: wp.int32  # 1: track the detachment velocity (event maximum and arrival times)
+    n_record_times: wp.int32  # length of the field-recording time grid (0: no recording)
+
+
 @wp.struct
 class IntegratorState:
     """Per-member integrator state that persists between launches, and the in-kernel reductions."""
@@ -86,3 +105,7 @@ class IntegratorState:
     restart: wp.int32  # 1: next step is a backward-Euler (re)start
     last_failure_non_finite: wp.int32
     done: wp.int32
+    front_max: wp.float64  # m/s, running maximum of the detachment velocity w over nodes and the window
+    front_level: wp.float64  # m/s, arrival level (threshold * event maximum of a first pass); inf: none
+    record_slot: wp.int32  # index among the recorded members, -1: not recorded
+    record_next: wp.int32  # next index of the recording time grid

@@ -9,7 +9,7 @@ maximised instead (docs/model.md, "Outputs").
 
 import warp as wp
 
-from .params import IntegratorState
+from .params import FRONT_ABSOLUTE, FRONT_WITH_DISC, IntegratorState
 
 
 @wp.func
@@ -36,3 +36,202 @@ def record_friction_point(st: IntegratorState, t: wp.float64, mu: wp.float64):
     st.mu_final = mu
     st.npts = st.npts + 1
     return st
+
+
+# ------------------------------------------------------------------------------------------------
+# Detachment fronts (SPEC section 7, docs/model.md "Fronts")
+# ------------------------------------------------------------------------------------------------
+
+
+@wp.func
+def detachment_velocity(velocity: wp.float64, disc_sign: wp.float64, direction: int):
+    """The detachment velocity w (m/s) of a pad velocity u_t (m/s): -sign(v_max)*u_t for
+    FRONT_AGAINST_DISC, sign(v_max)*u_t for FRONT_WITH_DISC, |u_t| for FRONT_ABSOLUTE."""
+    if direction == FRONT_ABSOLUTE:
+        return wp.abs(velocity)
+    if direction == FRONT_WITH_DISC:
+        return disc_sign * velocity
+    return -disc_sign * velocity
+
+
+@wp.func
+def crossing_time(level: wp.float64, t_old: wp.float64, w_old: wp.float64, t_new: wp.float64, w_new: wp.float64):
+    """First time in [t_old, t_new] at which the linear interpolant of w between two accepted points
+    reaches ``level``; requires w_new >= level. t_old when w_old already is at or above it."""
+    if w_old >= level:
+        return t_old
+    return t_old + (t_new - t_old) * (level - w_old) / (w_new - w_old)
+
+
+# rows of the front-metrics output array (out[row, member]); simulate() names them
+FM_NUCLEATION_POSITION = 0
+FM_NUCLEATION_EDGE = 1
+FM_FIRST_ARRIVAL = 2
+FM_LAST_ARRIVAL = 3
+FM_ARRIVED_FRACTION = 4
+FM_SEGMENTS = 5  # then start, end, length, speed for left, middle, right
+N_FRONT_METRICS = FM_SEGMENTS + 12
+
+
+@wp.struct
+class SegmentSettings:
+    min_nodes: wp.int32  # fewest node intervals of a segment
+    speed_ratio: wp.float64  # an end segment is a separate (slow) front when v_middle >= ratio * v_end
+    edge_zone: wp.float64  # m; nucleation within this distance of an edge counts as that edge
+
+
+@wp.func
+def level_misfit(sums: wp.array3d(dtype=wp.float64), m: int, a: int, b: int):
+    """Squared residual of the best constant fit to the log slowness over intervals a..b-1
+    (prefix-sum rows: count, q, q^2)."""
+    s0 = sums[0, b, m] - sums[0, a, m]
+    s1 = sums[1, b, m] - sums[1, a, m]
+    s2 = sums[2, b, m] - sums[2, a, m]
+    if s0 <= wp.float64(0.0):
+        return wp.float64(0.0)
+    return wp.max(s2 - s1 * s1 / s0, wp.float64(0.0))
+
+
+@wp.func
+def segment_speed(sums: wp.array3d(dtype=wp.float64), m: int, a: int, b: int, dx: wp.float64):
+    """Mean front speed (m/s) over intervals a..b-1: their length over the time the front spends
+    crossing them, sum |t_a(x_{j+1}) - t_a(x_j)| (a length-weighted harmonic mean of the local
+    speeds, also right for a front that spreads both ways from inside the segment)."""
+    s0 = sums[0, b, m] - sums[0, a, m]
+    spent = sums[3, b, m] - sums[3, a, m]
+    if s0 <= wp.float64(0.0):
+        return wp.float64(wp.nan)
+    return s0 * dx / spent
+
+
+@wp.func
+def write_segment(
+    out: wp.array2d(dtype=wp.float64), m: int, which: int, a: int, b: int,
+    L: wp.float64, dx: wp.float64, speed: wp.float64,
+):
+    """Start, end, length (m) and mean speed (m/s) of the segment of intervals a..b-1 into out."""
+    start = -wp.float64(0.5) * L + wp.float64(a) * dx
+    end = -wp.float64(0.5) * L + wp.float64(b) * dx
+    row = FM_SEGMENTS + 4 * which
+    out[row, m] = start
+    out[row + 1, m] = end
+    out[row + 2, m] = end - start
+    out[row + 3, m] = speed
+
+
+@wp.kernel
+def segment_fronts(
+    length: wp.array(dtype=wp.float64),
+    arrival: wp.array2d(dtype=wp.float64),
+    settings: SegmentSettings,
+    sums: wp.array3d(dtype=wp.float64),
+    out: wp.array2d(dtype=wp.float64),
+):
+    """Front metrics of each member from its arrival times t_a (s, nodes x members; NaN = never).
+
+    Works on the intervals between neighbouring nodes from the first to the last arrived node, each
+    with its local speed c_j = dx / |t_a(x_{j+1}) - t_a(x_j)|. The two breakpoints minimise the
+    squared misfit of a three-level piecewise-constant fit to log(1/c_j) (scale-free change-point
+    detection; each segment >= min_nodes intervals). An end segment is kept as a separate front
+    only when it is markedly slower than the middle one (v_middle >= speed_ratio * v_end);
+    otherwise it is merged into the middle. Absent segments are NaN. Segment speeds are
+    length / time spent (segment_speed)."""
+    m = wp.tid()
+    n = arrival.shape[0]
+    for r in range(N_FRONT_METRICS):
+        out[r, m] = wp.float64(wp.nan)
+    L = length[m]
+    dx = L / wp.float64(n - 1)
+    lo = int(-1)
+    hi = int(-1)
+    t0 = wp.float64(1.0e300)
+    t_last = wp.float64(-1.0e300)
+    i_first = int(0)
+    arrived = int(0)
+    for i in range(n):
+        ta = arrival[i, m]
+        if wp.isfinite(ta):
+            if lo < 0:
+                lo = i
+            hi = i
+            arrived += 1
+            if ta < t0:
+                t0 = ta
+                i_first = i
+            t_last = wp.max(t_last, ta)
+    out[FM_ARRIVED_FRACTION, m] = wp.float64(arrived) / wp.float64(n)
+    if lo < 0:
+        return
+    x_first = -wp.float64(0.5) * L + wp.float64(i_first) * dx
+    out[FM_NUCLEATION_POSITION, m] = x_first
+    edge = wp.float64(0.0)
+    if x_first <= -wp.float64(0.5) * L + settings.edge_zone:
+        edge = wp.float64(-1.0)
+    elif x_first >= wp.float64(0.5) * L - settings.edge_zone:
+        edge = wp.float64(1.0)
+    out[FM_NUCLEATION_EDGE, m] = edge
+    out[FM_FIRST_ARRIVAL, m] = t0
+    out[FM_LAST_ARRIVAL, m] = t_last
+    # prefix sums over intervals j = (node j, node j+1) with both ends arrived:
+    # rows count, q = log slowness, q^2, |dt|
+    for r in range(4):
+        sums[r, 0, m] = wp.float64(0.0)
+    for j in range(n - 1):
+        t_l = arrival[j, m]
+        t_r = arrival[j + 1, m]
+        w = wp.float64(0.0)
+        q = wp.float64(0.0)
+        dt = wp.float64(0.0)
+        if wp.isfinite(t_l) and wp.isfinite(t_r):
+            w = wp.float64(1.0)
+            dt = wp.abs(t_r - t_l)
+            q = wp.log(wp.max(dt, wp.float64(1.0e-12) * dx) / dx)  # speeds above 1e12 m/s: simultaneous
+        sums[0, j + 1, m] = sums[0, j, m] + w
+        sums[1, j + 1, m] = sums[1, j, m] + w * q
+        sums[2, j + 1, m] = sums[2, j, m] + w * q * q
+        sums[3, j + 1, m] = sums[3, j, m] + dt
+    if hi == lo:
+        return
+    a = lo
+    e = hi  # intervals lo..hi-1
+    k = settings.min_nodes
+    b1 = a
+    b2 = e
+    has_left = int(0)
+    has_right = int(0)
+    if e - a >= 3 * k:
+        best = wp.float64(1.0e300)
+        for i1 in range(a + k, e - 2 * k + 1):
+            q_l = level_misfit(sums, m, a, i1)
+            for i2 in range(i1 + k, e - k + 1):
+                q = q_l + level_misfit(sums, m, i1, i2) + level_misfit(sums, m, i2, e)
+                if q < best:
+                    best = q
+                    b1 = i1
+                    b2 = i2
+        has_left = 1
+        has_right = 1
+    # keep an end segment only when it is markedly slower than the (merged) middle
+    for _pass in range(3):
+        mid_a = a
+        mid_b = e
+        if has_left == 1:
+            mid_a = b1
+        if has_right == 1:
+            mid_b = b2
+        v_mid = segment_speed(sums, m, mid_a, mid_b, dx)
+        if has_left == 1:
+            if not (segment_speed(sums, m, a, b1, dx) * settings.speed_ratio <= v_mid):
+                has_left = 0
+        if has_right == 1:
+            if not (segment_speed(sums, m, b2, e, dx) * settings.speed_ratio <= v_mid):
+                has_right = 0
+    mid_a = a
+    mid_b = e
+    if has_left == 1:
+        mid_a = b1
+        write_segment(out, m, 0, a, b1, L, dx, segment_speed(sums, m, a, b1, dx))
+    if has_right == 1:
+        mid_b = b2
+        write_segment(out, m, 2, b2, e, L, dx, segment_speed(sums, m, b2, e, dx))
+    write_segment(out, m, 1, mid_a, mid_b, L, dx, segment_speed(sums, m, mid_a, mid_b, dx))

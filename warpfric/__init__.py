@@ -25,7 +25,7 @@ def _attach_kernels():
 
 _attach_kernels()
 
-from .parameters import PARAMETER_NAMES, Model, Parameters, Solver  # noqa: E402
+from .parameters import PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solver  # noqa: E402
 from .simulate import default_device, simulate  # noqa: E402
 
-__all__ = ["Parameters", "Model", "Solver", "simulate", "default_device", "PARAMETER_NAMES", "__version__"]
+__all__ = ["Parameters", "Model", "Solver", "Fronts", "Record", "simulate", "default_device", "PARAMETER_NAMES", "__version__"]

@@ -87,6 +87,6 @@ def _check_protocol(values: dict[str, np.ndarray]) -> None:
     if np.any(bad):
         i = int(np.flatnonzero(bad)[0])
         raise ValueError(
-            f"parameter 'end_time' = {end[i]!r} (s) ends before the disc starts to move; "
-            f"valid range (rest_until, inf) = ({rest[i]!r}, inf) s (member {i})"
+            f"parameter 'end_time' = {float(end[i])!r} (s) ends before the disc starts to move; "
+            f"valid range (rest_until, inf) = ({float(rest[i])!r}, inf) s (member {i})"
         )

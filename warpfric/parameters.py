@@ -141,7 +141,7 @@ def validate_value(name: str, value: np.ndarray) -> None:
     if np.any(bad):
         first = arr.reshape(-1)[np.flatnonzero(bad.reshape(-1))[0]]
         raise ValueError(
-            f"parameter {name!r} = {first!r} ({parameter_units(name)}) is out of range; "
+            f"parameter {name!r} = {float(first)!r} ({parameter_units(name)}) is out of range; "
             f"valid range {_range_text(meta)}"
         )
 
@@ -234,3 +234,82 @@ class Solver:
         need(is_int(self.steps_per_launch) and self.steps_per_launch >= 1, "steps_per_launch",
              self.steps_per_launch, "an integer >= 1")
         need(self.method in _METHODS, "method", self.method, " or ".join(_METHODS))
+
+
+_FRONT_DIRECTIONS = ("against_disc", "with_disc", "absolute")
+
+
+@dataclass(frozen=True)
+class Fronts:
+    """How the detachment front is read from the pad velocity (docs/model.md, "Fronts").
+
+    threshold:             a node has detached once its detachment velocity w reaches
+                           threshold * (the event maximum of w over nodes and time); 0.4 in the paper.
+    direction:             w = -sign(v_max)*u_t ('against_disc', default: the pad springs back as the
+                           interface lets go), sign(v_max)*u_t ('with_disc') or |u_t| ('absolute').
+    min_segment_fraction:  shortest left/middle/right segment, as a fraction of the pad length
+                           (at least 3 nodes).
+    speed_ratio:           an end segment counts as a separate, slower front (left precursor or
+                           right front) when v_middle >= speed_ratio * v_end; else it is merged.
+    edge_zone_fraction:    nucleation within this fraction of L of an edge is nucleation at that edge.
+
+    Front metrics cost a second pass of the integrator (the event maximum must be known before the
+    arrival times are taken); ``simulate(fronts=None)`` skips them.
+    """
+
+    threshold: float = 0.4
+    direction: str = "against_disc"
+    min_segment_fraction: float = 0.05
+    speed_ratio: float = 1.5
+    edge_zone_fraction: float = 0.1
+
+    def __post_init__(self):
+        def need(cond, name, value, valid):
+            if not cond:
+                raise ValueError(f"fronts setting {name!r} = {value!r} is invalid; valid: {valid}")
+
+        def real(v):
+            return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(v)
+
+        need(real(self.threshold) and 0 < self.threshold < 1, "threshold", self.threshold, "a number in (0, 1)")
+        need(self.direction in _FRONT_DIRECTIONS, "direction", self.direction, " or ".join(_FRONT_DIRECTIONS))
+        need(real(self.min_segment_fraction) and 0 < self.min_segment_fraction <= 1 / 3, "min_segment_fraction",
+             self.min_segment_fraction, "a number in (0, 1/3]")
+        need(real(self.speed_ratio) and self.speed_ratio >= 1, "speed_ratio", self.speed_ratio, "a number >= 1")
+        need(real(self.edge_zone_fraction) and 0 <= self.edge_zone_fraction <= 0.5, "edge_zone_fraction",
+             self.edge_zone_fraction, "a number in [0, 0.5]")
+
+
+@dataclass(frozen=True)
+class Record:
+    """Field recording for chosen members (off unless given): pad velocity (m/s), slip rate (m/s),
+    contact pressure (Pa) and friction stress (Pa) at every node, sampled at ``times`` (s) by linear
+    interpolation between accepted steps. Memory: 4 * len(times) * nodes * len(members) values.
+
+    members:  member indices (0-based, in the order of simulate's output) to record.
+    times:    sampling times in s, non-decreasing. ``Record.window(start, stop, count)`` builds an
+              evenly spaced grid.
+    """
+
+    members: tuple = (0,)
+    times: tuple = ()
+
+    @staticmethod
+    def window(start: float, stop: float, count: int, members=(0,)) -> "Record":
+        """``count`` evenly spaced times from ``start`` to ``stop`` (s), both included."""
+        if not (isinstance(count, (int, np.integer)) and count >= 2):
+            raise ValueError(f"record setting 'count' = {count!r} is invalid; valid: an integer >= 2")
+        return Record(members=tuple(members), times=tuple(np.linspace(float(start), float(stop), int(count))))
+
+    def __post_init__(self):
+        members = np.asarray(self.members).reshape(-1)
+        if members.size == 0 or members.dtype.kind not in "iu" or (members < 0).any():
+            raise ValueError(f"record setting 'members' = {self.members!r} is invalid; valid: non-empty list of member indices >= 0")
+        if len(set(members.tolist())) != members.size:
+            raise ValueError(f"record setting 'members' = {self.members!r} has repeated indices")
+        times = np.asarray(self.times, dtype=np.float64).reshape(-1)
+        if times.size == 0 or not np.isfinite(times).all() or (times < 0).any() or (np.diff(times) < 0).any():
+            raise ValueError(f"record setting 'times' = {self.times!r} is invalid; valid: non-empty, finite, "
+                             "non-decreasing times >= 0 (s)")
+        object.__setattr__(self, "members", tuple(int(i) for i in members))
+        object.__setattr__(self, "times", tuple(float(t) for t in times))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import math
 import sys
 import time
 from typing import Any
@@ -12,7 +13,7 @@ import xarray as xr
 
 from . import __version__
 from .members import resolve_members
-from .parameters import Model, Parameters, Solver, parameter_long_name, parameter_units
+from .parameters import Fronts, Model, Parameters, Record, Solver, parameter_long_name, parameter_units
 
 
 def _warp():
@@ -46,8 +47,9 @@ def _check_device(device: str | None) -> str:
 class _Progress:
     """One-line progress on stderr: members done and mean simulated-time fraction."""
 
-    def __init__(self, enabled: bool, n_members: int):
+    def __init__(self, enabled: bool, n_members: int, label: str = ""):
         self.enabled = enabled
+        self.label = (label + " ") if label else ""
         self.n = n_members
         self.tty = sys.stderr.isatty()  # in a log, "\r" does not overwrite: only the final line
         self.t0 = time.perf_counter()
@@ -62,7 +64,7 @@ class _Progress:
         self.last = now
         bar = "#" * int(30 * fraction) + "-" * (30 - int(30 * fraction))
         sys.stderr.write(
-            ("\r" if self.tty else "") + f"warpfric [{bar}] {100 * fraction:5.1f}% simulated time, "
+            ("\r" if self.tty else "") + f"warpfric {self.label}[{bar}] {100 * fraction:5.1f}% simulated time, "
             f"{done}/{self.n} members done, {now - self.t0:7.1f} s"
         )
         if final:
@@ -76,6 +78,8 @@ def simulate(
     scene: Parameters = Parameters(),
     model: Model = Model(),
     solver: Solver = Solver(),
+    fronts: Fronts | None = Fronts(),
+    record: Record | None = None,
     device: str | None = None,
     progress: bool | None = None,
 ) -> xr.Dataset:
@@ -102,11 +106,23 @@ def simulate(
         raise ValueError(f"model: expected a warpfric.Model, got {type(model).__name__}")
     if not isinstance(solver, Solver):
         raise ValueError(f"solver: expected a warpfric.Solver, got {type(solver).__name__}")
+    if fronts is not None and not isinstance(fronts, Fronts):
+        raise ValueError(f"fronts: expected a warpfric.Fronts or None, got {type(fronts).__name__}")
+    if record is not None and not isinstance(record, Record):
+        raise ValueError(f"record: expected a warpfric.Record or None, got {type(record).__name__}")
     values, varying = resolve_members(members, scene)
     device = _check_device(device)
     wp = _warp()
     from warpfric.kernels.integrator import C_PHI, N_COMPONENTS, N_STAGE_SLOTS, N_WORK, get_integrator
-    from warpfric.kernels.params import STATUS_MEANINGS, IntegratorState, MemberParams, SolverSettings
+    from warpfric.kernels.params import (
+        FRONT_DIRECTIONS,
+        RECORD_FIELDS,
+        STATUS_MEANINGS,
+        IntegratorState,
+        MemberParams,
+        OutputSettings,
+        SolverSettings,
+    )
 
     n_members = values["normal_force"].shape[0]
     n = solver.nodes
@@ -117,13 +133,6 @@ def simulate(
     params_np = np.zeros(n_members, dtype=MemberParams.numpy_dtype())
     for name in params_np.dtype.names:
         params_np[name] = values[name]
-    states_np = np.zeros(n_members, dtype=IntegratorState.numpy_dtype())
-    states_np["h"] = solver.initial_step
-    states_np["restart"] = 1
-    states_np["mu_s"] = -np.inf
-    state_np = np.zeros((N_COMPONENTS, n, n_members), dtype=np_dtype)
-    state_np[C_PHI] = values["initial_age"][None, :]
-
     settings = SolverSettings()
     settings.rtol = solver.rtol
     settings.initial_step = solver.initial_step
@@ -134,36 +143,172 @@ def simulate(
     settings.newton_max_iter = solver.newton_max_iter
 
     t_start = time.perf_counter()
+    record_slots = _record_slots(record, n_members)
+    n_passes = 2 if fronts is not None else 1
     with wp.ScopedDevice(device):
         params = wp.array(params_np, dtype=MemberParams)
-        states = wp.array(states_np, dtype=IntegratorState)
-        state = wp.array(state_np, dtype=ft)
         stages = wp.zeros((N_STAGE_SLOTS, N_COMPONENTS, n, n_members), dtype=ft)
         work = wp.zeros((N_WORK, n, n_members), dtype=ft)
+        outputs = OutputSettings()
+        outputs.fronts = 1 if fronts is not None else 0
+        outputs.front_direction = FRONT_DIRECTIONS.index(fronts.direction) if fronts is not None else 0
+        n_rec = len(record.members) if record is not None else 0
+        outputs.n_record_times = len(record.times) if record is not None else 0
+        arrival = wp.zeros((n, n_members) if fronts is not None else (1, 1), dtype=wp.float64)
+        rec_times = wp.array(np.asarray(record.times if record is not None else [0.0]), dtype=wp.float64)
+        rec_shape = (len(RECORD_FIELDS), n, max(n_rec, 1))
+        rec_previous = wp.zeros(rec_shape, dtype=ft)
+        rec_out = wp.zeros((len(RECORD_FIELDS), outputs.n_record_times if n_rec else 1, n, max(n_rec, 1)), dtype=ft)
         show = sys.stderr.isatty() if progress is None else bool(progress)
-        bar = _Progress(show, n_members)
-        end = values["end_time"]
-        while True:
-            wp.launch(
-                kern["integrate"],
-                dim=n_members,
-                inputs=[params, settings, states, state, stages, work, solver.steps_per_launch],
-            )
-            st = states.numpy()
-            n_done = int(st["done"].sum())
-            bar.update(n_done, float(np.mean(np.minimum(st["t"] / end, 1.0))))
-            if n_done == n_members:
-                break
-        bar.update(n_done, 1.0, final=True)
+        front_max = None
+        for pass_index in range(n_passes):
+            last = pass_index == n_passes - 1
+            states_np = np.zeros(n_members, dtype=IntegratorState.numpy_dtype())
+            states_np["h"] = solver.initial_step
+            states_np["restart"] = 1
+            states_np["mu_s"] = -np.inf
+            states_np["front_max"] = -np.inf
+            states_np["front_level"] = np.inf
+            if front_max is not None:  # second pass: the level is known from the first
+                states_np["front_level"] = np.where(front_max > 0, fronts.threshold * front_max, np.inf)
+            states_np["record_slot"] = record_slots if last else -1
+            state_np = np.zeros((N_COMPONENTS, n, n_members), dtype=np_dtype)
+            state_np[C_PHI] = values["initial_age"][None, :]
+            states = wp.array(states_np, dtype=IntegratorState)
+            state = wp.array(state_np, dtype=ft)
+            arrival.fill_(np.nan)
+            label = f"pass {pass_index + 1}/{n_passes}" if n_passes > 1 else ""
+            bar = _Progress(show, n_members, label)
+            end = values["end_time"]
+            while True:
+                wp.launch(
+                    kern["integrate"],
+                    dim=n_members,
+                    inputs=[params, settings, states, state, stages, work, solver.steps_per_launch,
+                            outputs, arrival, rec_times, rec_previous, rec_out],
+                )
+                st = states.numpy()
+                n_done = int(st["done"].sum())
+                bar.update(n_done, float(np.mean(np.minimum(st["t"] / end, 1.0))))
+                if n_done == n_members:
+                    break
+            bar.update(n_done, 1.0, final=True)
+            front_max = st["front_max"]
         sigma_out = wp.zeros((n, n_members), dtype=ft)
         tau_out = wp.zeros((n, n_members), dtype=ft)
         wp.launch(kern["evaluate_fields"], dim=n_members, inputs=[params, states, state, sigma_out, tau_out])
         fields = state.numpy()
         sigma = sigma_out.numpy()
         tau = tau_out.numpy()
+        front = None
+        if fronts is not None:
+            front = _front_metrics(wp, fronts, values, arrival, n, n_members)
+            front["event_max_velocity"] = np.where(front_max > 0, front_max, np.nan)
+        recorded = rec_out.numpy() if record is not None else None
         wp.synchronize_device(device)
     wall = time.perf_counter() - t_start
-    return _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, wall, STATUS_MEANINGS)
+    ds = _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, wall, STATUS_MEANINGS)
+    if front is not None:
+        _add_fronts(ds, front, fronts)
+    if record is not None:
+        _add_record(ds, record, recorded, ds.x)
+    return ds
+
+
+def _record_slots(record: Record | None, n_members: int) -> np.ndarray:
+    """Per member: its index among the recorded members, or -1."""
+    slots = np.full(n_members, -1, dtype=np.int32)
+    if record is None:
+        return slots
+    for slot, member in enumerate(record.members):
+        if member >= n_members:
+            raise ValueError(f"record setting 'members' contains {member}; valid: member indices 0..{n_members - 1}")
+        slots[member] = slot
+    return slots
+
+
+def _front_metrics(wp, fronts: Fronts, values, arrival, n: int, n_members: int) -> dict:
+    """Run the segmentation kernel on the arrival times; return {name: array}."""
+    from warpfric.kernels.reductions import N_FRONT_METRICS, SegmentSettings, segment_fronts
+
+    length = values["length"]
+    seg = SegmentSettings()
+    seg.min_nodes = max(3, int(math.ceil(fronts.min_segment_fraction * (n - 1))))
+    seg.speed_ratio = fronts.speed_ratio
+    # edge zone in m: the same for all members only when their lengths agree; use the shortest
+    seg.edge_zone = float(fronts.edge_zone_fraction * np.min(length))
+    sums = wp.zeros((4, n, n_members), dtype=wp.float64)
+    out = wp.zeros((N_FRONT_METRICS, n_members), dtype=wp.float64)
+    wp.launch(segment_fronts, dim=n_members,
+              inputs=[wp.array(length, dtype=wp.float64), arrival, seg, sums, out])
+    rows = out.numpy()
+    metrics = {name: rows[i] for i, name in enumerate(FRONT_METRIC_NAMES)}
+    metrics["arrival_time"] = arrival.numpy().T.copy()
+    return metrics
+
+
+FRONT_METRIC_NAMES = (
+    "nucleation_position", "nucleation_edge", "front_start_time", "front_end_time", "detached_fraction",
+    "left_front_start", "left_front_end", "left_front_length", "v_left",
+    "middle_front_start", "middle_front_end", "middle_front_length", "v_middle",
+    "right_front_start", "right_front_end", "right_front_length", "v_right",
+)
+
+_FRONT_ATTRS = {
+    "arrival_time": ("s", "arrival time t_a of the detachment front (first time w >= threshold * event maximum)"),
+    "event_max_velocity": ("m s-1", "maximum of the detachment velocity w over the pad and the event window"),
+    "nucleation_position": ("m", "position of the node that detaches first"),
+    "front_start_time": ("s", "first arrival time of the detachment front"),
+    "front_end_time": ("s", "last arrival time of the detachment front"),
+    "detached_fraction": ("1", "fraction of the nodes the detachment front reached"),
+}
+for _seg in ("left", "middle", "right"):
+    _FRONT_ATTRS[f"{_seg}_front_start"] = ("m", f"start (smaller x) of the {_seg} front segment")
+    _FRONT_ATTRS[f"{_seg}_front_end"] = ("m", f"end (larger x) of the {_seg} front segment")
+    _FRONT_ATTRS[f"{_seg}_front_length"] = ("m", f"length of the {_seg} front segment")
+    _FRONT_ATTRS[f"v_{_seg}"] = ("m s-1", f"mean speed of the {_seg} front segment (1/|slope| of t_a(x))")
+
+
+def _add_fronts(ds: xr.Dataset, front: dict, fronts: Fronts) -> None:
+    failed = ds.status.values != 0
+    for name, arr in front.items():
+        arr = np.where(failed[:, None] if arr.ndim == 2 else failed, np.nan, arr)
+        if name == "nucleation_edge":
+            edge = np.where(np.isfinite(arr), arr, -2).astype(np.int8)
+            ds[name] = xr.DataArray(edge, dims=("member",), attrs={
+                "long_name": "edge where the detachment front nucleates",
+                "flag_values": np.array([-2, -1, 0, 1], dtype=np.int8),
+                "flag_meanings": "none left interior right",
+            })
+            continue
+        units, long_name = _FRONT_ATTRS[name]
+        dims = ("member", "x") if arr.ndim == 2 else ("member",)
+        ds[name] = xr.DataArray(arr, dims=dims, attrs={"units": units, "long_name": long_name})
+    for f in dataclasses.fields(fronts):
+        ds.attrs[f"fronts_{f.name}"] = getattr(fronts, f.name)
+
+
+def _add_record(ds: xr.Dataset, record: Record, recorded: np.ndarray, x) -> None:
+    from warpfric.kernels.params import RECORD_FIELDS
+
+    ds.coords["time"] = xr.DataArray(np.asarray(record.times), dims=("time",),
+                                     attrs={"units": "s", "long_name": "recording time"})
+    ds.coords["recorded_member"] = xr.DataArray(np.asarray(record.members, dtype=np.int64), dims=("recorded",),
+                                                attrs={"long_name": "member index of each recorded member"})
+    for f, name in enumerate(RECORD_FIELDS):
+        units, long_name = _RECORD_ATTRS[name]
+        ds[f"{name}_history"] = xr.DataArray(
+            np.ascontiguousarray(np.transpose(recorded[f], (2, 0, 1))), dims=("recorded", "time", "x"),
+            attrs={"units": units, "long_name": long_name + " (recorded)"},
+        )
+
+
+_RECORD_ATTRS = {
+    "velocity": ("m s-1", "pad velocity du/dt"),
+    "slip_rate": ("m s-1", "slip rate v_d - k_if*du/dt"),
+    "normal_stress": ("Pa", "interface contact pressure max(sigma_n, 0)"),
+    "friction_stress": ("Pa", "friction stress tau_f"),
+}
 
 
 _OUTPUT_ATTRS = {
