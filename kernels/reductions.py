@@ -131,10 +131,10 @@ def segment_fronts(
 
     Works on the intervals between neighbouring nodes from the first to the last arrived node, each
     with its local speed c_j = dx / |t_a(x_{j+1}) - t_a(x_j)|. The two breakpoints minimise the
-    squared misfit of a three-level piecewise-constant fit to log(1/c_j) (scale-free change-point
-    detection; each segment >= min_nodes intervals). An end segment is kept as a separate front
-    only when it is markedly slower than the middle one (v_middle >= speed_ratio * v_end);
-    otherwise it is merged into the middle. Absent segments are NaN. Segment speeds are
+    squared misfit of a piecewise-constant fit to log(1/c_j) (scale-free change-point detection)
+    over the admissible splits: no split, a left end segment, a right one, or both, each segment
+    >= min_nodes intervals and each end segment markedly slower than the middle one
+    (v_middle >= speed_ratio * v_end). Absent segments are NaN. Segment speeds are
     length / time spent (segment_speed)."""
     m = wp.tid()
     n = arrival.shape[0]
@@ -195,37 +195,43 @@ def segment_fronts(
     a = lo
     e = hi  # intervals lo..hi-1
     k = settings.min_nodes
+    # candidates: i1 = a (no left segment) or a+k.., i2 = e (no right segment) or ..e-k; the middle
+    # keeps >= k intervals; a present end segment must be markedly slower than the middle
     b1 = a
     b2 = e
-    has_left = int(0)
-    has_right = int(0)
-    if e - a >= 3 * k:
-        best = wp.float64(1.0e300)
-        for i1 in range(a + k, e - 2 * k + 1):
-            q_l = level_misfit(sums, m, a, i1)
-            for i2 in range(i1 + k, e - k + 1):
+    best = level_misfit(sums, m, a, e)
+    n_first = e - a - 2 * k + 1  # i1 in a+k .. e-2k when both ends are present
+    for c1 in range(-1, wp.max(n_first, 0) + k):
+        i1 = a + k + c1
+        if c1 < 0:
+            i1 = a
+        if i1 > e - k:
+            break
+        q_l = level_misfit(sums, m, a, i1)
+        for c2 in range(-1, e - k - (i1 + k) + 1):
+            i2 = i1 + k + c2
+            if c2 < 0:
+                i2 = e
+            if i1 == a and i2 == e:
+                continue
+            v_mid = segment_speed(sums, m, i1, i2, dx)
+            ok = True
+            if i1 > a:
+                ok = ok and segment_speed(sums, m, a, i1, dx) * settings.speed_ratio <= v_mid
+            if i2 < e:
+                ok = ok and segment_speed(sums, m, i2, e, dx) * settings.speed_ratio <= v_mid
+            if ok:
                 q = q_l + level_misfit(sums, m, i1, i2) + level_misfit(sums, m, i2, e)
                 if q < best:
                     best = q
                     b1 = i1
                     b2 = i2
+    has_left = int(0)
+    has_right = int(0)
+    if b1 > a:
         has_left = 1
+    if b2 < e:
         has_right = 1
-    # keep an end segment only when it is markedly slower than the (merged) middle
-    for _pass in range(3):
-        mid_a = a
-        mid_b = e
-        if has_left == 1:
-            mid_a = b1
-        if has_right == 1:
-            mid_b = b2
-        v_mid = segment_speed(sums, m, mid_a, mid_b, dx)
-        if has_left == 1:
-            if not (segment_speed(sums, m, a, b1, dx) * settings.speed_ratio <= v_mid):
-                has_left = 0
-        if has_right == 1:
-            if not (segment_speed(sums, m, b2, e, dx) * settings.speed_ratio <= v_mid):
-                has_right = 0
     mid_a = a
     mid_b = e
     if has_left == 1:
@@ -235,3 +241,37 @@ def segment_fronts(
         mid_b = b2
         write_segment(out, m, 2, b2, e, L, dx, segment_speed(sums, m, b2, e, dx))
     write_segment(out, m, 1, mid_a, mid_b, L, dx, segment_speed(sums, m, mid_a, mid_b, dx))
+
+
+@wp.kernel
+def arrival_from_history(
+    times: wp.array(dtype=wp.float64),
+    velocity: wp.array3d(dtype=wp.float64),
+    disc_sign: wp.array(dtype=wp.float64),
+    direction: int,
+    threshold: wp.float64,
+    arrival: wp.array2d(dtype=wp.float64),
+    event_max: wp.array(dtype=wp.float64),
+):
+    """Arrival times from a sampled pad-velocity history (times (T,) s, velocity (T, nodes,
+    members) m/s) by the rule the integrator applies to its accepted steps: a first sweep finds
+    the event maximum of the detachment velocity, a second the first crossing of threshold times
+    it at each node. Used to test that rule on fields with known fronts; nodes that never cross
+    get NaN."""
+    m = wp.tid()
+    n_t = velocity.shape[0]
+    n = velocity.shape[1]
+    w_max = wp.float64(-1.0e300)
+    for k in range(1, n_t):
+        for i in range(n):
+            w_max = wp.max(w_max, detachment_velocity(velocity[k, i, m], disc_sign[m], direction))
+    event_max[m] = w_max
+    level = threshold * w_max
+    for i in range(n):
+        arrival[i, m] = wp.float64(wp.nan)
+        for k in range(1, n_t):
+            w_old = detachment_velocity(velocity[k - 1, i, m], disc_sign[m], direction)
+            w_new = detachment_velocity(velocity[k, i, m], disc_sign[m], direction)
+            if w_new >= level:
+                arrival[i, m] = crossing_time(level, times[k - 1], w_old, times[k], w_new)
+                break

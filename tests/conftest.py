@@ -9,13 +9,17 @@ import warpfric as wf
 DEVICE = os.environ.get("WARPFRIC_TEST_DEVICE", "cpu")
 
 
-def run(members=None, *, scene=None, model=None, nodes=40, rtol=1e-6, dtype="float64", **solver_kw):
-    """simulate on the CPU with small, fast defaults for tests."""
+def run(members=None, *, scene=None, model=None, nodes=40, rtol=1e-6, dtype="float64", fronts=None,
+        record=None, **solver_kw):
+    """simulate on the CPU with small, fast defaults for tests (front metrics off unless asked for:
+    they cost a second pass)."""
     return wf.simulate(
         members,
         scene=scene or wf.Parameters(),
         model=model or wf.Model(),
         solver=wf.Solver(nodes=nodes, rtol=rtol, dtype=dtype, **solver_kw),
+        fronts=fronts,
+        record=record,
         device=DEVICE,
         progress=False,
     )

@@ -202,7 +202,7 @@ def simulate(
         tau = tau_out.numpy()
         front = None
         if fronts is not None:
-            front = _front_metrics(wp, fronts, values, arrival, n, n_members)
+            front = _front_metrics(wp, fronts, values, arrival, n, n_members, device)
             front["event_max_velocity"] = np.where(front_max > 0, front_max, np.nan)
         recorded = rec_out.numpy() if record is not None else None
         wp.synchronize_device(device)
@@ -227,32 +227,15 @@ def _record_slots(record: Record | None, n_members: int) -> np.ndarray:
     return slots
 
 
-def _front_metrics(wp, fronts: Fronts, values, arrival, n: int, n_members: int) -> dict:
-    """Run the segmentation kernel on the arrival times; return {name: array}."""
-    from warpfric.kernels.reductions import N_FRONT_METRICS, SegmentSettings, segment_fronts
+def _front_metrics(wp, fronts: Fronts, values, arrival, n: int, n_members: int, device: str) -> dict:
+    """Segment the arrival times (kernel launched on the simulation's device); return {name: array}."""
+    from .fronts import segment
 
-    length = values["length"]
-    seg = SegmentSettings()
-    seg.min_nodes = max(3, int(math.ceil(fronts.min_segment_fraction * (n - 1))))
-    seg.speed_ratio = fronts.speed_ratio
-    # edge zone in m: the same for all members only when their lengths agree; use the shortest
-    seg.edge_zone = float(fronts.edge_zone_fraction * np.min(length))
-    sums = wp.zeros((4, n, n_members), dtype=wp.float64)
-    out = wp.zeros((N_FRONT_METRICS, n_members), dtype=wp.float64)
-    wp.launch(segment_fronts, dim=n_members,
-              inputs=[wp.array(length, dtype=wp.float64), arrival, seg, sums, out])
-    rows = out.numpy()
-    metrics = {name: rows[i] for i, name in enumerate(FRONT_METRIC_NAMES)}
-    metrics["arrival_time"] = arrival.numpy().T.copy()
+    arrival_time = arrival.numpy().T.copy()
+    metrics = segment(arrival_time, values["length"], fronts, device=device)
+    metrics["arrival_time"] = arrival_time
     return metrics
 
-
-FRONT_METRIC_NAMES = (
-    "nucleation_position", "nucleation_edge", "front_start_time", "front_end_time", "detached_fraction",
-    "left_front_start", "left_front_end", "left_front_length", "v_left",
-    "middle_front_start", "middle_front_end", "middle_front_length", "v_middle",
-    "right_front_start", "right_front_end", "right_front_length", "v_right",
-)
 
 _FRONT_ATTRS = {
     "arrival_time": ("s", "arrival time t_a of the detachment front (first time w >= threshold * event maximum)"),

@@ -1,0 +1,171 @@
+"""Front metrics: the arrival rule and the segmentation on fields with known fronts, and on
+simulated members (definition, symmetry, independence from the rest of the run)."""
+
+import numpy as np
+import pytest
+from conftest import DEVICE, run, trapezoid_weights
+
+import warpfric as wf
+from warpfric.fronts import arrival_times_from_history, segment
+
+L = 0.2
+N = 101  # dx = 2 mm
+X = np.linspace(-L / 2, L / 2, N)
+DX = X[1] - X[0]
+
+
+def piecewise_arrival(x, breaks, speeds, x0, t0=0.0):
+    """Arrival times of a front leaving x0 at t0 and moving both ways with the local speed
+    speeds[k] between breaks[k-1] and breaks[k] (exact integral of the slowness)."""
+    edges = np.concatenate([[-np.inf], breaks, [np.inf]])
+
+    def slowness(xx):
+        return 1.0 / np.asarray(speeds)[np.searchsorted(edges, xx, side="right") - 1]
+
+    fine = np.linspace(-L / 2, L / 2, 200 * (N - 1) + 1)  # exact for breaks on nodes (midpoint rule)
+    mid = 0.5 * (fine[1:] + fine[:-1])
+    cum = np.concatenate([[0.0], np.cumsum(slowness(mid) * np.diff(fine))])
+    t_at = np.interp(x, fine, cum)
+    return t0 + np.abs(t_at - np.interp(x0, fine, cum))
+
+
+def paper_like():
+    """Slow left precursor (5 m/s) to -44 mm, middle front (30 m/s) to +56 mm, right front (2 m/s)."""
+    return piecewise_arrival(X, [-0.044, 0.056], [5.0, 30.0, 2.0], x0=-L / 2)
+
+
+def test_arrival_rule_recovers_the_threshold_crossing_of_a_sampled_pulse():
+    ta = paper_like() + 20.3
+    sigma, lag, amplitude = 1e-3, 3e-3, 7e-8
+    times = np.arange(20.285, 20.36, 2e-5)
+    s = times[:, None] - ta[None, :] - lag
+    backward = amplitude * np.exp(-((s / sigma) ** 2))
+    loading = 3 * amplitude * np.exp(-(((times[:, None] - 20.292) / 2e-3) ** 2)) * np.ones(N)  # with the disc
+    velocity = loading - backward  # disc moves towards +x: detachment velocity is -u_t
+    arrival, event_max = arrival_times_from_history(times, velocity, 1e-4, device=DEVICE)
+    expected = ta + lag - sigma * np.sqrt(np.log(1 / 0.4))
+    np.testing.assert_allclose(arrival[0], expected, atol=2e-7)
+    assert abs(event_max[0] / amplitude - 1) < 1e-3
+    # the other direction sees the loading pulse (before the event) instead
+    arrival_with, _ = arrival_times_from_history(times, velocity, 1e-4, wf.Fronts(direction="with_disc"), device=DEVICE)
+    assert np.ptp(arrival_with[0]) < 1e-6  # a uniform pulse reaches every node together
+
+
+def test_segmentation_finds_known_breakpoints_and_speeds():
+    m = segment(paper_like(), L, device=DEVICE)
+    assert m["nucleation_edge"][0] == -1 and m["nucleation_position"][0] == -L / 2
+    np.testing.assert_allclose([m["left_front_start"][0], m["left_front_end"][0]], [-0.1, -0.044], atol=1e-12)
+    np.testing.assert_allclose([m["middle_front_start"][0], m["middle_front_end"][0]], [-0.044, 0.056], atol=1e-12)
+    np.testing.assert_allclose([m["right_front_start"][0], m["right_front_end"][0]], [0.056, 0.1], atol=1e-12)
+    np.testing.assert_allclose([m["v_left"][0], m["v_middle"][0], m["v_right"][0]], [5.0, 30.0, 2.0], rtol=1e-6)
+    np.testing.assert_allclose(m["left_front_length"][0], 0.056, rtol=1e-9)
+    assert m["detached_fraction"][0] == 1.0
+
+
+def test_segmentation_is_robust_to_noise():
+    rng = np.random.default_rng(3)
+    ta = paper_like()
+    noisy = ta + rng.normal(0, 0.05 * DX / 30.0, N)  # 5 % of the middle front's time per node
+    m = segment(noisy, L, device=DEVICE)
+    assert abs(m["left_front_end"][0] + 0.044) <= 2 * DX + 1e-12
+    assert abs(m["right_front_start"][0] - 0.056) <= 2 * DX + 1e-12
+    np.testing.assert_allclose([m["v_left"][0], m["v_right"][0]], [5.0, 2.0], rtol=0.05)
+    np.testing.assert_allclose(m["v_middle"][0], 30.0, rtol=0.15)
+
+
+@pytest.mark.parametrize(
+    "breaks, speeds, x0, present",
+    [
+        ([0.056], [30.0, 2.0], -L / 2, ("middle", "right")),  # no left precursor (low force in the paper)
+        ([-0.044], [5.0, 30.0], -L / 2, ("left", "middle")),  # no right front
+        ([], [30.0], -L / 2, ("middle",)),  # one uniform front
+        ([-0.044, 0.056], [24.0, 30.0, 26.0], -L / 2, ("middle",)),  # speed changes too small to split
+    ],
+)
+def test_absent_segments_are_nan(breaks, speeds, x0, present):
+    m = segment(piecewise_arrival(X, breaks, speeds, x0), L, device=DEVICE)
+    for seg in ("left", "middle", "right"):
+        values = [m[f"{seg}_front_{q}"][0] for q in ("start", "end", "length")] + [m[f"v_{seg}"][0]]
+        assert np.isfinite(values).all() == (seg in present), (seg, values)
+    if present == ("middle",):
+        assert m["middle_front_length"][0] == pytest.approx(L, rel=1e-12)
+        harmonic = L / np.sum(np.diff(piecewise_arrival(X, breaks, speeds, x0)))
+        assert m["v_middle"][0] == pytest.approx(harmonic, rel=1e-9)
+
+
+def test_bilateral_front_and_no_front():
+    ta = piecewise_arrival(X, [], [30.0], x0=0.046)
+    ta_none = np.full(N, np.nan)
+    ta_part = ta.copy()
+    ta_part[:30] = np.nan  # the front stops short of the left part
+    m = segment(np.stack([ta, ta_none, ta_part]), L, device=DEVICE)
+    assert m["nucleation_edge"][0] == 0 and m["nucleation_position"][0] == pytest.approx(0.046, abs=1e-12)
+    assert m["v_middle"][0] == pytest.approx(30.0, rel=1e-9)  # both branches at 30 m/s
+    assert m["detached_fraction"][1] == 0 and all(np.isnan(m[k][1]) for k in m if k != "detached_fraction")
+    assert m["detached_fraction"][2] == pytest.approx(71 / 101)
+    assert m["middle_front_start"][2] == pytest.approx(X[30], abs=1e-12)
+
+
+def test_in_kernel_arrival_times_match_the_definition_on_recorded_fields():
+    """The two-pass in-kernel rule against the definition applied to the recorded velocity: the
+    recording is the linear interpolant of the accepted steps, so the two agree to the sampling."""
+    scene = wf.Parameters(end_time=20.4)
+    dt = 4e-5
+    record = wf.Record.window(20.0, 20.4, int(round(0.4 / dt)) + 1)
+    ds = run(scene=scene, nodes=41, fronts=wf.Fronts(), record=record)
+    velocity = ds.velocity_history.values[0]
+    arrival, event_max = arrival_times_from_history(ds.time.values, velocity, scene.disc_velocity, device=DEVICE)
+    kernel = ds.arrival_time.values[0]
+    assert np.isfinite(kernel).sum() >= 35
+    np.testing.assert_array_equal(np.isfinite(arrival[0]), np.isfinite(kernel))
+    assert np.nanmax(np.abs(arrival[0] - kernel)) < 2 * dt
+    assert abs(event_max[0] / float(ds.event_max_velocity[0]) - 1) < 2e-2
+    # and the segmentation of the stored arrival times reproduces the dataset's metrics
+    again = segment(ds.arrival_time.values, ds.length.values, device=DEVICE)
+    for name, value in again.items():
+        np.testing.assert_array_equal(value, ds[name].values if name != "nucleation_edge" else ds[name].values.astype(float))
+
+
+def test_fronts_do_not_change_the_solution_and_mirror_symmetry():
+    members = {"eccentricity": [0.2, -0.2], "disc_velocity": [1e-4, -1e-4]}
+    with_fronts = run(members, nodes=41, fronts=wf.Fronts())
+    without = run(members, nodes=41)
+    np.testing.assert_array_equal(with_fronts.mu_s.values, without.mu_s.values)
+    assert "arrival_time" not in without and "v_middle" not in without
+    ta = with_fronts.arrival_time.values
+    np.testing.assert_allclose(ta[0], ta[1][::-1], rtol=0, atol=1e-9)
+    a, b = with_fronts.isel(member=0), with_fronts.isel(member=1)
+    np.testing.assert_allclose(float(a.v_middle), float(b.v_middle), rtol=1e-6)
+    np.testing.assert_allclose(float(a.nucleation_position), -float(b.nucleation_position), atol=1e-12)
+    for left, right in (("v_left", "v_right"), ("left_front_length", "right_front_length")):
+        x, y = float(a[left]), float(b[right])
+        assert (np.isnan(x) and np.isnan(y)) or abs(x - y) <= 1e-6 * abs(x), (left, x, y)
+
+
+def test_recorded_fields_obey_the_plate_balance_and_the_slip_definition():
+    scene = wf.Parameters()
+    times = np.concatenate([np.linspace(0, 20, 9), np.linspace(20.1, 22.0, 20)])
+    ds = run(scene=scene, nodes=41, record=wf.Record(members=(0,), times=tuple(times)))
+    w = trapezoid_weights(ds.x.values)
+    force = np.clip(times / scene.force_ramp_time, 0, 1) * scene.normal_force
+    pressure = ds.normal_stress_history.values[0]
+    np.testing.assert_allclose(pressure @ w, force / scene.depth, rtol=1e-6, atol=1e-6)
+    v_disc = np.clip((times - scene.rest_until) / scene.velocity_ramp_time, 0, 1) * scene.disc_velocity
+    slip = ds.slip_rate_history.values[0]
+    vel = ds.velocity_history.values[0]
+    np.testing.assert_allclose(slip, v_disc[:, None] - vel, rtol=0, atol=1e-15)
+    # the last sample is the final state
+    np.testing.assert_array_equal(vel[-1], ds.velocity.values[0])
+    np.testing.assert_array_equal(ds.friction_stress_history.values[0, -1], ds.friction_stress.values[0])
+    assert ds.velocity_history.attrs["units"] == "m s-1" and ds.time.attrs["units"] == "s"
+
+
+def test_bad_record_and_fronts_settings():
+    with pytest.raises(ValueError, match="threshold"):
+        wf.Fronts(threshold=1.5)
+    with pytest.raises(ValueError, match="direction"):
+        wf.Fronts(direction="up")
+    with pytest.raises(ValueError, match="times"):
+        wf.Record(times=(2.0, 1.0))
+    with pytest.raises(ValueError, match="members"):
+        run({"normal_force": [500.0, 1000.0]}, record=wf.Record(members=(5,), times=(20.0,)))

@@ -1,0 +1,102 @@
+"""warpfric.fronts: detachment-front metrics from arrival times (docs/model.md, "Fronts").
+
+simulate() computes the arrival times in the integrator and calls :func:`segment`; both functions
+here are public so that a stored ensemble can be re-segmented with other settings without
+re-simulating (``segment(ds.arrival_time, ds.length, Fronts(speed_ratio=2))``) and so that the rule
+can be checked on sampled velocity fields (:func:`arrival_times_from_history`).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .parameters import Fronts
+
+FRONT_METRIC_NAMES = (
+    "nucleation_position", "nucleation_edge", "front_start_time", "front_end_time", "detached_fraction",
+    "left_front_start", "left_front_end", "left_front_length", "v_left",
+    "middle_front_start", "middle_front_end", "middle_front_length", "v_middle",
+    "right_front_start", "right_front_end", "right_front_length", "v_right",
+)
+
+
+def _warp():
+    from .simulate import _warp as init
+
+    return init()
+
+
+def _device(device):
+    from .simulate import _check_device
+
+    return _check_device(device)
+
+
+def min_segment_intervals(fronts: Fronts, nodes: int) -> int:
+    """Fewest node intervals of a front segment: min_segment_fraction of the pad, at least 3."""
+    return max(3, int(math.ceil(fronts.min_segment_fraction * (nodes - 1) - 1e-9)))
+
+
+def segment(arrival_time, length, fronts: Fronts = Fronts(), device: str | None = "cpu") -> dict:
+    """Front metrics from arrival times.
+
+    arrival_time: (members, nodes) s, NaN where the front never arrived; nodes evenly spaced over
+                  the pad from -L/2 to +L/2.
+    length:       pad length L in m, scalar or (members,).
+    Returns {name: (members,) float64 array} for FRONT_METRIC_NAMES (positions and lengths in m,
+    times in s, speeds in m/s; nucleation_edge -1 left, 0 interior, +1 right, NaN none).
+    """
+    wp = _warp()
+    from warpfric.kernels.reductions import N_FRONT_METRICS, SegmentSettings, segment_fronts
+
+    ta = np.atleast_2d(np.asarray(arrival_time, dtype=np.float64))
+    n_members, n = ta.shape
+    if n < 2:
+        raise ValueError(f"arrival_time: {n} nodes; valid: at least 2")
+    length = np.broadcast_to(np.asarray(length, dtype=np.float64), (n_members,)).copy()
+    if not (np.isfinite(length).all() and (length > 0).all()):
+        raise ValueError(f"length: {length!r}; valid: finite lengths > 0 (m)")
+    seg = SegmentSettings()
+    seg.min_nodes = min_segment_intervals(fronts, n)
+    seg.speed_ratio = fronts.speed_ratio
+    seg.edge_zone = float(fronts.edge_zone_fraction * np.min(length))
+    with wp.ScopedDevice(_device(device)):
+        arrival = wp.array(np.ascontiguousarray(ta.T), dtype=wp.float64)
+        sums = wp.zeros((4, n, n_members), dtype=wp.float64)
+        out = wp.zeros((N_FRONT_METRICS, n_members), dtype=wp.float64)
+        wp.launch(segment_fronts, dim=n_members, inputs=[wp.array(length, dtype=wp.float64), arrival, seg, sums, out])
+        rows = out.numpy()
+    return {name: rows[i] for i, name in enumerate(FRONT_METRIC_NAMES)}
+
+
+def arrival_times_from_history(times, velocity, disc_velocity=1.0, fronts: Fronts = Fronts(),
+                               device: str | None = "cpu"):
+    """Arrival times by the integrator's rule from a sampled pad-velocity history.
+
+    times:         (T,) s, increasing.
+    velocity:      (members, T, nodes) or (T, nodes) pad velocity u_t in m/s.
+    disc_velocity: sign source for the detachment velocity (scalar or (members,), m/s).
+    Returns (arrival_time (members, nodes) s, event_max_velocity (members,) m/s).
+    """
+    wp = _warp()
+    from warpfric.kernels.params import FRONT_DIRECTIONS
+    from warpfric.kernels.reductions import arrival_from_history
+
+    v = np.asarray(velocity, dtype=np.float64)
+    if v.ndim == 2:
+        v = v[None]
+    n_members, n_t, n = v.shape
+    times = np.asarray(times, dtype=np.float64)
+    if times.shape != (n_t,) or (np.diff(times) <= 0).any():
+        raise ValueError(f"times: shape {times.shape}; valid: ({n_t},) increasing (s)")
+    sign = np.where(np.broadcast_to(np.asarray(disc_velocity, dtype=np.float64), (n_members,)) < 0, -1.0, 1.0)
+    with wp.ScopedDevice(_device(device)):
+        vel = wp.array(np.ascontiguousarray(np.transpose(v, (1, 2, 0))), dtype=wp.float64)
+        arrival = wp.zeros((n, n_members), dtype=wp.float64)
+        event_max = wp.zeros(n_members, dtype=wp.float64)
+        wp.launch(arrival_from_history, dim=n_members,
+                  inputs=[wp.array(times, dtype=wp.float64), vel, wp.array(sign, dtype=wp.float64),
+                          FRONT_DIRECTIONS.index(fronts.direction), fronts.threshold, arrival, event_max])
+        return arrival.numpy().T.copy(), event_max.numpy()
