@@ -1,55 +1,255 @@
-"""Command line: ``warpfric run`` simulates the paper's default scene (or one given by options)
-and prints mu_s; ``-o OUT.nc`` also writes the result as netCDF."""
+"""warpfric command line.
+
+  warpfric run [SWEEP.toml] [-o OUT.nc] [--device D] [--chunk M] [--resume | --overwrite]
+  warpfric info OUT.nc
+  warpfric plot OUT.nc [--outdir DIR]
+
+Without a sweep file, ``run`` simulates the paper's default scene (one member, F = 1000 N, e = 0,
+changeable with --normal-force, --eccentricity, --disc-velocity) and prints mu_s and the front
+speeds. Exit codes: 0 success, 1 some members failed (or ``info`` on an incomplete run), 2 bad
+input (nothing is written).
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
+import time
+from pathlib import Path
+
+import numpy as np
 
 from .parameters import Model, Parameters, Solver
 
 
-def _run(args) -> int:
-    from .simulate import simulate
+class UsageError(ValueError):
+    pass
 
-    try:
-        scene = Parameters(normal_force=args.normal_force, eccentricity=args.eccentricity,
-                           disc_velocity=args.disc_velocity)
-        solver = Solver(nodes=args.nodes, dtype=args.dtype, rtol=args.rtol)
-        ds = simulate(scene=scene, model=Model(), solver=solver, device=args.device, progress=True)
-    except ValueError as err:
-        print(f"warpfric: error: {err}", file=sys.stderr)
-        return 2
+
+def _fail(message: str) -> int:
+    print(f"warpfric: error: {message}", file=sys.stderr)
+    return 2
+
+
+def _status_name(ds, code: int) -> str:
+    return ds.status.attrs["flag_meanings"].split()[int(code)]
+
+
+def _fmt(value, unit="", spec=".4g") -> str:
+    v = float(value)
+    return "absent" if not np.isfinite(v) else f"{v:{spec}}{(' ' + unit) if unit else ''}"
+
+
+def _print_member(ds, solver: Solver) -> None:
     m = ds.isel(member=0)
-    status = ds.status.attrs["flag_meanings"].split()[int(m.status)]
     print(f"scene: F = {float(m.normal_force):g} N, 2e/L = {float(m.eccentricity):g}, "
           f"v_d = {float(m.disc_velocity):g} m/s, N = {solver.nodes}, {solver.dtype}, rtol = {solver.rtol:g}, "
           f"device {ds.attrs['device']}")
-    print(f"mu_s      = {float(m.mu_s):.6f}  (static friction coefficient)")
-    print(f"mu_s_time = {float(m.mu_s_time):.5f} s")
-    print(f"mu_final  = {float(m.mu_final):.6f}  (at t = {float(m.final_time):g} s)")
-    print(f"status    = {status}; steps accepted {int(m.steps_accepted)}, rejected {int(m.steps_rejected)}; "
-          f"lift-off {'yes' if int(m.lift_off) else 'no'}; wall {ds.attrs['wall_time_s']:.2f} s")
+    print(f"mu_s      = {_fmt(m.mu_s, spec='.6f')}  (static friction coefficient)")
+    print(f"mu_s_time = {_fmt(m.mu_s_time, 's', '.5f')}")
+    print(f"mu_final  = {_fmt(m.mu_final, spec='.6f')}  (at t = {float(m.final_time):g} s)")
+    if "v_middle" in m:
+        edge = {-1: "left edge", 0: "interior", 1: "right edge", -2: "none"}[int(m.nucleation_edge)]
+        print(f"front     : nucleates at x = {_fmt(float(m.nucleation_position) * 1e3, 'mm', '.1f')} ({edge}), "
+              f"t = {_fmt(m.front_start_time, 's', '.5f')} .. {_fmt(m.front_end_time, 's', '.5f')}")
+        for seg in ("left", "middle", "right"):
+            start, end = float(m[f"{seg}_front_start"]), float(m[f"{seg}_front_end"])
+            where = f"x = {start * 1e3:.1f} .. {end * 1e3:.1f} mm" if np.isfinite(start) else "absent"
+            print(f"  v_{seg:<6} = {_fmt(m[f'v_{seg}'], 'm/s', '.3g'):>10}   {where}")
+    print(f"status    = {_status_name(ds, m.status)}; steps accepted {int(m.steps_accepted)}, rejected "
+          f"{int(m.steps_rejected)}; lift-off {'yes' if int(m.lift_off) else 'no'}; wall {ds.attrs['wall_time_s']:.2f} s")
+
+
+def _check_output(path: Path, resume: bool, overwrite: bool) -> None:
+    from .io import parts_dir
+
+    if resume and overwrite:
+        raise UsageError("--resume and --overwrite exclude each other")
+    if path.suffix != ".nc":
+        raise UsageError(f"output {str(path)!r}: expected a file name ending in .nc")
+    if not path.parent.exists():
+        raise UsageError(f"output {str(path)!r}: folder {str(path.parent)!r} does not exist")
+    if path.exists() and not overwrite:
+        raise UsageError(f"output {str(path)!r} exists; pass --overwrite to replace it"
+                         + (" (it is complete: nothing to resume)" if resume else ""))
+    if parts_dir(path).exists() and not (resume or overwrite):
+        raise UsageError(f"{str(parts_dir(path))!r} holds an interrupted run; pass --resume to finish it "
+                         "or --overwrite to start again")
+
+
+def _run_default(args) -> int:
+    from .io import write_ensemble
+    from .simulate import simulate
+
+    scene = Parameters(normal_force=args.normal_force, eccentricity=args.eccentricity, disc_velocity=args.disc_velocity)
+    solver = Solver(nodes=args.nodes, dtype=args.dtype, rtol=args.rtol)
     if args.output:
-        ds.to_netcdf(args.output)
+        _check_output(Path(args.output), args.resume, args.overwrite)
+    ds = simulate(scene=scene, model=Model(), solver=solver, device=args.device, progress=not args.quiet)
+    _print_member(ds, solver)
+    if args.output:
+        write_ensemble(ds, args.output)
         print(f"wrote {args.output}")
-    return 0 if int(m.status) == 0 else 1
+    return 0 if int(ds.status[0]) == 0 else 1
+
+
+def _run_sweep(args) -> int:
+    from .io import ChunkStore, parts_dir, sweep_digest, write_ensemble
+    from .simulate import _check_device, simulate
+    from .sweep import load_sweep
+
+    sweep = load_sweep(args.sweep)
+    out = Path(args.output) if args.output else Path(args.sweep).with_suffix(".nc")
+    _check_output(out, args.resume, args.overwrite)
+    chunk = args.chunk or sweep.run.get("chunk") or sweep.n_members
+    if chunk < 1:
+        raise UsageError(f"--chunk {chunk}: expected an integer >= 1")
+    device = _check_device(args.device or sweep.run.get("device"))
+    if sweep.record is not None and max(sweep.record.members) >= sweep.n_members:
+        raise UsageError(f"[record] members: index {max(sweep.record.members)} but the sweep has "
+                         f"{sweep.n_members} members (valid 0..{sweep.n_members - 1})")
+    digest = sweep_digest(f"{sweep.text}\nchunk={chunk}")
+    parts = parts_dir(out)
+    if args.resume and parts.exists():
+        store = ChunkStore.load(parts)
+        if store.digest != digest:
+            raise UsageError(f"{str(parts)!r} belongs to a different sweep or chunk size; run with --overwrite to start again")
+    else:
+        store = ChunkStore.create(parts, digest, sweep.n_members, chunk)
+    todo = [i for i in range(store.n_chunks) if not store.is_done(i)]
+    print(f"warpfric: {sweep.n_members} members in {store.n_chunks} chunks of <= {chunk}, "
+          f"{len(todo)} to run, device {device}; swept: {', '.join(sweep.varying) or 'nothing'}", file=sys.stderr)
+    t0 = time.perf_counter()
+    n_failed = 0
+    for count, index in enumerate(todo, start=1):
+        sl = store.members(index)
+        record = _chunk_record(sweep.record, sl)
+        label = f"chunk {index + 1}/{store.n_chunks} ({count}/{len(todo)} this run, members {sl.start}..{sl.stop - 1})"
+        ds = simulate(sweep.member_slice(sl) or None, scene=sweep.scene, model=sweep.model, solver=sweep.solver,
+                      fronts=sweep.fronts, record=record, device=device,
+                      progress=False if args.quiet else label)
+        ds = ds.assign_coords(member=np.arange(sl.start, sl.stop))
+        if record is not None:
+            ds = ds.assign_coords(recorded_member=ds.recorded_member + sl.start)
+        ds.attrs["title"] = sweep.title or ds.attrs["title"]
+        ds.attrs["sweep_file"] = str(args.sweep)
+        ds.attrs["sweep_toml"] = sweep.text
+        ds.attrs["chunk_index"] = index
+        n_failed += int((ds.status.values != 0).sum())
+        write_ensemble(ds, store.chunk_path(index), varying=sweep.varying)
+    store.combine(out)
+    print(f"warpfric: wrote {out} ({sweep.n_members} members, {time.perf_counter() - t0:.1f} s this run, "
+          f"{n_failed} failed members in the chunks run now)", file=sys.stderr)
+    return 0 if n_failed == 0 else 1
+
+
+def _chunk_record(record, sl: slice):
+    from .parameters import Record
+
+    if record is None:
+        return None
+    members = tuple(i - sl.start for i in record.members if sl.start <= i < sl.stop)
+    return Record(members=members, times=record.times) if members else None
+
+
+def _run(args) -> int:
+    if args.sweep is None:
+        return _run_default(args)
+    return _run_sweep(args)
+
+
+def _info(args) -> int:
+    from .io import ChunkStore, open_ensemble, parts_dir
+
+    path = Path(args.file)
+    if not path.exists() and parts_dir(path).exists():
+        store = ChunkStore.load(parts_dir(path))
+        print(f"{path}: INCOMPLETE run: {store.done_count()}/{store.n_chunks} chunks of <= {store.chunk} members "
+              f"finished ({store.n_members} members in all) in {parts_dir(path)}; finish it with "
+              f"`warpfric run SWEEP.toml -o {path} --resume`")
+        return 1
+    ds = open_ensemble(path)
+    print(summary(ds, str(path)))
+    return 0
+
+
+def summary(ds, name: str) -> str:
+    """Text summary of an ensemble: members, swept parameters, status counts, mu_s and fronts."""
+    lines = [f"{name}: {ds.sizes['member']} members, {ds.sizes.get('x', 0)} nodes, complete"]
+    lines.append(f"  title: {ds.attrs.get('title', '')}; device {ds.attrs.get('device')}, warpfric "
+                 f"{ds.attrs.get('warpfric_version')}, warp {ds.attrs.get('warp_version')}, "
+                 f"wall {float(ds.attrs.get('wall_time_s', float('nan'))):.1f} s")
+    swept = ds.attrs.get("varying_parameters", "").split()
+    lines.append("  swept parameters:" + ("" if swept else " none"))
+    for pname in swept:
+        v = ds[pname].values
+        lines.append(f"    {pname:<22} {np.unique(v).size:>6} values in [{v.min():.6g}, {v.max():.6g}] "
+                     f"{ds[pname].attrs.get('units', '')}")
+    meanings = ds.status.attrs["flag_meanings"].split()
+    counts = {meanings[int(k)]: int((ds.status.values == k).sum()) for k in np.unique(ds.status.values)}
+    lines.append("  status: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    mu = ds.mu_s.values
+    good = np.isfinite(mu)
+    if good.any():
+        lines.append(f"  mu_s: mean {mu[good].mean():.6f}, std {mu[good].std():.3g}, min {mu[good].min():.6f}, "
+                     f"max {mu[good].max():.6f} ({good.sum()} members)")
+    if "v_middle" in ds:
+        for seg in ("left", "middle", "right"):
+            v = ds[f"v_{seg}"].values
+            ok = np.isfinite(v)
+            text = f"median {np.median(v[ok]):.3g} m/s, range [{v[ok].min():.3g}, {v[ok].max():.3g}]" if ok.any() else ""
+            lines.append(f"  {seg} front present in {ok.sum()}/{v.size} members {text}")
+    if "recorded_member" in ds.coords:
+        lines.append(f"  recorded fields: members {list(map(int, ds.recorded_member.values))} at "
+                     f"{ds.sizes['time']} times in [{ds.time.values.min():g}, {ds.time.values.max():g}] s")
+    return "\n".join(lines)
+
+
+def _plot(args) -> int:
+    from .io import open_ensemble
+    from .plots import quick_look
+
+    ds = open_ensemble(args.file)
+    outdir = Path(args.outdir) if args.outdir else Path(args.file).with_suffix("")
+    outdir.mkdir(parents=True, exist_ok=True)
+    for path in quick_look(ds, outdir):
+        print(f"wrote {path}")
+    return 0
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(prog="warpfric", description=__doc__)
+    parser = argparse.ArgumentParser(prog="warpfric", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="simulate one pad (the paper's default scene unless options say otherwise)")
-    run.add_argument("-o", "--output", help="write the result to this netCDF file")
+    run = sub.add_parser("run", help="run a sweep file, or the paper's default scene without one")
+    run.add_argument("sweep", nargs="?", help="sweep file (TOML, see docs/sweeps.md); none: the default scene")
+    run.add_argument("-o", "--output", help="netCDF file to write (sweeps: default SWEEP.nc)")
     run.add_argument("--device", default=None, help="Warp device: cpu, cuda:0, ... (default: first GPU, else cpu)")
-    run.add_argument("--normal-force", type=float, default=Parameters.normal_force, help="N (default 1000)")
-    run.add_argument("--eccentricity", type=float, default=Parameters.eccentricity, help="2e/L (default 0)")
-    run.add_argument("--disc-velocity", type=float, default=Parameters.disc_velocity, help="m/s (default 1e-4)")
-    run.add_argument("--nodes", type=int, default=Solver.nodes, help=f"grid nodes (default {Solver.nodes})")
-    run.add_argument("--dtype", default=Solver.dtype, choices=("float64", "float32"))
-    run.add_argument("--rtol", type=float, default=Solver.rtol, help=f"relative tolerance (default {Solver.rtol:g})")
+    run.add_argument("--chunk", type=int, default=None, help="members per chunk file (default: all in one)")
+    run.add_argument("--resume", action="store_true", help="finish an interrupted run of the same sweep")
+    run.add_argument("--overwrite", action="store_true", help="replace an existing output (and interrupted parts)")
+    run.add_argument("--quiet", action="store_true", help="no progress line")
+    scene = run.add_argument_group("default scene (without a sweep file)")
+    scene.add_argument("--normal-force", type=float, default=Parameters.normal_force, help="N (default 1000)")
+    scene.add_argument("--eccentricity", type=float, default=Parameters.eccentricity, help="2e/L (default 0)")
+    scene.add_argument("--disc-velocity", type=float, default=Parameters.disc_velocity, help="m/s (default 1e-4)")
+    scene.add_argument("--nodes", type=int, default=Solver.nodes, help=f"grid nodes (default {Solver.nodes})")
+    scene.add_argument("--dtype", default=Solver.dtype, choices=("float64", "float32"))
+    scene.add_argument("--rtol", type=float, default=Solver.rtol, help=f"relative tolerance (default {Solver.rtol:g})")
+    info = sub.add_parser("info", help="summary of an ensemble file (or of an interrupted run)")
+    info.add_argument("file")
+    plot = sub.add_parser("plot", help="quick-look PNGs of an ensemble file")
+    plot.add_argument("file")
+    plot.add_argument("--outdir", default=None, help="folder for the PNGs (default: OUT next to OUT.nc)")
     args = parser.parse_args(argv)
-    return _run(args)
+    handlers = {"run": _run, "info": _info, "plot": _plot}
+    try:
+        return handlers[args.command](args)
+    except ValueError as err:  # bad input: one line, exit 2
+        return _fail(str(err))
+    except KeyboardInterrupt:
+        print("warpfric: interrupted; finished chunks are kept, continue with --resume", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -81,7 +81,7 @@ def simulate(
     fronts: Fronts | None = Fronts(),
     record: Record | None = None,
     device: str | None = None,
-    progress: bool | None = None,
+    progress: bool | str | None = None,
 ) -> xr.Dataset:
     """Simulate an ensemble of pads through the load protocol; return the results as a Dataset.
 
@@ -92,15 +92,25 @@ def simulate(
     model:    :class:`Model` switches (each combination compiles its own kernel).
     solver:   :class:`Solver` settings (grid, precision, tolerances, step bounds).
     device:   Warp device ('cpu', 'cuda:0', ...); None: the first CUDA device if any, else 'cpu'.
-    progress: progress line on stderr; None: only when stderr is a terminal.
+    fronts:   :class:`Fronts` settings of the detachment-front metrics (default on; they cost a
+              second pass of the integrator); None skips them.
+    record:   :class:`Record`: fields of chosen members on a time grid; None (default) records nothing.
+    progress: progress line on stderr; None: only when stderr is a terminal; a string: on, with
+              that label.
 
     Returns an ``xarray.Dataset`` with dims ``member`` and ``x`` (node position, m): every input
     parameter along ``member``; ``mu_s``, ``mu_s_time`` (s), ``status`` (flag values, see its
     attrs), ``lift_off``, ``steps_accepted``, ``steps_rejected``, ``newton_iterations``,
     ``final_time`` (s), ``plate_compression`` (m), ``plate_tilt`` (rad), ``mu_final``, and the final
     state along (member, x): ``displacement`` (m), ``velocity`` (m/s), ``elastic_stress`` (Pa),
-    ``contact_age`` (s), ``normal_stress`` (Pa), ``friction_stress`` (Pa). Raises ValueError on
-    invalid input before any kernel runs.
+    ``contact_age`` (s), ``normal_stress`` (Pa), ``friction_stress`` (Pa). With fronts:
+    ``arrival_time`` (member, x; s), ``event_max_velocity``, ``nucleation_position``,
+    ``nucleation_edge``, ``front_start_time``, ``front_end_time``, ``detached_fraction`` and per
+    segment (left, middle, right) ``*_front_start``, ``*_front_end``, ``*_front_length`` (m) and
+    ``v_left``, ``v_middle``, ``v_right`` (m/s; NaN where a segment is absent). With record:
+    ``velocity_history``, ``slip_rate_history``, ``normal_stress_history``,
+    ``friction_stress_history`` along (recorded, time, x), coordinates ``recorded_member`` and
+    ``time``. Raises ValueError on invalid input before any kernel runs.
     """
     if not isinstance(model, Model):
         raise ValueError(f"model: expected a warpfric.Model, got {type(model).__name__}")
@@ -160,6 +170,7 @@ def simulate(
         rec_previous = wp.zeros(rec_shape, dtype=ft)
         rec_out = wp.zeros((len(RECORD_FIELDS), outputs.n_record_times if n_rec else 1, n, max(n_rec, 1)), dtype=ft)
         show = sys.stderr.isatty() if progress is None else bool(progress)
+        prefix = progress if isinstance(progress, str) else ""
         front_max = None
         for pass_index in range(n_passes):
             last = pass_index == n_passes - 1
@@ -177,7 +188,7 @@ def simulate(
             states = wp.array(states_np, dtype=IntegratorState)
             state = wp.array(state_np, dtype=ft)
             arrival.fill_(np.nan)
-            label = f"pass {pass_index + 1}/{n_passes}" if n_passes > 1 else ""
+            label = " ".join(p for p in (prefix, f"pass {pass_index + 1}/{n_passes}" if n_passes > 1 else "") if p)
             bar = _Progress(show, n_members, label)
             end = values["end_time"]
             while True:
@@ -384,7 +395,8 @@ def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, 
         "warpfric_version": __version__,
         "device": device,
         "wall_time_s": wall,
-        "varying_parameters": " ".join(varying),
+        # parameters given per member that take more than one value
+        "varying_parameters": " ".join(v for v in varying if np.unique(values[v]).size > 1),
     }
     for f in dataclasses.fields(model):
         attrs[f"model_{f.name}"] = int(getattr(model, f.name))

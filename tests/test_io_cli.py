@@ -1,0 +1,172 @@
+"""netCDF round trip, combining files, and the command line end to end (run, info, plot, resume
+after a kill, bad input)."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+from conftest import DEVICE, run
+
+import warpfric as wf
+from warpfric.cli import main
+from warpfric.io import open_ensemble, write_ensemble
+
+TINY = """
+title = "test sweep"
+[solver]
+nodes = 21
+rtol = 1e-5
+[grid]
+eccentricity = [-0.2, 0.0, 0.2]
+normal_force = [500.0, 2000.0]
+"""
+
+
+def _cli(*args, timeout=300):
+    return subprocess.run([sys.executable, "-m", "warpfric", *args], capture_output=True, text=True, timeout=timeout,
+                          env={**os.environ, "PYTHONWARNINGS": "ignore"})
+
+
+def test_netcdf_round_trip(tmp_path):
+    members = {"eccentricity": [-0.1, 0.1], "normal_force": 800.0}
+    ds = run(members, nodes=21, fronts=wf.Fronts(), record=wf.Record.window(20.2, 20.3, 11, members=(1,)))
+    path = write_ensemble(ds, tmp_path / "ens.nc")
+    back = open_ensemble(path)
+    assert back.normal_force.dims == () and float(back.normal_force) == 800.0  # constant: a scalar
+    assert back.eccentricity.dims == ("member",)
+    for name, var in ds.variables.items():
+        got = back[name]
+        expected = var if name != "normal_force" else var.isel(member=0)
+        np.testing.assert_array_equal(got.values, expected.values, err_msg=name)
+        assert got.dtype == expected.dtype, name
+        for key in ("units", "long_name", "flag_meanings"):
+            if key in var.attrs:
+                assert got.attrs[key] == var.attrs[key], (name, key)
+    for key in ("model_tilt", "solver_rtol", "solver_dtype", "warpfric_version", "warp_version", "device",
+                "fronts_threshold", "Conventions"):
+        assert back.attrs[key] == ds.attrs[key], key
+    assert back.attrs["warpfric_complete"] == 1
+    with xr.open_dataset(path) as raw:
+        assert raw.mu_s.encoding["zlib"] and raw.arrival_time.encoding["zlib"]
+
+
+@pytest.mark.parametrize("new_defaults", [False, True])
+def test_open_mfdataset_combines_two_runs(tmp_path, new_defaults):
+    """Both xarray combine defaults (the current one and the announced one) give the same ensemble."""
+    pytest.importorskip("dask")
+    a = run({"eccentricity": [0.0, 0.1]}, nodes=21, fronts=wf.Fronts())
+    b = run({"eccentricity": [0.2, 0.3]}, nodes=21, fronts=wf.Fronts())
+    b = b.assign_coords(member=b.member + 2)
+    write_ensemble(a, tmp_path / "a.nc")
+    write_ensemble(b, tmp_path / "b.nc")
+    with xr.set_options(use_new_combine_kwarg_defaults=new_defaults), \
+            xr.open_mfdataset([tmp_path / "a.nc", tmp_path / "b.nc"], combine="nested", concat_dim="member") as both:
+        np.testing.assert_array_equal(both.member.values, [0, 1, 2, 3])
+        np.testing.assert_array_equal(both.eccentricity.values, [0.0, 0.1, 0.2, 0.3])
+        np.testing.assert_array_equal(both.mu_s.values, np.concatenate([a.mu_s.values, b.mu_s.values]))
+        np.testing.assert_array_equal(both.arrival_time.values, np.concatenate([a.arrival_time.values, b.arrival_time.values]))
+        assert np.all(both.normal_force.values == 1000.0)
+
+
+def test_cli_run_info_plot_end_to_end(tmp_path):
+    sweep = tmp_path / "tiny.toml"
+    sweep.write_text(TINY + "[record]\nmembers = [4]\nstart = 20.2\nstop = 20.3\ncount = 11\n")
+    out = tmp_path / "tiny.nc"
+    res = _cli("run", str(sweep), "-o", str(out), "--chunk", "4", "--device", DEVICE)
+    assert res.returncode == 0, res.stderr
+    assert "chunk 2/2" in res.stderr and not (tmp_path / "tiny.nc.parts").exists()
+    ds = open_ensemble(out)
+    assert ds.sizes["member"] == 6 and int(ds.recorded_member[0]) == 4
+    direct = wf.simulate({"eccentricity": [[-0.2], [0.0], [0.2]], "normal_force": [500.0, 2000.0]},
+                         solver=wf.Solver(nodes=21, rtol=1e-5), device=DEVICE, progress=False)
+    for name in ("mu_s", "mu_s_time", "v_middle", "arrival_time", "eccentricity", "normal_force"):
+        np.testing.assert_array_equal(ds[name].values, direct[name].values, err_msg=name)
+    assert ds.attrs["sweep_toml"].startswith("\ntitle")
+    res = _cli("info", str(out))
+    assert res.returncode == 0 and "6 members" in res.stdout and "status: ok 6" in res.stdout
+    assert "eccentricity" in res.stdout and "mu_s: mean" in res.stdout
+    res = _cli("plot", str(out), "--outdir", str(tmp_path / "png"))
+    assert res.returncode == 0, res.stderr
+    pngs = sorted(p.name for p in (tmp_path / "png").glob("*.png"))
+    assert {"mu_s_vs_eccentricity.png", "front_speeds_vs_normal_force.png", "arrival_times.png",
+            "space_time_member4.png"} <= set(pngs)
+    assert all((tmp_path / "png" / p).stat().st_size > 10_000 for p in pngs)
+
+
+def test_resume_after_kill_gives_the_uninterrupted_result(tmp_path):
+    sweep = tmp_path / "s.toml"
+    sweep.write_text(TINY.replace("[-0.2, 0.0, 0.2]", "[-0.3, -0.2, -0.1, 0.0, 0.1, 0.2]"))  # 12 members
+    out = tmp_path / "s.nc"
+    parts = tmp_path / "s.nc.parts"
+    proc = subprocess.Popen([sys.executable, "-m", "warpfric", "run", str(sweep), "-o", str(out), "--chunk", "1",
+                             "--device", DEVICE, "--quiet"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 240
+    while time.time() < deadline and not (parts / "chunk-000001.nc").exists():
+        time.sleep(0.01)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    finished = sorted(parts.glob("chunk-*.nc"))
+    assert 2 <= len(finished) < 12 and not out.exists()
+    res = _cli("info", str(out))
+    assert res.returncode == 1 and "INCOMPLETE" in res.stdout and "--resume" in res.stdout
+    with pytest.raises(ValueError, match="incomplete"):
+        open_ensemble(out)
+    res = _cli("run", str(sweep), "-o", str(out), "--device", DEVICE)  # no --resume: refuses, exit 2
+    assert res.returncode == 2 and "--resume" in res.stderr
+    res = _cli("run", str(sweep), "-o", str(out), "--chunk", "1", "--device", DEVICE, "--resume")
+    assert res.returncode == 0, res.stderr
+    assert f"{12 - len(finished)} to run" in res.stderr or f"{13 - len(finished)} to run" in res.stderr
+    resumed = open_ensemble(out)
+    whole = tmp_path / "whole.nc"
+    assert _cli("run", str(sweep), "-o", str(whole), "--chunk", "5", "--device", DEVICE).returncode == 0
+    reference = open_ensemble(whole)
+    for name, var in reference.data_vars.items():
+        np.testing.assert_array_equal(resumed[name].values, var.values, err_msg=name)
+
+
+BAD = [
+    ("[grid]\neccentricity = [0.0]\nfoo = [1.0]\n", ["foo", "accepted", "normal_force"]),  # unknown parameter
+    ("[solver]\nnodez = 30\n", ["nodez", "accepted", "nodes"]),  # unknown key
+    ("colour = 'red'\n", ["colour", "accepted"]),  # unknown top-level key
+    ("[solver]\nnodes = 'many'\n", ["nodes", "integer"]),  # wrong type
+    ("[grid]\nnormal_force = ['a']\n", ["normal_force", "number"]),  # wrong type in a list
+    ("[grid]\neccentricity = []\n", ["eccentricity", "empty"]),  # empty sweep
+    ("[sample]\nn = 0\nnormal_force = {distribution = 'uniform', low = 1, high = 2}\n", ["n", "integer >= 1"]),
+    ("[grid]\neccentricity = [0.0, 1.5]\n", ["eccentricity", "1.5", "valid range"]),  # out of range
+    ("[sample]\nn = 4\nnormal_force = {distribution = 'gamma', low = 1, high = 2}\n", ["gamma", "uniform"]),
+    ("[zip]\neccentricity = [0.0, 0.1]\nnormal_force = [500.0]\n", ["zip", "length"]),
+    ("[grid]\neccentricity = [0.0]\n[zip]\neccentricity = [0.1]\n", ["eccentricity", "twice"]),
+    ("[scene]\nnormal_force = -5.0\n", ["normal_force", "-5.0", "valid range"]),
+    ("[fronts]\nthreshold = 2.0\n", ["threshold", "(0, 1)"]),
+]
+
+
+@pytest.mark.parametrize("text, words", BAD)
+def test_bad_sweep_files_exit_2_with_one_line_and_no_output(tmp_path, capsys, text, words):
+    sweep = tmp_path / "bad.toml"
+    sweep.write_text(text)
+    out = tmp_path / "bad.nc"
+    code = main(["run", str(sweep), "-o", str(out), "--device", "cpu"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and err[0].startswith("warpfric: error:"), err
+    for word in words:
+        assert word in err[0], (word, err[0])
+    assert not out.exists() and not (tmp_path / "bad.nc.parts").exists()
+
+
+def test_existing_output_is_not_overwritten(tmp_path, capsys):
+    sweep = tmp_path / "s.toml"
+    sweep.write_text(TINY)
+    out = tmp_path / "s.nc"
+    out.write_text("precious")
+    assert main(["run", str(sweep), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "exists" in err and "--overwrite" in err and out.read_text() == "precious"
+    assert main(["info", str(tmp_path / "missing.nc")]) == 2
+    assert "no such file" in capsys.readouterr().err
