@@ -170,3 +170,12 @@ def test_existing_output_is_not_overwritten(tmp_path, capsys):
     assert "exists" in err and "--overwrite" in err and out.read_text() == "precious"
     assert main(["info", str(tmp_path / "missing.nc")]) == 2
     assert "no such file" in capsys.readouterr().err
+
+
+def test_example_sweeps_parse():
+    from warpfric.sweep import load_sweep
+
+    files = sorted(Path(__file__).resolve().parents[1].glob("studies/sweeps/*.toml"))
+    assert len(files) >= 6
+    sizes = {f.stem: load_sweep(f).n_members for f in files}
+    assert sizes["map_gpu"] >= 10_000 and sizes["tiny"] == 6 and sizes["fig4_eccentricity"] == 29
