@@ -4,7 +4,10 @@ accuracy of mu_s against a converged float64 run of the same members.
 
     python studies/bench_engine.py [--device cpu|cuda:0] [--members 1 100 1000 10000]
                                    [--dtypes float64 float32] [--rtol 1e-5] [--nodes 200]
-                                   [--out bench_engine.json]
+                                   [--fronts] [--out bench_engine.json]
+
+--fronts adds the front metrics (a second integration pass plus the segmentation kernel); without
+it the engine alone is timed (simulate(fronts=None)).
 
 Members vary: eccentricity uniform in [-0.2, 0.2] and normal force log-uniform in [500, 5000] N
 (seed 0), so the steps differ between members as in a real study. The accuracy column is the
@@ -42,6 +45,7 @@ def main(argv=None):
     ap.add_argument("--dtypes", nargs="+", default=["float64", "float32"])
     ap.add_argument("--rtol", type=float, default=1e-5)
     ap.add_argument("--nodes", type=int, default=200)
+    ap.add_argument("--fronts", action="store_true", help="time with the front metrics (two passes)")
     ap.add_argument("--repeat", type=int, default=1, help="timed repetitions (the best is kept)")
     ap.add_argument("--out", default="bench_engine.json")
     ap.add_argument("--reference", default=REFERENCE,
@@ -54,7 +58,7 @@ def main(argv=None):
     if args.make_reference:
         t0 = time.perf_counter()
         ref = wf.simulate(members(n_check), solver=wf.Solver(nodes=args.nodes, rtol=1e-9, max_steps=10**6),
-                          device=device, progress=False)
+                          fronts=None, device=device, progress=False)
         with open(args.reference, "w") as f:
             json.dump(dict(nodes=args.nodes, rtol=1e-9, dtype="float64", device=device,
                            wall_s=time.perf_counter() - t0, mu_s=ref.mu_s.values.tolist(),
@@ -67,21 +71,24 @@ def main(argv=None):
         raise SystemExit(f"--reference was made with nodes={reference['nodes']}, not {args.nodes}")
     ref_mu = np.asarray(reference["mu_s"])
     rows = []
+    fronts = wf.Fronts() if args.fronts else None
     for dtype in args.dtypes:
         solver = wf.Solver(nodes=args.nodes, dtype=dtype, rtol=args.rtol)
-        wf.simulate(members(1), scene=wf.Parameters(end_time=20.01), solver=solver, device=device)  # compile
+        wf.simulate(members(1), scene=wf.Parameters(end_time=20.01), solver=solver, fronts=fronts,
+                    device=device)  # compile
         for m in args.members:
             best = None
             for _ in range(args.repeat):
                 t0 = time.perf_counter()
-                ds = wf.simulate(members(m), solver=solver, device=device, progress=False)
+                ds = wf.simulate(members(m), solver=solver, fronts=fronts, device=device, progress=False)
                 wall = time.perf_counter() - t0
                 best = wall if best is None else min(best, wall)
             k = min(m, n_check)
             err = float(np.max(np.abs(ds.mu_s.values[:k] / ref_mu[:k] - 1)))
             steps = ds.steps_accepted.values + ds.steps_rejected.values
             row = dict(
-                members=m, nodes=args.nodes, dtype=dtype, device=device, rtol=args.rtol, wall_s=best,
+                members=m, nodes=args.nodes, dtype=dtype, device=device, rtol=args.rtol, fronts=bool(args.fronts),
+                wall_s=best,
                 realisations_per_s=m / best, node_steps_per_s=float(steps.sum()) * args.nodes / best,
                 mean_accepted_steps=float(ds.steps_accepted.values.mean()),
                 mean_rejected_steps=float(ds.steps_rejected.values.mean()),
@@ -94,10 +101,10 @@ def main(argv=None):
                 command="python studies/bench_engine.py " + " ".join(argv or []))
     with open(args.out, "w") as f:
         json.dump(dict(meta=meta, rows=rows), f, indent=1)
-    print(f"\n{'M':>6} {'N':>4} {'dtype':>8} {'device':>7} {'wall s':>8} {'real/s':>9} {'node-steps/s':>13} "
+    print(f"\n{'M':>6} {'N':>4} {'dtype':>8} {'fronts':>6} {'device':>7} {'wall s':>8} {'real/s':>9} {'node-steps/s':>13} "
           f"{'acc steps':>9} {'rej':>5} {'ok':>6} {'mu_s err':>9}")
     for r in rows:
-        print(f"{r['members']:>6} {r['nodes']:>4} {r['dtype']:>8} {r['device']:>7} {r['wall_s']:8.3f} "
+        print(f"{r['members']:>6} {r['nodes']:>4} {r['dtype']:>8} {str(r['fronts']):>6} {r['device']:>7} {r['wall_s']:8.3f} "
               f"{r['realisations_per_s']:9.1f} {r['node_steps_per_s']:13.3e} {r['mean_accepted_steps']:9.1f} "
               f"{r['mean_rejected_steps']:5.1f} {r['status_ok']:>6} {r['mu_s_max_rel_error']:9.2e}")
 
