@@ -56,6 +56,7 @@ def test_netcdf_round_trip(tmp_path):
         assert raw.mu_s.encoding["zlib"] and raw.arrival_time.encoding["zlib"]
 
 
+@pytest.mark.filterwarnings("ignore:In a future version of xarray the default value for data_vars:FutureWarning")
 @pytest.mark.parametrize("new_defaults", [False, True])
 def test_open_mfdataset_combines_two_runs(tmp_path, new_defaults):
     """Both xarray combine defaults (the current one and the announced one) give the same ensemble."""
