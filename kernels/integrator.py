@@ -347,7 +347,7 @@ def _make_integrator(dtype: str, model):
                     y_new = y + h * (ft(W_TRB) * (k1 + k2) + ft(GAMMA) * k3)
                     e = h * (ft(ERR1) * k1 + ft(ERR2) * k2 + ft(ERR3) * k3)
                     if comp == C_V:
-                        e = e * c.rhoH / (g * work[W_DIAG, i, m])
+                        e = e * wp.min(ft(1.0), wp.abs(c.rhoH / (g * work[W_DIAG, i, m])))
                     wgt = rtol * (scale + wp.max(wp.abs(y), wp.abs(y_new)))
                     err = wp.max(err, wp.abs(e) / wgt)
                     if not is_finite(e):

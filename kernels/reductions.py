@@ -71,37 +71,55 @@ FM_LAST_ARRIVAL = 3
 FM_ARRIVED_FRACTION = 4
 FM_SEGMENTS = 5  # then start, end, length, speed for left, middle, right
 N_FRONT_METRICS = FM_SEGMENTS + 12
+MODE_WIDTH = 0.0953  # log(1.1): local speeds within 10 % count to the same plateau
 
 
 @wp.struct
 class SegmentSettings:
     min_nodes: wp.int32  # fewest node intervals of a segment
-    speed_ratio: wp.float64  # an end segment is a separate (slow) front when v_middle >= ratio * v_end
+    fast_fraction: wp.float64  # v_fast: the plateau speed among this fastest fraction of the intervals
+    speed_ratio: wp.float64  # slow: local speed below v_fast / speed_ratio
     edge_zone: wp.float64  # m; nucleation within this distance of an edge counts as that edge
 
 
 @wp.func
-def level_misfit(sums: wp.array3d(dtype=wp.float64), m: int, a: int, b: int):
-    """Squared residual of the best constant fit to the log slowness over intervals a..b-1
-    (prefix-sum rows: count, q, q^2)."""
-    s0 = sums[0, b, m] - sums[0, a, m]
-    s1 = sums[1, b, m] - sums[1, a, m]
-    s2 = sums[2, b, m] - sums[2, a, m]
-    if s0 <= wp.float64(0.0):
-        return wp.float64(0.0)
-    return wp.max(s2 - s1 * s1 / s0, wp.float64(0.0))
+def median3(a: wp.float64, b: wp.float64, c: wp.float64):
+    return wp.max(wp.min(a, b), wp.min(wp.max(a, b), c))
 
 
 @wp.func
-def segment_speed(sums: wp.array3d(dtype=wp.float64), m: int, a: int, b: int, dx: wp.float64):
-    """Mean front speed (m/s) over intervals a..b-1: their length over the time the front spends
-    crossing them, sum |t_a(x_{j+1}) - t_a(x_j)| (a length-weighted harmonic mean of the local
-    speeds, also right for a front that spreads both ways from inside the segment)."""
+def smooth_pass(sums: wp.array3d(dtype=wp.float64), m: int, src: int, dst: int, a: int, e: int):
+    """Running median of three of row ``src`` over intervals a..e-1 into row ``dst`` (the end
+    values are kept): removes isolated outliers and keeps steps exactly."""
+    for j in range(a, e):
+        v = sums[src, j, m]
+        if j > a and j < e - 1:
+            v = median3(sums[src, j - 1, m], v, sums[src, j + 1, m])
+        sums[dst, j, m] = v
+
+
+@wp.func
+def segment_speed(
+    arrival: wp.array2d(dtype=wp.float64), sums: wp.array3d(dtype=wp.float64), m: int, a: int, b: int,
+    dx: wp.float64, i_first: int,
+):
+    """Mean front speed (m/s) over the nodes a..b (intervals a..b-1): the segment's length over the
+    time the front takes to cross it, |t_a(x_b) - t_a(x_a)|, or, when the nucleation node i_first
+    lies inside, the sum of the two branches' times from it. Endpoint times only, so the speed does
+    not collect the arrival times' small errors node by node. Where an end never arrived: length
+    over the summed |dt| of the usable intervals."""
+    t_a = arrival[a, m]
+    t_b = arrival[b, m]
+    if wp.isfinite(t_a) and wp.isfinite(t_b):
+        spent = wp.abs(t_b - t_a)
+        if i_first > a and i_first < b:
+            t0 = arrival[i_first, m]
+            spent = (t_a - t0) + (t_b - t0)
+        return wp.float64(b - a) * dx / spent
     s0 = sums[0, b, m] - sums[0, a, m]
-    spent = sums[3, b, m] - sums[3, a, m]
     if s0 <= wp.float64(0.0):
         return wp.float64(wp.nan)
-    return s0 * dx / spent
+    return s0 * dx / (sums[1, b, m] - sums[1, a, m])
 
 
 @wp.func
@@ -130,12 +148,13 @@ def segment_fronts(
     """Front metrics of each member from its arrival times t_a (s, nodes x members; NaN = never).
 
     Works on the intervals between neighbouring nodes from the first to the last arrived node, each
-    with its local speed c_j = dx / |t_a(x_{j+1}) - t_a(x_j)|. The two breakpoints minimise the
-    squared misfit of a piecewise-constant fit to log(1/c_j) (scale-free change-point detection)
-    over the admissible splits: no split, a left end segment, a right one, or both, each segment
-    >= min_nodes intervals and each end segment markedly slower than the middle one
-    (v_middle >= speed_ratio * v_end). Absent segments are NaN. Segment speeds are
-    length / time spent (segment_speed)."""
+    with its local speed c_j = dx / |t_a(x_{j+1}) - t_a(x_j)|. v_fast is the plateau (mode within
+    10 %) of the local speeds among the fastest fast_fraction of the intervals: the sustained speed
+    of the fast front, not the unbounded local speed at an interior nucleation point. An interval is slow when its local speed,
+    smoothed by two running medians of three, is below v_fast / speed_ratio. The left (right)
+    segment is the run of slow intervals from the left (right) end; it exists when it has at least
+    min_nodes intervals and its mean speed is at most v_middle / speed_ratio. The middle segment is
+    the rest. Absent segments are NaN. Segment speeds are length / time spent (segment_speed)."""
     m = wp.tid()
     n = arrival.shape[0]
     for r in range(N_FRONT_METRICS):
@@ -172,75 +191,100 @@ def segment_fronts(
     out[FM_NUCLEATION_EDGE, m] = edge
     out[FM_FIRST_ARRIVAL, m] = t0
     out[FM_LAST_ARRIVAL, m] = t_last
-    # prefix sums over intervals j = (node j, node j+1) with both ends arrived:
-    # rows count, q = log slowness, q^2, |dt|
-    for r in range(4):
-        sums[r, 0, m] = wp.float64(0.0)
+    # rows of sums: 0, 1 prefix sums of the count of usable intervals and of the time spent
+    # |dt| (s); 2 the log slowness q = log(|dt|/dx) of interval j (+inf where an end never
+    # arrived: such intervals count as slow); 3, 4 its running medians
+    sums[0, 0, m] = wp.float64(0.0)
+    sums[1, 0, m] = wp.float64(0.0)
     for j in range(n - 1):
         t_l = arrival[j, m]
         t_r = arrival[j + 1, m]
         w = wp.float64(0.0)
-        q = wp.float64(0.0)
         dt = wp.float64(0.0)
+        q = wp.float64(wp.inf)
         if wp.isfinite(t_l) and wp.isfinite(t_r):
             w = wp.float64(1.0)
             dt = wp.abs(t_r - t_l)
             q = wp.log(wp.max(dt, wp.float64(1.0e-12) * dx) / dx)  # speeds above 1e12 m/s: simultaneous
         sums[0, j + 1, m] = sums[0, j, m] + w
-        sums[1, j + 1, m] = sums[1, j, m] + w * q
-        sums[2, j + 1, m] = sums[2, j, m] + w * q * q
-        sums[3, j + 1, m] = sums[3, j, m] + dt
+        sums[1, j + 1, m] = sums[1, j, m] + dt
+        sums[2, j, m] = q
     if hi == lo:
         return
     a = lo
     e = hi  # intervals lo..hi-1
     k = settings.min_nodes
-    # candidates: i1 = a (no left segment) or a+k.., i2 = e (no right segment) or ..e-k; the middle
-    # keeps >= k intervals; a present end segment must be markedly slower than the middle
+    # fast reference speed v_fast: the plateau (mode) of the local speeds among the fastest
+    # fast_fraction of the usable intervals. q_cut: their slowest log slowness (an order statistic);
+    # the mode: the q_j with the most such q_i within +-MODE_WIDTH, averaged over those neighbours.
+    # O(N^2) once per member.
+    n_usable = int(sums[0, e, m] - sums[0, a, m])
+    rank = int(wp.floor(settings.fast_fraction * wp.float64(n_usable)))
+    rank = wp.min(wp.max(rank, 0), n_usable - 1)
+    q_cut = wp.float64(wp.inf)
+    for j in range(a, e):
+        qj = sums[2, j, m]
+        if wp.isfinite(qj):
+            below = int(0)
+            at_most = int(0)
+            for i in range(a, e):
+                qi = sums[2, i, m]
+                if qi < qj:
+                    below += 1
+                if qi <= qj:
+                    at_most += 1
+            if below <= rank and rank < at_most:
+                q_cut = qj
+    best_count = int(0)
+    q_fast = wp.float64(wp.nan)
+    for j in range(a, e):
+        qj = sums[2, j, m]
+        if qj <= q_cut:
+            count = int(0)
+            total = wp.float64(0.0)
+            for i in range(a, e):
+                qi = sums[2, i, m]
+                if qi <= q_cut and wp.abs(qi - qj) <= wp.float64(MODE_WIDTH):
+                    count += 1
+                    total += qi
+            if count > best_count:
+                best_count = count
+                q_fast = total / wp.float64(count)
+    slow_q = wp.log(settings.speed_ratio) + q_fast  # q above this: slower than v_fast / ratio
+    smooth_pass(sums, m, 2, 3, a, e)
+    smooth_pass(sums, m, 3, 4, a, e)
+    # slow end segments: the runs of intervals from each end whose smoothed speed is slow
     b1 = a
-    b2 = e
-    best = level_misfit(sums, m, a, e)
-    n_first = e - a - 2 * k + 1  # i1 in a+k .. e-2k when both ends are present
-    for c1 in range(-1, wp.max(n_first, 0) + k):
-        i1 = a + k + c1
-        if c1 < 0:
-            i1 = a
-        if i1 > e - k:
+    while b1 < e:
+        if sums[4, b1, m] <= slow_q:
             break
-        q_l = level_misfit(sums, m, a, i1)
-        for c2 in range(-1, e - k - (i1 + k) + 1):
-            i2 = i1 + k + c2
-            if c2 < 0:
-                i2 = e
-            if i1 == a and i2 == e:
-                continue
-            v_mid = segment_speed(sums, m, i1, i2, dx)
-            ok = True
-            if i1 > a:
-                ok = ok and segment_speed(sums, m, a, i1, dx) * settings.speed_ratio <= v_mid
-            if i2 < e:
-                ok = ok and segment_speed(sums, m, i2, e, dx) * settings.speed_ratio <= v_mid
-            if ok:
-                q = q_l + level_misfit(sums, m, i1, i2) + level_misfit(sums, m, i2, e)
-                if q < best:
-                    best = q
-                    b1 = i1
-                    b2 = i2
-    has_left = int(0)
-    has_right = int(0)
+        b1 += 1
+    b2 = e
+    while b2 > b1:
+        if sums[4, b2 - 1, m] <= slow_q:
+            break
+        b2 -= 1
+    if b1 - a < k:
+        b1 = a
+    if e - b2 < k:
+        b2 = e
+    if b2 - b1 < k:  # no sustained fast part between them: one front
+        b1 = a
+        b2 = e
+    # an end segment must also be markedly slower than the middle on average
+    for _pass in range(2):
+        v_mid = segment_speed(arrival, sums, m, b1, b2, dx, i_first)
+        if b1 > a:
+            if not (segment_speed(arrival, sums, m, a, b1, dx, i_first) * settings.speed_ratio <= v_mid):
+                b1 = a
+        if b2 < e:
+            if not (segment_speed(arrival, sums, m, b2, e, dx, i_first) * settings.speed_ratio <= v_mid):
+                b2 = e
     if b1 > a:
-        has_left = 1
+        write_segment(out, m, 0, a, b1, L, dx, segment_speed(arrival, sums, m, a, b1, dx, i_first))
     if b2 < e:
-        has_right = 1
-    mid_a = a
-    mid_b = e
-    if has_left == 1:
-        mid_a = b1
-        write_segment(out, m, 0, a, b1, L, dx, segment_speed(sums, m, a, b1, dx))
-    if has_right == 1:
-        mid_b = b2
-        write_segment(out, m, 2, b2, e, L, dx, segment_speed(sums, m, b2, e, dx))
-    write_segment(out, m, 1, mid_a, mid_b, L, dx, segment_speed(sums, m, mid_a, mid_b, dx))
+        write_segment(out, m, 2, b2, e, L, dx, segment_speed(arrival, sums, m, b2, e, dx, i_first))
+    write_segment(out, m, 1, b1, b2, L, dx, segment_speed(arrival, sums, m, b1, b2, dx, i_first))
 
 
 @wp.kernel

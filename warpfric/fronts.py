@@ -60,11 +60,12 @@ def segment(arrival_time, length, fronts: Fronts = Fronts(), device: str | None 
         raise ValueError(f"length: {length!r}; valid: finite lengths > 0 (m)")
     seg = SegmentSettings()
     seg.min_nodes = min_segment_intervals(fronts, n)
+    seg.fast_fraction = fronts.fast_fraction
     seg.speed_ratio = fronts.speed_ratio
     seg.edge_zone = float(fronts.edge_zone_fraction * np.min(length))
     with wp.ScopedDevice(_device(device)):
         arrival = wp.array(np.ascontiguousarray(ta.T), dtype=wp.float64)
-        sums = wp.zeros((4, n, n_members), dtype=wp.float64)
+        sums = wp.zeros((5, n, n_members), dtype=wp.float64)
         out = wp.zeros((N_FRONT_METRICS, n_members), dtype=wp.float64)
         wp.launch(segment_fronts, dim=n_members, inputs=[wp.array(length, dtype=wp.float64), arrival, seg, sums, out])
         rows = out.numpy()

@@ -248,9 +248,15 @@ class Fronts:
     direction:             w = -sign(v_max)*u_t ('against_disc', default: the pad springs back as the
                            interface lets go), sign(v_max)*u_t ('with_disc') or |u_t| ('absolute').
     min_segment_fraction:  shortest left/middle/right segment, as a fraction of the pad length
-                           (at least 3 nodes).
-    speed_ratio:           an end segment counts as a separate, slower front (left precursor or
-                           right front) when v_middle >= speed_ratio * v_end; else it is merged.
+                           (at least 3 node intervals).
+    fast_fraction:         v_fast, the front's fast reference speed, is the plateau (the most
+                           populated 10 % band) of the local speeds dx/|dt_a| among this fastest
+                           fraction of the node intervals: the sustained speed of the fast front,
+                           not the unbounded local speed next to an interior nucleation point.
+    speed_ratio:           slow: a local speed below v_fast / speed_ratio. The left (right) front
+                           is the run of slow intervals from the left (right) end; it counts when
+                           it is at least min_segment_fraction long and v_middle >= speed_ratio *
+                           its mean speed; else it is merged into the middle.
     edge_zone_fraction:    nucleation within this fraction of L of an edge is nucleation at that edge.
 
     Front metrics cost a second pass of the integrator (the event maximum must be known before the
@@ -260,6 +266,7 @@ class Fronts:
     threshold: float = 0.4
     direction: str = "against_disc"
     min_segment_fraction: float = 0.05
+    fast_fraction: float = 0.3
     speed_ratio: float = 1.5
     edge_zone_fraction: float = 0.1
 
@@ -275,6 +282,8 @@ class Fronts:
         need(self.direction in _FRONT_DIRECTIONS, "direction", self.direction, " or ".join(_FRONT_DIRECTIONS))
         need(real(self.min_segment_fraction) and 0 < self.min_segment_fraction <= 1 / 3, "min_segment_fraction",
              self.min_segment_fraction, "a number in (0, 1/3]")
+        need(real(self.fast_fraction) and 0 < self.fast_fraction <= 1, "fast_fraction",
+             self.fast_fraction, "a number in (0, 1]")
         need(real(self.speed_ratio) and self.speed_ratio >= 1, "speed_ratio", self.speed_ratio, "a number >= 1")
         need(real(self.edge_zone_fraction) and 0 <= self.edge_zone_fraction <= 0.5, "edge_zone_fraction",
              self.edge_zone_fraction, "a number in [0, 0.5]")

@@ -1,0 +1,181 @@
+"""Work-precision study (issue 4): error of mu_s, mu_s_time and the middle front speed against the
+converged reference (studies/reference/reference_scenes.nc) versus wall time, over tolerances,
+grids and precisions.
+
+    python studies/work_precision.py run  [--device cpu|cuda:0] [--members 18|10000]
+                                          [--nodes 25 50 100 200] [--rtols 1e-3 ... 1e-8]
+                                          [--dtypes float64 float32] [--out FILE.nc]
+    python studies/work_precision.py plot FILE.nc [FILE2.nc ...] [--outdir docs/figures]
+
+`run` simulates the 18 reference scenes (tiled to --members; fronts on, the default) for every
+(dtype, nodes, rtol) and stores, per setting, the largest error over the scenes: relative for
+mu_s and v_middle, absolute (s) for mu_s_time, the wall time and the wall time per realisation.
+On the CPU (Warp's CPU kernels run the members one after another) the per-realisation time of
+18 members is the M = 1 cost; on the GPU use --members 10000. `plot` draws error against time,
+one line per (dtype, nodes) family, like SciMLBenchmarks' work-precision diagrams, and prints the
+cheapest setting that keeps mu_s within 1e-4 of the reference.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import time
+from pathlib import Path
+
+import numpy as np
+import xarray as xr
+
+import warpfric as wf
+
+REFERENCE = Path(__file__).with_name("reference") / "reference_scenes.nc"
+TARGET = 1e-4
+
+
+def scene_members(ref: xr.Dataset, m: int) -> tuple[dict, np.ndarray]:
+    k = ref.sizes["member"]
+    idx = np.arange(m) % k
+    names = ("eccentricity", "normal_force", "viscous_coefficient")
+    return {n: ref[n].values[idx] for n in names}, idx
+
+
+def run(args):
+    ref = xr.load_dataset(args.reference)
+    device = args.device or wf.default_device()
+    members, idx = scene_members(ref, args.members)
+    scene = wf.Parameters(end_time=float(ref.end_time))  # the reference's protocol window
+    rows = []
+    for dtype in args.dtypes:
+        for nodes in args.nodes:
+            for rtol in args.rtols:
+                if dtype == "float32" and rtol < wf.parameters.FLOAT32_MIN_RTOL:
+                    continue
+                solver = wf.Solver(nodes=nodes, dtype=dtype, rtol=rtol, max_steps=10**6)
+                wf.simulate(members={k: v[:1] for k, v in members.items()}, scene=wf.Parameters(end_time=20.01),
+                            solver=solver, device=device)  # compile outside the timing
+                t0 = time.perf_counter()
+                ds = wf.simulate(members, scene=scene, solver=solver, device=device, progress=False)
+                wall = time.perf_counter() - t0
+                r = {q: ref[q].values[idx] for q in ("mu_s", "mu_s_time", "v_middle")}
+                ok = ds.status.values == 0
+                row = dict(
+                    dtype=dtype, nodes=nodes, rtol=rtol, members=args.members, device=device, wall_s=wall,
+                    wall_s_per_realisation=wall / args.members, ok=int(ok.sum()),
+                    mu_s_error=float(np.nanmax(np.abs(ds.mu_s.values / r["mu_s"] - 1))),
+                    mu_s_time_error=float(np.nanmax(np.abs(ds.mu_s_time.values - r["mu_s_time"]))),
+                    v_middle_error=float(np.nanmax(np.abs(ds.v_middle.values / r["v_middle"] - 1))),
+                    mean_steps=float((ds.steps_accepted + ds.steps_rejected).mean()),
+                )
+                rows.append(row)
+                print(json.dumps(row), flush=True)
+    meta = dict(platform=platform.platform(), warpfric=wf.__version__, device=device,
+                command="python studies/work_precision.py " + " ".join(args.argv))
+    out = to_dataset(rows, meta)
+    out.to_netcdf(args.out)
+    Path(args.out).with_suffix(".json").write_text(json.dumps(dict(meta=meta, rows=rows), indent=1))
+    print(f"wrote {args.out}")
+    table(rows)
+
+
+def to_dataset(rows, meta) -> xr.Dataset:
+    keys = ("wall_s", "wall_s_per_realisation", "mu_s_error", "mu_s_time_error", "v_middle_error", "mean_steps", "ok")
+    dtypes = sorted({r["dtype"] for r in rows})
+    nodes = sorted({r["nodes"] for r in rows})
+    rtols = sorted({r["rtol"] for r in rows})
+    data = {k: np.full((len(dtypes), len(nodes), len(rtols)), np.nan) for k in keys}
+    for r in rows:
+        i, j, k = dtypes.index(r["dtype"]), nodes.index(r["nodes"]), rtols.index(r["rtol"])
+        for key in keys:
+            data[key][i, j, k] = r[key]
+    units = {"wall_s": "s", "wall_s_per_realisation": "s", "mu_s_error": "1", "mu_s_time_error": "s",
+             "v_middle_error": "1", "mean_steps": "1", "ok": "1"}
+    ds = xr.Dataset({k: (("dtype", "nodes", "rtol"), v, {"units": units[k]}) for k, v in data.items()},
+                    coords={"dtype": dtypes, "nodes": nodes, "rtol": rtols})
+    ds.attrs.update({k: str(v) for k, v in meta.items()})
+    ds.attrs["members"] = rows[0]["members"]
+    return ds
+
+
+def table(rows):
+    print(f"\n{'dtype':>8} {'N':>4} {'rtol':>7} {'s/real.':>10} {'mu_s err':>9} {'t_s err s':>9} {'v_mid err':>9} {'steps':>7} {'ok':>5}")
+    for r in rows:
+        print(f"{r['dtype']:>8} {r['nodes']:>4} {r['rtol']:7.0e} {r['wall_s_per_realisation']:10.3e} {r['mu_s_error']:9.1e} "
+              f"{r['mu_s_time_error']:9.1e} {r['v_middle_error']:9.1e} {r['mean_steps']:7.0f} {r['ok']:>5}")
+
+
+def recommend(ds: xr.Dataset):
+    """The cheapest (dtype, nodes, rtol) whose mu_s error is within TARGET (all scenes ok)."""
+    best = None
+    for dt in ds.dtype.values:
+        for n in ds.nodes.values:
+            for r in ds.rtol.values:
+                sel = ds.sel(dtype=dt, nodes=n, rtol=r)
+                err, cost = float(sel.mu_s_error), float(sel.wall_s_per_realisation)
+                if np.isfinite(err) and err <= TARGET and (best is None or cost < best[3]):
+                    best = (str(dt), int(n), float(r), cost, err, float(sel.v_middle_error))
+    return best
+
+
+def plot(args):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    outdir = Path(args.outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    for path in args.files:
+        ds = xr.load_dataset(path)
+        label = f"{ds.attrs['device']}, {int(ds.attrs['members'])} members"
+        stem = Path(path).stem
+        fig, axes = plt.subplots(1, 3, figsize=(13, 4))
+        for ax, (q, name) in zip(axes, (("mu_s_error", "mu_s relative error"), ("mu_s_time_error", "mu_s_time error (s)"),
+                                       ("v_middle_error", "v_middle relative error"))):
+            for dt in ds.dtype.values:
+                for n in ds.nodes.values:
+                    sel = ds.sel(dtype=dt, nodes=n)
+                    ok = np.isfinite(sel[q].values)
+                    if ok.any():
+                        ax.loglog(sel.wall_s_per_realisation.values[ok], sel[q].values[ok],
+                                  "o-" if dt == "float64" else "s--", ms=4, label=f"{dt}, N={int(n)}")
+            if q == "mu_s_error":
+                ax.axhline(TARGET, color="k", lw=0.8, ls=":")
+            ax.set_xlabel("wall time per realisation (s)")
+            ax.set_ylabel(name)
+            ax.grid(True, which="both", alpha=0.3)
+        axes[0].legend(fontsize=7)
+        fig.suptitle(f"work-precision ({label}); points along a line: rtol from loose (left) to tight")
+        fig.tight_layout()
+        fig.savefig(outdir / f"{stem}.png", dpi=110)
+        plt.close(fig)
+        best = recommend(ds)
+        print(f"{path}: cheapest setting with mu_s error <= {TARGET:g}: dtype {best[0]}, N = {best[1]}, "
+              f"rtol = {best[2]:g}: {best[3]:.3e} s per realisation, mu_s error {best[4]:.1e}, "
+              f"v_middle error {best[5]:.1e}; figure {outdir / (stem + '.png')}")
+
+
+def main(argv=None):
+    import sys
+
+    argv = sys.argv[1:] if argv is None else argv
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    r = sub.add_parser("run")
+    r.add_argument("--device", default=None)
+    r.add_argument("--members", type=int, default=18)
+    r.add_argument("--nodes", type=int, nargs="+", default=[25, 50, 100, 200])
+    r.add_argument("--rtols", type=float, nargs="+", default=[1e-3, 1e-4, 1e-5, 1e-6, 1e-7, 1e-8])
+    r.add_argument("--dtypes", nargs="+", default=["float64", "float32"])
+    r.add_argument("--reference", default=str(REFERENCE))
+    r.add_argument("--out", default="work_precision.nc")
+    p = sub.add_parser("plot")
+    p.add_argument("files", nargs="+")
+    p.add_argument("--outdir", default="docs/figures")
+    args = ap.parse_args(argv)
+    args.argv = argv
+    run(args) if args.cmd == "run" else plot(args)
+
+
+if __name__ == "__main__":
+    main()
