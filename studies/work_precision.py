@@ -6,6 +6,7 @@ grids and precisions.
                                           [--nodes 25 50 100 200] [--rtols 1e-3 ... 1e-8]
                                           [--dtypes float64 float32] [--out FILE.nc]
     python studies/work_precision.py plot FILE.nc [FILE2.nc ...] [--outdir docs/figures]
+    python studies/work_precision.py collect LOG --out FILE.nc     (rows of a cut-off run's log)
 
 `run` simulates the 18 reference scenes (tiled to --members; fronts on, the default) for every
 (dtype, nodes, rtol) and stores, per setting, the largest error over the scenes: relative for
@@ -169,12 +170,25 @@ def main(argv=None):
     r.add_argument("--dtypes", nargs="+", default=["float64", "float32"])
     r.add_argument("--reference", default=str(REFERENCE))
     r.add_argument("--out", default="work_precision.nc")
+    c = sub.add_parser("collect", help="build the .nc/.json from the JSON lines of a run's log (a cut-off run)")
+    c.add_argument("log")
+    c.add_argument("--out", required=True)
+    c.add_argument("--command", default="", help="the command that produced the log")
     p = sub.add_parser("plot")
     p.add_argument("files", nargs="+")
     p.add_argument("--outdir", default="docs/figures")
     args = ap.parse_args(argv)
     args.argv = argv
-    run(args) if args.cmd == "run" else plot(args)
+    {"run": run, "plot": plot, "collect": collect}[args.cmd](args)
+
+
+def collect(args):
+    rows = [json.loads(line) for line in Path(args.log).read_text().splitlines() if line.startswith("{")]
+    meta = dict(platform="see the log", warpfric=wf.__version__, device=rows[0]["device"],
+                command=args.command or f"rows collected from {args.log}")
+    to_dataset(rows, meta).to_netcdf(args.out)
+    Path(args.out).with_suffix(".json").write_text(json.dumps(dict(meta=meta, rows=rows), indent=1))
+    print(f"wrote {args.out} ({len(rows)} settings)")
 
 
 if __name__ == "__main__":
