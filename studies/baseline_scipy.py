@@ -256,7 +256,10 @@ def main(argv=None):
     ap.add_argument("--end-time", type=float, default=20.6)
     ap.add_argument("--gpu-json", default=None, help="work_precision.py H100 results (per-realisation cost)")
     ap.add_argument("--out", default="baseline_scipy.json")
+    ap.add_argument("--from-json", default=None, help="recompute the ratios and the table of a saved run")
     args = ap.parse_args(argv)
+    if args.from_json:
+        return resummarise(args.from_json, args.gpu_json, args.nodes)
     p = wf.Parameters(end_time=args.end_time)
     ref = run_warpfric(p, args.nodes, 1e-10, repeat=1)
     print(json.dumps(dict(reference=ref)), flush=True)
@@ -269,12 +272,17 @@ def main(argv=None):
                      mu_s_time_error=abs(r["mu_s_time"] - ref["mu_s_time"]))
             rows.append(r)
             print(json.dumps(r), flush=True)
+    report(rows, ref, args.gpu_json, args.nodes, args.out, "python studies/baseline_scipy.py " + " ".join(argv or sys.argv[1:]))
+
+
+def report(rows, ref, gpu_json, nodes, out, command):
+    """Ratios at equal mu_s error, the JSON file and the table."""
     wf_rows = [r for r in rows if r["solver"] == "warpfric"]
     gpu_rows = []
-    if args.gpu_json:
-        with open(args.gpu_json) as f:
+    if gpu_json:
+        with open(gpu_json) as f:
             gpu_rows = [dict(mu_s_error=r["mu_s_error"], wall_s=r["wall_s_per_realisation"])
-                        for r in json.load(f)["rows"] if r["nodes"] == args.nodes and r["dtype"] == "float64"]
+                        for r in json.load(f)["rows"] if r["nodes"] == nodes and r["dtype"] == "float64"]
     # scipy's error does not fall monotonically with its tolerance: compare each scipy run with
     # warpfric at that run's error
     for r in rows:
@@ -287,20 +295,25 @@ def main(argv=None):
             gpu = time_at_error(gpu_rows, r["mu_s_error"])
             r["warpfric_h100_s_per_realisation_at_same_error"] = gpu
             r["ratio_h100"] = r["wall_s"] / gpu if gpu else None
-    with open(args.out, "w") as f:
-        json.dump(dict(reference=ref, rows=rows, command="python studies/baseline_scipy.py " + " ".join(argv or sys.argv[1:])),
-                  f, indent=1)
+    with open(out, "w") as f:
+        json.dump(dict(reference=ref, rows=rows, command=command, gpu_json=gpu_json), f, indent=1)
     print(f"\n{'solver':>10} {'rtol':>7} {'wall s':>9} {'steps':>7} {'mu_s':>12} {'mu_s err':>9} {'t_s err s':>9} "
-          f"{'wf CPU s':>9} {'x CPU':>7} {'x H100':>8}")
+          f"{'wf CPU s':>9} {'x CPU':>7} {'wf H100 s':>10} {'x H100':>8}")
     for r in rows:
         extra = ""
         if r["solver"] == "scipy_bdf":
             def f(v, spec):
                 return format(v, spec) if v else "n/a"
             extra = (f" {f(r['warpfric_cpu_s_at_same_error'], '9.4f'):>9} {f(r['ratio_cpu'], '7.0f'):>7} "
-                     f"{f(r.get('ratio_h100'), '8.0f'):>8}")
+                     f"{f(r.get('warpfric_h100_s_per_realisation_at_same_error'), '10.2e'):>10} {f(r.get('ratio_h100'), '8.0f'):>8}")
         print(f"{r['solver']:>10} {r['rtol']:7.0e} {r['wall_s']:9.3f} {r['steps']:7d} {r['mu_s']:12.8f} "
               f"{r['mu_s_error']:9.2e} {r['mu_s_time_error']:9.1e}" + extra)
+
+
+def resummarise(path, gpu_json, nodes):
+    with open(path) as f:
+        saved = json.load(f)
+    report(saved["rows"], saved["reference"], gpu_json, nodes, path, saved["command"])
 
 
 if __name__ == "__main__":
