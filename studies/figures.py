@@ -1,0 +1,417 @@
+"""Studies: the paper's Figures 3-14, the open model choices, and ensembles beyond the paper.
+
+    python studies/figures.py NAME [--quick] [--device cpu|cuda:0] [--outdir studies/figures]
+    python studies/figures.py all --quick
+
+NAME: fig3 fig4 fig5 fig10 fig11 fig12 choices map uncertainty (Figs. 6, 7 come with fig4, Figs.
+8, 9 with fig5, Figs. 13, 14 with fig10). Each writes NAME[_quick].nc (the ensemble, warpfric.io format),
+NAME[_quick].png and NAME[_quick].json (the numbers studies/README.md quotes, and that
+tests/test_studies.py checks). --quick: sizes for a 2-core CPU (seconds to a minute each); the full
+size is for the GPU.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+import warpfric as wf
+from warpfric.io import write_ensemble
+
+SHEAR_WAVE_SPEED = float(np.sqrt(wf.Parameters().shear_modulus / wf.Parameters().density))  # m/s
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def simulate(members, quick, device, scene=None, record=None, nodes=None, **solver_kw):
+    solver = wf.Solver(nodes=nodes or (100 if quick else 200), rtol=1e-5, **solver_kw)
+    return wf.simulate(members, scene=scene or wf.Parameters(), solver=solver, record=record, device=device,
+                       progress=sys.stderr.isatty())
+
+
+def linfit(x, y):
+    """Slope, intercept and R^2 of a least-squares line (finite points only)."""
+    ok = np.isfinite(x) & np.isfinite(y)
+    x, y = np.asarray(x)[ok], np.asarray(y)[ok]
+    if x.size < 3:
+        return dict(slope=float("nan"), intercept=float("nan"), r2=float("nan"), points=int(x.size))
+    slope, intercept = np.polyfit(x, y, 1)
+    resid = y - (slope * x + intercept)
+    r2 = 1 - resid.var() / y.var() if y.var() > 0 else float("nan")
+    return dict(slope=float(slope), intercept=float(intercept), r2=float(r2), points=int(x.size))
+
+
+def segments_summary(ds) -> dict:
+    out = {}
+    for seg in ("left", "middle", "right"):
+        v = ds[f"v_{seg}"].values
+        out[f"{seg}_present"] = int(np.isfinite(v).sum())
+        out[f"v_{seg}_median"] = float(np.nanmedian(v)) if np.isfinite(v).any() else float("nan")
+    return out
+
+
+# ------------------------------------------------------------------------------------------------
+def fig3(quick, device):
+    record = wf.Record.window(20.2, 20.36, 161 if quick else 321, members=(0,))
+    ds = simulate(None, quick, device, scene=wf.Parameters(end_time=20.6), record=record)
+    m = ds.isel(member=0)
+    claims = {k: float(m[k]) for k in ("mu_s", "mu_s_time", "nucleation_position", "left_front_end",
+                                        "right_front_start", "v_left", "v_middle", "v_right",
+                                        "front_start_time", "front_end_time")}
+    claims["nucleation_edge"] = int(m.nucleation_edge)
+    from warpfric.plots import space_time_map
+
+    return ds, claims, lambda path: space_time_map(ds, 0, path)
+
+
+def fig4(quick, device):
+    e = np.linspace(-0.35, 0.35, 15 if quick else 141)
+    ds = simulate({"eccentricity": e}, quick, device)
+    mu = ds.mu_s.values
+    claims = dict(mu_s_mean=float(mu.mean()), variation_percent=float(100 * (mu.max() - mu.min()) / mu.mean()),
+                  e_at_max=float(e[np.argmax(mu)]), e_at_min=float(e[np.argmin(mu)]),
+                  trend_slope_per_unit_e=linfit(e, mu)["slope"],
+                  mu_s_trailing_half_minus_leading_half=float(mu[e > 0].mean() - mu[e < 0].mean()))
+    # Figs. 6, 7: mu_s against the left precursor's speed and length over these events
+    claims["fig6_mu_s_vs_v_left"] = linfit(ds.v_left.values, mu)
+    claims["fig7_mu_s_vs_left_length"] = linfit(ds.left_front_length.values, mu)
+    claims.update(segments_summary(ds))
+
+    def draw(path):
+        plt = _plt()
+        fig, ax = plt.subplots(1, 3, figsize=(13, 3.8))
+        ax[0].plot(e, mu, "o-", ms=3)
+        ax[0].set_xlabel("eccentricity 2e/L (+: towards the trailing edge)")
+        ax[0].set_ylabel("mu_s")
+        ax[0].set_title("Fig. 4: F = 1000 N, v = 0.1 mm/s")
+        ax[1].plot(ds.v_left, mu, "o", ms=3)
+        ax[1].set_xlabel("left precursor speed (m/s)")
+        ax[1].set_title("Fig. 6")
+        ax[2].plot(ds.left_front_length * 1e3, mu, "o", ms=3)
+        ax[2].set_xlabel("left precursor length (mm)")
+        ax[2].set_title("Fig. 7")
+        fig.tight_layout()
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+
+    return ds, claims, draw
+
+
+def fig5_8(quick, device):
+    F = np.geomspace(100.0, 10000.0, 9 if quick else 41)
+    ds = simulate({"normal_force": F}, quick, device)
+    mu = ds.mu_s.values
+    claims = dict(mu_s=[float(v) for v in mu], normal_force=[float(v) for v in F],
+                  increase_first_decade=float(mu[F <= 1000].max() - mu[0]),
+                  increase_last_decade=float(mu[-1] - mu[F >= 1000].min()))
+    claims.update(segments_summary(ds))
+    vl = ds.v_left.values
+    present = np.isfinite(vl)
+    claims["lowest_force_with_left_precursor"] = float(F[present].min()) if present.any() else float("nan")
+    claims["highest_force_without_left_precursor"] = float(F[~present].max()) if (~present).any() else float("nan")
+    claims["fig9_inverse_v_left_vs_force"] = linfit(F[present], 1 / vl[present])
+    claims["shear_wave_speed"] = SHEAR_WAVE_SPEED
+    for seg in ("left", "middle", "right"):
+        claims[f"fig8_log_v_{seg}_vs_log_force"] = linfit(np.log(F), np.log(ds[f"v_{seg}"].values))
+
+    def draw(path):
+        plt = _plt()
+        fig, ax = plt.subplots(1, 3, figsize=(13, 3.8))
+        ax[0].semilogx(F, mu, "o-", ms=3)
+        ax[0].set_xlabel("normal force (N)")
+        ax[0].set_ylabel("mu_s")
+        ax[0].set_title("Fig. 5: e = 0, v = 0.1 mm/s")
+        for seg, mk in (("left", "v"), ("middle", "o"), ("right", "^")):
+            ax[1].loglog(F, ds[f"v_{seg}"], mk + "-", ms=3, label=f"v_{seg}")
+        ax[1].axhline(SHEAR_WAVE_SPEED, color="k", ls=":", label="shear wave speed")
+        ax[1].set_xlabel("normal force (N)")
+        ax[1].set_ylabel("front speed (m/s)")
+        ax[1].set_title("Fig. 8")
+        ax[1].legend(fontsize=7)
+        ax[2].plot(F[present], 1 / vl[present], "o", ms=3)
+        ax[2].set_xlabel("normal force (N)")
+        ax[2].set_ylabel("1 / v_left (s/m)")
+        ax[2].set_title("Fig. 9")
+        fig.tight_layout()
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+
+    return ds, claims, draw
+
+
+def fig10(quick, device):
+    v = np.geomspace(1e-6, 1e-2, 9 if quick else 33)
+    eta = np.array([2.7e13, 0.0])
+    ds = simulate({"viscous_coefficient": eta[:, None], "disc_velocity": v[None, :]}, quick, device,
+                  scene=wf.Parameters(normal_force=500.0))
+    mu = ds.mu_s.values.reshape(2, -1)
+    claims = {}
+    for seg in ("left", "middle", "right"):
+        claims[f"log_v_{seg}_vs_log_vd"] = linfit(np.log(v), np.log(ds[f"v_{seg}"].values.reshape(2, -1)[0]))
+    claims["fig13_mu_s_vs_log_vd_with_strengthening"] = linfit(np.log10(v), mu[0])
+    claims["fig14_mu_s_without_strengthening"] = [float(x) for x in mu[1]]
+    claims["fig14_drop_first_half"] = float(mu[1][0] - mu[1][len(v) // 2])
+    claims["fig14_drop_second_half"] = float(mu[1][len(v) // 2] - mu[1][-1])
+    claims["disc_velocity"] = [float(x) for x in v]
+
+    def draw(path):
+        plt = _plt()
+        fig, ax = plt.subplots(1, 2, figsize=(10, 3.8))
+        for seg, mk in (("left", "v"), ("middle", "o"), ("right", "^")):
+            ax[0].loglog(v, ds[f"v_{seg}"].values.reshape(2, -1)[0], mk + "-", ms=3, label=f"v_{seg}")
+        ax[0].set_xlabel("disc velocity (m/s)")
+        ax[0].set_ylabel("front speed (m/s)")
+        ax[0].set_title("Fig. 10: F = 500 N, e = 0")
+        ax[0].legend(fontsize=7)
+        ax[1].semilogx(v, mu[0], "o-", ms=3, label="with strengthening (Fig. 13)")
+        ax[1].semilogx(v, mu[1], "s-", ms=3, label="viscous_coefficient = 0 (Fig. 14)")
+        ax[1].set_xlabel("disc velocity (m/s)")
+        ax[1].set_ylabel("mu_s")
+        ax[1].legend(fontsize=7)
+        fig.tight_layout()
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+
+    return ds, claims, draw
+
+
+def fig11(quick, device):
+    stop = 20.15
+    record = wf.Record.window(20.0, 20.4, 201 if quick else 801, members=(0, 1))
+    ds = simulate({"stop_time": [stop, np.inf]}, quick, device, scene=wf.Parameters(end_time=20.4), record=record)
+    t = ds.time.values
+    v = ds.velocity_history.values[0]  # (time, x)
+    before = np.abs(v[t < stop]).max()
+    after = t > stop + 1e-9
+    # per node: the first recorded time after the stop at which |v| stays below 1 % of its pre-stop peak
+    stop_times = []
+    for i in range(v.shape[1]):
+        peak = np.abs(v[t <= stop, i]).max()
+        quiet = np.abs(v[:, i]) < 0.01 * peak
+        later = np.flatnonzero(after & quiet)
+        stop_times.append(float(t[later[0]] - stop) if later.size else float("nan"))
+    claims = dict(stop_time=stop, max_velocity_before=float(before),
+                  max_velocity_after_5ms=float(np.abs(v[t > stop + 0.005]).max()),
+                  node_quiet_delay_min=float(np.nanmin(stop_times)), node_quiet_delay_max=float(np.nanmax(stop_times)),
+                  status=[int(s) for s in ds.status.values])
+    from warpfric.plots import space_time_map
+
+    return ds, claims, lambda path: space_time_map(ds, 0, path)
+
+
+def fig12(quick, device):
+    e = np.linspace(-0.3, 0.3, 7 if quick else 25)
+    eta = np.array([2.7e13, 0.0])
+    ds = simulate({"viscous_coefficient": eta[:, None], "eccentricity": e[None, :]}, quick, device)
+    claims = {"eccentricity": [float(x) for x in e]}
+    for seg in ("left", "middle", "right"):
+        vv = ds[f"v_{seg}"].values.reshape(2, -1)
+        ratio = vv[1] / vv[0]
+        claims[f"v_{seg}_ratio_without_over_with"] = [float(x) for x in ratio]
+        claims[f"v_{seg}_ratio_median"] = float(np.nanmedian(ratio)) if np.isfinite(ratio).any() else float("nan")
+
+    def draw(path):
+        plt = _plt()
+        fig, ax = plt.subplots(figsize=(5.5, 3.8))
+        for seg, mk in (("left", "v"), ("middle", "o"), ("right", "^")):
+            vv = ds[f"v_{seg}"].values.reshape(2, -1)
+            ax.semilogy(e, vv[0], mk + "-", ms=4, label=f"v_{seg} with strengthening")
+            ax.semilogy(e, vv[1], mk + "--", ms=4, mfc="none", label=f"v_{seg} without")
+        ax.set_xlabel("eccentricity 2e/L")
+        ax.set_ylabel("front speed (m/s)")
+        ax.set_title("Fig. 12: F = 1000 N, v = 0.1 mm/s")
+        ax.legend(fontsize=6)
+        fig.tight_layout()
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+
+    return ds, claims, draw
+
+
+CHOICES = {
+    "default": {},
+    "fronts direction=with_disc": "with_disc",
+    "interface_velocity_factor=2": {"interface_velocity_factor": 2.0},
+    "torque_arm=0": {"torque_arm": 0.0},
+    "torque_arm=2H": {"torque_arm": 0.03},
+    "damping=1e5": {"damping": 1e5},
+    "initial_age=1s": {"initial_age": 1.0},
+}
+
+
+def choices(quick, device):
+    """Each open choice of SPEC section 10 against three readings of the paper: which edge
+    nucleates at e = 0 (paper: left), the sign of d mu_s / d e (paper: + , higher towards the
+    trailing edge), and whether the left precursor vanishes at low force (paper: none below
+    1000 N). poisson_coupling is a Model switch and is run separately."""
+    e = np.array([-0.3, 0.0, 0.3])
+    F = np.array([200.0, 1000.0, 5000.0])
+    rows = {}
+    datasets = []
+    for label, change in list(CHOICES.items()) + [("poisson_coupling=off", None)]:
+        fronts = wf.Fronts(direction=change) if isinstance(change, str) else wf.Fronts()
+        scene = wf.Parameters(**(change if isinstance(change, dict) else {}))
+        model = wf.Model(poisson_coupling=False) if change is None else wf.Model()
+        members = {"eccentricity": np.concatenate([e, np.zeros(2)]), "normal_force": np.concatenate([np.full(3, 1000.0), F[[0, 2]]])}
+        ds = wf.simulate(members, scene=scene, model=model, solver=wf.Solver(nodes=100 if quick else 200),
+                         fronts=fronts, device=device, progress=False)
+        mu = ds.mu_s.values
+        rows[label] = dict(
+            nucleation_position_e0=float(ds.nucleation_position.values[1]),
+            nucleation_edge_e0=int(ds.nucleation_edge.values[1]),
+            dmu_de=float((mu[2] - mu[0]) / 0.6),
+            left_precursor_at_200N=bool(np.isfinite(ds.v_left.values[3])),
+            left_precursor_at_1000N=bool(np.isfinite(ds.v_left.values[1])),
+            left_precursor_at_5000N=bool(np.isfinite(ds.v_left.values[4])),
+            v_middle_e0=float(ds.v_middle.values[1]), mu_s_e0=float(mu[1]),
+        )
+        ds = ds.expand_dims(choice=[label])
+        datasets.append(ds[["mu_s", "v_left", "v_middle", "v_right", "nucleation_position", "eccentricity", "normal_force"]])
+    import xarray as xr
+
+    combined = xr.concat(datasets, dim="choice")
+    combined.attrs = datasets[0].attrs
+    combined.attrs["warpfric_complete"] = 1
+
+    def draw(path):
+        plt = _plt()
+        fig, ax = plt.subplots(figsize=(7, 3.5))
+        labels = list(rows)
+        ax.barh(labels, [rows[k]["nucleation_position_e0"] * 1e3 for k in labels])
+        ax.set_xlabel("nucleation position at e = 0 (mm); paper: left edge, -100 mm")
+        fig.tight_layout()
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+
+    return combined, rows, draw
+
+
+def ensemble_map(quick, device):
+    e = np.linspace(-0.35, 0.35, 5 if quick else 29)
+    F = np.geomspace(100.0, 10000.0, 4 if quick else 25)
+    v = np.geomspace(1e-6, 1e-2, 3 if quick else 17)
+    members = {"eccentricity": e[:, None, None], "normal_force": F[None, :, None], "disc_velocity": v[None, None, :]}
+    ds = simulate(members, quick, device, nodes=60 if quick else 100)
+    mu = ds.mu_s.values.reshape(e.size, F.size, v.size)
+    left = np.isfinite(ds.v_left.values).reshape(mu.shape)
+    claims = dict(members=int(ds.sizes["member"]), ok=int((ds.status.values == 0).sum()),
+                  mu_s_min=float(np.nanmin(mu)), mu_s_max=float(np.nanmax(mu)),
+                  left_precursor_fraction=float(left.mean()),
+                  left_precursor_fraction_by_velocity=[float(left[:, :, k].mean()) for k in range(v.size)],
+                  left_precursor_fraction_by_eccentricity=[float(left[i].mean()) for i in range(e.size)],
+                  mu_s_range_over_velocity=float(np.nanmax(mu.max(axis=2) - mu.min(axis=2))),
+                  mu_s_range_over_eccentricity=float(np.nanmax(mu.max(axis=0) - mu.min(axis=0))),
+                  mu_s_range_over_force=float(np.nanmax(mu.max(axis=1) - mu.min(axis=1))))
+
+    def draw(path):
+        plt = _plt()
+        k = v.size // 2
+        fig, ax = plt.subplots(1, 2, figsize=(11, 4))
+        im = ax[0].pcolormesh(F, e, mu[:, :, k], shading="nearest")
+        ax[0].set_xscale("log")
+        ax[0].set_xlabel("normal force (N)")
+        ax[0].set_ylabel("eccentricity")
+        ax[0].set_title(f"mu_s at v = {v[k]:.1e} m/s")
+        fig.colorbar(im, ax=ax[0])
+        im = ax[1].pcolormesh(F, e, left[:, :, k], shading="nearest", cmap="Greys", vmin=0, vmax=1)
+        ax[1].set_xscale("log")
+        ax[1].set_xlabel("normal force (N)")
+        ax[1].set_title("left precursor present (black)")
+        fig.tight_layout()
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+
+    return ds, claims, draw
+
+
+def uncertainty(quick, device):
+    """Friction parameters drawn around Table 1 (distributions in the docstring of
+    studies/sweeps/uncertainty.toml, the same here)."""
+    n = 200 if quick else 10000
+    rng = lambda k: np.random.default_rng([2014, k])  # noqa: E731
+    members = {
+        "aging_coefficient": rng(0).normal(0.075, 0.0075, n),
+        "memory_length": np.exp(rng(1).uniform(np.log(3e-7), np.log(8e-7), n)),
+        "viscous_coefficient": rng(2).uniform(1.35e13, 4.05e13, n),
+        "interface_stiffness": np.exp(rng(3).uniform(np.log(1.5e14), np.log(6e14), n)),
+        "hardness": rng(4).normal(5.4e8, 5.4e7, n),
+    }
+    ds = simulate(members, quick, device, nodes=60 if quick else 100)
+    mu = ds.mu_s.values
+    claims = dict(members=n, ok=int((ds.status.values == 0).sum()), mu_s_mean=float(np.nanmean(mu)),
+                  mu_s_std=float(np.nanstd(mu)), mu_s_p05=float(np.nanpercentile(mu, 5)),
+                  mu_s_p95=float(np.nanpercentile(mu, 95)),
+                  v_middle_p05=float(np.nanpercentile(ds.v_middle.values, 5)),
+                  v_middle_p95=float(np.nanpercentile(ds.v_middle.values, 95)),
+                  correlation_mu_s={k: float(np.corrcoef(v, mu)[0, 1]) for k, v in members.items()})
+    claims.update(segments_summary(ds))
+
+    def draw(path):
+        plt = _plt()
+        fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+        ax[0].hist(mu[np.isfinite(mu)], bins=40)
+        ax[0].set_xlabel("mu_s")
+        ax[1].hist(ds.v_middle.values[np.isfinite(ds.v_middle.values)], bins=40)
+        ax[1].set_xlabel("v_middle (m/s)")
+        fig.suptitle(f"{n} members, friction parameters drawn around Table 1")
+        fig.tight_layout()
+        fig.savefig(path, dpi=110)
+        plt.close(fig)
+
+    return ds, claims, draw
+
+
+STUDIES = {
+    "fig3": fig3, "fig4": fig4, "fig5": fig5_8,
+    "fig10": fig10, "fig11": fig11, "fig12": fig12, "choices": choices, "map": ensemble_map,
+    "uncertainty": uncertainty,
+}
+
+
+def run_study(name, quick, device, outdir) -> dict:
+    outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
+    stem = name + ("_quick" if quick else "")
+    t0 = time.perf_counter()
+    ds, claims, draw = STUDIES[name](quick, device)
+    wall = time.perf_counter() - t0
+    if "choice" in ds.dims:
+        ds.to_netcdf(outdir / f"{stem}.nc")
+    else:  # the final-state fields are not needed by the figures: keep the files small
+        final_fields = ["displacement", "velocity", "elastic_stress", "contact_age", "normal_stress", "friction_stress"]
+        write_ensemble(ds.drop_vars([v for v in final_fields if v in ds]), outdir / f"{stem}.nc")
+    draw(outdir / f"{stem}.png")
+    meta = dict(study=name, quick=quick, device=str(device), wall_s=wall, warpfric=wf.__version__,
+                command=f"python studies/figures.py {name}" + (" --quick" if quick else "") + f" --device {device}")
+    (outdir / f"{stem}.json").write_text(json.dumps(dict(meta=meta, claims=claims), indent=1, default=float))
+    print(f"{stem}: {wall:.1f} s -> {outdir / stem}.nc/.png/.json")
+    return claims
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("name", choices=sorted(STUDIES) + ["all"])
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--device", default=None)
+    ap.add_argument("--outdir", default=str(Path(__file__).with_name("figures")))
+    args = ap.parse_args(argv)
+    device = args.device or wf.default_device()
+    names = sorted(STUDIES) if args.name == "all" else [args.name]
+    for name in names:
+        run_study(name, args.quick, device, args.outdir)
+
+
+if __name__ == "__main__":
+    main()
