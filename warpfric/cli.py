@@ -3,6 +3,7 @@
   warpfric run [SWEEP.toml] [-o OUT.nc] [--device D] [--chunk M] [--resume | --overwrite]
   warpfric info OUT.nc
   warpfric plot OUT.nc [--outdir DIR]
+  warpfric sensitivity OUT.nc [--output mu_s --output v_middle ...] [--on-failure refuse|fill-mean]
 
 Without a sweep file, ``run`` simulates the paper's default scene (one member, F = 1000 N, e = 0,
 changeable with --normal-force, --eccentricity, --disc-velocity) and prints mu_s and the front
@@ -24,6 +25,9 @@ from .parameters import Model, Parameters, Solver
 
 class UsageError(ValueError):
     pass
+
+
+FINAL_FIELDS = ("displacement", "velocity", "elastic_stress", "contact_age", "normal_stress", "friction_stress")
 
 
 def _fail(message: str) -> int:
@@ -135,7 +139,15 @@ def _run_sweep(args) -> int:
         ds.attrs["sweep_file"] = str(args.sweep)
         ds.attrs["sweep_toml"] = sweep.text
         ds.attrs["chunk_index"] = index
+        if sweep.design is not None:
+            import json
+
+            from .sensitivity import DESIGN_ATTR
+
+            ds.attrs[DESIGN_ATTR] = json.dumps(sweep.design)
         n_failed += int((ds.status.values != 0).sum())
+        if not sweep.run.get("final_fields", True):
+            ds = ds.drop_vars([v for v in FINAL_FIELDS if v in ds])
         write_ensemble(ds, store.chunk_path(index), varying=sweep.varying)
     store.combine(out)
     print(f"warpfric: wrote {out} ({sweep.n_members} members, {time.perf_counter() - t0:.1f} s this run, "
@@ -217,6 +229,32 @@ def _plot(args) -> int:
     return 0
 
 
+def _sensitivity(args) -> int:
+    from .io import open_ensemble
+    from .sensitivity import analyse, bar_plot
+
+    ds = open_ensemble(args.file)
+    res = analyse(ds, outputs=tuple(args.output or ["mu_s"]), on_failure=args.on_failure)
+    out = Path(args.out) if args.out else Path(args.file).with_name(Path(args.file).stem + "_sensitivity.nc")
+    res.to_netcdf(out)
+    bar_plot(res, out.with_suffix(".png"))
+    for o in res.output.values:
+        r = res.sel(output=o)
+        print(f"{o}: ({int(r.filled_members)} members filled with the mean)")
+        if "S1" in res:
+            print(f"  {'parameter':<22} {'S1':>7} {'+-':>6} {'ST':>7} {'+-':>6}")
+            for p in res.parameter.values:
+                q = r.sel(parameter=p)
+                print(f"  {p:<22} {float(q.S1):7.3f} {float(q.S1_conf):6.3f} {float(q.ST):7.3f} {float(q.ST_conf):6.3f}")
+        else:
+            print(f"  {'parameter':<22} {'mu*':>10} {'+-':>9} {'sigma':>10}")
+            for p in res.parameter.values:
+                q = r.sel(parameter=p)
+                print(f"  {p:<22} {float(q.mu_star):10.3g} {float(q.mu_star_conf):9.2g} {float(q.sigma):10.3g}")
+    print(f"wrote {out} and {out.with_suffix('.png')}")
+    return 0
+
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog="warpfric", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -241,8 +279,14 @@ def main(argv=None) -> int:
     plot = sub.add_parser("plot", help="quick-look PNGs of an ensemble file")
     plot.add_argument("file")
     plot.add_argument("--outdir", default=None, help="folder for the PNGs (default: OUT next to OUT.nc)")
+    sens = sub.add_parser("sensitivity", help="Sobol (Saltelli design) or Morris indices of a design's outputs (needs SALib)")
+    sens.add_argument("file")
+    sens.add_argument("--output", action="append", help="per-member output to analyse (repeatable; default mu_s)")
+    sens.add_argument("--on-failure", default="refuse", choices=("refuse", "fill-mean"),
+                      help="members that failed or lack an output: refuse (default) or replace by the mean")
+    sens.add_argument("-o", "--out", default=None, help="result file (default OUT_sensitivity.nc, and .png)")
     args = parser.parse_args(argv)
-    handlers = {"run": _run, "info": _info, "plot": _plot}
+    handlers = {"run": _run, "info": _info, "plot": _plot, "sensitivity": _sensitivity}
     try:
         return handlers[args.command](args)
     except ValueError as err:  # bad input: one line, exit 2

@@ -11,7 +11,9 @@ A sweep file (examples in studies/sweeps/, reference in docs/sweeps.md)::
     [grid]    eccentricity = [-0.2, 0.0, 0.2]           # full grid; or {start, stop, num, spacing}
     [zip]     a = [...], b = [...]                      # zipped lists of one length
     [sample]  n = 1000, seed = 1, viscous_coefficient = {distribution = "uniform", low = 0, high = 2.7e13}
-    [run]     chunk = 1000, device = "cpu"              # defaults of the command-line options
+    [design]  method = "saltelli", n = 1024, ...          # SALib designs (warpfric.sensitivity)
+    [run]     chunk = 1000, device = "cpu"              # defaults of the command-line options;
+              final_fields = false                      # leave out the final-state fields (member, x)
 
 Members are every combination of one grid point, one zip row and one sample row, in C order over
 the blocks: grid keys in file order, then the zip rows, then the sample rows (fastest). Each sampled parameter draws from its own random stream, seeded by (seed, name), so
@@ -33,8 +35,9 @@ import numpy as np
 from .members import resolve_members
 from .parameters import PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solver
 
-TOP_KEYS = ("title", "description", "scene", "model", "solver", "fronts", "record", "grid", "zip", "sample", "run")
-RUN_KEYS = {"chunk": int, "device": str}
+TOP_KEYS = ("title", "description", "scene", "model", "solver", "fronts", "record", "grid", "zip", "sample", "design",
+            "run")
+RUN_KEYS = {"chunk": int, "device": str, "final_fields": bool}
 DISTRIBUTIONS = {"uniform": ("low", "high"), "normal": ("mean", "std"), "loguniform": ("low", "high")}
 RANGE_KEYS = ("start", "stop", "num", "spacing")
 
@@ -55,6 +58,7 @@ class Sweep:
     members: dict  # name -> (M,) float64, only the swept parameters
     varying: tuple
     run: dict
+    design: dict | None = None  # a sensitivity design (warpfric.sensitivity), JSON-serialisable
 
     @property
     def n_members(self) -> int:
@@ -174,7 +178,7 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
     for key in doc:
         if key not in TOP_KEYS:
             raise SweepError(f"unknown key {key!r} in {name}; accepted: {', '.join(TOP_KEYS)}")
-    for key in ("scene", "model", "solver", "record", "grid", "zip", "sample", "run"):
+    for key in ("scene", "model", "solver", "record", "grid", "zip", "sample", "design", "run"):
         if key in doc and not isinstance(doc[key], dict):
             raise SweepError(f"{key} = {doc[key]!r}: expected a table [{key}]")
     title = doc.get("title", "")
@@ -233,6 +237,15 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
             cols[pname] = _draw(pname, spec, n, seed, _where("sample", pname))
         blocks.append(cols)
     members: dict[str, np.ndarray] = {}
+    design = None
+    if "design" in doc:
+        from .sensitivity import generate, parse_design
+
+        if blocks:
+            raise SweepError("[design] cannot be combined with [grid], [zip] or [sample]: the analysis needs the "
+                             "design's rows exactly (put fixed values in [scene])")
+        design = parse_design(doc["design"])
+        members = generate(design)
     if blocks:
         sizes = [len(next(iter(b.values()))) for b in blocks]
         index = np.array(list(itertools.product(*(range(s) for s in sizes))), dtype=np.int64).reshape(-1, len(blocks))
@@ -246,7 +259,7 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
     # validate every member now (ranges, protocol), before anything runs or is written
     resolve_members(members or None, scene)
     varying = tuple(k for k in PARAMETER_NAMES if k in members)
-    return Sweep(text, title, scene, model, solver, fronts, record, members, varying, run)
+    return Sweep(text, title, scene, model, solver, fronts, record, members, varying, run, design)
 
 
 def _record(spec: dict) -> Record:
@@ -278,7 +291,8 @@ def _dataclass_like(table: dict, kinds: dict, where: str) -> dict:
         if key not in kinds:
             raise SweepError(f"unknown key {_where(where, key)}; accepted: {', '.join(kinds)}")
         kind = kinds[key]
-        if isinstance(value, bool) or not isinstance(value, kind):
-            raise SweepError(f"{_where(where, key)} = {value!r}: expected {'an integer' if kind is int else 'a string'}")
+        if (isinstance(value, bool) and kind is not bool) or not isinstance(value, kind):
+            expected = {int: "an integer", str: "a string", bool: "true or false"}[kind]
+            raise SweepError(f"{_where(where, key)} = {value!r}: expected {expected}")
         out[key] = value
     return out

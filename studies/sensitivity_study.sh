@@ -1,0 +1,14 @@
+#!/usr/bin/env bash
+# Issue 6 study on the lent H100 (Warp installed per shared/device/README.md; SALib, multiprocess
+# and dill carried in .salib/ and copied to /tmp/salib, since the machine has no package index).
+# Results under $OUT.
+set -uo pipefail
+export PYTHONPATH=/tmp/site:$PWD:/tmp/salib PYTHONUNBUFFERED=1
+OUT=${OUT:-out}; mkdir -p "$OUT"
+start=$SECONDS
+python3 -m warpfric run studies/sweeps/sensitivity_gpu.toml -o /tmp/sens.nc --device cuda:0 --overwrite 2>&1 \
+  | tee "$OUT/sensitivity_run.log" | tail -4
+echo "run command: $((SECONDS - start)) s (kernel compilation and netCDF writing included)" | tee -a "$OUT/sensitivity_run.log"
+python3 -m warpfric info /tmp/sens.nc 2>&1 | tee "$OUT/sensitivity_info.log"
+python3 -m warpfric sensitivity /tmp/sens.nc --output mu_s --output mu_s_time --output v_middle --output v_left \
+  --output v_right --on-failure fill-mean -o "$OUT/sensitivity_gpu.nc" 2>&1 | tee "$OUT/sensitivity_indices.log"

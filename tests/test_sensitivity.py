@@ -1,0 +1,124 @@
+"""Sensitivity designs and indices: SALib's Ishigami function through warpfric's own
+design -> dataset -> analysis path, a small real design through the command line, failed
+members, and bad input."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+import xarray as xr
+from conftest import DEVICE
+
+pytest.importorskip("SALib")
+from warpfric.cli import main  # noqa: E402
+from warpfric.sensitivity import DESIGN_ATTR, analyse, generate, parse_design  # noqa: E402
+
+# Ishigami (a = 7, b = 0.1): analytic indices (Saltelli et al. 2008; SALib's test values)
+S1_TRUE = np.array([0.3139, 0.4424, 0.0, 0.0])
+ST_TRUE = np.array([0.5576, 0.4424, 0.2437, 0.0])
+
+
+def ishigami_dataset(method="saltelli", n=1024, seed=7):
+    spec = {"method": method, "n": n, "seed": seed,
+            "parameters": {f"x{i}": {"low": -np.pi, "high": np.pi} for i in (1, 2, 3, 4)}}  # x4: a dummy
+    design = parse_design(spec, check_names=False)
+    rows = generate(design)
+    x1, x2, x3 = rows["x1"], rows["x2"], rows["x3"]
+    y = np.sin(x1) + 7 * np.sin(x2) ** 2 + 0.1 * x3 ** 4 * np.sin(x1)
+    data = {k: ("member", v) for k, v in rows.items()}
+    data["y"] = ("member", y)
+    data["status"] = ("member", np.zeros(y.size, dtype=np.int32))
+    return xr.Dataset(data, attrs={DESIGN_ATTR: json.dumps(design)})
+
+
+def test_ishigami_sobol_indices_within_confidence():
+    res = analyse(ishigami_dataset(), ("y",), num_resamples=200).sel(output="y")
+    for key, true in (("S1", S1_TRUE), ("ST", ST_TRUE)):
+        est, conf = res[key].values, res[f"{key}_conf"].values
+        assert np.all(np.abs(est - true) <= 1.5 * conf + 0.01), (key, est, conf)
+    assert abs(float(res.S2.sel(parameter="x1", parameter_2="x3")) - 0.2437) < 0.1  # the x1-x3 interaction
+    assert abs(float(res.ST.sel(parameter="x4"))) < 0.01
+
+
+def test_morris_ranks_the_dummy_last():
+    res = analyse(ishigami_dataset("morris", n=200), ("y",)).sel(output="y")
+    mu_star = res.mu_star.values
+    assert mu_star[3] < 1e-9 < mu_star[:3].min()
+
+
+def test_failed_members_are_refused_or_filled_explicitly():
+    ds = ishigami_dataset(n=64)
+    ds["y"].values[[3, 10]] = np.nan
+    ds["status"].values[5] = 1
+    with pytest.raises(ValueError, match="3 of .* members failed or lack it .*3, 5, 10"):
+        analyse(ds, ("y",))
+    res = analyse(ds, ("y",), on_failure="fill-mean")
+    assert int(res.filled_members.sel(output="y")) == 3
+
+
+def test_small_real_design_through_the_command_line(tmp_path):
+    sweep = tmp_path / "design.toml"
+    sweep.write_text("""
+[solver]
+nodes = 40
+[design]
+method = "saltelli"
+n = 32
+seed = 3
+second_order = false
+[design.parameters]
+eccentricity = {low = -0.3, high = 0.3}
+normal_force = {low = 300.0, high = 3000.0, scale = "log"}
+aging_coefficient = {low = 0.05, high = 0.1}
+""")
+    out = tmp_path / "design.nc"
+    run = subprocess.run([sys.executable, "-m", "warpfric", "run", str(sweep), "-o", str(out), "--device", DEVICE,
+                          "--quiet"], capture_output=True, text=True, timeout=600)
+    assert run.returncode == 0, run.stderr
+    res = subprocess.run([sys.executable, "-m", "warpfric", "sensitivity", str(out), "--output", "mu_s",
+                          "--output", "v_middle"], capture_output=True, text=True, timeout=600)
+    assert res.returncode == 0, res.stderr
+    result = xr.load_dataset(tmp_path / "design_sensitivity.nc")
+    assert result.attrs["members"] == 32 * 5
+    st = result.ST.sel(output="mu_s")
+    # the aging coefficient sets the contact strength; eccentricity and force move mu_s by < 1e-3
+    assert float(st.sel(parameter="aging_coefficient")) > 0.8
+    assert (tmp_path / "design_sensitivity.png").stat().st_size > 10_000
+    design = json.loads(xr.open_dataset(out).attrs[DESIGN_ATTR])
+    assert design["method"] == "saltelli" and design["seed"] == 3 and design["scales"][1] == "log"
+
+
+BAD = [
+    ('method = "saltelli"\nn = 16\n[design.parameters]\nfoo = {low = 0.0, high = 1.0}\neccentricity = {low = 0.0, high = 0.1}\n',
+     ["foo", "accepted"]),
+    ('method = "saltelli"\nn = 16\n[design.parameters]\neccentricity = {low = 0.2, high = 0.1}\nnormal_force = {low = 1.0, high = 2.0}\n',
+     ["eccentricity", "low = 0.2", "below high"]),
+    ('method = "saltelli"\nn = 100\n[design.parameters]\neccentricity = {low = 0.0, high = 0.1}\nnormal_force = {low = 1.0, high = 2.0}\n',
+     ["n = 100", "power of two"]),
+    ('method = "sobolev"\nn = 16\n[design.parameters]\neccentricity = {low = 0.0, high = 0.1}\nnormal_force = {low = 1.0, high = 2.0}\n',
+     ["sobolev", "saltelli"]),
+]
+
+
+@pytest.mark.parametrize("design, words", BAD)
+def test_bad_designs_exit_2_with_one_line(tmp_path, capsys, design, words):
+    sweep = tmp_path / "bad.toml"
+    sweep.write_text("[design]\n" + design)
+    code = main(["run", str(sweep), "-o", str(tmp_path / "bad.nc"), "--device", "cpu"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1, err
+    for word in words:
+        assert word in err[0], (word, err[0])
+    assert not (tmp_path / "bad.nc").exists()
+
+
+def test_output_not_in_the_file(tmp_path, capsys):
+    ds = ishigami_dataset(n=16)
+    ds.attrs["warpfric_complete"] = 1
+    path = tmp_path / "ish.nc"
+    ds.to_netcdf(path)
+    code = main(["sensitivity", str(path), "--output", "v_sideways"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "v_sideways" in err[0] and "available: " in err[0] and "y" in err[0]

@@ -1,0 +1,234 @@
+"""warpfric.sensitivity: sampling designs and Sobol / Morris indices over ensembles, with SALib
+(optional extra: ``pip install "warpfric[sensitivity]"``).
+
+A sweep file's ``[design]`` table (docs/sweeps.md)::
+
+    [design]
+    method = "saltelli"        # "saltelli" (Sobol indices), "morris", "latin"
+    n = 1024                   # base size: Saltelli rows = n*(2D+2) (n*(D+2) without second order),
+                               # Morris rows = n*(D+1) (n trajectories), Latin rows = n
+    seed = 1
+    second_order = true        # saltelli only
+    levels = 4                 # morris only
+    [design.parameters]
+    eccentricity = {low = -0.3, high = 0.3}
+    normal_force = {low = 300.0, high = 3000.0, scale = "log"}   # sampled uniformly in log
+
+The design (method, problem, seed, sizes) is stored in the output's global attribute
+``sensitivity_design`` (JSON), so :func:`analyse` can redo the analysis from the file alone.
+Members whose status is not ok, or whose requested output is NaN (an absent front segment), are
+never dropped silently: a Saltelli or Morris analysis needs every row, so :func:`analyse` refuses
+them unless ``on_failure="fill-mean"``, which replaces them by the mean of the other members and
+records how many it replaced (attribute ``filled_members`` of each output).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+
+from .parameters import PARAMETER_NAMES
+
+METHODS = ("saltelli", "morris", "latin")
+DESIGN_ATTR = "sensitivity_design"
+
+
+class DesignError(ValueError):
+    pass
+
+
+def _salib():
+    try:
+        import SALib  # noqa: F401
+    except ImportError:  # pragma: no cover - depends on the environment
+        raise DesignError('sensitivity designs need SALib: pip install "warpfric[sensitivity]"') from None
+
+
+def parse_design(table: dict, check_names: bool = True) -> dict:
+    """Validate a [design] table; return the design dict (JSON-serialisable)."""
+    allowed = {"method", "n", "seed", "second_order", "levels", "parameters"}
+    for key in table:
+        if key not in allowed:
+            raise DesignError(f"unknown key [design] {key}; accepted: {', '.join(sorted(allowed))}")
+    method = table.get("method")
+    if method not in METHODS:
+        raise DesignError(f"[design] method = {method!r}; accepted: {', '.join(METHODS)}")
+    n = table.get("n")
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise DesignError(f"[design] n = {n!r}: expected an integer >= 1 (the base sample size)")
+    if method == "saltelli" and n & (n - 1):
+        raise DesignError(f"[design] n = {n}: the Saltelli (Sobol sequence) base size must be a power of two, "
+                          f"e.g. {2 ** round(math.log2(n))}")
+    seed = table.get("seed", 0)
+    if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+        raise DesignError(f"[design] seed = {seed!r}: expected an integer >= 0")
+    second_order = table.get("second_order", True)
+    if not isinstance(second_order, bool):
+        raise DesignError(f"[design] second_order = {second_order!r}: expected true or false")
+    levels = table.get("levels", 4)
+    if isinstance(levels, bool) or not isinstance(levels, int) or levels < 2 or levels % 2:
+        raise DesignError(f"[design] levels = {levels!r}: expected an even integer >= 2 (Morris grid levels)")
+    params = table.get("parameters")
+    if not isinstance(params, dict) or len(params) < 2:
+        raise DesignError("[design.parameters]: give at least two parameters as name = {low = ..., high = ...}")
+    names, bounds, scales = [], [], []
+    for name, spec in params.items():
+        where = f"[design.parameters] {name}"
+        if check_names and name not in PARAMETER_NAMES:
+            raise DesignError(f"unknown parameter {where}; accepted: {', '.join(PARAMETER_NAMES)}")
+        if not isinstance(spec, dict) or set(spec) - {"low", "high", "scale"} or not {"low", "high"} <= set(spec):
+            raise DesignError(f"{where} = {spec!r}: expected {{low = ..., high = ..., scale = 'linear' | 'log'}}")
+        low, high = spec["low"], spec["high"]
+        for v in (low, high):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise DesignError(f"{where}: bounds must be finite numbers, got {v!r}")
+        if not low < high:
+            raise DesignError(f"{where}: low = {low!r} must be below high = {high!r}")
+        scale = spec.get("scale", "linear")
+        if scale not in ("linear", "log"):
+            raise DesignError(f"{where}.scale = {scale!r}; accepted: linear, log")
+        if scale == "log" and low <= 0:
+            raise DesignError(f"{where}: scale = 'log' needs low > 0, got {low!r}")
+        names.append(name)
+        bounds.append([float(low), float(high)])
+        scales.append(scale)
+    return dict(method=method, n=n, seed=seed, second_order=second_order, levels=levels,
+                names=names, bounds=bounds, scales=scales)
+
+
+def _problem(design: dict) -> dict:
+    bounds = [[math.log(lo), math.log(hi)] if sc == "log" else [lo, hi]
+              for (lo, hi), sc in zip(design["bounds"], design["scales"])]
+    return {"num_vars": len(design["names"]), "names": list(design["names"]), "bounds": bounds}
+
+
+def generate(design: dict) -> dict:
+    """The design's rows as {name: (rows,) float64} in SI units (log-scaled parameters exponentiated)."""
+    _salib()
+    from SALib.sample import latin, morris, sobol
+
+    problem = _problem(design)
+    if design["method"] == "saltelli":
+        X = sobol.sample(problem, design["n"], calc_second_order=design["second_order"], seed=design["seed"])
+    elif design["method"] == "morris":
+        X = morris.sample(problem, design["n"], num_levels=design["levels"], seed=design["seed"])
+    else:
+        X = latin.sample(problem, design["n"], seed=design["seed"])
+    out = {}
+    for j, (name, scale) in enumerate(zip(design["names"], design["scales"])):
+        out[name] = np.exp(X[:, j]) if scale == "log" else X[:, j].astype(np.float64)
+    return out
+
+
+def design_rows(design: dict) -> int:
+    d = len(design["names"])
+    if design["method"] == "saltelli":
+        return design["n"] * (2 * d + 2 if design["second_order"] else d + 2)
+    if design["method"] == "morris":
+        return design["n"] * (d + 1)
+    return design["n"]
+
+
+def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: int = 100, conf_level: float = 0.95):
+    """Sensitivity indices of ``outputs`` (variables along member) for the design stored in ``ds``.
+
+    Returns an xarray Dataset: for Saltelli designs S1, S1_conf, ST, ST_conf (output, parameter)
+    and S2, S2_conf (output, parameter, parameter_2) when second order; for Morris mu_star,
+    mu_star_conf, sigma, mu (output, parameter); Latin designs have no index of their own and are
+    refused. on_failure: 'refuse' (default) raises ValueError naming the members that failed or
+    lack the output; 'fill-mean' replaces their values by the mean of the others (counted in the
+    result's ``filled_members``)."""
+    import xarray as xr
+
+    _salib()
+    from SALib.analyze import morris as morris_analyze
+    from SALib.analyze import sobol as sobol_analyze
+
+    if DESIGN_ATTR not in ds.attrs:
+        raise ValueError(f"the file has no sensitivity design (global attribute {DESIGN_ATTR!r}); "
+                         "run a sweep with a [design] table")
+    design = json.loads(ds.attrs[DESIGN_ATTR])
+    if design["method"] == "latin":
+        raise ValueError("a Latin hypercube design has no indices of its own; use method = 'saltelli' or 'morris'")
+    if on_failure not in ("refuse", "fill-mean"):
+        raise ValueError(f"on_failure = {on_failure!r}; accepted: refuse, fill-mean")
+    rows = design_rows(design)
+    if ds.sizes["member"] != rows:
+        raise ValueError(f"the file has {ds.sizes['member']} members but the design has {rows} rows")
+    problem = _problem(design)
+    X = np.column_stack([np.log(ds[n].values) if sc == "log" else ds[n].values
+                         for n, sc in zip(design["names"], design["scales"])])
+    status = ds["status"].values if "status" in ds else np.zeros(rows, dtype=int)
+    names = design["names"]
+    d = len(names)
+    result = {}
+    filled = {}
+    for out in outputs:
+        if out not in ds or ds[out].dims != ("member",):
+            candidates = [v for v in ds.data_vars if ds[v].dims == ("member",) and v not in PARAMETER_NAMES]
+            raise ValueError(f"output {out!r} is not a per-member variable of the file; available: {', '.join(candidates)}")
+        Y = ds[out].values.astype(np.float64)
+        bad = (status != 0) | ~np.isfinite(Y)
+        if bad.any():
+            if on_failure == "refuse":
+                idx = np.flatnonzero(bad)
+                raise ValueError(f"output {out!r}: {bad.sum()} of {rows} members failed or lack it (members "
+                                 f"{', '.join(map(str, idx[:10]))}{' ...' if idx.size > 10 else ''}); the design needs "
+                                 "every row: pass --on-failure fill-mean to replace them by the mean")
+            Y = np.where(bad, Y[~bad].mean(), Y)
+        filled[out] = int(bad.sum())
+        if design["method"] == "saltelli":
+            r = sobol_analyze.analyze(problem, Y, calc_second_order=design["second_order"],
+                                      num_resamples=num_resamples, conf_level=conf_level, seed=design["seed"])
+        else:
+            r = morris_analyze.analyze(problem, X, Y, num_resamples=num_resamples, conf_level=conf_level,
+                                       num_levels=design["levels"], seed=design["seed"])
+        result[out] = r
+    data = {}
+    keys = ("S1", "S1_conf", "ST", "ST_conf") if design["method"] == "saltelli" else ("mu_star", "mu_star_conf", "sigma", "mu")
+    long = {"S1": "first-order Sobol index", "S1_conf": "confidence half-width of S1", "ST": "total Sobol index",
+            "ST_conf": "confidence half-width of ST", "mu_star": "Morris mean absolute elementary effect",
+            "mu_star_conf": "confidence half-width of mu_star", "sigma": "Morris standard deviation of the elementary effects",
+            "mu": "Morris mean elementary effect"}
+    for k in keys:
+        data[k] = (("output", "parameter"), np.array([np.asarray(result[o][k], dtype=float) for o in outputs]),
+                   {"long_name": long[k], "units": "1" if k.startswith("S") else "output units per unit of the parameter (log for log-scaled)"})
+    if design["method"] == "saltelli" and design["second_order"]:
+        for k in ("S2", "S2_conf"):
+            data[k] = (("output", "parameter", "parameter_2"),
+                       np.array([np.asarray(result[o][k], dtype=float).reshape(d, d) for o in outputs]),
+                       {"long_name": ("second-order Sobol index" if k == "S2" else "confidence half-width of S2")})
+    data["filled_members"] = (("output",), np.array([filled[o] for o in outputs]),
+                              {"long_name": f"members replaced by the mean ({on_failure})"})
+    res = xr.Dataset(data, coords={"output": list(outputs), "parameter": names, "parameter_2": names})
+    res.attrs.update({DESIGN_ATTR: ds.attrs[DESIGN_ATTR], "conf_level": conf_level, "num_resamples": num_resamples,
+                      "on_failure": on_failure, "members": rows})
+    return res
+
+
+def bar_plot(res, path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    outputs = list(res.output.values)
+    fig, axes = plt.subplots(1, len(outputs), figsize=(4.5 * len(outputs), 3.8), squeeze=False)
+    x = np.arange(res.sizes["parameter"])
+    for ax, out in zip(axes[0], outputs):
+        r = res.sel(output=out)
+        if "S1" in res:
+            ax.bar(x - 0.2, r.S1, 0.4, yerr=r.S1_conf, label="S1")
+            ax.bar(x + 0.2, r.ST, 0.4, yerr=r.ST_conf, label="ST")
+            ax.set_ylabel("Sobol index")
+        else:
+            ax.bar(x - 0.2, r.mu_star, 0.4, yerr=r.mu_star_conf, label="mu*")
+            ax.bar(x + 0.2, r.sigma, 0.4, label="sigma")
+        ax.set_xticks(x, list(res.parameter.values), rotation=60, ha="right", fontsize=7)
+        ax.set_title(out)
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
