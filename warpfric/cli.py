@@ -234,13 +234,13 @@ def _sensitivity(args) -> int:
     from .sensitivity import analyse, bar_plot
 
     ds = open_ensemble(args.file)
-    res = analyse(ds, outputs=tuple(args.output or ["mu_s"]), on_failure=args.on_failure)
+    res = analyse(ds, outputs=tuple(args.output or ["mu_s"]), on_failure=args.on_failure, log=args.log)
     out = Path(args.out) if args.out else Path(args.file).with_name(Path(args.file).stem + "_sensitivity.nc")
     res.to_netcdf(out)
     bar_plot(res, out.with_suffix(".png"))
     for o in res.output.values:
         r = res.sel(output=o)
-        print(f"{o}: ({int(r.filled_members)} members filled with the mean)")
+        print(f"{'log ' if args.log else ''}{o}: ({int(r.filled_members)} members filled with the mean)")
         if "S1" in res:
             print(f"  {'parameter':<22} {'S1':>7} {'+-':>6} {'ST':>7} {'+-':>6}")
             for p in res.parameter.values:
@@ -284,6 +284,7 @@ def main(argv=None) -> int:
     sens.add_argument("--output", action="append", help="per-member output to analyse (repeatable; default mu_s)")
     sens.add_argument("--on-failure", default="refuse", choices=("refuse", "fill-mean"),
                       help="members that failed or lack an output: refuse (default) or replace by the mean")
+    sens.add_argument("--log", action="store_true", help="analyse the log of each output (heavy-tailed outputs: front speeds)")
     sens.add_argument("-o", "--out", default=None, help="result file (default OUT_sensitivity.nc, and .png)")
     args = parser.parse_args(argv)
     handlers = {"run": _run, "info": _info, "plot": _plot, "sensitivity": _sensitivity}

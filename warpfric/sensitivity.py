@@ -131,7 +131,8 @@ def design_rows(design: dict) -> int:
     return design["n"]
 
 
-def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: int = 100, conf_level: float = 0.95):
+def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: int = 100, conf_level: float = 0.95,
+            log: bool = False):
     """Sensitivity indices of ``outputs`` (variables along member) for the design stored in ``ds``.
 
     Returns an xarray Dataset: for Saltelli designs S1, S1_conf, ST, ST_conf (output, parameter)
@@ -139,7 +140,8 @@ def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: in
     mu_star_conf, sigma, mu (output, parameter); Latin designs have no index of their own and are
     refused. on_failure: 'refuse' (default) raises ValueError naming the members that failed or
     lack the output; 'fill-mean' replaces their values by the mean of the others (counted in the
-    result's ``filled_members``)."""
+    result's ``filled_members``). log: analyse the natural log of each output (for heavy-tailed
+    outputs such as front speeds; a non-positive value counts as lacking)."""
     import xarray as xr
 
     _salib()
@@ -170,6 +172,9 @@ def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: in
             candidates = [v for v in ds.data_vars if ds[v].dims == ("member",) and v not in PARAMETER_NAMES]
             raise ValueError(f"output {out!r} is not a per-member variable of the file; available: {', '.join(candidates)}")
         Y = ds[out].values.astype(np.float64)
+        if log:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                Y = np.where(Y > 0, np.log(Y), np.nan)
         bad = (status != 0) | ~np.isfinite(Y)
         if bad.any():
             if on_failure == "refuse":
@@ -204,7 +209,7 @@ def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: in
                               {"long_name": f"members replaced by the mean ({on_failure})"})
     res = xr.Dataset(data, coords={"output": list(outputs), "parameter": names, "parameter_2": names})
     res.attrs.update({DESIGN_ATTR: ds.attrs[DESIGN_ATTR], "conf_level": conf_level, "num_resamples": num_resamples,
-                      "on_failure": on_failure, "members": rows})
+                      "on_failure": on_failure, "members": rows, "output_transform": "log" if log else "none"})
     return res
 
 
