@@ -86,7 +86,10 @@ aging_coefficient = {low = 0.05, high = 0.1}
     # the aging coefficient sets the contact strength; eccentricity and force move mu_s by < 1e-3
     assert float(st.sel(parameter="aging_coefficient")) > 0.8
     assert (tmp_path / "design_sensitivity.png").stat().st_size > 10_000
-    design = json.loads(xr.open_dataset(out).attrs[DESIGN_ATTR])
+    info = subprocess.run([sys.executable, "-m", "warpfric", "info", str(out)], capture_output=True, text=True, timeout=600)
+    assert "sensitivity design: saltelli, base size 32, seed 3, 3 parameters" in info.stdout
+    with xr.open_dataset(out) as opened:
+        design = json.loads(opened.attrs[DESIGN_ATTR])
     assert design["method"] == "saltelli" and design["seed"] == 3 and design["scales"][1] == "log"
 
 

@@ -211,6 +211,12 @@ def summary(ds, name: str) -> str:
             ok = np.isfinite(v)
             text = f"median {np.median(v[ok]):.3g} m/s, range [{v[ok].min():.3g}, {v[ok].max():.3g}]" if ok.any() else ""
             lines.append(f"  {seg} front present in {ok.sum()}/{v.size} members {text}")
+    if "sensitivity_design" in ds.attrs:
+        import json
+
+        d = json.loads(ds.attrs["sensitivity_design"])
+        lines.append(f"  sensitivity design: {d['method']}, base size {d['n']}, seed {d['seed']}, "
+                     f"{len(d['names'])} parameters ({', '.join(d['names'])}); analyse with `warpfric sensitivity`")
     if "recorded_member" in ds.coords:
         lines.append(f"  recorded fields: members {list(map(int, ds.recorded_member.values))} at "
                      f"{ds.sizes['time']} times in [{ds.time.values.min():g}, {ds.time.values.max():g}] s")

@@ -232,7 +232,7 @@ def bar_plot(res, path) -> None:
             ax.bar(x - 0.2, r.mu_star, 0.4, yerr=r.mu_star_conf, label="mu*")
             ax.bar(x + 0.2, r.sigma, 0.4, label="sigma")
         ax.set_xticks(x, list(res.parameter.values), rotation=60, ha="right", fontsize=7)
-        ax.set_title(out)
+        ax.set_title(("log " if res.attrs.get("output_transform") == "log" else "") + str(out))
         ax.legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
