@@ -77,16 +77,17 @@ def test_open_mfdataset_combines_two_runs(tmp_path, new_defaults):
 
 def test_cli_run_info_plot_end_to_end(tmp_path):
     sweep = tmp_path / "tiny.toml"
-    sweep.write_text(TINY + "[record]\nmembers = [4]\nstart = 20.2\nstop = 20.3\ncount = 11\n")
+    sweep.write_text(TINY + "[record]\nmembers = [1, 4]\nstart = 20.2\nstop = 20.3\ncount = 11\n")  # one per chunk
     out = tmp_path / "tiny.nc"
     res = _cli("run", str(sweep), "-o", str(out), "--chunk", "4", "--device", DEVICE)
     assert res.returncode == 0, res.stderr
     assert "chunk 2/2" in res.stderr and not (tmp_path / "tiny.nc.parts").exists()
     ds = open_ensemble(out)
-    assert ds.sizes["member"] == 6 and int(ds.recorded_member[0]) == 4
+    assert ds.sizes["member"] == 6 and list(ds.recorded_member.values) == [1, 4]
     direct = wf.simulate({"eccentricity": [[-0.2], [0.0], [0.2]], "normal_force": [500.0, 2000.0]},
-                         solver=wf.Solver(nodes=21, rtol=1e-5), device=DEVICE, progress=False)
-    for name in ("mu_s", "mu_s_time", "v_middle", "arrival_time", "eccentricity", "normal_force"):
+                         solver=wf.Solver(nodes=21, rtol=1e-5), record=wf.Record.window(20.2, 20.3, 11, members=(1, 4)),
+                         device=DEVICE, progress=False)
+    for name in ("mu_s", "mu_s_time", "v_middle", "arrival_time", "eccentricity", "normal_force", "velocity_history"):
         np.testing.assert_array_equal(ds[name].values, direct[name].values, err_msg=name)
     assert ds.attrs["sweep_toml"].startswith("\ntitle")
     res = _cli("info", str(out))
@@ -96,7 +97,7 @@ def test_cli_run_info_plot_end_to_end(tmp_path):
     assert res.returncode == 0, res.stderr
     pngs = sorted(p.name for p in (tmp_path / "png").glob("*.png"))
     assert {"mu_s_vs_eccentricity.png", "front_speeds_vs_normal_force.png", "arrival_times.png",
-            "space_time_member4.png"} <= set(pngs)
+            "space_time_member1.png", "space_time_member4.png"} <= set(pngs)
     assert all((tmp_path / "png" / p).stat().st_size > 10_000 for p in pngs)
 
 
