@@ -374,21 +374,29 @@ def _make_integrator(dtype: str, model):
     def track_fronts(
         p: MemberParams, st: IntegratorState, m: int, n: int, state: array3, K: array4, s3: int,
         t_old: wp.float64, t_new: wp.float64, arrival: wp.array2d(dtype=wp.float64), direction: int,
+        threshold: wp.float64,
     ):
         """Fold an accepted step (before the state is advanced) into the front tracking: the running
-        maximum of the detachment velocity w, and each node's first crossing of st.front_level,
-        interpolated linearly in time. Window: from the disc start to the sudden stop (or the end)."""
+        maximum of the detachment velocity w, each node's first crossing of st.front_level,
+        interpolated linearly in time, and front_last: the last step at which some node had
+        w >= threshold * (running maximum). Every first crossing of threshold * (final maximum)
+        ends a step at or before front_last, so the arrival pass may stop there.
+        Window: from the disc start to the sudden stop (or the end)."""
         if t_new <= p.rest_until or t_old >= p.stop_time:
             return st
         disc_sign = wp.float64(1.0)
         if p.disc_velocity < wp.float64(0.0):
             disc_sign = wp.float64(-1.0)
+        w_step = wp.float64(-1.0e300)
         for i in range(n):
             w_old = detachment_velocity(wp.float64(state[C_V, i, m]), disc_sign, direction)
             w_new = detachment_velocity(wp.float64(K[s3, C_U, i, m]), disc_sign, direction)
             st.front_max = wp.max(st.front_max, w_new)
+            w_step = wp.max(w_step, w_new)
             if w_new >= st.front_level and not wp.isfinite(arrival[i, m]):
                 arrival[i, m] = crossing_time(st.front_level, t_old, w_old, t_new, w_new)
+        if w_step > wp.float64(0.0) and w_step >= threshold * st.front_max:
+            st.front_last = t_new
         return st
 
     @wp.func
@@ -495,7 +503,7 @@ def _make_integrator(dtype: str, model):
         tilt = ft(st.tilt)
         for _attempt in range(launch_steps):
             t = st.t
-            if t >= p.end_time:
+            if t >= p.end_time or t >= st.front_until:
                 st.done = 1
                 break
             if st.steps_accepted + st.steps_rejected >= settings.max_steps:
@@ -525,7 +533,7 @@ def _make_integrator(dtype: str, model):
                 if ok == 1:
                     sum_tau, sum_sigma, min_sigma = finalize_stage(c, p, m, n, work, K, s3, g, t_new, t, d0, a)
                     if outputs.fronts == 1:
-                        st = track_fronts(p, st, m, n, state, K, s3, t, t_new, arrival, outputs.front_direction)
+                        st = track_fronts(p, st, m, n, state, K, s3, t, t_new, arrival, outputs.front_direction, outputs.front_threshold)
                     advance_state(m, n, state, K, s1, s2, s3, ft(h), 1)
                     delta0 = d0
                     tilt = a
@@ -568,7 +576,7 @@ def _make_integrator(dtype: str, model):
                 factor = wp.min(wp.float64(5.0), wp.max(wp.float64(0.2), wp.float64(0.9) * wp.pow(err, wp.float64(-1.0 / ORDER_ESTIMATE))))
             if err <= wp.float64(1.0):
                 if outputs.fronts == 1:
-                    st = track_fronts(p, st, m, n, state, K, s3, t, t_new, arrival, outputs.front_direction)
+                    st = track_fronts(p, st, m, n, state, K, s3, t, t_new, arrival, outputs.front_direction, outputs.front_threshold)
                 advance_state(m, n, state, K, s1, s2, s3, ft(h), 0)
                 delta0 = d0
                 tilt = a

@@ -77,6 +77,7 @@ class OutputSettings:
     front_direction: wp.int32  # FRONT_* code
     fronts: wp.int32  # 1: track the detachment velocity (event maximum and arrival times)
     n_record_times: wp.int32  # length of the field-recording time grid (0: no recording)
+    front_threshold: wp.float64  # arrival level as a fraction of the event maximum
 
 
 @wp.struct
@@ -107,5 +108,7 @@ class IntegratorState:
     done: wp.int32
     front_max: wp.float64  # m/s, running maximum of the detachment velocity w over nodes and the window
     front_level: wp.float64  # m/s, arrival level (threshold * event maximum of a first pass); inf: none
+    front_last: wp.float64  # s, last accepted time with max_x w >= threshold * running maximum (pass 1)
+    front_until: wp.float64  # s, the arrival pass stops here (front_last of pass 1); inf in pass 1
     record_slot: wp.int32  # index among the recorded members, -1: not recorded
     record_next: wp.int32  # next index of the recording time grid

@@ -162,6 +162,7 @@ def simulate(
         outputs = OutputSettings()
         outputs.fronts = 1 if fronts is not None else 0
         outputs.front_direction = FRONT_DIRECTIONS.index(fronts.direction) if fronts is not None else 0
+        outputs.front_threshold = fronts.threshold if fronts is not None else 1.0
         n_rec = len(record.members) if record is not None else 0
         outputs.n_record_times = len(record.times) if record is not None else 0
         arrival = wp.zeros((n, n_members) if fronts is not None else (1, 1), dtype=wp.float64)
@@ -171,18 +172,26 @@ def simulate(
         rec_out = wp.zeros((len(RECORD_FIELDS), outputs.n_record_times if n_rec else 1, n, max(n_rec, 1)), dtype=ft)
         show = sys.stderr.isatty() if progress is None else bool(progress)
         prefix = progress if isinstance(progress, str) else ""
-        front_max = None
+        # pass 1 integrates the whole protocol: every output but the arrival times, and the event
+        # maximum; pass 2 (fronts only) repeats the same trajectory up to the last possible crossing
+        # (front_last of pass 1) and records the arrival times at the now known level
+        front_max = front_last = None
+        end = values["end_time"]
         for pass_index in range(n_passes):
-            last = pass_index == n_passes - 1
             states_np = np.zeros(n_members, dtype=IntegratorState.numpy_dtype())
             states_np["h"] = solver.initial_step
             states_np["restart"] = 1
             states_np["mu_s"] = -np.inf
             states_np["front_max"] = -np.inf
+            states_np["front_last"] = -np.inf
             states_np["front_level"] = np.inf
-            if front_max is not None:  # second pass: the level is known from the first
-                states_np["front_level"] = np.where(front_max > 0, fronts.threshold * front_max, np.inf)
-            states_np["record_slot"] = record_slots if last else -1
+            states_np["front_until"] = np.inf
+            states_np["record_slot"] = record_slots if pass_index == 0 else -1
+            if pass_index == 1:
+                event = (front_max > 0) & np.isfinite(front_last)
+                states_np["front_level"] = np.where(event, fronts.threshold * front_max, np.inf)
+                states_np["front_until"] = np.where(event, front_last, -np.inf)  # no event: nothing to redo
+                end = np.where(event, np.minimum(front_last, values["end_time"]), 1.0)
             state_np = np.zeros((N_COMPONENTS, n, n_members), dtype=np_dtype)
             state_np[C_PHI] = values["initial_age"][None, :]
             states = wp.array(states_np, dtype=IntegratorState)
@@ -190,7 +199,6 @@ def simulate(
             arrival.fill_(np.nan)
             label = " ".join(p for p in (prefix, f"pass {pass_index + 1}/{n_passes}" if n_passes > 1 else "") if p)
             bar = _Progress(show, n_members, label)
-            end = values["end_time"]
             while True:
                 wp.launch(
                     kern["integrate"],
@@ -198,19 +206,21 @@ def simulate(
                     inputs=[params, settings, states, state, stages, work, solver.steps_per_launch,
                             outputs, arrival, rec_times, rec_previous, rec_out],
                 )
-                st = states.numpy()
-                n_done = int(st["done"].sum())
-                bar.update(n_done, float(np.mean(np.minimum(st["t"] / end, 1.0))))
+                st_now = states.numpy()
+                n_done = int(st_now["done"].sum())
+                bar.update(n_done, float(np.mean(np.minimum(st_now["t"] / end, 1.0))))
                 if n_done == n_members:
                     break
             bar.update(n_done, 1.0, final=True)
-            front_max = st["front_max"]
-        sigma_out = wp.zeros((n, n_members), dtype=ft)
-        tau_out = wp.zeros((n, n_members), dtype=ft)
-        wp.launch(kern["evaluate_fields"], dim=n_members, inputs=[params, states, state, sigma_out, tau_out])
-        fields = state.numpy()
-        sigma = sigma_out.numpy()
-        tau = tau_out.numpy()
+            if pass_index == 0:
+                st = st_now
+                front_max, front_last = st["front_max"], st["front_last"]
+                sigma_out = wp.zeros((n, n_members), dtype=ft)
+                tau_out = wp.zeros((n, n_members), dtype=ft)
+                wp.launch(kern["evaluate_fields"], dim=n_members, inputs=[params, states, state, sigma_out, tau_out])
+                fields = state.numpy()
+                sigma = sigma_out.numpy()
+                tau = tau_out.numpy()
         front = None
         if fronts is not None:
             front = _front_metrics(wp, fronts, values, arrival, n, n_members, device)
