@@ -56,7 +56,8 @@ class Parameters:
     # --- friction law (Bouchbinder / Bar-Sinai) ---------------------------------------------------
     memory_length: float = _p(5e-7, "m", "memory length D (mean contact size)", 0.0, INF, True)
     shear_strength: float = _p(
-        1.3e8, "Pa", "shear strength tau_c of the contacts (not used by the law, see docs)", 0.0, INF, True
+        1.3e8, "Pa", "shear strength tau_c: yield threshold of the asperity-level stress |tau_f|/A", 0.0, INF,
+        True, True
     )
     hardness: float = _p(5.4e8, "Pa", "hardness sigma_H", 0.0, INF, low_open=True)
     viscous_coefficient: float = _p(2.7e13, "Pa s m-1", "viscous friction coefficient eta", 0.0, INF)
@@ -64,6 +65,10 @@ class Parameters:
     aging_coefficient: float = _p(0.075, "1", "aging coefficient b", 0.0, INF)
     aging_time: float = _p(3.33e-4, "s", "aging time scale phi0", 0.0, INF, low_open=True)
     interface_stiffness: float = _p(3e14, "Pa m-1", "interface stiffness mu0/h", 0.0, INF, True)
+    gate_velocity: float = _p(
+        1e-9, "m s-1", "v0 of the smooth velocity gate sqrt(s^2 + v0^2) (relaxation_gate='velocity')",
+        0.0, INF, True, True
+    )
     # --- geometry -------------------------------------------------------------------------------
     height: float = _p(0.015, "m", "pad height H", 0.0, INF, low_open=True)
     length: float = _p(0.2, "m", "pad length L", 0.0, INF, low_open=True)
@@ -85,7 +90,8 @@ class Parameters:
         1.0, "1", "k_if: interface velocity = k_if * pad velocity", 0.0, INF, low_open=True, high_open=True
     )
     torque_arm: float | None = _p(
-        None, "m", "height h_arm of the friction torque arm (None: the pad height)", 0.0, INF, high_open=True
+        None, "m", "height h_arm of the friction torque arm (None: the pad height; < 0: reversed torque, "
+        "a counterfactual, see docs/model.md)", -INF, INF, True, True
     )
     initial_age: float = _p(3.33e-4, "s", "initial contact age phi_init", 0.0, INF, high_open=True)
 
@@ -146,6 +152,9 @@ def validate_value(name: str, value: np.ndarray) -> None:
         )
 
 
+RELAXATION_GATES = ("stress", "none", "velocity")
+
+
 @dataclass(frozen=True)
 class Model:
     """Model switches. Each combination compiles its own specialised kernel, so a term that is off
@@ -155,17 +164,28 @@ class Model:
     tilt:               the backing plate may tilt (off: it only translates; no moment balance).
     poisson_coupling:   the -lambda*eps_xx term of the interface normal stress (SPEC section 4).
     viscous_friction:   the viscous (velocity-strengthening) friction stress tau_vis.
+    relaxation_gate:    what gates the relaxation of tau_el and the rejuvenation of the contact age
+                        (SPEC v2 section 5, docs/model.md "Friction law"):
+                        'stress' (default): Heaviside theta(|tau_f|/A - tau_c) of Bar-Sinai, Brener &
+                        Bouchbinder, GRL 39 L03308 (2012), tau_c = ``shear_strength``;
+                        'none': no gate, |s| always (the SPEC v1 law of earlier results);
+                        'velocity': |s| -> sqrt(s^2 + v0^2), v0 = ``gate_velocity`` (Bar-Sinai et
+                        al., PRE 88, 060403, 2013).
     """
 
     inertia: bool = True
     tilt: bool = True
     poisson_coupling: bool = True
     viscous_friction: bool = True
+    relaxation_gate: str = "stress"
 
     def __post_init__(self):
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
-            if not isinstance(v, (bool, np.bool_)):
+            if f.name == "relaxation_gate":
+                if v not in RELAXATION_GATES:
+                    raise ValueError(f"model switch 'relaxation_gate' = {v!r}: valid: {', '.join(map(repr, RELAXATION_GATES))}")
+            elif not isinstance(v, (bool, np.bool_)):
                 raise ValueError(f"model switch {f.name!r} = {v!r}: must be True or False")
 
 

@@ -82,6 +82,7 @@ def simulate(
     record: Record | None = None,
     device: str | None = None,
     progress: bool | str | None = None,
+    member_offset: int = 0,
 ) -> xr.Dataset:
     """Simulate an ensemble of pads through the load protocol; return the results as a Dataset.
 
@@ -97,6 +98,8 @@ def simulate(
     record:   :class:`Record`: fields of chosen members on a time grid; None (default) records nothing.
     progress: progress line on stderr; None: only when stderr is a terminal; a string: on, with
               that label.
+    member_offset: number of the first member (coordinate ``member`` = offset, offset + 1, ...), so
+              that the files of separate runs combine without repeated member numbers.
 
     Returns an ``xarray.Dataset`` with dims ``member`` and ``x`` (node position, m): every input
     parameter along ``member``; ``mu_s``, ``mu_s_time`` (s), ``status`` (flag values, see its
@@ -120,6 +123,10 @@ def simulate(
         raise ValueError(f"fronts: expected a warpfric.Fronts or None, got {type(fronts).__name__}")
     if record is not None and not isinstance(record, Record):
         raise ValueError(f"record: expected a warpfric.Record or None, got {type(record).__name__}")
+    if isinstance(member_offset, bool) or not isinstance(member_offset, (int, np.integer)) or not (
+        0 <= member_offset < 2**31 - 2**24
+    ):
+        raise ValueError(f"member_offset = {member_offset!r} is invalid; valid: an integer in [0, {2**31 - 2**24})")
     values, varying = resolve_members(members, scene)
     device = _check_device(device)
     wp = _warp()
@@ -228,7 +235,8 @@ def simulate(
         recorded = rec_out.numpy() if record is not None else None
         wp.synchronize_device(device)
     wall = time.perf_counter() - t_start
-    ds = _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, wall, STATUS_MEANINGS)
+    ds = _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, wall, STATUS_MEANINGS,
+                     member_offset)
     if front is not None:
         _add_fronts(ds, front, fronts)
     if record is not None:
@@ -335,12 +343,15 @@ _OUTPUT_ATTRS = {
 }
 
 
-def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, wall, meanings):
+def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, wall, meanings, member_offset=0):
     from warpfric.kernels.integrator import C_PHI, C_TAU, C_U, C_V
 
     n_members = st.shape[0]
     n = solver.nodes
-    member = np.arange(n_members)
+    member = xr.DataArray(
+        np.arange(member_offset, member_offset + n_members, dtype=np.int32), dims=("member",),
+        attrs={"long_name": "ensemble member number", "units": "1"},
+    )
     length = values["length"]
     x_rel = np.linspace(-0.5, 0.5, n)
     data = {}
@@ -409,7 +420,8 @@ def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, 
         "varying_parameters": " ".join(v for v in varying if np.unique(values[v]).size > 1),
     }
     for f in dataclasses.fields(model):
-        attrs[f"model_{f.name}"] = int(getattr(model, f.name))
+        value = getattr(model, f.name)
+        attrs[f"model_{f.name}"] = value if isinstance(value, str) else int(value)
     for f in dataclasses.fields(solver):
         attrs[f"solver_{f.name}"] = getattr(solver, f.name)
     try:
