@@ -39,8 +39,13 @@ from .reductions import crossing_time, detachment_velocity, record_friction_poin
 C_U, C_V, C_TAU, C_PHI = 0, 1, 2, 3
 N_COMPONENTS = 4
 # work slots: stage constants z (same order as the components), Newton iterate, Thomas and border rows
-W_ZU, W_ZV, W_ZT, W_ZP, W_V, W_CP, W_R0, W_R1, W_R2, W_C1, W_C2, W_DIAG = range(12)
-N_WORK = 12
+W_ZU, W_ZV, W_ZT, W_ZP, W_V, W_CP, W_R0, W_R1, W_R2, W_C1, W_C2, W_DIAG, W_MARGIN, W_DMARGIN = range(14)
+N_WORK = 14
+# yield-gate state (stress gate), first index of the gate array: the gate held over the next step (0
+# closed, 1 open, in between: Filippov sliding on the yield surface), and the yield margin
+# |tau_f| - tau_c*A (Pa) at the last accepted point
+G_GATE, G_MARGIN = 0, 1
+N_GATE = 2
 N_STAGE_SLOTS = 3
 
 # TR-BDF2 as an ESDIRK: c = (0, 2g, 1); A = [[0,0,0],[g,g,0],[w,w,g]]; b = (w, w, g)
@@ -73,7 +78,10 @@ def _make_integrator(dtype: str, model):
     normal_stress = terms["normal_stress"]
     elastic_force = terms["elastic_force"]
     interface_friction = terms["interface_friction"]
+    yield_margin = terms["yield_margin"]
     inertia = bool(model.inertia)
+    stress_gate = model.relaxation_gate == "stress"
+    viscous = bool(model.viscous_friction)
     tilt_on = bool(model.tilt)
 
     array3 = wp.array3d(dtype=ft)
@@ -82,6 +90,13 @@ def _make_integrator(dtype: str, model):
     @wp.func
     def is_finite(x: ft):
         return wp.isfinite(x)
+
+    @wp.func
+    def node_gate(gates: array3, i: int, m: int):
+        """The yield gate of node i over the current step (1 for the gate-less and velocity laws)."""
+        if wp.static(stress_gate):
+            return gates[G_GATE, i, m]
+        return ft(1.0)
 
     @wp.func
     def prepare_stage(
@@ -106,7 +121,7 @@ def _make_integrator(dtype: str, model):
 
     @wp.func
     def newton_solve(
-        c: Coeffs, p: MemberParams, s: SolverSettings, m: int, n: int, work: array3,
+        c: Coeffs, p: MemberParams, s: SolverSettings, m: int, n: int, work: array3, gates: array3,
         g: ft, t_stage: wp.float64, t_step: wp.float64, delta0_in: ft, tilt_in: ft,
     ):
         """Solve one implicit stage. Returns (converged, delta0, tilt, iterations, non_finite)."""
@@ -146,8 +161,8 @@ def _make_integrator(dtype: str, model):
                     u_r = work[W_ZU, i + 1, m] + g * work[W_V, i + 1, m]
                 vel = work[W_V, i, m]
                 sigma, ds_ul, ds_uc, ds_ur, ds_d0, ds_a = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
-                tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact = interface_friction(
-                    c, sigma, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m], g
+                tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area = interface_friction(
+                    c, sigma, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m], g, node_gate(gates, i, m)
                 )
                 f_el, df_ul, df_uc, df_ur, df_d0, df_a = elastic_force(c, i, n, u_l, u_c, u_r, delta0, tilt)
                 residual = -(f_el + tau_f - c.damping * vel)
@@ -280,15 +295,28 @@ def _make_integrator(dtype: str, model):
 
     @wp.func
     def finalize_stage(
-        c: Coeffs, p: MemberParams, m: int, n: int, work: array3, K: array4, slot: int,
-        g: ft, t_stage: wp.float64, t_step: wp.float64, delta0: ft, tilt: ft,
+        c: Coeffs, p: MemberParams, s: SolverSettings, m: int, n: int, work: array3, gates: array3,
+        K: array4, slot: int, g: ft, t_stage: wp.float64, t_step: wp.float64, delta0: ft, tilt: ft,
+        h: ft, check_gates: int,
     ):
         """Stage derivatives K[slot] = f(Y) of the converged stage; returns
-        (int tau_f dx, int sigma_n^+ dx, min sigma_n) per unit depth."""
+        (int tau_f dx, int sigma_n^+ dx, min sigma_n) per unit depth, and (check_gates = 1, stress
+        gate, last stage of a step of size h) the gate-switch test of the step: (switch error,
+        fraction of h to retry with).
+
+        Gate switches (docs/model.md, "Gate switches"): the gate of each node is held over a step.
+        Where the end-of-step yield margin z1 (stored in work[W_MARGIN]) has the other sign, the
+        switch happened inside the step, at the fraction theta = z0/(z0 - z1) (linear in time); the
+        relaxation then ran with the wrong gate over (1 - theta)*h, a local error of
+        (1 - theta)*h*(|tau_el|, phi)*|s|/D. Its error-weighted size (like the step's error norm)
+        is the switch error; > 1 rejects the step, and the retry ends where that error is 0.5."""
         v_disc = ft(disc_velocity_at(p, t_stage, t_step))
         sum_tau = wp.float64(0.0)
         sum_sigma = wp.float64(0.0)
         min_sigma = wp.float64(1.0e300)
+        switch_error = ft(0.0)
+        retry_fraction = ft(1.0)
+        rtol = ft(wp.min(s.switch_rtol, wp.float64(1.0e30)))
         u_l = ft(0.0)
         u_c = work[W_ZU, 0, m] + g * work[W_V, 0, m]
         for i in range(n):
@@ -297,9 +325,40 @@ def _make_integrator(dtype: str, model):
                 u_r = work[W_ZU, i + 1, m] + g * work[W_V, i + 1, m]
             vel = work[W_V, i, m]
             sigma, ds_ul, ds_uc, ds_ur, ds_d0, ds_a = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
-            tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact = interface_friction(
-                c, sigma, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m], g
+            gate = node_gate(gates, i, m)
+            tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area = interface_friction(
+                c, sigma, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m], g, gate
             )
+            if wp.static(stress_gate):
+                if check_gates == 1:
+                    z1 = yield_margin(c, tau_f, area)
+                    work[W_MARGIN, i, m] = z1
+                    # d(dz/dt)/d(gate) at the end of the step: the gate enters the rates of tau_el
+                    # and phi (and A through phi); the pad's rates do not depend on it
+                    relax = wp.abs(v_disc - c.kif * vel) * c.inv_D
+                    darea_dgate = contact * sigma * c.inv_hardness * c.b / (c.phi0 + phi) * (-phi * relax)
+                    dtau_dgate = -tau_el * relax
+                    if wp.static(viscous):
+                        slip = v_disc - c.kif * vel
+                        dtau_dgate += c.eta_vstar * wp.sign(slip) * wp.log(ft(1.0) + wp.abs(slip) / c.vstar) * darea_dgate
+                    work[W_DMARGIN, i, m] = wp.sign(tau_f) * dtau_dgate - c.tau_c * darea_dgate
+                    open_now = ft(0.0)
+                    if z1 > ft(0.0):
+                        open_now = ft(1.0)
+                    if (gate == ft(0.0) or gate == ft(1.0)) and open_now != gate:
+                        z0 = gates[G_MARGIN, i, m]
+                        theta = ft(0.0)
+                        if z0 != z1:
+                            theta = wp.clamp(z0 / (z0 - z1), ft(0.0), ft(1.0))
+                        slip_rate = wp.abs(v_disc - c.kif * vel) * c.inv_D
+                        rate = wp.max(
+                            wp.abs(tau_el) * slip_rate / (rtol * (c.tau_scale + wp.abs(tau_el))),
+                            phi * slip_rate / (rtol * (c.phi_scale + wp.abs(phi))),
+                        )
+                        e = (ft(1.0) - theta) * h * rate
+                        switch_error = wp.max(switch_error, e)
+                        if e > ft(1.0):
+                            retry_fraction = wp.min(retry_fraction, theta + ft(0.5) * (ft(1.0) - theta) / e)
             K[slot, C_U, i, m] = vel
             if wp.static(inertia):
                 K[slot, C_V, i, m] = (vel - work[W_ZV, i, m]) / g
@@ -313,7 +372,74 @@ def _make_integrator(dtype: str, model):
             min_sigma = wp.min(min_sigma, wp.float64(sigma))
             u_l = u_c
             u_c = u_r
-        return sum_tau, sum_sigma, min_sigma
+        return sum_tau, sum_sigma, min_sigma, switch_error, retry_fraction
+
+    @wp.func
+    def gate_regime(gate: ft):
+        """0: closed, 1: sliding on the yield surface (fractional gate), 2: open."""
+        if gate <= ft(0.0):
+            return 0
+        if gate >= ft(1.0):
+            return 2
+        return 1
+
+    @wp.func
+    def switch_gates(
+        c: Coeffs, p: MemberParams, st: IntegratorState, m: int, n: int, state: array3, K: array4,
+        slot: int, gates: array3, work: array3, t_old: wp.float64, t_new: wp.float64,
+        yield_time: wp.array2d(dtype=wp.float64),
+    ):
+        """After an accepted step (state advanced): choose each node's gate for the next step from its
+        end-of-step yield margin z1, store the margin, correct the FSAL derivatives K[slot] of the
+        nodes whose gate changed (the gate enters only the relaxation rates of tau_el and phi, which
+        are closed-form in the state) and record the first opening time (linear in the margin).
+
+        The margin's rate is affine in the gate: dz/dt(g) = r_obs + (g - g_old)*dr, with r_obs the
+        rate seen over the step and dr = d(dz/dt)/dg at its end (work[W_DMARGIN]). A node that
+        crosses the yield surface z = 0 while the other side's field also points towards it
+        (dr < 0 and the rate on the far side of opposite sign) slides on the surface (Filippov):
+        its gate takes the fraction that drives z to 0 over the next step of the same size; it
+        leaves the surface when that fraction leaves [0, 1]. Otherwise the gate is the Heaviside
+        theta(z1)."""
+        v_disc = ft(disc_velocity_at(p, t_new, t_old))
+        h = ft(t_new - t_old)
+        for i in range(n):
+            z1 = work[W_MARGIN, i, m]
+            z0 = gates[G_MARGIN, i, m]
+            gate = gates[G_GATE, i, m]
+            dr = work[W_DMARGIN, i, m]
+            new_gate = ft(0.0)
+            if z1 > ft(0.0):
+                new_gate = ft(1.0)
+            r_obs = ft(0.0)
+            if h > ft(0.0):
+                r_obs = (z1 - z0) / h
+            rate_closed = r_obs - gate * dr
+            rate_open = r_obs + (ft(1.0) - gate) * dr
+            sliding = False
+            if dr < ft(0.0) and h > ft(0.0):
+                if gate > ft(0.0) and gate < ft(1.0):
+                    sliding = True
+                if gate == ft(0.0) and z1 > ft(0.0) and rate_open < ft(0.0):
+                    sliding = True  # entered the open side, which pushes back
+                if gate == ft(1.0) and z1 <= ft(0.0) and rate_closed > ft(0.0):
+                    sliding = True  # entered the closed side, which pushes back
+            if sliding:
+                new_gate = wp.clamp(gate + (-z1 / h - r_obs) / dr, ft(0.0), ft(1.0))
+            if new_gate != gate:
+                relax = (new_gate - gate) * wp.abs(v_disc - c.kif * state[C_V, i, m]) * c.inv_D
+                K[slot, C_TAU, i, m] = K[slot, C_TAU, i, m] - state[C_TAU, i, m] * relax
+                K[slot, C_PHI, i, m] = K[slot, C_PHI, i, m] - state[C_PHI, i, m] * relax
+                gates[G_GATE, i, m] = new_gate
+                if gate_regime(new_gate) != gate_regime(gate):
+                    st.gate_switches = st.gate_switches + 1
+                if gate == ft(0.0) and not wp.isfinite(yield_time[i, m]):
+                    theta = wp.float64(0.0)
+                    if z0 != z1 and z1 > ft(0.0):
+                        theta = wp.clamp(wp.float64(z0) / wp.float64(z0 - z1), wp.float64(0.0), wp.float64(1.0))
+                    yield_time[i, m] = t_old + theta * (t_new - t_old)
+            gates[G_MARGIN, i, m] = z1
+        return st
 
     @wp.func
     def error_norm(
@@ -425,8 +551,8 @@ def _make_integrator(dtype: str, model):
                 u_r = state[C_U, i + 1, m]
             vel = state[C_V, i, m]
             sigma, ds_ul, ds_uc, ds_ur, ds_d0, ds_a = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
-            tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact = interface_friction(
-                c, sigma, vel, v_disc, state[C_TAU, i, m], state[C_PHI, i, m], ft(0.0)
+            tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area = interface_friction(
+                c, sigma, vel, v_disc, state[C_TAU, i, m], state[C_PHI, i, m], ft(0.0), ft(1.0)
             )
             current = wp.vector(vel, v_disc - c.kif * vel, contact * sigma, tau_f, length=4, dtype=ft)
             for k in range(st.record_next, k_end):
@@ -490,8 +616,13 @@ def _make_integrator(dtype: str, model):
         record_times: wp.array(dtype=wp.float64),
         record_previous: array3,
         record: array4,
+        gates: array3,
+        yield_time: wp.array2d(dtype=wp.float64),
     ):
-        """Advance each member by at most ``launch_steps`` attempted steps (or to its end_time)."""
+        """Advance each member by at most ``launch_steps`` attempted steps (or to its end_time).
+
+        gates: (N_GATE, node, member) yield-gate state (stress gate only; else a (N_GATE, 1, 1) dummy);
+        yield_time: (node, member) first gate opening time, s (stress gate only)."""
         m = wp.tid()
         st = states[m]
         if st.done != 0:
@@ -518,9 +649,16 @@ def _make_integrator(dtype: str, model):
                 clipped = 1
             elif h > wp.float64(0.5) * (bp - t):
                 h = wp.float64(0.5) * (bp - t)  # two equal steps, not a long one and a sliver
+            if wp.static(stress_gate):
+                if st.switch_limit < t + h:
+                    # a gate switch located by a rejected step lies before: end the step there
+                    h = st.switch_limit - t
+                    clipped = 2
             t_new = t + h
             if clipped == 1:
                 t_new = bp
+            if clipped == 2:
+                t_new = st.switch_limit
             s1 = st.fsal
             s2 = (s1 + 1) % 3
             s3 = (s1 + 2) % 3
@@ -528,13 +666,17 @@ def _make_integrator(dtype: str, model):
                 # backward Euler (re)start: one implicit stage, accepted without error estimate
                 g = ft(h)
                 prepare_stage(m, n, state, K, work, ft(h), ft(0.0), s1, ft(0.0), s1, 0, ft(0.0))
-                ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, g, t_new, t, delta0, tilt)
+                ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, gates, g, t_new, t, delta0, tilt)
                 st.newton_iterations = st.newton_iterations + iters
                 if ok == 1:
-                    sum_tau, sum_sigma, min_sigma = finalize_stage(c, p, m, n, work, K, s3, g, t_new, t, d0, a)
+                    sum_tau, sum_sigma, min_sigma, sw_err, sw_frac = finalize_stage(
+                        c, p, settings, m, n, work, gates, K, s3, g, t_new, t, d0, a, ft(h), 1
+                    )
                     if outputs.fronts == 1:
                         st = track_fronts(p, st, m, n, state, K, s3, t, t_new, arrival, outputs.front_direction, outputs.front_threshold)
                     advance_state(m, n, state, K, s1, s2, s3, ft(h), 1)
+                    if wp.static(stress_gate):
+                        st = switch_gates(c, p, st, m, n, state, K, s3, gates, work, t, t_new, yield_time)
                     delta0 = d0
                     tilt = a
                     if st.record_slot >= 0:
@@ -552,19 +694,25 @@ def _make_integrator(dtype: str, model):
             g = ft(wp.float64(GAMMA) * h)
             # stage 2 (trapezoidal stage, at t + 2*gamma*h)
             prepare_stage(m, n, state, K, work, ft(h), ft(GAMMA), s1, ft(0.0), s1, 1, ft(0.0))
-            ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, g, t + wp.float64(C2) * h, t, delta0, tilt)
+            ok, d0, a, iters, bad = newton_solve(
+                c, p, settings, m, n, work, gates, g, t + wp.float64(C2) * h, t, delta0, tilt
+            )
             st.newton_iterations = st.newton_iterations + iters
             sum_tau = wp.float64(0.0)
             sum_sigma = wp.float64(0.0)
             min_sigma = wp.float64(0.0)
+            sw_err = ft(0.0)
+            sw_frac = ft(1.0)
             if ok == 1:
-                finalize_stage(c, p, m, n, work, K, s2, g, t + wp.float64(C2) * h, t, d0, a)
+                finalize_stage(c, p, settings, m, n, work, gates, K, s2, g, t + wp.float64(C2) * h, t, d0, a, ft(h), 0)
                 # stage 3 (BDF2 stage, at t + h)
                 prepare_stage(m, n, state, K, work, ft(h), ft(W_TRB), s1, ft(W_TRB), s2, 2, ft(EXTRAPOLATE_STAGE3))
-                ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, g, t_new, t, d0, a)
+                ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, gates, g, t_new, t, d0, a)
                 st.newton_iterations = st.newton_iterations + iters
                 if ok == 1:
-                    sum_tau, sum_sigma, min_sigma = finalize_stage(c, p, m, n, work, K, s3, g, t_new, t, d0, a)
+                    sum_tau, sum_sigma, min_sigma, sw_err, sw_frac = finalize_stage(
+                        c, p, settings, m, n, work, gates, K, s3, g, t_new, t, d0, a, ft(h), 1
+                    )
             if ok != 1:
                 st = reject(st, settings, h * wp.float64(0.25), 1, bad)
                 if st.done != 0:
@@ -574,17 +722,28 @@ def _make_integrator(dtype: str, model):
             factor = wp.float64(5.0)
             if err > wp.float64(0.0):
                 factor = wp.min(wp.float64(5.0), wp.max(wp.float64(0.2), wp.float64(0.9) * wp.pow(err, wp.float64(-1.0 / ORDER_ESTIMATE))))
+            if wp.static(stress_gate):
+                if err <= wp.float64(1.0) and sw_err > ft(1.0) and wp.float64(sw_frac) * h > settings.min_step:
+                    # a gate switched inside the step, too early to be moved to its end: retry up to
+                    # just past the switch (the error-controlled step size st.h is kept)
+                    st.steps_rejected = st.steps_rejected + 1
+                    st.switch_limit = t + wp.float64(sw_frac) * h
+                    continue
             if err <= wp.float64(1.0):
                 if outputs.fronts == 1:
                     st = track_fronts(p, st, m, n, state, K, s3, t, t_new, arrival, outputs.front_direction, outputs.front_threshold)
                 advance_state(m, n, state, K, s1, s2, s3, ft(h), 0)
+                if wp.static(stress_gate):
+                    st = switch_gates(c, p, st, m, n, state, K, s3, gates, work, t, t_new, yield_time)
+                    if t_new >= st.switch_limit:
+                        st.switch_limit = wp.float64(1.0e300)
                 delta0 = d0
                 tilt = a
                 if st.record_slot >= 0:
                     st = record_fields(c, p, st, m, n, state, t, t_new, d0, a, record_times, record_previous, record)
                 st.fsal = s3
                 h_next = h * factor
-                if clipped == 1:
+                if clipped != 0:
                     h_next = wp.max(h_next, st.h)
                 st.h = h_next
                 st = accept_point(st, p, t_new, sum_tau, sum_sigma, min_sigma)
@@ -623,8 +782,8 @@ def _make_integrator(dtype: str, model):
             if i < n - 1:
                 u_r = state[C_U, i + 1, m]
             sigma, ds_ul, ds_uc, ds_ur, ds_d0, ds_a = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
-            tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact = interface_friction(
-                c, sigma, state[C_V, i, m], v_disc, state[C_TAU, i, m], state[C_PHI, i, m], ft(0.0)
+            tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area = interface_friction(
+                c, sigma, state[C_V, i, m], v_disc, state[C_TAU, i, m], state[C_PHI, i, m], ft(0.0), ft(1.0)
             )
             normal_stress_out[i, m] = contact * sigma
             friction_stress_out[i, m] = tau_f

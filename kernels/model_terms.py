@@ -68,6 +68,7 @@ def make_model_terms(ft, model):
     poisson = bool(model.poisson_coupling)
     viscous = bool(model.viscous_friction)
     tilt_on = bool(model.tilt)
+    velocity_gate = model.relaxation_gate == "velocity"
 
     @wp.struct
     class Coeffs:
@@ -88,6 +89,8 @@ def make_model_terms(ft, model):
         b: ft
         phi0: ft  # s
         inv_D: ft  # 1/m
+        tau_c: ft  # shear strength, Pa (stress gate)
+        v0: ft  # gate velocity, m/s (velocity gate)
         dx: ft  # m
         inv_dx: ft  # 1/m
         L: ft  # m
@@ -121,6 +124,8 @@ def make_model_terms(ft, model):
         c.b = ft(p.aging_coefficient)
         c.phi0 = ft(p.aging_time)
         c.inv_D = ft(wp.float64(1.0) / p.memory_length)
+        c.tau_c = ft(p.shear_strength)
+        c.v0 = ft(p.gate_velocity)
         dx = p.length / wp.float64(n - 1)
         c.dx = ft(dx)
         c.inv_dx = ft(wp.float64(1.0) / dx)
@@ -247,22 +252,34 @@ def make_model_terms(ft, model):
         return force, d_ul, d_uc, d_ur, d_d0, d_a
 
     @wp.func
-    def interface_friction(c: Coeffs, sigma: ft, velocity: ft, v_disc: ft, z_tau: ft, z_phi: ft, g: ft):
+    def interface_friction(
+        c: Coeffs, sigma: ft, velocity: ft, v_disc: ft, z_tau: ft, z_phi: ft, g: ft, gate: ft
+    ):
         """Friction law (SPEC section 5) at one node, solved implicitly over a stage of coefficient g.
 
         The stage equations  phi = z_phi + g*dphi/dt  and  tau_el = z_tau + g*dtau_el/dt  are linear
         in phi and tau_el for a given slip rate, so they are solved in closed form here; with g = 0
         this evaluates the law at the state (phi = z_phi, tau_el = z_tau).
 
+        The relaxation of tau_el and the rejuvenation of phi run at the rate r/D:
+        r = gate*|s| (stress gate: ``gate`` is the node's yield gate, 0 or 1, held fixed over the step;
+        the gate-less law passes gate = 1) or r = sqrt(s^2 + v0^2) (velocity gate; ``gate`` unused).
+
         Returns tau_f (Pa), d tau_f/d sigma_n, d tau_f/d s (total, through phi and tau_el),
-        tau_el (Pa), phi (s), d tau_el/dt (Pa/s), d phi/dt (1), contact indicator (1 or 0).
+        tau_el (Pa), phi (s), d tau_el/dt (Pa/s), d phi/dt (1), contact indicator (1 or 0),
+        real-contact fraction A (1).
         """
         s = v_disc - c.kif * velocity
         a_s = wp.abs(s)
         sg = wp.sign(s)
-        den = ft(1.0) + g * a_s * c.inv_D
+        r = a_s * gate
+        dr_ds = sg * gate
+        if wp.static(velocity_gate):
+            r = wp.sqrt(s * s + c.v0 * c.v0)
+            dr_ds = s / r
+        den = ft(1.0) + g * r * c.inv_D
         phi = (z_phi + g) / den
-        dphi_ds = -phi * g * sg * c.inv_D / den
+        dphi_ds = -phi * g * dr_ds * c.inv_D / den
         contact = ft(0.0)
         if sigma >= ft(0.0):
             contact = ft(1.0)
@@ -274,7 +291,7 @@ def make_model_terms(ft, model):
         darea_ds = sigma_c * c.inv_hardness * daging_dphi * dphi_ds
         tau_el = (z_tau + g * c.Kh * area * s) / den
         dtel_darea = g * c.Kh * s / den
-        dtel_ds = (g * c.Kh * area - tau_el * g * sg * c.inv_D) / den
+        dtel_ds = (g * c.Kh * area - tau_el * g * dr_ds * c.inv_D) / den
         tau_f = tau_el
         dtf_darea = dtel_darea
         dtf_ds = dtel_ds
@@ -285,9 +302,16 @@ def make_model_terms(ft, model):
             dtf_ds += c.eta_vstar * area / (c.vstar + a_s)
         dtf_ds += dtf_darea * darea_ds
         dtf_dsigma = dtf_darea * darea_dsigma
-        rate_tau = c.Kh * area * s - tau_el * a_s * c.inv_D
-        rate_phi = ft(1.0) - phi * a_s * c.inv_D
-        return tau_f, dtf_dsigma, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact
+        rate_tau = c.Kh * area * s - tau_el * r * c.inv_D
+        rate_phi = ft(1.0) - phi * r * c.inv_D
+        return tau_f, dtf_dsigma, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area
+
+    @wp.func
+    def yield_margin(c: Coeffs, tau_f: ft, area: ft):
+        """|tau_f| - tau_c*A (Pa): the stress gate is open where this is > 0, i.e. where the
+        asperity-level stress |tau_f|/A exceeds tau_c; a point without contact area (A = 0) that still
+        carries a friction stress is open (the limit A -> 0+), one carrying none is closed."""
+        return wp.abs(tau_f) - c.tau_c * area
 
     return dict(
         Coeffs=Coeffs,
@@ -298,4 +322,5 @@ def make_model_terms(ft, model):
         normal_stress=normal_stress,
         elastic_force=elastic_force,
         interface_friction=interface_friction,
+        yield_margin=yield_margin,
     )

@@ -23,12 +23,14 @@ class MemberParams:
     poisson_ratio: wp.float64
     density: wp.float64
     memory_length: wp.float64
+    shear_strength: wp.float64
     hardness: wp.float64
     viscous_coefficient: wp.float64
     reference_velocity: wp.float64
     aging_coefficient: wp.float64
     aging_time: wp.float64
     interface_stiffness: wp.float64
+    gate_velocity: wp.float64
     height: wp.float64
     length: wp.float64
     depth: wp.float64
@@ -56,6 +58,7 @@ class SolverSettings:
     min_step: wp.float64
     max_step: wp.float64
     newton_tol: wp.float64
+    switch_rtol: wp.float64  # relative tolerance of the gate-switch location (rtol * switch_tol)
     max_steps: wp.int32
     newton_max_iter: wp.int32
 
@@ -110,5 +113,7 @@ class IntegratorState:
     front_level: wp.float64  # m/s, arrival level (threshold * event maximum of a first pass); inf: none
     front_last: wp.float64  # s, last accepted time with max_x w >= threshold * running maximum (pass 1)
     front_until: wp.float64  # s, the arrival pass stops here (front_last of pass 1); inf in pass 1
+    switch_limit: wp.float64  # s, steps end at or before this time (a gate switch located in a rejected step)
+    gate_switches: wp.int32  # accepted gate switches (stress gate)
     record_slot: wp.int32  # index among the recorded members, -1: not recorded
     record_next: wp.int32  # next index of the recording time grid

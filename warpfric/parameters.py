@@ -209,6 +209,9 @@ class Solver:
     max_steps:        attempted steps (accepted + rejected) per member before status max_steps.
     newton_max_iter:  Newton iterations per stage before the step is rejected.
     newton_tol:       Newton convergence threshold in the error-weighted norm (units of rtol).
+    switch_tol:       stress gate: tolerance of the located gate switches, in units of rtol (docs/model.md,
+                      "Gate switches"); 1 holds the error of a switch to the step's local tolerance,
+                      inf lets every switch happen at the end of the step in which it occurs (no location).
     steps_per_launch: attempted steps per kernel launch (progress granularity; no effect on results).
     method:           time integrator; 'tr-bdf2' (L-stable ESDIRK, order 2, embedded order 3).
     """
@@ -222,6 +225,7 @@ class Solver:
     max_steps: int = 100_000
     newton_max_iter: int = 8
     newton_tol: float = 0.03
+    switch_tol: float = 1.0
     steps_per_launch: int = 500
     method: str = "tr-bdf2"
 
@@ -251,6 +255,9 @@ class Solver:
         need(is_int(self.newton_max_iter) and 1 <= self.newton_max_iter <= 100, "newton_max_iter",
              self.newton_max_iter, "an integer in [1, 100]")
         need(is_real(self.newton_tol) and 0 < self.newton_tol <= 1, "newton_tol", self.newton_tol, "a number in (0, 1]")
+        need(isinstance(self.switch_tol, (int, float, np.integer, np.floating)) and not isinstance(self.switch_tol, bool)
+             and self.switch_tol > 0 and not math.isnan(self.switch_tol), "switch_tol", self.switch_tol,
+             "a number > 0 (inf allowed)")
         need(is_int(self.steps_per_launch) and self.steps_per_launch >= 1, "steps_per_launch",
              self.steps_per_launch, "an integer >= 1")
         need(self.method in _METHODS, "method", self.method, " or ".join(_METHODS))

@@ -130,7 +130,7 @@ def simulate(
     values, varying = resolve_members(members, scene)
     device = _check_device(device)
     wp = _warp()
-    from warpfric.kernels.integrator import C_PHI, N_COMPONENTS, N_STAGE_SLOTS, N_WORK, get_integrator
+    from warpfric.kernels.integrator import C_PHI, N_COMPONENTS, N_GATE, N_STAGE_SLOTS, N_WORK, get_integrator
     from warpfric.kernels.params import (
         FRONT_DIRECTIONS,
         RECORD_FIELDS,
@@ -156,6 +156,7 @@ def simulate(
     settings.min_step = solver.min_step
     settings.max_step = solver.max_step
     settings.newton_tol = solver.newton_tol
+    settings.switch_rtol = solver.rtol * solver.switch_tol
     settings.max_steps = solver.max_steps
     settings.newton_max_iter = solver.newton_max_iter
 
@@ -177,6 +178,9 @@ def simulate(
         rec_shape = (len(RECORD_FIELDS), n, max(n_rec, 1))
         rec_previous = wp.zeros(rec_shape, dtype=ft)
         rec_out = wp.zeros((len(RECORD_FIELDS), outputs.n_record_times if n_rec else 1, n, max(n_rec, 1)), dtype=ft)
+        stress_gate = model.relaxation_gate == "stress"
+        gates = wp.zeros((N_GATE, n, n_members) if stress_gate else (N_GATE, 1, 1), dtype=ft)
+        yield_time = wp.zeros((n, n_members) if stress_gate else (1, 1), dtype=wp.float64)
         show = sys.stderr.isatty() if progress is None else bool(progress)
         prefix = progress if isinstance(progress, str) else ""
         # pass 1 integrates the whole protocol: every output but the arrival times, and the event
@@ -193,6 +197,7 @@ def simulate(
             states_np["front_last"] = -np.inf
             states_np["front_level"] = np.inf
             states_np["front_until"] = np.inf
+            states_np["switch_limit"] = 1e300
             states_np["record_slot"] = record_slots if pass_index == 0 else -1
             if pass_index == 1:
                 event = (front_max > 0) & np.isfinite(front_last)
@@ -204,6 +209,8 @@ def simulate(
             states = wp.array(states_np, dtype=IntegratorState)
             state = wp.array(state_np, dtype=ft)
             arrival.fill_(np.nan)
+            gates.zero_()  # every gate closed: no friction stress at the start
+            yield_time.fill_(np.nan)
             label = " ".join(p for p in (prefix, f"pass {pass_index + 1}/{n_passes}" if n_passes > 1 else "") if p)
             bar = _Progress(show, n_members, label)
             while True:
@@ -211,7 +218,7 @@ def simulate(
                     kern["integrate"],
                     dim=n_members,
                     inputs=[params, settings, states, state, stages, work, solver.steps_per_launch,
-                            outputs, arrival, rec_times, rec_previous, rec_out],
+                            outputs, arrival, rec_times, rec_previous, rec_out, gates, yield_time],
                 )
                 st_now = states.numpy()
                 n_done = int(st_now["done"].sum())
@@ -228,6 +235,8 @@ def simulate(
                 fields = state.numpy()
                 sigma = sigma_out.numpy()
                 tau = tau_out.numpy()
+                yield_np = yield_time.numpy() if stress_gate else None
+                gate_np = gates.numpy()[0] if stress_gate else None
         front = None
         if fronts is not None:
             front = _front_metrics(wp, fronts, values, arrival, n, n_members, device)
@@ -237,6 +246,14 @@ def simulate(
     wall = time.perf_counter() - t_start
     ds = _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, wall, STATUS_MEANINGS,
                      member_offset)
+    if yield_np is not None:
+        yt = np.where((ds.status.values != 0)[:, None], np.nan, yield_np.T)
+        ds["yield_time"] = xr.DataArray(np.ascontiguousarray(yt), dims=("member", "x"), attrs={
+            "units": "s", "long_name": "time at which the asperity-level stress |tau_f|/A first reached tau_c "
+            "(the yield gate opened; NaN: never)"})
+        ds["yield_gate"] = xr.DataArray(np.ascontiguousarray(gate_np.T), dims=("member", "x"), attrs={
+            "units": "1", "long_name": "yield gate at the final time: 0 closed (stuck, ageing), 1 open "
+            "(sliding, rejuvenating), in between: held on the yield surface |tau_f|/A = tau_c"})
     if front is not None:
         _add_fronts(ds, front, fronts)
     if record is not None:
@@ -331,6 +348,7 @@ _OUTPUT_ATTRS = {
     "steps_accepted": ("1", "accepted time steps"),
     "steps_rejected": ("1", "rejected time steps (error test or Newton failure)"),
     "newton_iterations": ("1", "Newton iterations over all stages"),
+    "gate_switches": ("1", "accepted switches of the nodes' yield gates (relaxation_gate='stress')"),
     "final_time": ("s", "time reached"),
     "plate_compression": ("m", "mean compression delta0 of the pad at the final time"),
     "plate_tilt": ("rad", "tilt a of the backing plate at the final time"),
@@ -376,6 +394,7 @@ def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, 
         "steps_accepted": st["steps_accepted"],
         "steps_rejected": st["steps_rejected"],
         "newton_iterations": st["newton_iterations"],
+        "gate_switches": st["gate_switches"],
         "final_time": st["t"],
         "plate_compression": st["delta0"],
         "plate_tilt": st["tilt"],
