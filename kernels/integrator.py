@@ -47,6 +47,10 @@ N_WORK = 14
 G_GATE, G_MARGIN = 0, 1
 N_GATE = 2
 N_STAGE_SLOTS = 3
+# a gate switch that MAX_SWITCH_RETRIES retries could not place within its tolerance (a strongly
+# curved margin makes the linear crossing estimate creep towards it, like regula falsi) is accepted
+# at the end of the step and counted in unlocated_switches: the cost of one is bounded
+MAX_SWITCH_RETRIES = 8
 
 # TR-BDF2 as an ESDIRK: c = (0, 2g, 1); A = [[0,0,0],[g,g,0],[w,w,g]]; b = (w, w, g)
 GAMMA = 1.0 - math.sqrt(2.0) / 2.0
@@ -723,18 +727,24 @@ def _make_integrator(dtype: str, model):
             if err > wp.float64(0.0):
                 factor = wp.min(wp.float64(5.0), wp.max(wp.float64(0.2), wp.float64(0.9) * wp.pow(err, wp.float64(-1.0 / ORDER_ESTIMATE))))
             if wp.static(stress_gate):
-                if err <= wp.float64(1.0) and sw_err > ft(1.0) and wp.float64(sw_frac) * h > settings.min_step:
-                    # a gate switched inside the step, too early to be moved to its end: retry up to
-                    # just past the switch (the error-controlled step size st.h is kept)
-                    st.steps_rejected = st.steps_rejected + 1
-                    st.switch_limit = t + wp.float64(sw_frac) * h
-                    continue
+                if err <= wp.float64(1.0) and sw_err > ft(1.0):
+                    if wp.float64(sw_frac) * h > settings.min_step and st.switch_retries < MAX_SWITCH_RETRIES:
+                        # a gate switched inside the step, too early to be moved to its end: retry up
+                        # to just past the switch (the error-controlled step size st.h is kept)
+                        st.steps_rejected = st.steps_rejected + 1
+                        st.switch_retries = st.switch_retries + 1
+                        st.switch_limit = t + wp.float64(sw_frac) * h
+                        continue
+                    st.unlocated_switches = st.unlocated_switches + 1
             if err <= wp.float64(1.0):
                 if outputs.fronts == 1:
                     st = track_fronts(p, st, m, n, state, K, s3, t, t_new, arrival, outputs.front_direction, outputs.front_threshold)
                 advance_state(m, n, state, K, s1, s2, s3, ft(h), 0)
                 if wp.static(stress_gate):
+                    switches_before = st.gate_switches
                     st = switch_gates(c, p, st, m, n, state, K, s3, gates, work, t, t_new, yield_time)
+                    if st.gate_switches != switches_before or sw_err > ft(1.0):
+                        st.switch_retries = 0  # the located switch happened (or was given up)
                     if t_new >= st.switch_limit:
                         st.switch_limit = wp.float64(1.0e300)
                 delta0 = d0

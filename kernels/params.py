@@ -115,5 +115,7 @@ class IntegratorState:
     front_until: wp.float64  # s, the arrival pass stops here (front_last of pass 1); inf in pass 1
     switch_limit: wp.float64  # s, steps end at or before this time (a gate switch located in a rejected step)
     gate_switches: wp.int32  # accepted gate switches (stress gate)
+    switch_retries: wp.int32  # consecutive steps rejected to locate a gate switch
+    unlocated_switches: wp.int32  # steps accepted with a switch error > 1 after MAX_SWITCH_RETRIES
     record_slot: wp.int32  # index among the recorded members, -1: not recorded
     record_next: wp.int32  # next index of the recording time grid

@@ -257,7 +257,7 @@ def simulate(
     if front is not None:
         _add_fronts(ds, front, fronts)
     if record is not None:
-        _add_record(ds, record, recorded, ds.x)
+        _add_record(ds, record, recorded, ds.x, member_offset)
     return ds
 
 
@@ -317,13 +317,14 @@ def _add_fronts(ds: xr.Dataset, front: dict, fronts: Fronts) -> None:
         ds.attrs[f"fronts_{f.name}"] = getattr(fronts, f.name)
 
 
-def _add_record(ds: xr.Dataset, record: Record, recorded: np.ndarray, x) -> None:
+def _add_record(ds: xr.Dataset, record: Record, recorded: np.ndarray, x, member_offset: int = 0) -> None:
     from warpfric.kernels.params import RECORD_FIELDS
 
     ds.coords["time"] = xr.DataArray(np.asarray(record.times), dims=("time",),
                                      attrs={"units": "s", "long_name": "recording time"})
-    ds.coords["recorded_member"] = xr.DataArray(np.asarray(record.members, dtype=np.int64), dims=("recorded",),
-                                                attrs={"long_name": "member index of each recorded member"})
+    ds.coords["recorded_member"] = xr.DataArray(
+        member_offset + np.asarray(record.members, dtype=np.int32), dims=("recorded",),
+        attrs={"long_name": "member number of each recorded member", "units": "1"})
     for f, name in enumerate(RECORD_FIELDS):
         units, long_name = _RECORD_ATTRS[name]
         ds[f"{name}_history"] = xr.DataArray(
@@ -349,6 +350,7 @@ _OUTPUT_ATTRS = {
     "steps_rejected": ("1", "rejected time steps (error test or Newton failure)"),
     "newton_iterations": ("1", "Newton iterations over all stages"),
     "gate_switches": ("1", "accepted switches of the nodes' yield gates (relaxation_gate='stress')"),
+    "unlocated_switches": ("1", "steps accepted with a gate switch the retries could not place within its tolerance"),
     "final_time": ("s", "time reached"),
     "plate_compression": ("m", "mean compression delta0 of the pad at the final time"),
     "plate_tilt": ("rad", "tilt a of the backing plate at the final time"),
@@ -395,6 +397,7 @@ def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, 
         "steps_rejected": st["steps_rejected"],
         "newton_iterations": st["newton_iterations"],
         "gate_switches": st["gate_switches"],
+        "unlocated_switches": st["unlocated_switches"],
         "final_time": st["t"],
         "plate_compression": st["delta0"],
         "plate_tilt": st["tilt"],
