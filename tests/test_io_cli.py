@@ -44,9 +44,9 @@ def test_netcdf_round_trip(tmp_path):
         got = back[name]
         expected = var if name != "normal_force" else var.isel(member=0)
         np.testing.assert_array_equal(got.values, expected.values, err_msg=name)
-        assert got.dtype == expected.dtype, name
+        assert got.dtype == (np.int32 if expected.dtype == np.int64 else expected.dtype), name  # CF-1.8: no int64
         for key in ("units", "long_name", "flag_meanings"):
-            if key in var.attrs:
+            if key in var.attrs and name != "recorded_member":  # in files: member numbers, said so
                 assert got.attrs[key] == var.attrs[key], (name, key)
     for key in ("model_tilt", "solver_rtol", "solver_dtype", "warpfric_version", "warp_version", "device",
                 "fronts_threshold", "Conventions"):

@@ -1,7 +1,7 @@
 """warpfric command line.
 
-  warpfric run [SWEEP.toml] [-o OUT.nc] [--device D] [--chunk M] [--resume | --overwrite]
-  warpfric info OUT.nc
+  warpfric run [SWEEP.toml] [-o OUT.nc] [--device D] [--chunk M] [--member-offset K] [--resume | --overwrite]
+  warpfric info OUT.nc [MORE.nc ...]
   warpfric plot OUT.nc [--outdir DIR]
   warpfric sensitivity OUT.nc [--output mu_s --output v_middle ...] [--on-failure refuse|fill-mean]
 
@@ -14,6 +14,7 @@ input (nothing is written).
 from __future__ import annotations
 
 import argparse
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -84,15 +85,19 @@ def _check_output(path: Path, resume: bool, overwrite: bool) -> None:
 def _run_default(args) -> int:
     from .io import write_ensemble
     from .simulate import simulate
+    from .sweep import check_member_offset
 
     scene = Parameters(normal_force=args.normal_force, eccentricity=args.eccentricity, disc_velocity=args.disc_velocity)
     solver = Solver(nodes=args.nodes, dtype=args.dtype, rtol=args.rtol)
     if args.output:
         _check_output(Path(args.output), args.resume, args.overwrite)
-    ds = simulate(scene=scene, model=Model(), solver=solver, device=args.device, progress=not args.quiet)
+    offset = args.member_offset or 0
+    check_member_offset(offset, 1, "--member-offset")
+    ds = simulate(scene=scene, model=Model(), solver=solver, device=args.device, progress=not args.quiet,
+                  member_offset=offset)
     _print_member(ds, solver)
     if args.output:
-        write_ensemble(ds, args.output)
+        write_ensemble(ds, args.output, command=args.command_line)
         print(f"wrote {args.output}")
     return 0 if int(ds.status[0]) == 0 else 1
 
@@ -100,29 +105,35 @@ def _run_default(args) -> int:
 def _run_sweep(args) -> int:
     from .io import ChunkStore, parts_dir, sweep_digest, write_ensemble
     from .simulate import _check_device, simulate
-    from .sweep import load_sweep
+    from .sweep import check_member_offset, load_sweep
 
     sweep = load_sweep(args.sweep)
     out = Path(args.output) if args.output else Path(args.sweep).with_suffix(".nc")
     _check_output(out, args.resume, args.overwrite)
-    chunk = args.chunk or sweep.run.get("chunk") or sweep.n_members
-    if chunk < 1:
-        raise UsageError(f"--chunk {chunk}: expected an integer >= 1")
+    parts = parts_dir(out)
+    previous = ChunkStore.load(parts) if args.resume and parts.exists() else None
+    # an omitted option takes, in this order: the interrupted run's value (--resume), the sweep's [run]
+    chunk = args.chunk or (previous.chunk if previous else None) or sweep.run.get("chunk") or sweep.n_members
+    offset = next(v for v in (args.member_offset, previous and previous.member_offset,
+                              sweep.run.get("member_offset"), 0) if v is not None)
+    check_member_offset(offset, sweep.n_members, "--member-offset")
     device = _check_device(args.device or sweep.run.get("device"))
     if sweep.record is not None and max(sweep.record.members) >= sweep.n_members:
         raise UsageError(f"[record] members: index {max(sweep.record.members)} but the sweep has "
                          f"{sweep.n_members} members (valid 0..{sweep.n_members - 1})")
-    digest = sweep_digest(f"{sweep.text}\nchunk={chunk}")
-    parts = parts_dir(out)
-    if args.resume and parts.exists():
-        store = ChunkStore.load(parts)
+    digest = sweep_digest(f"{sweep.text}\nchunk={chunk}" + (f"\nmember_offset={offset}" if offset else ""))
+    if previous is not None:
+        store = previous
         if store.digest != digest:
-            raise UsageError(f"{str(parts)!r} belongs to a different sweep or chunk size; run with --overwrite to start again")
+            raise UsageError(f"{str(parts)!r} belongs to a different sweep, chunk size ({store.chunk}) or member "
+                             f"offset ({store.member_offset}); run with --overwrite to start again")
     else:
-        store = ChunkStore.create(parts, digest, sweep.n_members, chunk)
+        store = ChunkStore.create(parts, digest, sweep.n_members, chunk, member_offset=offset,
+                                  sweep_file=str(Path(args.sweep).resolve()), device=args.device)
     todo = [i for i in range(store.n_chunks) if not store.is_done(i)]
-    print(f"warpfric: {sweep.n_members} members in {store.n_chunks} chunks of <= {chunk}, "
-          f"{len(todo)} to run, device {device}; swept: {', '.join(sweep.varying) or 'nothing'}", file=sys.stderr)
+    print(f"warpfric: {sweep.n_members} members (numbers {offset}..{offset + sweep.n_members - 1}) in "
+          f"{store.n_chunks} chunks of <= {chunk}, {len(todo)} to run, device {device}; "
+          f"swept: {', '.join(sweep.varying) or 'nothing'}", file=sys.stderr)
     t0 = time.perf_counter()
     n_failed = 0
     for count, index in enumerate(todo, start=1):
@@ -131,10 +142,9 @@ def _run_sweep(args) -> int:
         label = f"chunk {index + 1}/{store.n_chunks} ({count}/{len(todo)} this run, members {sl.start}..{sl.stop - 1})"
         ds = simulate(sweep.member_slice(sl) or None, scene=sweep.scene, model=sweep.model, solver=sweep.solver,
                       fronts=sweep.fronts, record=record, device=device,
-                      progress=False if args.quiet else label)
-        ds = ds.assign_coords(member=np.arange(sl.start, sl.stop))
-        if record is not None:
-            ds = ds.assign_coords(recorded_member=ds.recorded_member + sl.start)
+                      progress=False if args.quiet else label, member_offset=offset + sl.start)
+        if record is not None:  # member numbers, as the member coordinate
+            ds = ds.assign_coords(recorded_member=ds.recorded_member.copy(data=ds.member.values[list(record.members)]))
         ds.attrs["title"] = sweep.title or ds.attrs["title"]
         ds.attrs["sweep_file"] = str(args.sweep)
         ds.attrs["sweep_toml"] = sweep.text
@@ -148,8 +158,8 @@ def _run_sweep(args) -> int:
         n_failed += int((ds.status.values != 0).sum())
         if not sweep.run.get("final_fields", True):
             ds = ds.drop_vars([v for v in FINAL_FIELDS if v in ds])
-        write_ensemble(ds, store.chunk_path(index), varying=sweep.varying)
-    store.combine(out)
+        write_ensemble(ds, store.chunk_path(index), varying=sweep.varying, command=args.command_line)
+    store.combine(out, command=args.command_line)
     print(f"warpfric: wrote {out} ({sweep.n_members} members, {time.perf_counter() - t0:.1f} s this run, "
           f"{n_failed} failed members in the chunks run now)", file=sys.stderr)
     return 0 if n_failed == 0 else 1
@@ -165,20 +175,35 @@ def _chunk_record(record, sl: slice):
 
 
 def _run(args) -> int:
+    if args.chunk is not None and args.chunk < 1:
+        raise UsageError(f"--chunk {args.chunk}: expected an integer >= 1 (members per chunk file)")
     if args.sweep is None:
         return _run_default(args)
     return _run_sweep(args)
 
 
-def _info(args) -> int:
-    from .io import ChunkStore, open_ensemble, parts_dir
+def resume_command(store, path: Path) -> str:
+    """The command that finishes an interrupted chunked run (chunk size and member offset come
+    from the manifest)."""
+    words = ["warpfric", "run", store.manifest.get("sweep_file", "SWEEP.toml"), "-o", str(path), "--resume"]
+    if store.manifest.get("device"):
+        words += ["--device", store.manifest["device"]]
+    return shlex.join(words)
 
-    path = Path(args.file)
+
+def _info(args) -> int:
+    from .io import ChunkStore, open_ensemble, open_ensembles, parts_dir
+
+    if len(args.file) > 1:  # several files: their combination (refused when member numbers repeat)
+        ds = open_ensembles(args.file)
+        print(summary(ds, " + ".join(args.file)))
+        return 0
+    path = Path(args.file[0])
     if not path.exists() and parts_dir(path).exists():
         store = ChunkStore.load(parts_dir(path))
         print(f"{path}: INCOMPLETE run: {store.done_count()}/{store.n_chunks} chunks of <= {store.chunk} members "
               f"finished ({store.n_members} members in all) in {parts_dir(path)}; finish it with "
-              f"`warpfric run SWEEP.toml -o {path} --resume`")
+              f"`{resume_command(store, path)}`")
         return 1
     ds = open_ensemble(path)
     print(summary(ds, str(path)))
@@ -187,7 +212,9 @@ def _info(args) -> int:
 
 def summary(ds, name: str) -> str:
     """Text summary of an ensemble: members, swept parameters, status counts, mu_s and fronts."""
-    lines = [f"{name}: {ds.sizes['member']} members, {ds.sizes.get('x', 0)} nodes, complete"]
+    numbers = ds.member.values
+    lines = [f"{name}: {ds.sizes['member']} members (numbers {numbers.min()}..{numbers.max()}), "
+             f"{ds.sizes.get('x', 0)} nodes, complete"]
     lines.append(f"  title: {ds.attrs.get('title', '')}; device {ds.attrs.get('device')}, warpfric "
                  f"{ds.attrs.get('warpfric_version')}, warp {ds.attrs.get('warp_version')}, "
                  f"wall {float(ds.attrs.get('wall_time_s', float('nan'))):.1f} s")
@@ -269,7 +296,10 @@ def main(argv=None) -> int:
     run.add_argument("sweep", nargs="?", help="sweep file (TOML, see docs/sweeps.md); none: the default scene")
     run.add_argument("-o", "--output", help="netCDF file to write (sweeps: default SWEEP.nc)")
     run.add_argument("--device", default=None, help="Warp device: cpu, cuda:0, ... (default: first GPU, else cpu)")
-    run.add_argument("--chunk", type=int, default=None, help="members per chunk file (default: all in one)")
+    run.add_argument("--chunk", type=int, default=None,
+                     help="members per chunk file (default: all in one; with --resume: the interrupted run's)")
+    run.add_argument("--member-offset", type=int, default=None, metavar="K",
+                     help="number of the first member (default 0): give runs to be combined distinct numbers")
     run.add_argument("--resume", action="store_true", help="finish an interrupted run of the same sweep")
     run.add_argument("--overwrite", action="store_true", help="replace an existing output (and interrupted parts)")
     run.add_argument("--quiet", action="store_true", help="no progress line")
@@ -280,8 +310,8 @@ def main(argv=None) -> int:
     scene.add_argument("--nodes", type=int, default=Solver.nodes, help=f"grid nodes (default {Solver.nodes})")
     scene.add_argument("--dtype", default=Solver.dtype, choices=("float64", "float32"))
     scene.add_argument("--rtol", type=float, default=Solver.rtol, help=f"relative tolerance (default {Solver.rtol:g})")
-    info = sub.add_parser("info", help="summary of an ensemble file (or of an interrupted run)")
-    info.add_argument("file")
+    info = sub.add_parser("info", help="summary of an ensemble file (or of an interrupted run, or of several files combined)")
+    info.add_argument("file", nargs="+")
     plot = sub.add_parser("plot", help="quick-look PNGs of an ensemble file")
     plot.add_argument("file")
     plot.add_argument("--outdir", default=None, help="folder for the PNGs (default: OUT next to OUT.nc)")
@@ -292,7 +322,9 @@ def main(argv=None) -> int:
                       help="members that failed or lack an output: refuse (default) or replace by the mean")
     sens.add_argument("--log", action="store_true", help="analyse the log of each output (heavy-tailed outputs: front speeds)")
     sens.add_argument("-o", "--out", default=None, help="result file (default OUT_sensitivity.nc, and .png)")
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = parser.parse_args(argv)
+    args.command_line = shlex.join(["warpfric", *map(str, argv)])  # the files' history attribute
     handlers = {"run": _run, "info": _info, "plot": _plot, "sensitivity": _sensitivity}
     try:
         return handlers[args.command](args)

@@ -4,8 +4,20 @@ A file holds dims ``member`` and ``x`` (and ``recorded``, ``time`` for recorded 
 input parameter is a variable: along ``member`` where it varies in the run (or in the sweep the
 file is a chunk of), a scalar where it does not. Outputs carry CF ``units`` and ``long_name``;
 the model switches, solver and front settings, package and Warp versions and the device are
-global attributes. Files from several runs or chunks combine with
-``xr.open_mfdataset(files, combine="nested", concat_dim="member")`` (needs dask).
+global attributes.
+
+Layout on disk (what ``xr.open_dataset``/``xr.open_mfdataset`` show) differs from the in-memory
+layout of :func:`warpfric.simulate` only for recorded fields: their dims are
+(``recorded_member``, ``record_time``, ``x``), where ``recorded_member`` is a coordinate variable
+holding the member numbers (values of ``member``) and ``record_time`` is the recording time (not
+named ``time``: CF reserves that name for calendar time with ``units = "s since <epoch>"``).
+:func:`open_ensemble` gives back the layout of ``simulate()``: (``recorded``, ``time``, ``x``).
+Coordinates carry no ``_FillValue``; integers are int32 or int8 (netCDF classic types, CF-1.8);
+the global attribute ``history`` says when and by which command the file was written.
+
+Combining files: :func:`open_ensembles` (refuses repeated member numbers), or
+``xr.open_mfdataset(files, **COMBINE_KWARGS)`` (needs dask): members concatenate along
+``member`` and recorded fields are aligned on ``recorded_member``.
 
 Completeness: a file written by :func:`write_ensemble` has the global attribute
 ``warpfric_complete = 1`` and is written under a temporary name and renamed, so a killed run never
@@ -15,6 +27,7 @@ in ``OUT.nc.parts/`` until all are done, then combines them into ``OUT.nc``.
 
 from __future__ import annotations
 
+import datetime
 import hashlib
 import json
 import os
@@ -29,15 +42,69 @@ from .parameters import PARAMETER_NAMES
 COMPLETE_ATTR = "warpfric_complete"
 PARTS_SUFFIX = ".parts"
 MANIFEST = "manifest.json"
+FILE_TIME = "record_time"  # on-disk name of the recording-time coordinate (``time`` in memory)
+RECORDED_MEMBER_ATTRS = {"long_name": "member number (value of coordinate member) of each recorded member",
+                         "units": "1"}
+# xr.open_mfdataset(files, **COMBINE_KWARGS) combines warpfric files of distinct member numbers,
+# recorded fields included, under both xarray's current and its announced combine defaults
+COMBINE_KWARGS = {"combine": "nested", "concat_dim": "member", "data_vars": "minimal", "coords": "minimal",
+                  "compat": "no_conflicts", "join": "outer"}
+INT32_MAX = 2**31 - 1
 
 
 def _encoding(ds: xr.Dataset, complevel: int) -> dict:
     enc = {}
     for name, var in ds.variables.items():
+        if name in ds.coords:
+            enc[name] = {"_FillValue": None}  # CF: coordinate variables have no missing values
         if var.ndim == 0 or var.dtype.kind not in "biuf":
             continue
-        enc[name] = {"zlib": True, "complevel": complevel, "shuffle": True}
+        enc.setdefault(name, {}).update({"zlib": True, "complevel": complevel, "shuffle": True})
     return enc
+
+
+def _int32(value, where: str):
+    """int64 (not a netCDF classic type) -> int32; python ints in attributes too."""
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "iu" or arr.dtype.itemsize <= 4 or isinstance(value, bool):
+        return value
+    if arr.size and (arr.min() < -INT32_MAX - 1 or arr.max() > INT32_MAX):
+        raise ValueError(f"{where}: integers beyond the int32 range of a CF-1.8 file")
+    out = arr.astype(np.int32)
+    return out if isinstance(value, np.ndarray) else out[()]
+
+
+def _to_file_layout(ds: xr.Dataset) -> xr.Dataset:
+    """The in-memory layout of simulate() -> the on-disk layout (see the module docstring)."""
+    out = ds.copy()
+    if "recorded" in out.dims:
+        numbers = np.asarray(out.recorded_member.values)
+        out = out.assign_coords(recorded_member=("recorded", _int32(numbers, "recorded_member"),
+                                                 RECORDED_MEMBER_ATTRS)).swap_dims(recorded="recorded_member")
+    if "time" in out.dims:
+        out = out.rename(time=FILE_TIME)
+    for name, var in list(out.variables.items()):
+        if var.dtype == np.int64:
+            out[name] = out[name].copy(data=_int32(var.values, name))
+        out.variables[name].attrs = {k: _int32(v, f"{name}:{k}") for k, v in var.attrs.items()}
+    out.attrs = {k: _int32(v, f"attribute {k}") for k, v in out.attrs.items()}
+    return out
+
+
+def _from_file_layout(ds: xr.Dataset) -> xr.Dataset:
+    """The on-disk layout -> the in-memory layout of simulate()."""
+    if FILE_TIME in ds.dims:
+        ds = ds.rename({FILE_TIME: "time"})
+    if "recorded_member" in ds.dims:
+        ds = ds.swap_dims(recorded_member="recorded")
+    return ds
+
+
+def _history_line(command: str | None) -> str:
+    from . import __version__
+
+    now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    return f"{now}: {command or 'warpfric.io.write_ensemble (Python)'} (warpfric {__version__})"
 
 
 def collapse_constants(ds: xr.Dataset, varying) -> xr.Dataset:
@@ -51,23 +118,42 @@ def collapse_constants(ds: xr.Dataset, varying) -> xr.Dataset:
     return out
 
 
-def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4) -> Path:
+def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, command: str | None = None) -> Path:
     """Write ``ds`` (from :func:`warpfric.simulate`) to netCDF4 at ``path``, atomically.
 
     varying:   names of the parameters to keep along ``member`` (default: those that vary in ds,
                ``ds.attrs['varying_parameters']``); the others are stored as scalars.
     complevel: zlib level (1..9) of every numeric variable.
+    command:   what produced the file, for the ``history`` attribute (a line
+               "<UTC time>: <command> (warpfric <version>)" put before any earlier history).
+    ``recorded_member`` must hold member numbers (values of ``member``).
     """
     path = Path(path)
     if varying is None:
         varying = ds.attrs.get("varying_parameters", "").split()
+    if "recorded_member" in ds.coords and not np.isin(ds.recorded_member.values, ds.member.values).all():
+        raise ValueError(f"recorded_member {ds.recorded_member.values.tolist()}: not among the member numbers "
+                         f"{ds.member.values.min()}..{ds.member.values.max()} of the ensemble")
     out = collapse_constants(ds, set(varying))
     out.attrs["varying_parameters"] = " ".join(v for v in PARAMETER_NAMES if v in set(varying))
     out.attrs[COMPLETE_ATTR] = np.int8(1)
+    earlier = out.attrs.get("history", "")
+    out.attrs["history"] = _history_line(command) + ("\n" + earlier if earlier else "")
+    out = _to_file_layout(out)
     tmp = path.with_name(path.name + ".tmp")
     out.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=_encoding(out, complevel))
     os.replace(tmp, path)
     return path
+
+
+def _read(path) -> xr.Dataset:
+    """A netCDF file, loaded, in the in-memory layout; ValueError (one line) if it is not netCDF."""
+    try:
+        with xr.open_dataset(path, engine="netcdf4") as ds:
+            return _from_file_layout(ds.load())
+    except (OSError, ValueError, RuntimeError) as err:
+        reason = " ".join(str(err).split())
+        raise ValueError(f"{path}: not a readable netCDF file ({reason})") from None
 
 
 def open_ensemble(path) -> xr.Dataset:
@@ -83,11 +169,22 @@ def open_ensemble(path) -> xr.Dataset:
                 "run the same command again with --resume"
             )
         raise ValueError(f"{path}: no such file")
-    with xr.open_dataset(path, engine="netcdf4") as ds:
-        ds = ds.load()
+    if path.is_dir():
+        raise ValueError(f"{path}: a folder, not a netCDF file")
+    ds = _read(path)
     if int(ds.attrs.get(COMPLETE_ATTR, 0)) != 1:
         raise ValueError(f"{path}: not a complete warpfric ensemble (attribute {COMPLETE_ATTR} missing)")
     return ds
+
+
+def open_ensembles(paths) -> xr.Dataset:
+    """Open several complete warpfric files and concatenate them along ``member`` (recorded fields
+    along ``recorded``). Raises ValueError when member numbers repeat (runs made without distinct
+    ``--member-offset``), naming the files and the numbers, instead of mixing them up."""
+    paths = [Path(p) for p in paths]
+    if not paths:
+        raise ValueError("open_ensembles: no files given")
+    return concat_members([open_ensemble(p) for p in paths], names=[str(p) for p in paths])
 
 
 def parts_dir(path) -> Path:
@@ -101,77 +198,122 @@ def sweep_digest(text: str) -> str:
 
 class ChunkStore:
     """Finished chunks of a chunked run: ``OUT.nc.parts/chunk-NNNNNN.nc`` and a manifest with the
-    run's digest (sweep text, chunk size, number of members), so that --resume only continues the
-    very same run."""
+    run's digest (sweep text, chunk size, member offset), the number of members and what
+    ``--resume`` needs to continue the very same run (``chunk``, ``member_offset``, ``sweep_file``,
+    ``device``: ``info`` holds them in ``self.manifest``)."""
 
-    def __init__(self, directory: Path, digest: str, n_members: int, chunk: int):
+    def __init__(self, directory: Path, digest: str, n_members: int, chunk: int, manifest: dict | None = None):
         self.directory = Path(directory)
         self.digest = digest
         self.n_members = int(n_members)
         self.chunk = int(chunk)
         self.n_chunks = -(-self.n_members // self.chunk)
+        self.manifest = dict(manifest or {})
+        self.member_offset = int(self.manifest.get("member_offset", 0))
 
     @classmethod
-    def create(cls, directory, digest, n_members, chunk) -> "ChunkStore":
+    def create(cls, directory, digest, n_members, chunk, **extra) -> "ChunkStore":
+        """A new, empty store; ``extra`` (JSON values: member_offset, sweep_file, device) go into
+        the manifest."""
         directory = Path(directory)
         if directory.exists():
             shutil.rmtree(directory)
         directory.mkdir(parents=True)
-        store = cls(directory, digest, n_members, chunk)
-        manifest = {"digest": digest, "n_members": store.n_members, "chunk": store.chunk, "n_chunks": store.n_chunks}
+        manifest = {"digest": digest, "n_members": int(n_members), "chunk": int(chunk),
+                    "n_chunks": -(-int(n_members) // int(chunk)), **extra}
         tmp = directory / (MANIFEST + ".tmp")
         tmp.write_text(json.dumps(manifest, indent=1))
         os.replace(tmp, directory / MANIFEST)
-        return store
+        return cls(directory, digest, n_members, chunk, manifest)
 
     @classmethod
     def load(cls, directory) -> "ChunkStore":
         directory = Path(directory)
         try:
             manifest = json.loads((directory / MANIFEST).read_text())
-        except (OSError, ValueError) as err:
-            raise ValueError(f"{directory}: unreadable chunk manifest ({err})") from None
-        return cls(directory, manifest["digest"], manifest["n_members"], manifest["chunk"])
+            return cls(directory, manifest["digest"], manifest["n_members"], manifest["chunk"], manifest)
+        except (OSError, ValueError, KeyError, TypeError) as err:
+            raise ValueError(f"{directory}: unreadable chunk manifest ({err!r})") from None
 
     def chunk_path(self, index: int) -> Path:
         return self.directory / f"chunk-{index:06d}.nc"
 
     def members(self, index: int) -> slice:
+        """Indices (within the sweep) of the members of chunk ``index``; their member numbers are
+        ``member_offset`` + these."""
         return slice(index * self.chunk, min((index + 1) * self.chunk, self.n_members))
 
     def is_done(self, index: int) -> bool:
         path = self.chunk_path(index)
         if not path.exists():
             return False
+        sl = self.members(index)
         try:
             with xr.open_dataset(path, engine="netcdf4") as ds:
-                return int(ds.attrs.get(COMPLETE_ATTR, 0)) == 1 and ds.sizes["member"] == len(range(self.n_members)[self.members(index)])
+                return int(ds.attrs.get(COMPLETE_ATTR, 0)) == 1 and np.array_equal(
+                    ds.member.values, np.arange(sl.start, sl.stop) + self.member_offset)
         except Exception:  # noqa: BLE001 - a damaged chunk is simply redone
             return False
 
     def done_count(self) -> int:
         return sum(self.is_done(i) for i in range(self.n_chunks))
 
-    def combine(self, path) -> Path:
+    def combine(self, path, command: str | None = None) -> Path:
         """Concatenate the chunks along member into ``path`` (atomically) and remove the parts."""
-        datasets = []
-        for i in range(self.n_chunks):
-            with xr.open_dataset(self.chunk_path(i), engine="netcdf4") as ds:
-                datasets.append(ds.load())
-        combined = concat_members(datasets)
-        combined.attrs[COMPLETE_ATTR] = np.int8(1)
+        datasets = [_read(self.chunk_path(i)) for i in range(self.n_chunks)]
+        combined = concat_members(datasets, names=[self.chunk_path(i).name for i in range(self.n_chunks)])
+        combined.attrs.pop("chunk_index", None)
+        combined.attrs.pop("history", None)
         combined.attrs["chunks"] = self.n_chunks
-        tmp = Path(path).with_name(Path(path).name + ".tmp")
-        combined.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=_encoding(combined, 4))
-        os.replace(tmp, path)
+        write_ensemble(combined, path, command=command)
         shutil.rmtree(self.directory)
         return Path(path)
 
 
-def concat_members(datasets) -> xr.Dataset:
-    """Concatenate ensembles along member: variables with a member dim are concatenated,
-    recorded fields along ``recorded``, scalars must agree. Global attributes of the first;
+def duplicate_members(datasets, names=None) -> str:
+    """'' when the member numbers of ``datasets`` are distinct, else a sentence naming the
+    repeated numbers and the datasets (``names``) that share them."""
+    names = names or [f"dataset {i}" for i in range(len(datasets))]
+    numbers = np.concatenate([np.asarray(ds.member.values) for ds in datasets])
+    values, counts = np.unique(numbers, return_counts=True)
+    repeated = values[counts > 1]
+    if not repeated.size:
+        return ""
+    where = [n for n, ds in zip(names, datasets) if np.isin(ds.member.values, repeated).any()]
+    shown = ", ".join(map(str, repeated[:5].tolist())) + (f", ... ({repeated.size} in all)" if repeated.size > 5 else "")
+    return (f"member numbers {shown} occur more than once (in {', '.join(where)}); give separate runs distinct "
+            "numbers with `warpfric run --member-offset K` (or [run] member_offset, or simulate(member_offset=K))")
+
+
+def concat_members(datasets, names=None) -> xr.Dataset:
+    """Concatenate ensembles (in-memory layout) along member: variables with a member dim are
+    concatenated, recorded fields along ``recorded``; a parameter that is a scalar in one and
+    differs or varies in another becomes a variable along member. Refuses repeated member numbers
+    and different model/solver/front settings (ValueError). Global attributes of the first;
     wall_time_s summed."""
+    names = names or [f"dataset {i}" for i in range(len(datasets))]
+    message = duplicate_members(datasets, names)
+    if message:
+        raise ValueError(message)
+    first = datasets[0]
+    for key, value in first.attrs.items():
+        if key.startswith(("model_", "solver_", "fronts_")):
+            for name, ds in zip(names[1:], datasets[1:]):
+                if ds.attrs.get(key) != value:
+                    raise ValueError(f"{names[0]} and {name} differ in {key} ({value!r}, {ds.attrs.get(key)!r}): "
+                                     "not one ensemble")
+    varying = set()
+    for ds in datasets:
+        varying |= set(ds.attrs.get("varying_parameters", "").split())
+    along_member = set()
+    for pname in PARAMETER_NAMES:
+        present = [ds[pname] for ds in datasets if pname in ds]
+        if present and np.unique(np.concatenate([np.ravel(v.values) for v in present])).size > 1:
+            varying.add(pname)
+        if present and (pname in varying or any("member" in v.dims for v in present)):
+            along_member.add(pname)
+    datasets = [ds.assign({p: ds[p].broadcast_like(ds.member) for p in along_member
+                           if p in ds and "member" not in ds[p].dims}) for ds in datasets]
     first = datasets[0]
     member_vars = [v for v in first.data_vars if "member" in first[v].dims]
     parts = [ds[member_vars] for ds in datasets]
@@ -179,6 +321,9 @@ def concat_members(datasets) -> xr.Dataset:
     for name, var in first.data_vars.items():
         if "member" in var.dims or "recorded" in var.dims:
             continue
+        for other, ds in zip(names[1:], datasets[1:]):
+            if name in ds and not var.equals(ds[name]):
+                raise ValueError(f"{names[0]} and {other} differ in {name}: not one ensemble")
         out[name] = var
     recorded = [ds for ds in datasets if "recorded" in ds.dims]
     if recorded:
@@ -187,5 +332,6 @@ def concat_members(datasets) -> xr.Dataset:
                         compat="equals", join="exact")
         out = out.merge(rec)
     out.attrs = dict(first.attrs)
+    out.attrs["varying_parameters"] = " ".join(p for p in PARAMETER_NAMES if p in varying)
     out.attrs["wall_time_s"] = float(sum(float(ds.attrs.get("wall_time_s", 0.0)) for ds in datasets))
     return out

@@ -14,6 +14,7 @@ A sweep file (examples in studies/sweeps/, reference in docs/sweeps.md)::
     [design]  method = "saltelli", n = 1024, ...          # SALib designs (warpfric.sensitivity)
     [run]     chunk = 1000, device = "cpu"              # defaults of the command-line options;
               final_fields = false                      # leave out the final-state fields (member, x)
+              member_offset = 0                         # number of the first member (combining runs)
 
 Members are every combination of one grid point, one zip row and one sample row, in C order over
 the blocks: grid keys in file order, then the zip rows, then the sample rows (fastest). Each sampled parameter draws from its own random stream, seeded by (seed, name), so
@@ -37,7 +38,10 @@ from .parameters import PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solv
 
 TOP_KEYS = ("title", "description", "scene", "model", "solver", "fronts", "record", "grid", "zip", "sample", "design",
             "run")
-RUN_KEYS = {"chunk": int, "device": str, "final_fields": bool}
+RUN_KEYS = {"chunk": int, "device": str, "final_fields": bool, "member_offset": int}
+MEMBER_NUMBER_LIMIT = 2**31 - 2**24  # member numbers are int32 (simulate's member_offset bound)
+MEMBERS_NEEDED = ("a sweep file needs members: a [grid], [zip], [sample] or [design] table, or a [scene] table "
+                  "(even an empty one) to run that scene as one member")
 DISTRIBUTIONS = {"uniform": ("low", "high"), "normal": ("mean", "std"), "loguniform": ("low", "high")}
 RANGE_KEYS = ("start", "stop", "num", "spacing")
 
@@ -255,11 +259,26 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
     record = None
     if "record" in doc:
         record = _record(doc["record"])
+    if not members and "scene" not in doc:
+        raise SweepError(f"{name}: nothing to run; {MEMBERS_NEEDED}")
     run = _dataclass_like(doc.get("run", {}), RUN_KEYS, "run")
+    if run.get("chunk", 1) < 1:
+        raise SweepError(f"[run] chunk = {run['chunk']}: expected an integer >= 1 (members per chunk file)")
+    n_members = next(iter(members.values())).shape[0] if members else 1
+    check_member_offset(run.get("member_offset", 0), n_members, "[run] member_offset")
     # validate every member now (ranges, protocol), before anything runs or is written
     resolve_members(members or None, scene)
     varying = tuple(k for k in PARAMETER_NAMES if k in members)
     return Sweep(text, title, scene, model, solver, fronts, record, members, varying, run, design)
+
+
+def check_member_offset(offset: int, n_members: int, where: str) -> int:
+    """``offset`` if the member numbers offset .. offset + n_members - 1 fit in int32, else SweepError."""
+    top = MEMBER_NUMBER_LIMIT - n_members
+    if not 0 <= offset <= top:
+        raise SweepError(f"{where} = {offset}: expected an integer in [0, {top}] (the number of the first of "
+                         f"{n_members} members; member numbers are int32)")
+    return offset
 
 
 def _record(spec: dict) -> Record:
