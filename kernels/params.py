@@ -12,7 +12,8 @@ STATUS_OK = 0
 STATUS_MAX_STEPS = 1
 STATUS_NON_FINITE = 2
 STATUS_STEP_UNDERFLOW = 3
-STATUS_MEANINGS = ("ok", "max_steps_reached", "non_finite_state", "step_size_underflow")
+STATUS_NO_PEAK = 4  # set on the host: the friction coefficient was still rising at the end of the run
+STATUS_MEANINGS = ("ok", "max_steps_reached", "non_finite_state", "step_size_underflow", "no_peak")
 
 
 @wp.struct

@@ -35,10 +35,13 @@ import warpfric as wf
 class PadODE:
     """Right-hand side dy/dt of the semi-discrete pad model, y = [u, v, tau_el, phi] (4N,)."""
 
-    def __init__(self, p: wf.Parameters, n: int, model: wf.Model = wf.Model()):
+    def __init__(self, p: wf.Parameters, n: int, model: wf.Model = wf.Model(), gate_width: float = 1e-3):
+        """gate_width: the stress gate is smoothed here, theta_w(z) = (1 + tanh(z/(w*tau_c*A)))/2 with
+        z = |tau_f| - tau_c*A and w = gate_width (relative to tau_c*A): an independent, smooth
+        reading of the Heaviside gate that the kernels treat by locating the switches."""
         if not (model.inertia and model.tilt):
             raise ValueError("the baseline implements the default model (inertia and tilt on)")
-        self.p, self.n, self.model = p, n, model
+        self.p, self.n, self.model, self.gate_width = p, n, model, gate_width
         nu, G, H, L = p.poisson_ratio, p.shear_modulus, p.height, p.length
         self.M = 2 * G * (1 - nu) / (1 - 2 * nu)
         self.lam = 2 * G * nu / (1 - 2 * nu)
@@ -142,9 +145,23 @@ class PadODE:
         tau_f, area, s, contact = self.friction(sigma, v, tau, phi, t)
         rhoH = p.density * p.height
         dv = (self.elastic_force(u, d0, a) + tau_f - p.damping * v) / rhoH
-        dtau = p.interface_stiffness * area * s - tau * np.abs(s) / p.memory_length
-        dphi = 1 - phi * np.abs(s) / p.memory_length
+        relax = self.relaxation_speed(s, tau_f, area)
+        dtau = p.interface_stiffness * area * s - tau * relax / p.memory_length
+        dphi = 1 - phi * relax / p.memory_length
         return np.concatenate([v, dv, dtau, dphi])
+
+    def relaxation_speed(self, s, tau_f, area):
+        """|s| times the gate (m/s), SPEC v2 section 5."""
+        gate = self.model.relaxation_gate
+        if gate == "none":
+            return np.abs(s)
+        if gate == "velocity":
+            return np.sqrt(s**2 + self.p.gate_velocity**2)
+        strength = self.p.shear_strength * area
+        z = np.abs(tau_f) - strength
+        with np.errstate(divide="ignore", invalid="ignore"):
+            theta = np.where(strength > 0, 0.5 * (1 + np.tanh(z / (self.gate_width * strength))), (z > 0) * 1.0)
+        return theta * np.abs(s)
 
     def mu(self, t, y):
         n = self.n
@@ -183,12 +200,12 @@ def breakpoints(p: wf.Parameters):
     return sorted({t for t in pts if 0 <= t < p.end_time} | {p.end_time})
 
 
-def run_scipy(p: wf.Parameters, n: int, rtol: float, model: wf.Model = wf.Model()):
+def run_scipy(p: wf.Parameters, n: int, rtol: float, model: wf.Model = wf.Model(), gate_width: float = 1e-3):
     """Integrate with solve_ivp BDF piece by piece between the protocol's breakpoints; return
     (mu_s, mu_s_time, wall s, steps, rhs evaluations)."""
     from scipy.integrate import solve_ivp
 
-    ode = PadODE(p, n, model)
+    ode = PadODE(p, n, model, gate_width)
     y = np.zeros(4 * n)
     y[3 * n:] = p.initial_age
     atol = rtol * ode.scales()

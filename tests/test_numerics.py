@@ -4,6 +4,8 @@ import numpy as np
 import pytest
 from conftest import run
 
+import warpfric as wf
+
 
 @pytest.fixture(scope="module")
 def reference():
@@ -23,21 +25,27 @@ def test_mu_s_converges_with_tolerance(reference):
     assert errors[0] < 1e-5  # the default rtol (1e-5) is well inside the 1e-4 target
 
 
-def test_mu_s_converges_with_grid():
-    """Second-order finite volumes: successive differences of mu_s shrink ~4x per halving of dx."""
-    mus = np.array([run(nodes=n, rtol=1e-8).mu_s.values[0] for n in (10, 20, 40, 80)])
+@pytest.mark.parametrize("gate, min_order", [("none", 1.5), ("stress", 1.1)])
+def test_mu_s_converges_with_grid(gate, min_order):
+    """Second-order finite volumes: successive differences of mu_s shrink ~4x per halving of dx with
+    the smooth (gate-less) law. With the stress gate each node yields at its own time and the grid
+    samples the yielding zone node by node; the observed order is lower (1.27, 1.38 measured at
+    N = 10..80), still above first order."""
+    model = wf.Model(relaxation_gate=gate)
+    mus = np.array([run(nodes=n, rtol=1e-8, model=model).mu_s.values[0] for n in (10, 20, 40, 80)])
     diffs = np.abs(np.diff(mus))
     orders = np.log2(diffs[:-1] / diffs[1:])
-    print(f"mu_s {mus}, observed spatial orders {orders}")
-    assert np.all(orders > 1.5)
+    print(f"{gate}: mu_s {mus}, observed spatial orders {orders}")
+    assert np.all(orders > min_order)
 
 
 def test_float32_agrees_with_float64():
     """At rtol = 1e-5 both precisions resolve mu_s far below the 1e-4 target; float32 round-off
     (eps = 6e-8, amplified by the cancellations of the second difference) adds < 1e-5."""
     members = {"eccentricity": [-0.2, 0.0, 0.2], "normal_force": [500.0, 1000.0, 5000.0]}
-    f64 = run(members, rtol=1e-5, dtype="float64")
-    f32 = run(members, rtol=1e-5, dtype="float32")
+    gateless = wf.Model(relaxation_gate="none")  # the stress gate in float32: tests/test_gate.py
+    f64 = run(members, rtol=1e-5, dtype="float64", model=gateless)
+    f32 = run(members, rtol=1e-5, dtype="float32", model=gateless)
     assert (f32.status.values == 0).all()
     np.testing.assert_allclose(f32.mu_s.values, f64.mu_s.values, rtol=1e-5)
     np.testing.assert_allclose(f32.mu_s_time.values, f64.mu_s_time.values, atol=1e-3)
@@ -75,8 +83,9 @@ def test_float32_members_reach_the_ramp_end():
         "eccentricity": [0.06802473972597439, -0.01916448466915663, 0.075313056446496, -0.16269441192618112],
         "normal_force": [2449.158389218588, 1436.6277291857823, 637.7688105267864, 1401.0899504810648],
     }
-    f32 = run(members, nodes=200, rtol=1e-5, dtype="float32", max_steps=3000)
-    f64 = run(members, nodes=200, rtol=1e-5, dtype="float64")
+    gateless = wf.Model(relaxation_gate="none")  # a regression of the ramp-end sliver, law-independent
+    f32 = run(members, nodes=200, rtol=1e-5, dtype="float32", max_steps=3000, model=gateless)
+    f64 = run(members, nodes=200, rtol=1e-5, dtype="float64", model=gateless)
     assert list(f32.status.values) == [0, 0, 0, 0]
     assert (f32.steps_accepted.values + f32.steps_rejected.values).max() < 600
     np.testing.assert_allclose(f32.mu_s.values, f64.mu_s.values, rtol=1e-5)

@@ -28,7 +28,8 @@ def test_static_normal_stress_matches_linear_law(tilt):
         e = e_norm * L / 2
         expected = F / (p * L) * (1 + 12 * e * x / L**2) if tilt else np.full_like(x, F / (p * L))
         np.testing.assert_allclose(ds.normal_stress.values[i], expected, rtol=1e-10)
-    assert (ds.status.values == 0).all()
+    # the run ends before the disc moves: no friction peak (status no_peak), the fields are real
+    assert (ds.status.values == 4).all() and (ds.final_time.values == scene.end_time).all()
 
 
 def test_contact_age_grows_with_time_while_stuck():
@@ -46,14 +47,18 @@ def test_contact_age_grows_with_time_while_stuck():
         {},
         {"disc_velocity": 1e-5},
         {"disc_velocity": 1e-3, "normal_force": 500.0},
-        {"viscous_coefficient": 0.0},
         {"aging_coefficient": 0.2, "memory_length": 1e-6},
+        # eta = 0 under the stress gate is a dynamic rupture (inertial fronts, ~6e5 steps at N = 40):
+        # too slow for the suite; the gate-less and velocity-gate laws give the same steady state
+        ({"viscous_coefficient": 0.0}, "none"),
+        ({"viscous_coefficient": 0.0}, "velocity"),
     ],
 )
 def test_steady_sliding_matches_closed_form(members):
     """Long after the velocity ramp the pad is at rest and the slip rate is the disc velocity."""
+    members, gate = members if isinstance(members, tuple) else (members, "stress")
     scene = wf.Parameters(end_time=24.0)
-    ds = run({k: [v] for k, v in members.items()} or None, scene=scene)
+    ds = run({k: [v] for k, v in members.items()} or None, scene=scene, model=wf.Model(relaxation_gate=gate))
     p = wf.Parameters(**{**scene.__dict__, **members})
     expected = steady_mu(p, p.disc_velocity)
     assert ds.status.values[0] == 0
@@ -90,7 +95,7 @@ def test_mirror_symmetry():
 def test_members_are_independent_of_the_batch():
     """A member's result is the same alone and inside a batch of different members."""
     batch = {"eccentricity": [0.1, -0.25, 0.0], "normal_force": [800.0, 5000.0, 1000.0],
-             "viscous_coefficient": [2.7e13, 0.0, 1e13]}
+             "viscous_coefficient": [2.7e13, 2.7e12, 1e13]}
     together = run(batch)
     for i in range(3):
         alone = run({k: [v[i]] for k, v in batch.items()})
@@ -101,8 +106,8 @@ def test_members_are_independent_of_the_batch():
 
 def test_quasi_static_pad_agrees_with_inertia():
     """Slow fronts: pad inertia is negligible, so the quasi-static model gives the same mu_s."""
-    with_inertia = run({"viscous_coefficient": [2.7e13, 0.0]}, rtol=1e-7)
-    quasi_static = run({"viscous_coefficient": [2.7e13, 0.0]}, rtol=1e-7, model=wf.Model(inertia=False))
+    with_inertia = run({"viscous_coefficient": [2.7e13, 2.7e12]}, rtol=1e-7)
+    quasi_static = run({"viscous_coefficient": [2.7e13, 2.7e12]}, rtol=1e-7, model=wf.Model(inertia=False))
     np.testing.assert_allclose(quasi_static.mu_s.values, with_inertia.mu_s.values, rtol=1e-5)
 
 

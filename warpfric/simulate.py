@@ -13,7 +13,16 @@ import xarray as xr
 
 from . import __version__
 from .members import resolve_members
-from .parameters import Fronts, Model, Parameters, Record, Solver, parameter_long_name, parameter_units
+from .parameters import (
+    FLOAT32_MIN_RTOL_STRESS_GATE,
+    Fronts,
+    Model,
+    Parameters,
+    Record,
+    Solver,
+    parameter_long_name,
+    parameter_units,
+)
 
 
 def _warp():
@@ -119,6 +128,12 @@ def simulate(
         raise ValueError(f"model: expected a warpfric.Model, got {type(model).__name__}")
     if not isinstance(solver, Solver):
         raise ValueError(f"solver: expected a warpfric.Solver, got {type(solver).__name__}")
+    if solver.dtype == "float32" and model.relaxation_gate == "stress" and solver.rtol < FLOAT32_MIN_RTOL_STRESS_GATE:
+        raise ValueError(
+            f"solver setting 'rtol' = {solver.rtol!r} is invalid with dtype='float32' and relaxation_gate='stress'; "
+            f"valid: a number in [{FLOAT32_MIN_RTOL_STRESS_GATE:g}, 0.1] (float32 stalls near the gate switches "
+            "below that; use dtype='float64')"
+        )
     if fronts is not None and not isinstance(fronts, Fronts):
         raise ValueError(f"fronts: expected a warpfric.Fronts or None, got {type(fronts).__name__}")
     if record is not None and not isinstance(record, Record):
@@ -247,7 +262,8 @@ def simulate(
     ds = _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, wall, STATUS_MEANINGS,
                      member_offset)
     if yield_np is not None:
-        yt = np.where((ds.status.values != 0)[:, None], np.nan, yield_np.T)
+        broken = (ds.status.values != 0) & (ds.status.values != STATUS_MEANINGS.index("no_peak"))
+        yt = np.where(broken[:, None], np.nan, yield_np.T)  # a run cut short still has real opening times
         ds["yield_time"] = xr.DataArray(np.ascontiguousarray(yt), dims=("member", "x"), attrs={
             "units": "s", "long_name": "time at which the asperity-level stress |tau_f|/A first reached tau_c "
             "(the yield gate opened; NaN: never)"})
@@ -379,6 +395,9 @@ def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, 
         attrs = {"units": parameter_units(name), "long_name": parameter_long_name(name)}
         data[name] = xr.DataArray(arr, dims=("member",), attrs=attrs)
     status = st["status"].astype(np.int32)
+    # mu(t) still rising at the last accepted step: its maximum lies beyond end_time, and the running
+    # maximum (the value at the end) is not mu_s
+    status = np.where((status == 0) & (st["mu_s_time"] >= st["t"]), meanings.index("no_peak"), status).astype(np.int32)
     data["status"] = xr.DataArray(
         status,
         dims=("member",),
@@ -406,7 +425,9 @@ def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, 
     for name, arr in scalars.items():
         arr = np.asarray(arr)
         if name in ("mu_s", "mu_s_time", "mu_final") and failed.any():
-            arr = np.where(failed, np.nan, arr)  # a failed member is never returned as a number
+            # a failed member is never returned as a number; no_peak keeps mu_final (a real value)
+            bad = failed if name != "mu_final" else failed & (status != meanings.index("no_peak"))
+            arr = np.where(bad, np.nan, arr)
         units, long_name = _OUTPUT_ATTRS[name]
         data[name] = xr.DataArray(arr, dims=("member",), attrs={"units": units, "long_name": long_name})
     per_node = {
