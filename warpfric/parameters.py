@@ -191,9 +191,6 @@ class Model:
 
 _DTYPES = ("float32", "float64")
 FLOAT32_MIN_RTOL = 1e-5  # docs/performance.md: float32 stalls below this
-# float32 with the stress gate stalls at rtol 1e-5 once the first gates are about to open (docs/model.md,
-# "Gate switches"); at 1e-4 the test members end ok
-FLOAT32_MIN_RTOL_STRESS_GATE = 1e-4
 _METHODS = ("tr-bdf2",)
 
 
