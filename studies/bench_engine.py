@@ -4,7 +4,7 @@ accuracy of mu_s against a converged float64 run of the same members.
 
     python studies/bench_engine.py [--device cpu|cuda:0] [--members 1 100 1000 10000]
                                    [--dtypes float64 float32] [--rtol 1e-5] [--nodes 200]
-                                   [--fronts] [--out bench_engine.json]
+                                   [--fronts] [--relaxation-gate stress|none|velocity] [--out bench_engine.json]
 
 --fronts adds the front metrics (a second integration pass plus the segmentation kernel); without
 it the engine alone is timed (simulate(fronts=None)).
@@ -12,7 +12,9 @@ it the engine alone is timed (simulate(fronts=None)).
 Members vary: eccentricity uniform in [-0.2, 0.2] and normal force log-uniform in [500, 5000] N
 (seed 0), so the steps differ between members as in a real study. The accuracy column is the
 largest relative error of mu_s over the first 16 members against a converged float64 run
-(rtol = 1e-9, same N), stored in studies/reference/ and made with --make-reference. Compilation is excluded (a warm-up run compiles each kernel first).
+(rtol = 1e-9, same N, same friction law), stored in studies/reference/ and made with --make-reference.
+Compilation is excluded (a warm-up run compiles each kernel first). float32 is skipped with the stress
+gate, which refuses it (docs/model.md, "Precision").
 """
 
 from __future__ import annotations
@@ -27,7 +29,10 @@ import numpy as np
 
 import warpfric as wf
 
-REFERENCE = str(Path(__file__).with_name("reference") / "bench_members_mu_s.json")
+def reference_path(gate: str) -> str:
+    """The gate-less reference keeps its original name (made before the gate existed)."""
+    suffix = "" if gate == "none" else f"_{gate}"
+    return str(Path(__file__).with_name("reference") / f"bench_members_mu_s{suffix}.json")
 
 
 def members(m: int, seed: int = 0) -> dict:
@@ -48,19 +53,23 @@ def main(argv=None):
     ap.add_argument("--fronts", action="store_true", help="time with the front metrics (two passes)")
     ap.add_argument("--repeat", type=int, default=1, help="timed repetitions (the best is kept)")
     ap.add_argument("--out", default="bench_engine.json")
-    ap.add_argument("--reference", default=REFERENCE,
-                    help="JSON with mu_s of the first 16 members (float64, rtol 1e-9); made with --make-reference")
+    ap.add_argument("--relaxation-gate", default="stress", choices=["stress", "none", "velocity"])
+    ap.add_argument("--reference", default=None,
+                    help="JSON with mu_s of the first 16 members (float64, rtol 1e-9); made with --make-reference "
+                         "(default: studies/reference/bench_members_mu_s[_GATE].json)")
     ap.add_argument("--make-reference", action="store_true", help="compute the reference (on --device) and exit")
     args = ap.parse_args(argv)
     device = args.device or wf.default_device()
     n_check = 16
+    model = wf.Model(relaxation_gate=args.relaxation_gate)
+    args.reference = args.reference or reference_path(args.relaxation_gate)
 
     if args.make_reference:
         t0 = time.perf_counter()
-        ref = wf.simulate(members(n_check), solver=wf.Solver(nodes=args.nodes, rtol=1e-9, max_steps=10**6),
+        ref = wf.simulate(members(n_check), model=model, solver=wf.Solver(nodes=args.nodes, rtol=1e-9, max_steps=10**6),
                           fronts=None, device=device, progress=False)
         with open(args.reference, "w") as f:
-            json.dump(dict(nodes=args.nodes, rtol=1e-9, dtype="float64", device=device,
+            json.dump(dict(nodes=args.nodes, rtol=1e-9, dtype="float64", device=device, relaxation_gate=args.relaxation_gate,
                            wall_s=time.perf_counter() - t0, mu_s=ref.mu_s.values.tolist(),
                            steps_accepted=ref.steps_accepted.values.tolist()), f, indent=1)
         print(f"wrote {args.reference}")
@@ -73,14 +82,17 @@ def main(argv=None):
     rows = []
     fronts = wf.Fronts() if args.fronts else None
     for dtype in args.dtypes:
+        if dtype == "float32" and args.relaxation_gate == "stress":
+            print("float32 skipped: the stress gate needs float64")
+            continue
         solver = wf.Solver(nodes=args.nodes, dtype=dtype, rtol=args.rtol)
-        wf.simulate(members(1), scene=wf.Parameters(end_time=20.01), solver=solver, fronts=fronts,
+        wf.simulate(members(1), scene=wf.Parameters(end_time=20.01), model=model, solver=solver, fronts=fronts,
                     device=device)  # compile
         for m in args.members:
             best = None
             for _ in range(args.repeat):
                 t0 = time.perf_counter()
-                ds = wf.simulate(members(m), solver=solver, fronts=fronts, device=device, progress=False)
+                ds = wf.simulate(members(m), model=model, solver=solver, fronts=fronts, device=device, progress=False)
                 wall = time.perf_counter() - t0
                 best = wall if best is None else min(best, wall)
             k = min(m, n_check)
@@ -88,6 +100,7 @@ def main(argv=None):
             steps = ds.steps_accepted.values + ds.steps_rejected.values
             row = dict(
                 members=m, nodes=args.nodes, dtype=dtype, device=device, rtol=args.rtol, fronts=bool(args.fronts),
+                relaxation_gate=args.relaxation_gate,
                 wall_s=best,
                 realisations_per_s=m / best, node_steps_per_s=float(steps.sum()) * args.nodes / best,
                 mean_accepted_steps=float(ds.steps_accepted.values.mean()),

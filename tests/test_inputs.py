@@ -15,7 +15,9 @@ def simulate(members=None, device=DEVICE, **kw):
 @pytest.mark.parametrize(
     "members, words",
     [
-        ({"length": 0.0}, ["length", "0.0", "(0, inf]"]),
+        ({"length": 0.0}, ["length", "0.0", "(0, inf)"]),
+        ({"normal_force": np.inf}, ["normal_force", "inf", "(0, inf)"]),  # inf is not a force
+        ({"disc_velocity": -np.inf}, ["disc_velocity", "-inf"]),
         ({"length": -0.1}, ["length", "-0.1"]),
         ({"poisson_ratio": 0.5}, ["poisson_ratio", "0.5", "(-1, 0.5)"]),
         ({"poisson_ratio": -1.0}, ["poisson_ratio", "-1.0"]),
@@ -24,7 +26,7 @@ def simulate(members=None, device=DEVICE, **kw):
         ({"density": np.nan}, ["density", "nan"]),
         ({"eccentricity": 1.0}, ["eccentricity", "1.0", "(-1, 1)"]),
         ({"end_time": 19.0}, ["end_time", "19.0", "rest_until"]),
-        ({"viscous_coefficient": -1.0}, ["viscous_coefficient", "-1.0", "[0, inf]"]),
+        ({"viscous_coefficient": -1.0}, ["viscous_coefficient", "-1.0", "[0, inf)"]),
         ({"frobnication": 1.0}, ["frobnication", "valid names"]),
         ({"normal_force": [1.0, 2.0], "eccentricity": [0.0, 0.1, 0.2]}, ["broadcast", "normal_force", "eccentricity"]),
         ({"normal_force": []}, ["empty"]),
@@ -76,3 +78,10 @@ def test_members_from_xarray_dataset_and_broadcasting():
     np.testing.assert_array_equal(grid.normal_force.values, [500, 500, 500, 1000, 1000, 1000])
     np.testing.assert_array_equal(grid.eccentricity.values, [0, 0.1, 0.2, 0, 0.1, 0.2])
     assert grid.mu_s.attrs["units"] == "1" and grid.normal_force.attrs["units"] == "N"
+
+
+@pytest.mark.parametrize("cls, typo, right", [(wf.Parameters, "normal_forse", "normal_force"), (wf.Solver, "rtoll", "rtol"),
+                                             (wf.Model, "relaxation_gates", "relaxation_gate")])
+def test_unknown_keyword_names_the_valid_ones(cls, typo, right):
+    with pytest.raises(TypeError, match=f"unknown parameter '{typo}' \\(did you mean '{right}'\\?\\); valid names: .*{right}"):
+        cls(**{typo: 1})

@@ -110,8 +110,10 @@ def parameter_long_name(name: str) -> str:
 
 
 def _range_text(meta) -> str:
-    lo = "(" if meta["low_open"] else "["
-    hi = ")" if meta["high_open"] else "]"
+    """Valid range, e.g. '(0, inf)': an infinite end is always open (inf itself is never a value,
+    except stop_time = inf, which means "no stop")."""
+    lo = "(" if meta["low_open"] or math.isinf(meta["low"]) else "["
+    hi = ")" if meta["high_open"] or math.isinf(meta["high"]) else "]"
     return f"{lo}{meta['low']:g}, {meta['high']:g}{hi}"
 
 
@@ -139,7 +141,7 @@ def validate_value(name: str, value: np.ndarray) -> None:
     meta = _FIELDS[name].metadata
     arr = np.asarray(value, dtype=np.float64)
     lo, hi = meta["low"], meta["high"]
-    bad = np.isnan(arr)
+    bad = ~np.isfinite(arr)
     bad |= (arr <= lo) if meta["low_open"] else (arr < lo)
     bad |= (arr >= hi) if meta["high_open"] else (arr > hi)
     if name == "stop_time":  # inf means "no stop" and is allowed
@@ -349,3 +351,29 @@ class Record:
                              "non-decreasing times >= 0 (s)")
         object.__setattr__(self, "members", tuple(int(i) for i in members))
         object.__setattr__(self, "times", tuple(float(t) for t in times))
+
+
+def _with_named_keywords(cls):
+    """Wrap a dataclass's __init__ so that an unknown keyword raises a TypeError that names the
+    valid ones and the closest match (the default message names neither)."""
+    import difflib
+
+    init = cls.__init__
+    names = [f.name for f in dataclasses.fields(cls)]
+
+    def __init__(self, *args, **kwargs):
+        unknown = [k for k in kwargs if k not in names]
+        if unknown:
+            close = difflib.get_close_matches(unknown[0], names, n=1)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise TypeError(f"{cls.__name__}: unknown parameter {unknown[0]!r}{hint}; valid names: {', '.join(names)}")
+        init(self, *args, **kwargs)
+
+    __init__.__doc__ = init.__doc__
+    __init__.__signature__ = __import__("inspect").signature(init)
+    cls.__init__ = __init__
+    return cls
+
+
+for _cls in (Parameters, Model, Solver, Fronts, Record):
+    _with_named_keywords(_cls)
