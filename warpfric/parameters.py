@@ -215,6 +215,10 @@ class Solver:
                       "Gate switches"); 1 holds the error of a switch to the step's local tolerance,
                       inf lets every switch happen at the end of the step in which it occurs (no location).
     steps_per_launch: attempted steps per kernel launch (progress granularity; no effect on results).
+    stall_factor:     once half of an ensemble has ended ok, a member still running after more than
+                      max(stall_min_steps, stall_factor * their median) attempted steps stops with
+                      status 'stalled' (NaN outputs), so that one straggler cannot hold a launch.
+    stall_min_steps:  see stall_factor.
     method:           time integrator; 'tr-bdf2' (L-stable ESDIRK, order 2, embedded order 3).
     """
 
@@ -229,6 +233,8 @@ class Solver:
     newton_tol: float = 0.03
     switch_tol: float = 1.0
     steps_per_launch: int = 500
+    stall_factor: float = 10.0
+    stall_min_steps: int = 2000
     method: str = "tr-bdf2"
 
     def __post_init__(self):
@@ -263,6 +269,9 @@ class Solver:
         need(is_int(self.steps_per_launch) and self.steps_per_launch >= 1, "steps_per_launch",
              self.steps_per_launch, "an integer >= 1")
         need(self.method in _METHODS, "method", self.method, " or ".join(_METHODS))
+        need(is_real(self.stall_factor) and self.stall_factor >= 1, "stall_factor", self.stall_factor, "a number >= 1")
+        need(is_int(self.stall_min_steps) and self.stall_min_steps >= 1, "stall_min_steps", self.stall_min_steps,
+             "an integer >= 1")
 
 
 _FRONT_DIRECTIONS = ("against_disc", "with_disc", "absolute")

@@ -235,6 +235,8 @@ def simulate(
                             outputs, arrival, rec_times, rec_previous, rec_out, gates, yield_time],
                 )
                 st_now = states.numpy()
+                if pass_index == 0 and _flag_stragglers(st_now, solver, STATUS_MEANINGS.index("stalled")):
+                    states = wp.array(st_now, dtype=IntegratorState)
                 n_done = int(st_now["done"].sum())
                 bar.update(n_done, float(np.mean(np.minimum(st_now["t"] / end, 1.0))))
                 if n_done == n_members:
@@ -274,6 +276,26 @@ def simulate(
     if record is not None:
         _add_record(ds, record, recorded, ds.x, member_offset)
     return ds
+
+
+def _flag_stragglers(st: np.ndarray, solver: Solver, stalled: int) -> bool:
+    """Stop the members that need far more steps than their peers (in place; True if any).
+
+    Once at least half of the members have ended ok, a running member whose attempted steps exceed
+    max(stall_min_steps, stall_factor * the median of theirs) gets status ``stalled``: one member
+    can then cost a launch at most about stall_factor times a typical member. A lone member (no
+    peers) is bounded by max_steps only."""
+    finished = (st["done"] != 0) & (st["status"] == 0)
+    if finished.sum() * 2 < st.shape[0] or not finished.any():
+        return False
+    attempts = st["steps_accepted"].astype(np.int64) + st["steps_rejected"]
+    limit = max(solver.stall_min_steps, solver.stall_factor * float(np.median(attempts[finished])))
+    late = (st["done"] == 0) & (attempts > limit)
+    if not late.any():
+        return False
+    st["status"][late] = stalled
+    st["done"][late] = 1
+    return True
 
 
 def _record_slots(record: Record | None, n_members: int) -> np.ndarray:
