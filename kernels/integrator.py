@@ -23,7 +23,7 @@ import math
 
 import warp as wp
 
-from .model_terms import disc_velocity_at, make_model_terms, next_breakpoint, normal_force_at
+from .model_terms import disc_travel_at, disc_velocity_at, make_model_terms, next_breakpoint, normal_force_at
 from .params import (
     STATUS_MAX_STEPS,
     STATUS_NON_FINITE,
@@ -39,8 +39,8 @@ from .reductions import crossing_time, detachment_velocity, record_friction_poin
 C_U, C_V, C_TAU, C_PHI = 0, 1, 2, 3
 N_COMPONENTS = 4
 # work slots: stage constants z (same order as the components), Newton iterate, Thomas and border rows
-W_ZU, W_ZV, W_ZT, W_ZP, W_V, W_CP, W_R0, W_R1, W_R2, W_C1, W_C2, W_DIAG, W_MARGIN, W_DMARGIN = range(14)
-N_WORK = 14
+W_ZU, W_ZV, W_ZT, W_ZP, W_V, W_CP, W_R0, W_R1, W_R2, W_C1, W_C2, W_DIAG, W_MARGIN, W_DMARGIN, W_CONTACT = range(15)
+N_WORK = 15
 # yield-gate state (stress gate), first index of the gate array: the gate held over the next step (0
 # closed, 1 open, in between: Filippov sliding on the yield surface), and the yield margin
 # |tau_f| - tau_c*A (Pa) at the last accepted point
@@ -51,6 +51,16 @@ N_STAGE_SLOTS = 3
 # curved margin makes the linear crossing estimate creep towards it, like regula falsi) is accepted
 # at the end of the step and counted in unlocated_switches: the cost of one is bounded
 MAX_SWITCH_RETRIES = 8
+
+# automatic end (end_time None, docs/model.md "End of a run"): mu has fallen this fraction below its
+# maximum, and (front metrics on) every node's detachment velocity is below this fraction of the
+# arrival level
+AUTO_END_PEAK_DROP = 0.01
+AUTO_END_FRONT_FRACTION = 0.5
+# ... and the maximum came after the disc had slid this many memory lengths D: a detachment needs
+# slip of order D (the measured peaks: 2.7-3.6 D from 1e-6 to 1e-4 m/s); earlier wiggles of mu(t)
+# (the start of the disc, 1e-8 in mu) are not the peak
+AUTO_END_MIN_TRAVEL = 0.5
 
 # TR-BDF2 as an ESDIRK: c = (0, 2g, 1); A = [[0,0,0],[g,g,0],[w,w,g]]; b = (w, w, g)
 GAMMA = 1.0 - math.sqrt(2.0) / 2.0
@@ -333,6 +343,8 @@ def _make_integrator(dtype: str, model):
             tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area = interface_friction(
                 c, sigma, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m], g, gate
             )
+            if check_gates == 1:
+                work[W_CONTACT, i, m] = contact  # at the end of the step: fronts skip lifted-off nodes
             if wp.static(stress_gate):
                 if check_gates == 1:
                     z1 = yield_margin(c, tau_f, area)
@@ -502,7 +514,7 @@ def _make_integrator(dtype: str, model):
 
     @wp.func
     def track_fronts(
-        p: MemberParams, st: IntegratorState, m: int, n: int, state: array3, K: array4, s3: int,
+        p: MemberParams, st: IntegratorState, m: int, n: int, state: array3, K: array4, work: array3, s3: int,
         t_old: wp.float64, t_new: wp.float64, arrival: wp.array2d(dtype=wp.float64), direction: int,
         threshold: wp.float64,
     ):
@@ -511,7 +523,8 @@ def _make_integrator(dtype: str, model):
         interpolated linearly in time, and front_last: the last step at which some node had
         w >= threshold * (running maximum). Every first crossing of threshold * (final maximum)
         ends a step at or before front_last, so the arrival pass may stop there.
-        Window: from the disc start to the sudden stop (or the end)."""
+        Window: from the disc start to the sudden stop (or the end). A node without contact at the
+        end of the step (lifted off) is skipped: it never arrives, nucleates or sets the maximum."""
         if t_new <= p.rest_until or t_old >= p.stop_time:
             return st
         disc_sign = wp.float64(1.0)
@@ -519,6 +532,8 @@ def _make_integrator(dtype: str, model):
             disc_sign = wp.float64(-1.0)
         w_step = wp.float64(-1.0e300)
         for i in range(n):
+            if work[W_CONTACT, i, m] == ft(0.0):
+                continue
             w_old = detachment_velocity(wp.float64(state[C_V, i, m]), disc_sign, direction)
             w_new = detachment_velocity(wp.float64(K[s3, C_U, i, m]), disc_sign, direction)
             st.front_max = wp.max(st.front_max, w_new)
@@ -527,6 +542,7 @@ def _make_integrator(dtype: str, model):
                 arrival[i, m] = crossing_time(st.front_level, t_old, w_old, t_new, w_new)
         if w_step > wp.float64(0.0) and w_step >= threshold * st.front_max:
             st.front_last = t_new
+        st.front_now = w_step
         return st
 
     @wp.func
@@ -571,6 +587,22 @@ def _make_integrator(dtype: str, model):
             u_c = u_r
         st.record_next = k_end
         return st
+
+    @wp.func
+    def detachment_over(p: MemberParams, st: IntegratorState, outputs: OutputSettings):
+        """The automatic end: mu has passed a maximum reached after the disc slid AUTO_END_MIN_TRAVEL*D
+        and fallen AUTO_END_PEAK_DROP below it, and (fronts on) no node is above
+        AUTO_END_FRONT_FRACTION of the arrival level."""
+        if st.t <= p.rest_until or st.npts < 3 or st.mu_s <= wp.float64(0.0):
+            return False
+        if disc_travel_at(p, st.mu_s_time) < wp.float64(AUTO_END_MIN_TRAVEL) * p.memory_length:
+            return False  # the maximum must come from the sliding disc
+        if st.mu_final > (wp.float64(1.0) - wp.float64(AUTO_END_PEAK_DROP)) * st.mu_s:
+            return False
+        if outputs.fronts == 1 and st.front_max > wp.float64(0.0):
+            if st.front_now >= wp.float64(AUTO_END_FRONT_FRACTION) * outputs.front_threshold * st.front_max:
+                return False
+        return True
 
     @wp.func
     def accept_point(
@@ -641,6 +673,9 @@ def _make_integrator(dtype: str, model):
             if t >= p.end_time or t >= st.front_until:
                 st.done = 1
                 break
+            if p.auto_end > wp.float64(0.0) and detachment_over(p, st, outputs):
+                st.done = 1
+                break
             if st.steps_accepted + st.steps_rejected >= settings.max_steps:
                 st.status = STATUS_MAX_STEPS
                 st.done = 1
@@ -677,7 +712,7 @@ def _make_integrator(dtype: str, model):
                         c, p, settings, m, n, work, gates, K, s3, g, t_new, t, d0, a, ft(h), 1
                     )
                     if outputs.fronts == 1:
-                        st = track_fronts(p, st, m, n, state, K, s3, t, t_new, arrival, outputs.front_direction, outputs.front_threshold)
+                        st = track_fronts(p, st, m, n, state, K, work, s3, t, t_new, arrival, outputs.front_direction, outputs.front_threshold)
                     advance_state(m, n, state, K, s1, s2, s3, ft(h), 1)
                     if wp.static(stress_gate):
                         st = switch_gates(c, p, st, m, n, state, K, s3, gates, work, t, t_new, yield_time)
@@ -738,7 +773,7 @@ def _make_integrator(dtype: str, model):
                     st.unlocated_switches = st.unlocated_switches + 1
             if err <= wp.float64(1.0):
                 if outputs.fronts == 1:
-                    st = track_fronts(p, st, m, n, state, K, s3, t, t_new, arrival, outputs.front_direction, outputs.front_threshold)
+                    st = track_fronts(p, st, m, n, state, K, work, s3, t, t_new, arrival, outputs.front_direction, outputs.front_threshold)
                 advance_state(m, n, state, K, s1, s2, s3, ft(h), 0)
                 if wp.static(stress_gate):
                     switches_before = st.gate_switches

@@ -48,6 +48,18 @@ def disc_velocity_at(p: MemberParams, t: wp.float64, step_start: wp.float64):
 
 
 @wp.func
+def disc_travel_at(p: MemberParams, t: wp.float64):
+    """Distance the disc has slid by time t, m (integral of |v_d|; nothing after a sudden stop)."""
+    te = wp.min(t, p.stop_time) - p.rest_until
+    if te <= wp.float64(0.0):
+        return wp.float64(0.0)
+    v = wp.abs(p.disc_velocity)
+    if te < p.velocity_ramp_time:
+        return v * te * te / (wp.float64(2.0) * p.velocity_ramp_time)
+    return v * (te - wp.float64(0.5) * p.velocity_ramp_time)
+
+
+@wp.func
 def next_breakpoint(p: MemberParams, t: wp.float64):
     """First protocol time after t where the load is not smooth (ramp ends, disc start, stop, end)."""
     bp = p.end_time

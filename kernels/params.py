@@ -44,7 +44,8 @@ class MemberParams:
     rest_until: wp.float64
     velocity_ramp_time: wp.float64
     stop_time: wp.float64
-    end_time: wp.float64
+    end_time: wp.float64  # s, min(end_time, max_end_time)
+    auto_end: wp.float64  # 1: end_time was None, the run ends when the detachment is over
     interface_velocity_factor: wp.float64
     torque_arm: wp.float64
     initial_age: wp.float64
@@ -114,6 +115,7 @@ class IntegratorState:
     front_max: wp.float64  # m/s, running maximum of the detachment velocity w over nodes and the window
     front_level: wp.float64  # m/s, arrival level (threshold * event maximum of a first pass); inf: none
     front_last: wp.float64  # s, last accepted time with max_x w >= threshold * running maximum (pass 1)
+    front_now: wp.float64  # m/s, max over nodes of w at the last accepted step (pass 1)
     front_until: wp.float64  # s, the arrival pass stops here (front_last of pass 1); inf in pass 1
     switch_limit: wp.float64  # s, steps end at or before this time (a gate switch located in a rejected step)
     gate_switches: wp.int32  # accepted gate switches (stress gate)

@@ -143,7 +143,7 @@ def test_fronts_do_not_change_the_solution_and_mirror_symmetry():
 
 
 def test_recorded_fields_obey_the_plate_balance_and_the_slip_definition():
-    scene = wf.Parameters()
+    scene = wf.Parameters(end_time=22.0)
     times = np.concatenate([np.linspace(0, 20, 9), np.linspace(20.1, 22.0, 20)])
     ds = run(scene=scene, nodes=41, record=wf.Record(members=(0,), times=tuple(times)))
     w = trapezoid_weights(ds.x.values)

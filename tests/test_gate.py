@@ -123,9 +123,17 @@ def test_float32_serves_the_smooth_laws_and_refuses_the_stress_gate():
 
 
 def test_no_peak_inside_the_run_is_a_status_not_a_number():
-    """A run that ends while mu(t) still rises has no mu_s: status no_peak, NaN (issue: 1e-6 m/s at 22 s)."""
-    ds = run({"disc_velocity": [1e-6, 1e-4]}, rtol=1e-5)
+    """A run that ends while mu(t) still rises has no mu_s: status no_peak, NaN (issue: 1e-6 m/s at
+    22 s); the default automatic end runs until the peak is past (at 1e-6 m/s about 22.3 s) and
+    stops well before the cap."""
+    ds = run({"disc_velocity": [1e-6, 1e-4]}, rtol=1e-5, scene=wf.Parameters(end_time=22.0))
     meanings = ds.status.attrs["flag_meanings"].split()
     assert meanings[ds.status.values[0]] == "no_peak" and np.isnan(ds.mu_s.values[0]) and np.isnan(ds.mu_s_time.values[0])
     assert np.isfinite(ds.mu_final.values[0])  # the value at the end is real, and says what it is
     assert ds.status.values[1] == 0 and ds.mu_s_time.values[1] < ds.final_time.values[1]
+    auto = run({"disc_velocity": [1e-6, 1e-4]}, rtol=1e-5)
+    assert (auto.status.values == 0).all()
+    assert 22.0 < auto.mu_s_time.values[0] < auto.final_time.values[0] < 30.0  # past 22 s, far below the cap
+    assert auto.mu_final.values[0] <= 0.99 * auto.mu_s.values[0]  # the end: 1 % below the peak
+    np.testing.assert_allclose(auto.mu_s.values[1], ds.mu_s.values[1], rtol=1e-12)  # same peak, shorter run
+    assert auto.final_time.values[1] < 21.0

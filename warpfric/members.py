@@ -82,11 +82,13 @@ def resolve_members(members: Any, scene: Parameters) -> tuple[dict[str, np.ndarr
 
 def _check_protocol(values: dict[str, np.ndarray]) -> None:
     """Cross-parameter rules of the load protocol."""
-    end, rest = values["end_time"], values["rest_until"]
-    bad = ~(end > rest)
-    if np.any(bad):
-        i = int(np.flatnonzero(bad)[0])
-        raise ValueError(
-            f"parameter 'end_time' = {float(end[i])!r} (s) ends before the disc starts to move; "
-            f"valid range (rest_until, inf) = ({float(rest[i])!r}, inf) s (member {i})"
-        )
+    rest = values["rest_until"]
+    for name in ("end_time", "max_end_time"):
+        end = values[name]
+        bad = ~(end > rest)
+        if np.any(bad):
+            i = int(np.flatnonzero(bad)[0])
+            raise ValueError(
+                f"parameter {name!r} = {float(end[i])!r} (s) ends before the disc starts to move; "
+                f"valid range (rest_until, inf) = ({float(rest[i])!r}, inf) s (member {i})"
+            )

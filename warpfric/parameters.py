@@ -46,7 +46,8 @@ class Parameters:
     the normal force ramps 0 -> ``normal_force`` over ``force_ramp_time``, rests until
     ``rest_until``, then the disc velocity ramps 0 -> ``disc_velocity`` over
     ``velocity_ramp_time``; optional sudden disc stop at ``stop_time``; the run ends at
-    ``end_time``.
+    ``end_time``, or with ``end_time=None`` (default) when the detachment is over (docs/model.md,
+    "End of a run"), at ``max_end_time`` at the latest.
     """
 
     # --- pad material -------------------------------------------------------------------------
@@ -84,7 +85,13 @@ class Parameters:
     stop_time: float | None = _p(
         None, "s", "time of a sudden disc stop (None or inf: no stop)", 0.0, INF, True, False, none_means=INF
     )
-    end_time: float = _p(22.0, "s", "end of the simulated time", 0.0, INF, low_open=True, high_open=True)
+    end_time: float | None = _p(
+        None, "s", "end of the simulated time (None or inf: when the detachment is over, at most max_end_time)",
+        0.0, INF, True, False, none_means=INF
+    )
+    max_end_time: float = _p(
+        80.0, "s", "latest end of a run whose end_time is None (the detachment may not end)", 0.0, INF, True
+    )
     # --- open model choices (SPEC [choice]) ------------------------------------------------------
     interface_velocity_factor: float = _p(
         1.0, "1", "k_if: interface velocity = k_if * pad velocity", 0.0, INF, low_open=True, high_open=True
@@ -144,7 +151,7 @@ def validate_value(name: str, value: np.ndarray) -> None:
     bad = ~np.isfinite(arr)
     bad |= (arr <= lo) if meta["low_open"] else (arr < lo)
     bad |= (arr >= hi) if meta["high_open"] else (arr > hi)
-    if name == "stop_time":  # inf means "no stop" and is allowed
+    if name in ("stop_time", "end_time"):  # inf means "no stop" / "when the detachment is over"
         bad &= ~np.isposinf(arr)
     if np.any(bad):
         first = arr.reshape(-1)[np.flatnonzero(bad.reshape(-1))[0]]
@@ -269,7 +276,8 @@ class Solver:
         need(is_int(self.steps_per_launch) and self.steps_per_launch >= 1, "steps_per_launch",
              self.steps_per_launch, "an integer >= 1")
         need(self.method in _METHODS, "method", self.method, " or ".join(_METHODS))
-        need(is_real(self.stall_factor) and self.stall_factor >= 1, "stall_factor", self.stall_factor, "a number >= 1")
+        need((is_real(self.stall_factor) or self.stall_factor == math.inf) and self.stall_factor >= 1, "stall_factor",
+             self.stall_factor, "a number >= 1 (inf: never)")
         need(is_int(self.stall_min_steps) and self.stall_min_steps >= 1, "stall_min_steps", self.stall_min_steps,
              "an integer >= 1")
 
@@ -296,6 +304,9 @@ class Fronts:
                            it is at least min_segment_fraction long and v_middle >= speed_ratio *
                            its mean speed; else it is merged into the middle.
     edge_zone_fraction:    nucleation within this fraction of L of an edge is nucleation at that edge.
+    min_event_fraction:    a detachment event needs a maximum detachment velocity of at least this
+                           fraction of |disc_velocity|; below it there is no front (all front
+                           outputs NaN). Measured events: 1e-4 .. 3e-3 of |v_max| for 1e-6 .. 1e-2 m/s.
 
     Front metrics cost a second pass of the integrator (the event maximum must be known before the
     arrival times are taken); ``simulate(fronts=None)`` skips them.
@@ -307,6 +318,7 @@ class Fronts:
     fast_fraction: float = 0.3
     speed_ratio: float = 1.5
     edge_zone_fraction: float = 0.1
+    min_event_fraction: float = 1e-5
 
     def __post_init__(self):
         def need(cond, name, value, valid):
@@ -325,6 +337,8 @@ class Fronts:
         need(real(self.speed_ratio) and self.speed_ratio >= 1, "speed_ratio", self.speed_ratio, "a number >= 1")
         need(real(self.edge_zone_fraction) and 0 <= self.edge_zone_fraction <= 0.5, "edge_zone_fraction",
              self.edge_zone_fraction, "a number in [0, 0.5]")
+        need(real(self.min_event_fraction) and 0 <= self.min_event_fraction < 1, "min_event_fraction",
+             self.min_event_fraction, "a number in [0, 1)")
 
 
 @dataclass(frozen=True)

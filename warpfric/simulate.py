@@ -163,7 +163,10 @@ def simulate(
 
     params_np = np.zeros(n_members, dtype=MemberParams.numpy_dtype())
     for name in params_np.dtype.names:
-        params_np[name] = values[name]
+        if name in values:
+            params_np[name] = values[name]
+    params_np["end_time"] = np.minimum(values["end_time"], values["max_end_time"])
+    params_np["auto_end"] = np.isinf(values["end_time"]).astype(np.float64)
     settings = SolverSettings()
     settings.rtol = solver.rtol
     settings.initial_step = solver.initial_step
@@ -191,7 +194,8 @@ def simulate(
         rec_times = wp.array(np.asarray(record.times if record is not None else [0.0]), dtype=wp.float64)
         rec_shape = (len(RECORD_FIELDS), n, max(n_rec, 1))
         rec_previous = wp.zeros(rec_shape, dtype=ft)
-        rec_out = wp.zeros((len(RECORD_FIELDS), outputs.n_record_times if n_rec else 1, n, max(n_rec, 1)), dtype=ft)
+        rec_out = wp.full((len(RECORD_FIELDS), outputs.n_record_times if n_rec else 1, n, max(n_rec, 1)), np.nan,
+                          dtype=ft)  # NaN: a time after the end of the run is never sampled
         stress_gate = model.relaxation_gate == "stress"
         gates = wp.zeros((N_GATE, n, n_members) if stress_gate else (N_GATE, 1, 1), dtype=ft)
         yield_time = wp.zeros((n, n_members) if stress_gate else (1, 1), dtype=wp.float64)
@@ -201,7 +205,7 @@ def simulate(
         # maximum; pass 2 (fronts only) repeats the same trajectory up to the last possible crossing
         # (front_last of pass 1) and records the arrival times at the now known level
         front_max = front_last = None
-        end = values["end_time"]
+        end = params_np["end_time"]
         for pass_index in range(n_passes):
             states_np = np.zeros(n_members, dtype=IntegratorState.numpy_dtype())
             states_np["h"] = solver.initial_step
@@ -209,15 +213,16 @@ def simulate(
             states_np["mu_s"] = -np.inf
             states_np["front_max"] = -np.inf
             states_np["front_last"] = -np.inf
+            states_np["front_now"] = -np.inf
             states_np["front_level"] = np.inf
             states_np["front_until"] = np.inf
             states_np["switch_limit"] = 1e300
             states_np["record_slot"] = record_slots if pass_index == 0 else -1
             if pass_index == 1:
-                event = (front_max > 0) & np.isfinite(front_last)
+                event = _real_event(front_max, front_last, values, fronts)
                 states_np["front_level"] = np.where(event, fronts.threshold * front_max, np.inf)
                 states_np["front_until"] = np.where(event, front_last, -np.inf)  # no event: nothing to redo
-                end = np.where(event, np.minimum(front_last, values["end_time"]), 1.0)
+                end = np.where(event, np.minimum(front_last, params_np["end_time"]), 1.0)
             state_np = np.zeros((N_COMPONENTS, n, n_members), dtype=np_dtype)
             state_np[C_PHI] = values["initial_age"][None, :]
             states = wp.array(states_np, dtype=IntegratorState)
@@ -256,7 +261,7 @@ def simulate(
         front = None
         if fronts is not None:
             front = _front_metrics(wp, fronts, values, arrival, n, n_members, device)
-            front["event_max_velocity"] = np.where(front_max > 0, front_max, np.nan)
+            front["event_max_velocity"] = np.where(_real_event(front_max, front_last, values, fronts), front_max, np.nan)
         recorded = rec_out.numpy() if record is not None else None
         wp.synchronize_device(device)
     wall = time.perf_counter() - t_start
@@ -276,6 +281,14 @@ def simulate(
     if record is not None:
         _add_record(ds, record, recorded, ds.x, member_offset)
     return ds
+
+
+def _real_event(front_max, front_last, values, fronts: Fronts) -> np.ndarray:
+    """Members with a detachment event: a maximum detachment velocity of at least
+    fronts.min_event_fraction * |disc_velocity| (docs/model.md, "Fronts"). Below it (e.g. a disc that
+    never moves: round-off of 1e-22 m/s) there is no front, and every front output is NaN."""
+    floor = fronts.min_event_fraction * np.abs(values["disc_velocity"])
+    return (front_max > 0) & (front_max >= floor) & np.isfinite(front_last)
 
 
 def _flag_stragglers(st: np.ndarray, solver: Solver, stalled: int) -> bool:
@@ -418,7 +431,9 @@ def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, 
     status = st["status"].astype(np.int32)
     # mu(t) still rising at the last accepted step: its maximum lies beyond end_time, and the running
     # maximum (the value at the end) is not mu_s
-    status = np.where((status == 0) & (st["mu_s_time"] >= st["t"]), meanings.index("no_peak"), status).astype(np.int32)
+    # a maximum before the disc moves (a disc that never moves) is load noise, not a friction peak
+    no_peak = (st["mu_s_time"] >= st["t"]) | (st["mu_s_time"] <= values["rest_until"])
+    status = np.where((status == 0) & no_peak, meanings.index("no_peak"), status).astype(np.int32)
     data["status"] = xr.DataArray(
         status,
         dims=("member",),
