@@ -24,7 +24,8 @@ def simulate(members=None, device=DEVICE, **kw):
         ({"normal_force": -10.0}, ["normal_force", "-10.0"]),
         ({"hardness": [5e8, -1.0]}, ["hardness", "-1.0"]),
         ({"density": np.nan}, ["density", "nan"]),
-        ({"eccentricity": 1.0}, ["eccentricity", "1.0", "(-1, 1)"]),
+        ({"eccentricity": 1.0}, ["eccentricity", "1.0", "[-0.6, 0.6]"]),
+        ({"eccentricity": -0.8}, ["eccentricity", "-0.8", "[-0.6, 0.6]"]),  # lifts off and stalls: refused
         ({"end_time": 19.0}, ["end_time", "19.0", "rest_until"]),
         ({"viscous_coefficient": -1.0}, ["viscous_coefficient", "-1.0", "[0, inf)"]),
         ({"frobnication": 1.0}, ["frobnication", "valid names"]),
