@@ -320,7 +320,7 @@ class Fronts:
     fast_fraction: float = 0.3
     speed_ratio: float = 1.5
     edge_zone_fraction: float = 0.1
-    min_event_fraction: float = 1e-5
+    min_event_fraction: float = 1e-6
 
     def __post_init__(self):
         def need(cond, name, value, valid):
