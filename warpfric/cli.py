@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .parameters import Model, Parameters, Solver
+from .parameters import RELAXATION_GATES, Model, Parameters, Solver
 
 
 class UsageError(ValueError):
@@ -48,8 +48,8 @@ def _fmt(value, unit="", spec=".4g") -> str:
 def _print_member(ds, solver: Solver) -> None:
     m = ds.isel(member=0)
     print(f"scene: F = {float(m.normal_force):g} N, 2e/L = {float(m.eccentricity):g}, "
-          f"v_d = {float(m.disc_velocity):g} m/s, N = {solver.nodes}, {solver.dtype}, rtol = {solver.rtol:g}, "
-          f"device {ds.attrs['device']}")
+          f"v_d = {float(m.disc_velocity):g} m/s, relaxation gate {ds.attrs['model_relaxation_gate']}, "
+          f"N = {solver.nodes}, {solver.dtype}, rtol = {solver.rtol:g}, device {ds.attrs['device']}")
     print(f"mu_s      = {_fmt(m.mu_s, spec='.6f')}  (static friction coefficient)")
     print(f"mu_s_time = {_fmt(m.mu_s_time, 's', '.5f')}")
     print(f"mu_final  = {_fmt(m.mu_final, spec='.6f')}  (at t = {float(m.final_time):g} s)")
@@ -87,13 +87,15 @@ def _run_default(args) -> int:
     from .simulate import simulate
     from .sweep import check_member_offset
 
-    scene = Parameters(normal_force=args.normal_force, eccentricity=args.eccentricity, disc_velocity=args.disc_velocity)
+    scene = Parameters(normal_force=args.normal_force, eccentricity=args.eccentricity, disc_velocity=args.disc_velocity,
+                       end_time=args.end_time)
+    model = Model(relaxation_gate=args.relaxation_gate)
     solver = Solver(nodes=args.nodes, dtype=args.dtype, rtol=args.rtol)
     if args.output:
         _check_output(Path(args.output), args.resume, args.overwrite)
     offset = args.member_offset or 0
     check_member_offset(offset, 1, "--member-offset")
-    ds = simulate(scene=scene, model=Model(), solver=solver, device=args.device, progress=not args.quiet,
+    ds = simulate(scene=scene, model=model, solver=solver, device=args.device, progress=not args.quiet,
                   member_offset=offset)
     _print_member(ds, solver)
     if args.output:
@@ -310,6 +312,10 @@ def main(argv=None) -> int:
     scene.add_argument("--nodes", type=int, default=Solver.nodes, help=f"grid nodes (default {Solver.nodes})")
     scene.add_argument("--dtype", default=Solver.dtype, choices=("float64", "float32"))
     scene.add_argument("--rtol", type=float, default=Solver.rtol, help=f"relative tolerance (default {Solver.rtol:g})")
+    scene.add_argument("--end-time", type=float, default=None,
+                       help="s (default: when the detachment is over, at most max_end_time = 80 s)")
+    scene.add_argument("--relaxation-gate", default=Model.relaxation_gate, choices=RELAXATION_GATES,
+                       help="friction law's gate (default stress: GRL 2012; none: the SPEC v1 law)")
     info = sub.add_parser("info", help="summary of an ensemble file (or of an interrupted run, or of several files combined)")
     info.add_argument("file", nargs="+")
     plot = sub.add_parser("plot", help="quick-look PNGs of an ensemble file")
