@@ -1,18 +1,29 @@
 """Studies: the paper's Figures 3-14, the open model choices, and ensembles beyond the paper.
 
     python studies/figures.py NAME [--quick] [--device cpu|cuda:0] [--outdir studies/figures]
+                              [--relaxation-gate stress|none|velocity]
     python studies/figures.py all --quick
 
 NAME: fig3 fig4 fig5 fig10 fig11 fig12 choices map uncertainty (Figs. 6, 7 come with fig4, Figs.
 8, 9 with fig5, Figs. 13, 14 with fig10). Each writes NAME[_quick].nc (the ensemble, warpfric.io format),
 NAME[_quick].png and NAME[_quick].json (the numbers studies/README.md quotes, and that
 tests/test_studies.py checks). --quick: sizes for a 2-core CPU (seconds to a minute each); the full
-size is for the GPU.
+size is for the GPU. --relaxation-gate: the friction law's yield gate (wf.Model(relaxation_gate=...),
+SPEC section 5; default "stress", the GRL 2012 law); "none" (SPEC v1, the law of the earlier results)
+writes NAME_nogate[_quick].*, "velocity" NAME_velgate[_quick].*.
+
+End time rule (every study): a member whose disc moves runs at least until the disc has slid
+PEAK_SLIP_MEMORY_LENGTHS = 10 memory lengths (the mu_s peak comes after about 3.5 D of slip), i.e.
+end_time = max(scene end_time or 22 s, t(slip = 10 D)) with t(slip) from the ramp of SPEC section 6:
+rest_until + sqrt(2 * ramp * 10 D / v) within the ramp, else rest_until + ramp + (10 D - v * ramp / 2) / v.
+Only slow members (v < ~4e-6 m/s with the defaults) get a longer run. Every study counts the members
+whose mu_s_time is not before their final_time (no real peak) in claims["members_without_peak"].
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import time
@@ -24,6 +35,9 @@ import warpfric as wf
 from warpfric.io import write_ensemble
 
 SHEAR_WAVE_SPEED = float(np.sqrt(wf.Parameters().shear_modulus / wf.Parameters().density))  # m/s
+PEAK_SLIP_MEMORY_LENGTHS = 10.0
+STUDY_END_TIME = 22.0  # the studies pin the end (not the engine's end_time=None adaptive end): results stay comparable
+GATE_SUFFIX = {"stress": "", "none": "_nogate", "velocity": "_velgate"}
 
 
 def _plt():
@@ -35,10 +49,47 @@ def _plt():
     return plt
 
 
-def simulate(members, quick, device, scene=None, record=None, nodes=None, **solver_kw):
+def peak_end_time(disc_velocity, scene, memory_length=None):
+    """The end time rule (module docstring): at least until the disc has slid 10 memory lengths."""
+    v = np.asarray(disc_velocity, dtype=float)
+    D = scene.memory_length if memory_length is None else np.asarray(memory_length, dtype=float)
+    slip = PEAK_SLIP_MEMORY_LENGTHS * D
+    ramp = scene.velocity_ramp_time
+    t = np.where(slip <= v * ramp / 2, scene.rest_until + np.sqrt(2 * ramp * slip / v),
+                 scene.rest_until + ramp + (slip - v * ramp / 2) / v)
+    return np.maximum(STUDY_END_TIME if scene.end_time is None else scene.end_time, t)
+
+
+def with_peak_end_time(members, scene):
+    """members with a per-member end_time where the rule asks for more than the scene's end_time."""
+    m = dict(members or {})
+    if "end_time" in m:
+        return members
+    v = m.get("disc_velocity", scene.disc_velocity)
+    end = peak_end_time(v, scene, m.get("memory_length"))
+    if scene.end_time is not None and np.all(end <= scene.end_time):
+        return members
+    m["end_time"] = end
+    return m
+
+
+def peak_check(ds) -> dict:
+    """Members whose mu_s peak is not inside the run (mu_s_time >= final_time), stopped members excluded."""
+    moving = ~np.isfinite(ds.stop_time.values) if "stop_time" in ds else np.ones(ds.sizes["member"], bool)
+    ok = ds.status.values == 0
+    no_peak = moving & ok & ~(ds.mu_s_time.values < ds.final_time.values - 1e-9)
+    return dict(members_without_peak=int(no_peak.sum()), failed_members=int((~ok).sum()),
+                max_final_time=float(np.nanmax(ds.final_time.values)))
+
+
+def simulate(members, quick, device, scene=None, record=None, nodes=None, model=None, **solver_kw):
+    scene = scene or wf.Parameters()
+    # stall_factor = inf: the engine's straggler rule (b1fc4a1) marks healthy but slow stress-gate members
+    # (viscous_coefficient = 0) 'stalled' in a mixed ensemble; the studies let every member end on its own
+    solver_kw.setdefault("stall_factor", np.inf)
     solver = wf.Solver(nodes=nodes or (100 if quick else 200), rtol=1e-5, **solver_kw)
-    return wf.simulate(members, scene=scene or wf.Parameters(), solver=solver, record=record, device=device,
-                       progress=sys.stderr.isatty())
+    return wf.simulate(with_peak_end_time(members, scene), scene=scene, model=model or wf.Model(), solver=solver,
+                       record=record, device=device, progress=sys.stderr.isatty())
 
 
 def linfit(x, y):
@@ -63,9 +114,9 @@ def segments_summary(ds) -> dict:
 
 
 # ------------------------------------------------------------------------------------------------
-def fig3(quick, device):
+def fig3(quick, device, model=None):
     record = wf.Record.window(20.2, 20.36, 161 if quick else 321, members=(0,))
-    ds = simulate(None, quick, device, scene=wf.Parameters(end_time=20.6), record=record)
+    ds = simulate(None, quick, device, scene=wf.Parameters(end_time=20.6), record=record, model=model)
     m = ds.isel(member=0)
     claims = {k: float(m[k]) for k in ("mu_s", "mu_s_time", "nucleation_position", "left_front_end",
                                         "right_front_start", "v_left", "v_middle", "v_right",
@@ -76,9 +127,9 @@ def fig3(quick, device):
     return ds, claims, lambda path: space_time_map(ds, 0, path)
 
 
-def fig4(quick, device):
+def fig4(quick, device, model=None):
     e = np.linspace(-0.35, 0.35, 15 if quick else 141)
-    ds = simulate({"eccentricity": e}, quick, device)
+    ds = simulate({"eccentricity": e}, quick, device, model=model)
     mu = ds.mu_s.values
     claims = dict(mu_s_mean=float(mu.mean()), variation_percent=float(100 * (mu.max() - mu.min()) / mu.mean()),
                   e_at_max=float(e[np.argmax(mu)]), e_at_min=float(e[np.argmin(mu)]),
@@ -109,9 +160,9 @@ def fig4(quick, device):
     return ds, claims, draw
 
 
-def fig5_8(quick, device):
+def fig5_8(quick, device, model=None):
     F = np.geomspace(100.0, 10000.0, 9 if quick else 41)
-    ds = simulate({"normal_force": F}, quick, device)
+    ds = simulate({"normal_force": F}, quick, device, model=model)
     mu = ds.mu_s.values
     claims = dict(mu_s=[float(v) for v in mu], normal_force=[float(v) for v in F],
                   increase_first_decade=float(mu[F <= 1000].max() - mu[0]),
@@ -151,11 +202,11 @@ def fig5_8(quick, device):
     return ds, claims, draw
 
 
-def fig10(quick, device):
+def fig10(quick, device, model=None):
     v = np.geomspace(1e-6, 1e-2, 9 if quick else 33)
     eta = np.array([2.7e13, 0.0])
     ds = simulate({"viscous_coefficient": eta[:, None], "disc_velocity": v[None, :]}, quick, device,
-                  scene=wf.Parameters(normal_force=500.0))
+                  scene=wf.Parameters(normal_force=500.0), model=model)
     mu = ds.mu_s.values.reshape(2, -1)
     claims = {}
     for seg in ("left", "middle", "right"):
@@ -187,10 +238,10 @@ def fig10(quick, device):
     return ds, claims, draw
 
 
-def fig11(quick, device):
+def fig11(quick, device, model=None):
     stop = 20.15
     record = wf.Record.window(20.0, 20.4, 201 if quick else 801, members=(0, 1))
-    ds = simulate({"stop_time": [stop, np.inf]}, quick, device, scene=wf.Parameters(end_time=20.4), record=record)
+    ds = simulate({"stop_time": [stop, np.inf]}, quick, device, scene=wf.Parameters(end_time=20.4), record=record, model=model)
     t = ds.time.values
     v = ds.velocity_history.values[0]  # (time, x)
     before = np.abs(v[t < stop]).max()
@@ -211,10 +262,10 @@ def fig11(quick, device):
     return ds, claims, lambda path: space_time_map(ds, 0, path)
 
 
-def fig12(quick, device):
+def fig12(quick, device, model=None):
     e = np.linspace(-0.3, 0.3, 7 if quick else 25)
     eta = np.array([2.7e13, 0.0])
-    ds = simulate({"viscous_coefficient": eta[:, None], "eccentricity": e[None, :]}, quick, device)
+    ds = simulate({"viscous_coefficient": eta[:, None], "eccentricity": e[None, :]}, quick, device, model=model)
     claims = {"eccentricity": [float(x) for x in e]}
     for seg in ("left", "middle", "right"):
         vv = ds[f"v_{seg}"].values.reshape(2, -1)
@@ -246,12 +297,13 @@ CHOICES = {
     "interface_velocity_factor=2": {"interface_velocity_factor": 2.0},
     "torque_arm=0": {"torque_arm": 0.0},
     "torque_arm=2H": {"torque_arm": 0.03},
+    "torque_arm=-H (counterfactual)": {"torque_arm": -0.015},
     "damping=1e5": {"damping": 1e5},
     "initial_age=1s": {"initial_age": 1.0},
 }
 
 
-def choices(quick, device):
+def choices(quick, device, model=None):
     """Each open choice of SPEC section 10 against three readings of the paper: which edge
     nucleates at e = 0 (paper: left), the sign of d mu_s / d e (paper: + , higher towards the
     trailing edge), and whether the left precursor vanishes at low force (paper: none below
@@ -263,9 +315,10 @@ def choices(quick, device):
     for label, change in list(CHOICES.items()) + [("poisson_coupling=off", None)]:
         fronts = wf.Fronts(direction=change) if isinstance(change, str) else wf.Fronts()
         scene = wf.Parameters(**(change if isinstance(change, dict) else {}))
-        model = wf.Model(poisson_coupling=False) if change is None else wf.Model()
+        base = model or wf.Model()
+        m = dataclasses.replace(base, poisson_coupling=False) if change is None else base
         members = {"eccentricity": np.concatenate([e, np.zeros(2)]), "normal_force": np.concatenate([np.full(3, 1000.0), F[[0, 2]]])}
-        ds = wf.simulate(members, scene=scene, model=model, solver=wf.Solver(nodes=100 if quick else 200),
+        ds = wf.simulate(with_peak_end_time(members, scene), scene=scene, model=m, solver=wf.Solver(nodes=100 if quick else 200, stall_factor=np.inf),
                          fronts=fronts, device=device, progress=False)
         mu = ds.mu_s.values
         rows[label] = dict(
@@ -278,7 +331,7 @@ def choices(quick, device):
             v_middle_e0=float(ds.v_middle.values[1]), mu_s_e0=float(mu[1]),
         )
         ds = ds.expand_dims(choice=[label])
-        datasets.append(ds[["mu_s", "v_left", "v_middle", "v_right", "nucleation_position", "eccentricity", "normal_force"]])
+        datasets.append(ds[["mu_s", "mu_s_time", "final_time", "status", "stop_time", "v_left", "v_middle", "v_right", "nucleation_position", "eccentricity", "normal_force"]])
     import xarray as xr
 
     combined = xr.concat(datasets, dim="choice")
@@ -298,12 +351,12 @@ def choices(quick, device):
     return combined, rows, draw
 
 
-def ensemble_map(quick, device):
+def ensemble_map(quick, device, model=None):
     e = np.linspace(-0.35, 0.35, 5 if quick else 29)
     F = np.geomspace(100.0, 10000.0, 4 if quick else 25)
     v = np.geomspace(1e-6, 1e-2, 3 if quick else 17)
     members = {"eccentricity": e[:, None, None], "normal_force": F[None, :, None], "disc_velocity": v[None, None, :]}
-    ds = simulate(members, quick, device, nodes=60 if quick else 100)
+    ds = simulate(members, quick, device, nodes=60 if quick else 100, model=model)
     mu = ds.mu_s.values.reshape(e.size, F.size, v.size)
     left = np.isfinite(ds.v_left.values).reshape(mu.shape)
     claims = dict(members=int(ds.sizes["member"]), ok=int((ds.status.values == 0).sum()),
@@ -336,7 +389,7 @@ def ensemble_map(quick, device):
     return ds, claims, draw
 
 
-def uncertainty(quick, device):
+def uncertainty(quick, device, model=None):
     """Friction parameters drawn around Table 1 (distributions in the docstring of
     studies/sweeps/uncertainty.toml, the same here)."""
     n = 200 if quick else 10000
@@ -348,14 +401,25 @@ def uncertainty(quick, device):
         "interface_stiffness": np.exp(rng(3).uniform(np.log(1.5e14), np.log(6e14), n)),
         "hardness": rng(4).normal(5.4e8, 5.4e7, n),
     }
-    ds = simulate(members, quick, device, nodes=60 if quick else 100)
+    # quick: max_steps 10,000 (members that end ok need < 1,300 accepted steps; under the stress gate the
+    # members whose steady sliding stays below the yield stress chatter on the gate until max_steps)
+    ds = simulate(members, quick, device, nodes=60 if quick else 100, model=model,
+                  **({"max_steps": 10000} if quick else {}))
     mu = ds.mu_s.values
-    claims = dict(members=n, ok=int((ds.status.values == 0).sum()), mu_s_mean=float(np.nanmean(mu)),
+    ok = ds.status.values == 0
+    p = wf.Parameters()
+    # steady sliding |tau_f|/A at v (SPEC section 5): mu0*D/h + eta*v_star*ln(1 + v/v_star); the gate stays shut below tau_c
+    steady = members["interface_stiffness"] * members["memory_length"] + members["viscous_coefficient"] * \
+        p.reference_velocity * np.log1p(p.disc_velocity / p.reference_velocity)
+    below = steady < p.shear_strength
+    claims = dict(members=n, ok=int(ok.sum()), failed_status=sorted({int(x) for x in ds.status.values[~ok]}),
+                  steady_stress_below_tau_c=int(below.sum()), failed_and_below_tau_c=int((~ok & below).sum()),
+                  mu_s_mean=float(np.nanmean(mu)),
                   mu_s_std=float(np.nanstd(mu)), mu_s_p05=float(np.nanpercentile(mu, 5)),
                   mu_s_p95=float(np.nanpercentile(mu, 95)),
                   v_middle_p05=float(np.nanpercentile(ds.v_middle.values, 5)),
                   v_middle_p95=float(np.nanpercentile(ds.v_middle.values, 95)),
-                  correlation_mu_s={k: float(np.corrcoef(v, mu)[0, 1]) for k, v in members.items()})
+                  correlation_mu_s={k: float(np.corrcoef(v[ok], mu[ok])[0, 1]) for k, v in members.items()})
     claims.update(segments_summary(ds))
 
     def draw(path):
@@ -380,13 +444,25 @@ STUDIES = {
 }
 
 
-def run_study(name, quick, device, outdir) -> dict:
+def run_study(name, quick, device, outdir, relaxation_gate="stress") -> dict:
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
-    stem = name + ("_quick" if quick else "")
+    stem = name + GATE_SUFFIX[relaxation_gate] + ("_quick" if quick else "")
     t0 = time.perf_counter()
-    ds, claims, draw = STUDIES[name](quick, device)
+    ds, claims, draw = STUDIES[name](quick, device, wf.Model(relaxation_gate=relaxation_gate))
     wall = time.perf_counter() - t0
+    if "choice" in ds.dims:
+        peaks = [peak_check(ds.sel(choice=c)) for c in ds.choice.values]
+        peak = dict(members_without_peak=sum(p["members_without_peak"] for p in peaks),
+                    failed_members=sum(p["failed_members"] for p in peaks),
+                    max_final_time=max(p["max_final_time"] for p in peaks))
+    else:
+        peak = peak_check(ds)
+    if peak["members_without_peak"] or peak["failed_members"]:
+        print(f"WARNING {stem}: {peak['members_without_peak']} member(s) end before their mu_s peak, "
+              f"{peak['failed_members']} failed (status != 0)", file=sys.stderr)
+    claims = dict(claims) if isinstance(claims, dict) else claims
+    claims["peak_check"] = peak
     if "choice" in ds.dims:
         ds.to_netcdf(outdir / f"{stem}.nc")
     else:  # the final-state fields are not needed by the figures: keep the files small
@@ -394,7 +470,9 @@ def run_study(name, quick, device, outdir) -> dict:
         write_ensemble(ds.drop_vars([v for v in final_fields if v in ds]), outdir / f"{stem}.nc")
     draw(outdir / f"{stem}.png")
     meta = dict(study=name, quick=quick, device=str(device), wall_s=wall, warpfric=wf.__version__,
-                command=f"python studies/figures.py {name}" + (" --quick" if quick else "") + f" --device {device}")
+                relaxation_gate=relaxation_gate,
+                command=f"python studies/figures.py {name}" + (" --quick" if quick else "") + f" --device {device}"
+                + f" --relaxation-gate {relaxation_gate}")
     (outdir / f"{stem}.json").write_text(json.dumps(dict(meta=meta, claims=claims), indent=1, default=float))
     print(f"{stem}: {wall:.1f} s -> {outdir / stem}.nc/.png/.json")
     return claims
@@ -406,11 +484,13 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--device", default=None)
     ap.add_argument("--outdir", default=str(Path(__file__).with_name("figures")))
+    ap.add_argument("--relaxation-gate", choices=sorted(GATE_SUFFIX), default="stress",
+                    help="the friction law's yield gate (default stress; none = SPEC v1)")
     args = ap.parse_args(argv)
     device = args.device or wf.default_device()
     names = sorted(STUDIES) if args.name == "all" else [args.name]
     for name in names:
-        run_study(name, args.quick, device, args.outdir)
+        run_study(name, args.quick, device, args.outdir, args.relaxation_gate)
 
 
 if __name__ == "__main__":
