@@ -39,13 +39,14 @@ from .reductions import crossing_time, detachment_velocity, record_friction_poin
 C_U, C_V, C_TAU, C_PHI = 0, 1, 2, 3
 N_COMPONENTS = 4
 # work slots: stage constants z (same order as the components), Newton iterate, Thomas and border rows
-W_ZU, W_ZV, W_ZT, W_ZP, W_V, W_CP, W_R0, W_R1, W_R2, W_C1, W_C2, W_DIAG, W_MARGIN, W_DMARGIN, W_CONTACT = range(15)
-N_WORK = 15
-# yield-gate state (stress gate), first index of the gate array: the gate held over the next step (0
-# closed, 1 open, in between: Filippov sliding on the yield surface), and the yield margin
-# |tau_f| - tau_c*A (Pa) at the last accepted point
-G_GATE, G_MARGIN = 0, 1
-N_GATE = 2
+W_ZU, W_ZV, W_ZT, W_ZP, W_V, W_CP, W_R0, W_R1, W_R2, W_C1, W_C2, W_DIAG, W_MARGIN, W_DMARGIN, W_CONTACT, W_GATE_END = range(16)
+N_WORK = 16
+# yield-gate state (stress gate), first index of the gate array: the gate (0 closed, 1 open, held over
+# the next step; for a sliding node the start of its implicit solve), the yield margin
+# |tau_f| - tau_c*A (Pa) at the last accepted point, and the sliding flag (1: the node slides on the
+# yield surface, its gate solved in every stage from |tau_f| = tau_c*A)
+G_GATE, G_MARGIN, G_SLIDE = 0, 1, 2
+N_GATE = 3
 N_STAGE_SLOTS = 3
 # a gate switch that MAX_SWITCH_RETRIES retries could not place within its tolerance (a strongly
 # curved margin makes the linear crossing estimate creep towards it, like regula falsi) is accepted
@@ -113,6 +114,13 @@ def _make_integrator(dtype: str, model):
         return ft(1.0)
 
     @wp.func
+    def node_sliding(gates: array3, i: int, m: int):
+        """1 where node i slides on the yield surface (stress gate), else 0."""
+        if wp.static(stress_gate):
+            return gates[G_SLIDE, i, m]
+        return ft(0.0)
+
+    @wp.func
     def prepare_stage(
         m: int, n: int, state: array3, K: array4, work: array3,
         h: ft, a1: ft, s1: int, a2: ft, s2: int, n_terms: int, extrapolate: ft,
@@ -175,8 +183,9 @@ def _make_integrator(dtype: str, model):
                     u_r = work[W_ZU, i + 1, m] + g * work[W_V, i + 1, m]
                 vel = work[W_V, i, m]
                 sigma, ds_ul, ds_uc, ds_ur, ds_d0, ds_a = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
-                tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area = interface_friction(
-                    c, sigma, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m], g, node_gate(gates, i, m)
+                tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, gate_used = interface_friction(
+                    c, sigma, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m], g, node_gate(gates, i, m),
+                    node_sliding(gates, i, m), ft(s.sliding_width),
                 )
                 f_el, df_ul, df_uc, df_ur, df_d0, df_a = elastic_force(c, i, n, u_l, u_c, u_r, delta0, tilt)
                 residual = -(f_el + tau_f - c.damping * vel)
@@ -339,12 +348,14 @@ def _make_integrator(dtype: str, model):
                 u_r = work[W_ZU, i + 1, m] + g * work[W_V, i + 1, m]
             vel = work[W_V, i, m]
             sigma, ds_ul, ds_uc, ds_ur, ds_d0, ds_a = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
-            gate = node_gate(gates, i, m)
-            tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area = interface_friction(
-                c, sigma, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m], g, gate
+            sliding = node_sliding(gates, i, m)
+            tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, gate = interface_friction(
+                c, sigma, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m], g, node_gate(gates, i, m), sliding,
+                ft(s.sliding_width),
             )
             if check_gates == 1:
                 work[W_CONTACT, i, m] = contact  # at the end of the step: fronts skip lifted-off nodes
+                work[W_GATE_END, i, m] = gate
             if wp.static(stress_gate):
                 if check_gates == 1:
                     z1 = yield_margin(c, tau_f, area)
@@ -361,7 +372,7 @@ def _make_integrator(dtype: str, model):
                     open_now = ft(0.0)
                     if z1 > ft(0.0):
                         open_now = ft(1.0)
-                    if (gate == ft(0.0) or gate == ft(1.0)) and open_now != gate:
+                    if sliding == ft(0.0) and open_now != gate:
                         z0 = gates[G_MARGIN, i, m]
                         theta = ft(0.0)
                         if z0 != z1:
@@ -391,13 +402,13 @@ def _make_integrator(dtype: str, model):
         return sum_tau, sum_sigma, min_sigma, switch_error, retry_fraction
 
     @wp.func
-    def gate_regime(gate: ft):
-        """0: closed, 1: sliding on the yield surface (fractional gate), 2: open."""
-        if gate <= ft(0.0):
-            return 0
+    def gate_regime(gate: ft, sliding: ft):
+        """0: closed, 1: sliding on the yield surface, 2: open."""
+        if sliding > ft(0.0):
+            return 1
         if gate >= ft(1.0):
             return 2
-        return 1
+        return 0
 
     @wp.func
     def switch_gates(
@@ -405,55 +416,59 @@ def _make_integrator(dtype: str, model):
         slot: int, gates: array3, work: array3, t_old: wp.float64, t_new: wp.float64,
         yield_time: wp.array2d(dtype=wp.float64),
     ):
-        """After an accepted step (state advanced): choose each node's gate for the next step from its
-        end-of-step yield margin z1, store the margin, correct the FSAL derivatives K[slot] of the
-        nodes whose gate changed (the gate enters only the relaxation rates of tau_el and phi, which
-        are closed-form in the state) and record the first opening time (linear in the margin).
+        """After an accepted step (state advanced): choose each node's gate regime for the next step
+        from its end-of-step yield margin z1, store the margin, correct the FSAL derivatives K[slot] of
+        the nodes whose gate changed (the gate enters only the relaxation rates of tau_el and phi,
+        closed-form in the state) and record the first opening time (linear in the margin).
 
-        The margin's rate is affine in the gate: dz/dt(g) = r_obs + (g - g_old)*dr, with r_obs the
-        rate seen over the step and dr = d(dz/dt)/dg at its end (work[W_DMARGIN]). A node that
-        crosses the yield surface z = 0 while the other side's field also points towards it
-        (dr < 0 and the rate on the far side of opposite sign) slides on the surface (Filippov):
-        its gate takes the fraction that drives z to 0 over the next step of the same size; it
-        leaves the surface when that fraction leaves [0, 1]. Otherwise the gate is the Heaviside
-        theta(z1)."""
+        A closed or open node takes the Heaviside theta(z1), unless it crossed the yield surface
+        z = 0 into a side whose field points back (Filippov sliding): the margin's rate is affine in
+        the gate, dz/dt(g) = r_obs + (g - g_old)*dr, r_obs seen over the step and dr = d(dz/dt)/dg
+        at its end (work[W_DMARGIN]); with dr < 0 and the far side's rate of opposite sign the node
+        slides. A sliding node's gate is solved in every stage from |tau_f| = tau_c*A
+        (interface_friction), pinned at 1 or 0 where that cannot hold; the node keeps that implicit
+        regime for the rest of the run."""
         v_disc = ft(disc_velocity_at(p, t_new, t_old))
         h = ft(t_new - t_old)
         for i in range(n):
             z1 = work[W_MARGIN, i, m]
             z0 = gates[G_MARGIN, i, m]
+            sliding = gates[G_SLIDE, i, m]
             gate = gates[G_GATE, i, m]
-            dr = work[W_DMARGIN, i, m]
+            new_sliding = ft(0.0)
             new_gate = ft(0.0)
-            if z1 > ft(0.0):
-                new_gate = ft(1.0)
-            r_obs = ft(0.0)
-            if h > ft(0.0):
-                r_obs = (z1 - z0) / h
-            rate_closed = r_obs - gate * dr
-            rate_open = r_obs + (ft(1.0) - gate) * dr
-            sliding = False
-            if dr < ft(0.0) and h > ft(0.0):
-                if gate > ft(0.0) and gate < ft(1.0):
-                    sliding = True
-                if gate == ft(0.0) and z1 > ft(0.0) and rate_open < ft(0.0):
-                    sliding = True  # entered the open side, which pushes back
-                if gate == ft(1.0) and z1 <= ft(0.0) and rate_closed > ft(0.0):
-                    sliding = True  # entered the closed side, which pushes back
-            if sliding:
-                new_gate = wp.clamp(gate + (-z1 / h - r_obs) / dr, ft(0.0), ft(1.0))
+            if sliding > ft(0.0):
+                # a sliding node stays in the implicit regime: where |tau_f| = tau_c*A cannot hold, its
+                # solved gate is pinned at 1 (open) or 0 (closed), which is the Heaviside value; leaving
+                # the regime would only trade the implicit gate for repeated located switches
+                gate = work[W_GATE_END, i, m]  # the last stage's solved gate: K[slot] is consistent with it
+                new_gate = gate
+                new_sliding = ft(1.0)
+            else:
+                if z1 > ft(0.0):
+                    new_gate = ft(1.0)
+                dr = work[W_DMARGIN, i, m]
+                if dr < ft(0.0) and h > ft(0.0) and new_gate != gate:
+                    r_obs = (z1 - z0) / h
+                    rate_far = r_obs - gate * dr  # the closed side's rate, coming from the open side
+                    if gate == ft(0.0):
+                        rate_far = r_obs + dr  # the open side's rate, coming from the closed side
+                    if (gate == ft(0.0) and rate_far < ft(0.0)) or (gate == ft(1.0) and rate_far > ft(0.0)):
+                        new_sliding = ft(1.0)
+                        new_gate = wp.clamp(gate + (-z1 / h - r_obs) / dr, ft(0.0), ft(1.0))  # start value
             if new_gate != gate:
                 relax = (new_gate - gate) * wp.abs(v_disc - c.kif * state[C_V, i, m]) * c.inv_D
                 K[slot, C_TAU, i, m] = K[slot, C_TAU, i, m] - state[C_TAU, i, m] * relax
                 K[slot, C_PHI, i, m] = K[slot, C_PHI, i, m] - state[C_PHI, i, m] * relax
-                gates[G_GATE, i, m] = new_gate
-                if gate_regime(new_gate) != gate_regime(gate):
-                    st.gate_switches = st.gate_switches + 1
-                if gate == ft(0.0) and not wp.isfinite(yield_time[i, m]):
-                    theta = wp.float64(0.0)
-                    if z0 != z1 and z1 > ft(0.0):
-                        theta = wp.clamp(wp.float64(z0) / wp.float64(z0 - z1), wp.float64(0.0), wp.float64(1.0))
-                    yield_time[i, m] = t_old + theta * (t_new - t_old)
+            if gate_regime(new_gate, new_sliding) != gate_regime(gate, sliding):
+                st.gate_switches = st.gate_switches + 1
+            if new_gate > ft(0.0) and not wp.isfinite(yield_time[i, m]):
+                theta = wp.float64(0.0)
+                if z0 != z1 and z1 > ft(0.0):
+                    theta = wp.clamp(wp.float64(z0) / wp.float64(z0 - z1), wp.float64(0.0), wp.float64(1.0))
+                yield_time[i, m] = t_old + theta * (t_new - t_old)
+            gates[G_GATE, i, m] = new_gate
+            gates[G_SLIDE, i, m] = new_sliding
             gates[G_MARGIN, i, m] = z1
         return st
 
@@ -571,8 +586,8 @@ def _make_integrator(dtype: str, model):
                 u_r = state[C_U, i + 1, m]
             vel = state[C_V, i, m]
             sigma, ds_ul, ds_uc, ds_ur, ds_d0, ds_a = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
-            tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area = interface_friction(
-                c, sigma, vel, v_disc, state[C_TAU, i, m], state[C_PHI, i, m], ft(0.0), ft(1.0)
+            tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, gate = interface_friction(
+                c, sigma, vel, v_disc, state[C_TAU, i, m], state[C_PHI, i, m], ft(0.0), ft(1.0), ft(0.0), ft(1.0)
             )
             current = wp.vector(vel, v_disc - c.kif * vel, contact * sigma, tau_f, length=4, dtype=ft)
             for k in range(st.record_next, k_end):
@@ -827,8 +842,8 @@ def _make_integrator(dtype: str, model):
             if i < n - 1:
                 u_r = state[C_U, i + 1, m]
             sigma, ds_ul, ds_uc, ds_ur, ds_d0, ds_a = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
-            tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area = interface_friction(
-                c, sigma, state[C_V, i, m], v_disc, state[C_TAU, i, m], state[C_PHI, i, m], ft(0.0), ft(1.0)
+            tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, gate = interface_friction(
+                c, sigma, state[C_V, i, m], v_disc, state[C_TAU, i, m], state[C_PHI, i, m], ft(0.0), ft(1.0), ft(0.0), ft(1.0)
             )
             normal_stress_out[i, m] = contact * sigma
             friction_stress_out[i, m] = tau_f

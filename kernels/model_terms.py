@@ -17,6 +17,8 @@ import warp as wp
 from .params import MemberParams
 
 FLOAT32_VELOCITY_FLOOR = 1.0e-4  # m/s, smallest velocity reference of the error weights in float32
+SLIDING_NEWTON_ITERATIONS = 12  # Newton iterations on the gate of a node sliding on the yield surface
+SLIDING_GATE_TOL = 1.0e-10  # converged gate update
 
 # ------------------------------------------------------------------------------------------------
 # Load protocol (float64: times of order 20 s need more than float32's 1e-6 s resolution).
@@ -81,6 +83,7 @@ def make_model_terms(ft, model):
     viscous = bool(model.viscous_friction)
     tilt_on = bool(model.tilt)
     velocity_gate = model.relaxation_gate == "velocity"
+    stress_gate = model.relaxation_gate == "stress"
 
     @wp.struct
     class Coeffs:
@@ -264,24 +267,11 @@ def make_model_terms(ft, model):
         return force, d_ul, d_uc, d_ur, d_d0, d_a
 
     @wp.func
-    def interface_friction(
-        c: Coeffs, sigma: ft, velocity: ft, v_disc: ft, z_tau: ft, z_phi: ft, g: ft, gate: ft
-    ):
-        """Friction law (SPEC section 5) at one node, solved implicitly over a stage of coefficient g.
-
-        The stage equations  phi = z_phi + g*dphi/dt  and  tau_el = z_tau + g*dtau_el/dt  are linear
-        in phi and tau_el for a given slip rate, so they are solved in closed form here; with g = 0
-        this evaluates the law at the state (phi = z_phi, tau_el = z_tau).
-
-        The relaxation of tau_el and the rejuvenation of phi run at the rate r/D:
-        r = gate*|s| (stress gate: ``gate`` is the node's yield gate, 0 or 1, held fixed over the step;
-        the gate-less law passes gate = 1) or r = sqrt(s^2 + v0^2) (velocity gate; ``gate`` unused).
-
-        Returns tau_f (Pa), d tau_f/d sigma_n, d tau_f/d s (total, through phi and tau_el),
-        tau_el (Pa), phi (s), d tau_el/dt (Pa/s), d phi/dt (1), contact indicator (1 or 0),
-        real-contact fraction A (1).
-        """
-        s = v_disc - c.kif * velocity
+    def friction_at_gate(c: Coeffs, sigma: ft, s: ft, z_tau: ft, z_phi: ft, g: ft, gate: ft):
+        """The closed-form stage solution of the friction law at one node for a given slip rate s and
+        gate (see interface_friction). Returns tau_f, d tau_f/d sigma_n, d tau_f/d s (total through
+        phi and tau_el, gate fixed), tau_el, phi, d tau_el/dt, d phi/dt, contact, A, d A/d sigma_n,
+        d A/d s (gate fixed), d tau_f/d gate, d A/d gate."""
         a_s = wp.abs(s)
         sg = wp.sign(s)
         r = a_s * gate
@@ -292,6 +282,7 @@ def make_model_terms(ft, model):
         den = ft(1.0) + g * r * c.inv_D
         phi = (z_phi + g) / den
         dphi_ds = -phi * g * dr_ds * c.inv_D / den
+        dphi_dgate = -phi * g * a_s * c.inv_D / den
         contact = ft(0.0)
         if sigma >= ft(0.0):
             contact = ft(1.0)
@@ -300,10 +291,13 @@ def make_model_terms(ft, model):
         daging_dphi = c.b / (c.phi0 + phi)
         area = sigma_c * c.inv_hardness * aging
         darea_dsigma = contact * c.inv_hardness * aging
-        darea_ds = sigma_c * c.inv_hardness * daging_dphi * dphi_ds
+        darea_dphi = sigma_c * c.inv_hardness * daging_dphi
+        darea_ds = darea_dphi * dphi_ds
+        darea_dgate = darea_dphi * dphi_dgate
         tau_el = (z_tau + g * c.Kh * area * s) / den
         dtel_darea = g * c.Kh * s / den
         dtel_ds = (g * c.Kh * area - tau_el * g * dr_ds * c.inv_D) / den
+        dtel_dgate = -tau_el * g * a_s * c.inv_D / den
         tau_f = tau_el
         dtf_darea = dtel_darea
         dtf_ds = dtel_ds
@@ -314,9 +308,71 @@ def make_model_terms(ft, model):
             dtf_ds += c.eta_vstar * area / (c.vstar + a_s)
         dtf_ds += dtf_darea * darea_ds
         dtf_dsigma = dtf_darea * darea_dsigma
+        dtf_dgate = dtel_dgate + dtf_darea * darea_dgate
         rate_tau = c.Kh * area * s - tau_el * r * c.inv_D
         rate_phi = ft(1.0) - phi * r * c.inv_D
-        return tau_f, dtf_dsigma, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area
+        return (tau_f, dtf_dsigma, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, darea_dsigma, darea_ds,
+                dtf_dgate, darea_dgate)
+
+    @wp.func
+    def interface_friction(
+        c: Coeffs, sigma: ft, velocity: ft, v_disc: ft, z_tau: ft, z_phi: ft, g: ft, gate: ft, sliding: ft,
+        width: ft,
+    ):
+        """Friction law (SPEC section 5) at one node, solved implicitly over a stage of coefficient g.
+
+        The stage equations  phi = z_phi + g*dphi/dt  and  tau_el = z_tau + g*dtau_el/dt  are linear
+        in phi and tau_el for a given slip rate and gate, so they are solved in closed form; with
+        g = 0 this evaluates the law at the state (phi = z_phi, tau_el = z_tau).
+
+        The relaxation of tau_el and the rejuvenation of phi run at the rate r/D:
+        r = gate*|s| (stress gate: ``gate`` is the node's yield gate, held fixed over the step; the
+        gate-less law passes gate = 1) or r = sqrt(s^2 + v0^2) (velocity gate; ``gate`` unused).
+        A node sliding on the yield surface (stress gate, ``sliding`` = 1, g > 0) has its gate
+        solved here, implicitly, from gate = theta_w(x), x = (|tau_f|/A - tau_c)/(width*tau_c),
+        theta_w(x) = (1 + tanh(x))/2: Filippov's equivalent gate, regularised over a relative
+        width of the yield stress (Newton on the gate, started from ``gate``; unique root since
+        dx/dgate < 0 there); the derivatives then include the gate's response.
+
+        Returns tau_f (Pa), d tau_f/d sigma_n, d tau_f/d s (total), tau_el (Pa), phi (s),
+        d tau_el/dt (Pa/s), d phi/dt (1), contact indicator (1 or 0), real-contact fraction A (1),
+        and the gate used.
+        """
+        s = v_disc - c.kif * velocity
+        (tau_f, dtf_dsigma, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, darea_dsigma, darea_ds,
+         dtf_dgate, darea_dgate) = friction_at_gate(c, sigma, s, z_tau, z_phi, g, gate)
+        if wp.static(stress_gate):
+            if sliding > ft(0.0) and g > ft(0.0) and area > ft(0.0):
+                scale = ft(1.0) / (width * c.tau_c)
+                dF_dgate = ft(1.0)
+                dtheta = ft(0.0)
+                for _it in range(SLIDING_NEWTON_ITERATIONS):
+                    x = (wp.abs(tau_f) / area - c.tau_c) * scale
+                    theta = ft(0.5) * (ft(1.0) + wp.tanh(x))
+                    dtheta = ft(0.5) * (ft(1.0) - wp.tanh(x) * wp.tanh(x))
+                    dx_dgate = (wp.sign(tau_f) * dtf_dgate - wp.abs(tau_f) * darea_dgate / area) / area * scale
+                    dF_dgate = ft(1.0) - dtheta * dx_dgate
+                    F = gate - theta
+                    new_gate = wp.clamp(gate - F / dF_dgate, ft(0.0), ft(1.0))
+                    if wp.abs(new_gate - gate) <= ft(SLIDING_GATE_TOL):
+                        gate = new_gate
+                        (tau_f, dtf_dsigma, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, darea_dsigma,
+                         darea_ds, dtf_dgate, darea_dgate) = friction_at_gate(c, sigma, s, z_tau, z_phi, g, gate)
+                        break
+                    gate = new_gate
+                    (tau_f, dtf_dsigma, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, darea_dsigma, darea_ds,
+                     dtf_dgate, darea_dgate) = friction_at_gate(c, sigma, s, z_tau, z_phi, g, gate)
+                if area > ft(0.0):
+                    # the gate follows s and sigma_n: d gate = theta' (dx/ds ds + dx/dsigma dsigma) / dF_dgate
+                    x = (wp.abs(tau_f) / area - c.tau_c) * scale
+                    dtheta = ft(0.5) * (ft(1.0) - wp.tanh(x) * wp.tanh(x))
+                    dx_dgate = (wp.sign(tau_f) * dtf_dgate - wp.abs(tau_f) * darea_dgate / area) / area * scale
+                    dF_dgate = ft(1.0) - dtheta * dx_dgate
+                    dx_ds = (wp.sign(tau_f) * dtf_ds - wp.abs(tau_f) * darea_ds / area) / area * scale
+                    dx_dsigma = (wp.sign(tau_f) * dtf_dsigma - wp.abs(tau_f) * darea_dsigma / area) / area * scale
+                    dtf_ds = dtf_ds + dtf_dgate * dtheta * dx_ds / dF_dgate
+                    dtf_dsigma = dtf_dsigma + dtf_dgate * dtheta * dx_dsigma / dF_dgate
+        return tau_f, dtf_dsigma, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, gate
 
     @wp.func
     def yield_margin(c: Coeffs, tau_f: ft, area: ft):

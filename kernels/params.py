@@ -62,6 +62,7 @@ class SolverSettings:
     max_step: wp.float64
     newton_tol: wp.float64
     switch_rtol: wp.float64  # relative tolerance of the gate-switch location (rtol * switch_tol)
+    sliding_width: wp.float64  # relative width of the regularised gate of nodes sliding on the yield surface
     max_steps: wp.int32
     newton_max_iter: wp.int32
 

@@ -137,3 +137,25 @@ def test_no_peak_inside_the_run_is_a_status_not_a_number():
     assert auto.mu_final.values[0] <= 0.99 * auto.mu_s.values[0]  # the end: 1 % below the peak
     np.testing.assert_allclose(auto.mu_s.values[1], ds.mu_s.values[1], rtol=1e-12)  # same peak, shorter run
     assert auto.final_time.values[1] < 21.0
+
+
+def test_steady_sliding_below_the_yield_stress_holds_the_yield_surface():
+    """With mu0*D/h + tau_vis below tau_c (interface_stiffness 2e14: 100 + 18.7 MPa < 130 MPa) a fully
+    open gate cannot keep the asperity stress at tau_c: the nodes slide on the yield surface with the
+    equivalent gate g* = (mu0/h)*D / (tau_c - tau_vis/A) (Filippov), phi = D/(g*|s|) and
+    mu = (1 + b ln(1 + phi/phi0)) * tau_c/sigma_H. The regularised gate converges to it as its width
+    shrinks, and the run no longer chatters (it did: 2e4 switches and max_steps)."""
+    p = wf.Parameters(interface_stiffness=2e14, end_time=24.0)
+    s = p.disc_velocity
+    visc = p.viscous_coefficient * p.reference_velocity * np.log1p(s / p.reference_velocity)
+    g_star = p.interface_stiffness * p.memory_length / (p.shear_strength - visc)
+    phi = p.memory_length / (g_star * s)
+    mu_expected = (1 + p.aging_coefficient * np.log1p(phi / p.aging_time)) * p.shear_strength / p.hardness
+    errors = []
+    for width in (1e-3, 1e-4):
+        ds = run(scene=p, nodes=20, sliding_width=width)
+        assert ds.status.values[0] == 0 and ds.gate_switches.values[0] < 3 * 20
+        np.testing.assert_allclose(ds.yield_gate.values[0], g_star, rtol=10 * width)
+        errors.append(abs(ds.mu_final.values[0] / mu_expected - 1))
+    print("steady mu errors at widths 1e-3, 1e-4:", errors)
+    assert errors[1] < errors[0] / 3 and errors[1] < 1e-3

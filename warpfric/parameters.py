@@ -223,6 +223,9 @@ class Solver:
     switch_tol:       stress gate: tolerance of the located gate switches, in units of rtol (docs/model.md,
                       "Gate switches"); 1 holds the error of a switch to the step's local tolerance,
                       inf lets every switch happen at the end of the step in which it occurs (no location).
+    sliding_width:    stress gate: a node held on the yield surface (Filippov sliding) has the gate
+                      theta_w(x) = (1 + tanh x)/2, x = (|tau_f|/A - tau_c)/(sliding_width*tau_c), solved
+                      implicitly; its limit 0 is the sharp equivalent gate (docs/model.md, "Gate switches").
     steps_per_launch: attempted steps per kernel launch (progress granularity; no effect on results).
     stall_factor:     once half of an ensemble has ended ok, a member still running after more than
                       max(stall_min_steps, stall_factor * their median) attempted steps stops with
@@ -241,6 +244,7 @@ class Solver:
     newton_max_iter: int = 8
     newton_tol: float = 0.03
     switch_tol: float = 1.0
+    sliding_width: float = 1e-3
     steps_per_launch: int = 500
     stall_factor: float = 10.0
     stall_min_steps: int = 2000
@@ -275,6 +279,8 @@ class Solver:
         need(isinstance(self.switch_tol, (int, float, np.integer, np.floating)) and not isinstance(self.switch_tol, bool)
              and self.switch_tol > 0 and not math.isnan(self.switch_tol), "switch_tol", self.switch_tol,
              "a number > 0 (inf allowed)")
+        need(is_real(self.sliding_width) and 0 < self.sliding_width <= 0.1, "sliding_width", self.sliding_width,
+             "a number in (0, 0.1]")
         need(is_int(self.steps_per_launch) and self.steps_per_launch >= 1, "steps_per_launch",
              self.steps_per_launch, "an integer >= 1")
         need(self.method in _METHODS, "method", self.method, " or ".join(_METHODS))

@@ -174,6 +174,7 @@ def simulate(
     settings.max_step = solver.max_step
     settings.newton_tol = solver.newton_tol
     settings.switch_rtol = solver.rtol * solver.switch_tol
+    settings.sliding_width = solver.sliding_width
     settings.max_steps = solver.max_steps
     settings.newton_max_iter = solver.newton_max_iter
 
