@@ -82,6 +82,10 @@ def main(argv=None):
     ap.add_argument("--max-steps", type=int, default=50_000)
     ap.add_argument("--dtypes", nargs="+", default=["float64", "float32"])
     ap.add_argument("--out", default="stability.nc")
+    ap.add_argument("--relaxation-gate", default="stress", choices=["stress", "none", "velocity"],
+                    help="friction law (float32 is skipped with the stress gate, which refuses it)")
+    ap.add_argument("--stall-factor", type=float, default=float("inf"),
+                    help="Solver.stall_factor (default inf: a map counts every member's own outcome)")
     ap.add_argument("--summarise", default=None, help="print the summary of an existing file and exit")
     args = ap.parse_args(argv)
     if args.summarise:
@@ -94,15 +98,18 @@ def main(argv=None):
     axes = QUICK if args.quick else FULL
     members = grid(axes)
     mode = "w"
-    for dtype in args.dtypes:
-        solver = wf.Solver(nodes=args.nodes, rtol=args.rtol, dtype=dtype, max_steps=args.max_steps)
+    model = wf.Model(relaxation_gate=args.relaxation_gate)
+    dtypes = [d for d in args.dtypes if not (d == "float32" and args.relaxation_gate == "stress")]
+    for dtype in dtypes:
+        solver = wf.Solver(nodes=args.nodes, rtol=args.rtol, dtype=dtype, max_steps=args.max_steps,
+                           stall_factor=args.stall_factor)
         t0 = time.perf_counter()
-        ds = wf.simulate(members, solver=solver, device=args.device, progress=True)
+        ds = wf.simulate(members, model=model, solver=solver, device=args.device, progress=True)
         print(f"{dtype}: {time.perf_counter() - t0:.1f} s")
         print(summarise(ds, axes), flush=True)
         ds.to_netcdf(args.out, mode=mode, group=dtype)
         mode = "a"
-    print(f"wrote {args.out} (groups {', '.join(args.dtypes)})")
+    print(f"wrote {args.out} (groups {', '.join(dtypes)}; relaxation gate {args.relaxation_gate})")
 
 
 if __name__ == "__main__":
