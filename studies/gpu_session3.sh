@@ -4,6 +4,7 @@
 #   bash studies/gpu_session3.sh bench    # engine benchmark: stress gate vs no gate, fronts off/on
 #   bash studies/gpu_session3.sh stability  # hard-case map under the stress gate (float64)
 #   bash studies/gpu_session3.sh figures  # every figure study, full size, under the stress gate
+#   bash studies/gpu_session3.sh float32  # float32 (gate-less law) benchmark and stability map, straggler rule on
 # Logs and JSON under $OUT.
 set -uo pipefail
 export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1
@@ -25,5 +26,12 @@ case "${1:-}" in
       2>&1 | grep -v "pass [12]/2" | tee "$OUT/stability_h100_stress.log" | tail -25 ;;
   figures)
     timeout 560 python3 studies/figures.py all --device cuda:0 --outdir "$OUT/figures" 2>&1 | tee "$OUT/figures_h100.log" | tail -12 ;;
-  *) echo "usage: $0 tests|bench|stability|figures"; exit 2 ;;
+  float32)
+    # issue 11's benchmark: float32 (gate-less law; the stress gate refuses float32) against float64
+    python3 studies/bench_engine.py --device cuda:0 --members 10000 --dtypes float64 float32 --repeat 1 \
+      --relaxation-gate none --out "$OUT/bench_engine_h100_none_f32.json" 2>&1 | tee "$OUT/bench_h100_none_f32.log" | tail -3
+    timeout 420 python3 studies/stability.py --device cuda:0 --dtypes float32 --relaxation-gate none \
+      --stall-factor 10 --out "$OUT/stability_h100_none_f32.nc" 2>&1 | grep -v "pass [12]/2" \
+      | tee "$OUT/stability_h100_none_f32.log" | head -12 ;;
+  *) echo "usage: $0 tests|bench|stability|figures|float32"; exit 2 ;;
 esac
