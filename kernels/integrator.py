@@ -33,7 +33,7 @@ from .params import (
     OutputSettings,
     SolverSettings,
 )
-from .reductions import crossing_time, detachment_velocity, record_friction_point
+from .reductions import crossing_time, crossing_time_quadratic, detachment_velocity, record_friction_point
 
 # state components (first index of the state array and second index of the stage-derivative array)
 C_U, C_V, C_TAU, C_PHI = 0, 1, 2, 3
@@ -529,9 +529,10 @@ def _make_integrator(dtype: str, model):
 
     @wp.func
     def track_fronts(
-        p: MemberParams, st: IntegratorState, m: int, n: int, state: array3, K: array4, work: array3, s3: int,
-        t_old: wp.float64, t_new: wp.float64, arrival: wp.array2d(dtype=wp.float64), direction: int,
-        threshold: wp.float64,
+        p: MemberParams, st: IntegratorState, m: int, n: int, state: array3, K: array4, work: array3, s2: int, s3: int,
+        t_old: wp.float64, t_new: wp.float64, arrival: wp.array2d(dtype=wp.float64),
+        arrival_step: wp.array2d(dtype=wp.float64), direction: int,
+        threshold: wp.float64, use_stage2: int,
     ):
         """Fold an accepted step (before the state is advanced) into the front tracking: the running
         maximum of the detachment velocity w, each node's first crossing of st.front_level,
@@ -553,8 +554,20 @@ def _make_integrator(dtype: str, model):
             w_new = detachment_velocity(wp.float64(K[s3, C_U, i, m]), disc_sign, direction)
             st.front_max = wp.max(st.front_max, w_new)
             w_step = wp.max(w_step, w_new)
-            if w_new >= st.front_level and not wp.isfinite(arrival[i, m]):
-                arrival[i, m] = crossing_time(st.front_level, t_old, w_old, t_new, w_new)
+            if not wp.isfinite(arrival[i, m]):
+                if use_stage2 == 1:
+                    # quadratic through the step's ends and its second stage (at c2*h): a sharper
+                    # crossing time, and its distance to the linear one as the error estimate
+                    w_mid = detachment_velocity(wp.float64(K[s2, C_U, i, m]), disc_sign, direction)
+                    if w_new >= st.front_level or w_mid >= st.front_level:
+                        t_cross, t_err = crossing_time_quadratic(
+                            st.front_level, t_old, w_old, wp.float64(C2), w_mid, t_new, w_new
+                        )
+                        arrival[i, m] = t_cross
+                        arrival_step[i, m] = t_err
+                elif w_new >= st.front_level:
+                    arrival[i, m] = crossing_time(st.front_level, t_old, w_old, t_new, w_new)
+                    arrival_step[i, m] = t_new - t_old  # backward-Euler step: no inner point
         if w_step > wp.float64(0.0) and w_step >= threshold * st.front_max:
             st.front_last = t_new
         st.front_now = w_step
@@ -664,6 +677,7 @@ def _make_integrator(dtype: str, model):
         launch_steps: int,
         outputs: OutputSettings,
         arrival: wp.array2d(dtype=wp.float64),
+        arrival_step: wp.array2d(dtype=wp.float64),
         record_times: wp.array(dtype=wp.float64),
         record_previous: array3,
         record: array4,
@@ -727,7 +741,7 @@ def _make_integrator(dtype: str, model):
                         c, p, settings, m, n, work, gates, K, s3, g, t_new, t, d0, a, ft(h), 1
                     )
                     if outputs.fronts == 1:
-                        st = track_fronts(p, st, m, n, state, K, work, s3, t, t_new, arrival, outputs.front_direction, outputs.front_threshold)
+                        st = track_fronts(p, st, m, n, state, K, work, s2, s3, t, t_new, arrival, arrival_step, outputs.front_direction, outputs.front_threshold, 0)
                     advance_state(m, n, state, K, s1, s2, s3, ft(h), 1)
                     if wp.static(stress_gate):
                         st = switch_gates(c, p, st, m, n, state, K, s3, gates, work, t, t_new, yield_time)
@@ -788,7 +802,7 @@ def _make_integrator(dtype: str, model):
                     st.unlocated_switches = st.unlocated_switches + 1
             if err <= wp.float64(1.0):
                 if outputs.fronts == 1:
-                    st = track_fronts(p, st, m, n, state, K, work, s3, t, t_new, arrival, outputs.front_direction, outputs.front_threshold)
+                    st = track_fronts(p, st, m, n, state, K, work, s2, s3, t, t_new, arrival, arrival_step, outputs.front_direction, outputs.front_threshold, 1)
                 advance_state(m, n, state, K, s1, s2, s3, ft(h), 0)
                 if wp.static(stress_gate):
                     switches_before = st.gate_switches

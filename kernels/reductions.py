@@ -63,6 +63,46 @@ def crossing_time(level: wp.float64, t_old: wp.float64, w_old: wp.float64, t_new
     return t_old + (t_new - t_old) * (level - w_old) / (w_new - w_old)
 
 
+@wp.func
+def crossing_time_quadratic(
+    level: wp.float64, t_old: wp.float64, w_old: wp.float64, c_mid: wp.float64, w_mid: wp.float64,
+    t_new: wp.float64, w_new: wp.float64,
+):
+    """First time in [t_old, t_new] at which the quadratic through (t_old, w_old), (t_old +
+    c_mid*h, w_mid) and (t_new, w_new) reaches ``level`` (the middle point: the step's second
+    stage), and the difference to the linear interpolant's crossing, an estimate of the crossing's
+    time-discretisation error (s). Falls back to the linear crossing where the quadratic has no
+    root in the step. Requires w_new >= level or w_mid >= level."""
+    h = t_new - t_old
+    t_lin = t_new
+    if w_new >= level:
+        t_lin = crossing_time(level, t_old, w_old, t_new, w_new)
+    if w_old >= level:
+        return t_old, wp.float64(0.0)
+    b = ((w_mid - w_old) - c_mid * (w_new - w_old)) / (c_mid * (c_mid - wp.float64(1.0)))
+    a = (w_new - w_old) - b
+    tau = wp.float64(-1.0)
+    if wp.abs(b) <= wp.float64(1.0e-12) * (wp.abs(a) + wp.abs(w_old - level)):
+        if a > wp.float64(0.0):
+            tau = (level - w_old) / a
+    else:
+        disc = a * a - wp.float64(4.0) * b * (w_old - level)
+        if disc >= wp.float64(0.0):
+            sq = wp.sqrt(disc)
+            r1 = (-a - sq) / (wp.float64(2.0) * b)
+            r2 = (-a + sq) / (wp.float64(2.0) * b)
+            lo = wp.min(r1, r2)
+            hi = wp.max(r1, r2)
+            if lo >= wp.float64(0.0) and lo <= wp.float64(1.0):
+                tau = lo
+            elif hi >= wp.float64(0.0) and hi <= wp.float64(1.0):
+                tau = hi
+    if tau < wp.float64(0.0) or tau > wp.float64(1.0):
+        return t_lin, wp.float64(0.0)
+    t_quad = t_old + tau * h
+    return t_quad, wp.abs(t_quad - t_lin)
+
+
 # rows of the front-metrics output array (out[row, member]); simulate() names them
 FM_NUCLEATION_POSITION = 0
 FM_NUCLEATION_EDGE = 1
@@ -247,7 +287,9 @@ def segment_fronts(
                 if qi <= q_cut and wp.abs(qi - qj) <= wp.float64(MODE_WIDTH):
                     count += 1
                     total += qi
-            if count > best_count:
+            # ties go to the faster plateau: the choice depends on the speeds only, not on where they
+            # lie, so a mirrored front gets the mirrored segments
+            if count > best_count or (count == best_count and total / wp.float64(count) < q_fast):
                 best_count = count
                 q_fast = total / wp.float64(count)
     slow_q = wp.log(settings.speed_ratio) + q_fast  # q above this: slower than v_fast / ratio

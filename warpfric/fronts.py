@@ -101,3 +101,42 @@ def arrival_times_from_history(times, velocity, disc_velocity=1.0, fronts: Front
                   inputs=[wp.array(times, dtype=wp.float64), vel, wp.array(sign, dtype=wp.float64),
                           FRONT_DIRECTIONS.index(fronts.direction), fronts.threshold, arrival, event_max])
         return arrival.numpy().T.copy(), event_max.numpy()
+
+
+def speed_errors(metrics: dict, arrival_time, arrival_error, length) -> dict:
+    """Estimates of the time-discretisation error of the segment speeds (m/s), (members,) each.
+
+    ``arrival_error`` ((members, nodes) s) estimates each t_a's error: the distance between the
+    crossings of the quadratic (through the step's ends and its second stage) and of the linear
+    interpolant inside the accepted step that holds it (the whole step after a backward-Euler
+    restart). A segment's speed is its length over the time spent T between its end nodes (the
+    two branches from the nucleation node when it lies inside), so dv = v * dT / (T - dT) with dT
+    the sum of the end (and twice the nucleation) nodes' errors; inf where dT >= T (the speed is
+    not resolved). NaN where the segment is absent. Also returns arrival_time_error where t_a is
+    finite.
+    """
+    ta = np.atleast_2d(np.asarray(arrival_time, dtype=np.float64))
+    dt = np.where(np.isfinite(ta), np.atleast_2d(np.asarray(arrival_error, dtype=np.float64)), np.nan)
+    n_members, n = ta.shape
+    length = np.broadcast_to(np.asarray(length, dtype=np.float64), (n_members,))
+    dx = length / (n - 1)
+    out = {"arrival_time_error": dt}
+    nuc = np.rint((metrics["nucleation_position"] + 0.5 * length) / np.where(dx > 0, dx, 1.0))
+    for seg in ("left", "middle", "right"):
+        bound = np.full(n_members, np.nan)
+        start, end, v = metrics[f"{seg}_front_start"], metrics[f"{seg}_front_end"], metrics[f"v_{seg}"]
+        for m in np.flatnonzero(np.isfinite(v) & np.isfinite(start) & np.isfinite(end)):
+            a = int(round((start[m] + 0.5 * length[m]) / dx[m]))
+            b = int(round((end[m] + 0.5 * length[m]) / dx[m]))
+            if not (0 <= a < b < n) or not (np.isfinite(ta[m, a]) and np.isfinite(ta[m, b])):
+                bound[m] = np.inf  # an end never arrived: the speed comes from the interval sums
+                continue
+            spent = abs(ta[m, b] - ta[m, a])
+            slack = dt[m, a] + dt[m, b]
+            k = int(nuc[m]) if np.isfinite(nuc[m]) else -1
+            if a < k < b and np.isfinite(ta[m, k]):
+                spent = (ta[m, a] - ta[m, k]) + (ta[m, b] - ta[m, k])
+                slack += 2 * dt[m, k]
+            bound[m] = v[m] * slack / (spent - slack) if spent > slack else np.inf
+        out[f"v_{seg}_error"] = bound
+    return out

@@ -192,6 +192,7 @@ def simulate(
         n_rec = len(record.members) if record is not None else 0
         outputs.n_record_times = len(record.times) if record is not None else 0
         arrival = wp.zeros((n, n_members) if fronts is not None else (1, 1), dtype=wp.float64)
+        arrival_step = wp.zeros_like(arrival)
         rec_times = wp.array(np.asarray(record.times if record is not None else [0.0]), dtype=wp.float64)
         rec_shape = (len(RECORD_FIELDS), n, max(n_rec, 1))
         rec_previous = wp.zeros(rec_shape, dtype=ft)
@@ -229,6 +230,7 @@ def simulate(
             states = wp.array(states_np, dtype=IntegratorState)
             state = wp.array(state_np, dtype=ft)
             arrival.fill_(np.nan)
+            arrival_step.fill_(np.nan)
             gates.zero_()  # every gate closed: no friction stress at the start
             yield_time.fill_(np.nan)
             label = " ".join(p for p in (prefix, f"pass {pass_index + 1}/{n_passes}" if n_passes > 1 else "") if p)
@@ -238,7 +240,7 @@ def simulate(
                     kern["integrate"],
                     dim=n_members,
                     inputs=[params, settings, states, state, stages, work, solver.steps_per_launch,
-                            outputs, arrival, rec_times, rec_previous, rec_out, gates, yield_time],
+                            outputs, arrival, arrival_step, rec_times, rec_previous, rec_out, gates, yield_time],
                 )
                 st_now = states.numpy()
                 if pass_index == 0 and _flag_stragglers(st_now, solver, STATUS_MEANINGS.index("stalled")):
@@ -261,7 +263,7 @@ def simulate(
                 gate_np = gates.numpy()[0] if stress_gate else None
         front = None
         if fronts is not None:
-            front = _front_metrics(wp, fronts, values, arrival, n, n_members, device)
+            front = _front_metrics(wp, fronts, values, arrival, arrival_step, n, n_members, device)
             front["event_max_velocity"] = np.where(_real_event(front_max, front_last, values, fronts), front_max, np.nan)
         recorded = rec_out.numpy() if record is not None else None
         wp.synchronize_device(device)
@@ -324,18 +326,22 @@ def _record_slots(record: Record | None, n_members: int) -> np.ndarray:
     return slots
 
 
-def _front_metrics(wp, fronts: Fronts, values, arrival, n: int, n_members: int, device: str) -> dict:
+def _front_metrics(wp, fronts: Fronts, values, arrival, arrival_step, n: int, n_members: int, device: str) -> dict:
     """Segment the arrival times (kernel launched on the simulation's device); return {name: array}."""
+    from .fronts import speed_errors
     from .fronts import segment
 
     arrival_time = arrival.numpy().T.copy()
     metrics = segment(arrival_time, values["length"], fronts, device=device)
     metrics["arrival_time"] = arrival_time
+    metrics.update(speed_errors(metrics, arrival_time, arrival_step.numpy().T, values["length"]))
     return metrics
 
 
 _FRONT_ATTRS = {
     "arrival_time": ("s", "arrival time t_a of the detachment front (first time w >= threshold * event maximum)"),
+    "arrival_time_error": ("s", "estimated time-discretisation error of t_a: quadratic against linear "
+                                "interpolation inside the accepted step that holds the crossing"),
     "event_max_velocity": ("m s-1", "maximum of the detachment velocity w over the pad and the event window"),
     "nucleation_position": ("m", "position of the node that detaches first"),
     "front_start_time": ("s", "first arrival time of the detachment front"),
@@ -347,6 +353,8 @@ for _seg in ("left", "middle", "right"):
     _FRONT_ATTRS[f"{_seg}_front_end"] = ("m", f"end (larger x) of the {_seg} front segment")
     _FRONT_ATTRS[f"{_seg}_front_length"] = ("m", f"length of the {_seg} front segment")
     _FRONT_ATTRS[f"v_{_seg}"] = ("m s-1", f"mean speed of the {_seg} front segment (1/|slope| of t_a(x))")
+    _FRONT_ATTRS[f"v_{_seg}_error"] = ("m s-1", f"estimated time-discretisation error of v_{_seg}, from the "
+                                       "arrival_time_error of its end (and nucleation) nodes; inf: not resolved")
 
 
 def _add_fronts(ds: xr.Dataset, front: dict, fronts: Fronts) -> None:
