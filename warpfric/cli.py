@@ -60,7 +60,8 @@ def _print_member(ds, solver: Solver) -> None:
         for seg in ("left", "middle", "right"):
             start, end = float(m[f"{seg}_front_start"]), float(m[f"{seg}_front_end"])
             where = f"x = {start * 1e3:.1f} .. {end * 1e3:.1f} mm" if np.isfinite(start) else "absent"
-            print(f"  v_{seg:<6} = {_fmt(m[f'v_{seg}'], 'm/s', '.3g'):>10}   {where}")
+            err = f"+- {_fmt(m[f'v_{seg}_error'], '', '.2g')}" if f"v_{seg}_error" in m and np.isfinite(float(m[f"v_{seg}"])) else ""
+            print(f"  v_{seg:<6} = {_fmt(m[f'v_{seg}'], 'm/s', '.3g'):>10} {err:<10} {where}")
     print(f"status    = {_status_name(ds, m.status)}; steps accepted {int(m.steps_accepted)}, rejected "
           f"{int(m.steps_rejected)}; lift-off {'yes' if int(m.lift_off) else 'no'}; wall {ds.attrs['wall_time_s']:.2f} s")
 
