@@ -71,9 +71,6 @@ B_HAT = ((1.0 - W_TRB) / 3.0, (3.0 * W_TRB + 1.0) / 3.0, GAMMA / 3.0)
 ERR1, ERR2, ERR3 = W_TRB - B_HAT[0], W_TRB - B_HAT[1], GAMMA - B_HAT[2]
 EXTRAPOLATE_STAGE3 = 1.0 / C2  # linear extrapolation of V from t_n and t_n + c2*h to t_n + h
 ORDER_ESTIMATE = 3.0  # the local error of the order-2 solution is O(h^3)
-# |sum of the error weights| / gamma: how a Newton error of the stage velocities (in units of the
-# velocity weight) enters the velocity's error estimate, h-independently (float32, error_norm)
-NEWTON_NOISE_GAIN = (abs(ERR1) + abs(ERR2) + abs(ERR3)) / GAMMA
 
 _CACHE: dict = {}
 
@@ -317,7 +314,7 @@ def _make_integrator(dtype: str, model):
                 converged = 1
                 break
             prev_norm = norm
-        return converged, delta0, tilt, iters, non_finite, norm
+        return converged, delta0, tilt, iters, non_finite
 
     @wp.func
     def finalize_stage(
@@ -478,7 +475,7 @@ def _make_integrator(dtype: str, model):
     @wp.func
     def error_norm(
         c: Coeffs, s: SolverSettings, m: int, n: int, state: array3, K: array4, work: array3,
-        s1: int, s2: int, s3: int, h: ft, newton_noise: ft,
+        s1: int, s2: int, s3: int, h: ft,
     ):
         """Max over nodes and differential components of |h*sum (b - b_hat) K| / (rtol*(scale + |y|)).
 
@@ -509,13 +506,6 @@ def _make_integrator(dtype: str, model):
                     if comp == C_V:
                         e = e * wp.min(ft(1.0), wp.abs(c.rhoH / (g * work[W_DIAG, i, m])))
                     wgt = rtol * (scale + wp.max(wp.abs(y), wp.abs(y_new)))
-                    if wp.static(ft == wp.float32):
-                        if comp == C_V:
-                            # the stage accelerations are (V - Z_v)/g: a Newton error dV of the stage
-                            # velocities enters the estimate as NEWTON_NOISE_GAIN*dV whatever h is, so
-                            # a float32 Newton that stagnated at newton_noise (in units of the weight)
-                            # must not be read as a time-step error (it kept h at ~1e-7 s for ever)
-                            wgt = wgt * (ft(1.0) + ft(NEWTON_NOISE_GAIN) * newton_noise)
                     err = wp.max(err, wp.abs(e) / wgt)
                     if not is_finite(e):
                         err = ft(1.0e30)
@@ -744,7 +734,7 @@ def _make_integrator(dtype: str, model):
                 # backward Euler (re)start: one implicit stage, accepted without error estimate
                 g = ft(h)
                 prepare_stage(m, n, state, K, work, ft(h), ft(0.0), s1, ft(0.0), s1, 0, ft(0.0))
-                ok, d0, a, iters, bad, newton_norm = newton_solve(c, p, settings, m, n, work, gates, g, t_new, t, delta0, tilt)
+                ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, gates, g, t_new, t, delta0, tilt)
                 st.newton_iterations = st.newton_iterations + iters
                 if ok == 1:
                     sum_tau, sum_sigma, min_sigma, sw_err, sw_frac = finalize_stage(
@@ -772,10 +762,9 @@ def _make_integrator(dtype: str, model):
             g = ft(wp.float64(GAMMA) * h)
             # stage 2 (trapezoidal stage, at t + 2*gamma*h)
             prepare_stage(m, n, state, K, work, ft(h), ft(GAMMA), s1, ft(0.0), s1, 1, ft(0.0))
-            ok, d0, a, iters, bad, newton_norm = newton_solve(
+            ok, d0, a, iters, bad = newton_solve(
                 c, p, settings, m, n, work, gates, g, t + wp.float64(C2) * h, t, delta0, tilt
             )
-            newton_noise = newton_norm
             st.newton_iterations = st.newton_iterations + iters
             sum_tau = wp.float64(0.0)
             sum_sigma = wp.float64(0.0)
@@ -786,8 +775,7 @@ def _make_integrator(dtype: str, model):
                 finalize_stage(c, p, settings, m, n, work, gates, K, s2, g, t + wp.float64(C2) * h, t, d0, a, ft(h), 0)
                 # stage 3 (BDF2 stage, at t + h)
                 prepare_stage(m, n, state, K, work, ft(h), ft(W_TRB), s1, ft(W_TRB), s2, 2, ft(EXTRAPOLATE_STAGE3))
-                ok, d0, a, iters, bad, newton_norm = newton_solve(c, p, settings, m, n, work, gates, g, t_new, t, d0, a)
-                newton_noise = wp.max(newton_noise, newton_norm)
+                ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, gates, g, t_new, t, d0, a)
                 st.newton_iterations = st.newton_iterations + iters
                 if ok == 1:
                     sum_tau, sum_sigma, min_sigma, sw_err, sw_frac = finalize_stage(
@@ -798,7 +786,7 @@ def _make_integrator(dtype: str, model):
                 if st.done != 0:
                     break
                 continue
-            err = wp.float64(error_norm(c, settings, m, n, state, K, work, s1, s2, s3, ft(h), newton_noise))
+            err = wp.float64(error_norm(c, settings, m, n, state, K, work, s1, s2, s3, ft(h)))
             factor = wp.float64(5.0)
             if err > wp.float64(0.0):
                 factor = wp.min(wp.float64(5.0), wp.max(wp.float64(0.2), wp.float64(0.9) * wp.pow(err, wp.float64(-1.0 / ORDER_ESTIMATE))))
