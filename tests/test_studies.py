@@ -45,7 +45,8 @@ def test_fig3_front_nucleates_inside_and_after_the_peak(claims):
     c = claims["fig3"]
     assert c["v_left"] < c["v_middle"] / 1.5 and c["v_right"] < c["v_middle"] / 1.5
     assert -0.06 < c["left_front_end"] < -0.04  # paper: -45 mm
-    assert 0.0 < c["right_front_start"] < 0.03  # paper: +55 mm; the stress gate moves it to ~ +11 mm
+    assert 0.0 < c["right_front_start"] < 0.03  # paper: +55 mm; the stress gate moves it to +11 mm (+9.5 mm at N = 200)
+    assert 45 < c["v_middle"] < 60  # 52.6 m/s quick, 54.8 at N = 200 (the linear interpolation gave 44.2 there)
     assert c["nucleation_edge"] == 0 and -0.05 < c["nucleation_position"] < 0.0  # not the paper's left edge
     assert c["front_start_time"] > c["mu_s_time"] and 20.24 < c["front_start_time"] < 20.30  # paper: 20.14-20.18 s
 
@@ -84,12 +85,15 @@ def test_fig11_motion_stops_together(claims):
     assert c["node_quiet_delay_max"] - c["node_quiet_delay_min"] < 0.01 and c["node_quiet_delay_max"] < 0.05
 
 
-def test_fig12_the_gate_makes_the_fronts_depend_on_strengthening(claims):
+def test_fig12_quick_under_the_gate_scatters_but_is_no_systematic_slow_down(claims):
     c = claims["fig12"]
-    # without the gate the medians are within 15 % of 1 (README, "no gate" column); with it the middle
-    # front is far from insensitive (median 0.09) and no left or right front pairs
-    assert c["v_middle_ratio_median"] < 0.3
-    assert np.isnan(c["v_left_ratio_median"]) and np.isnan(c["v_right_ratio_median"])
+    # quadratic arrival times (engine 17a79aa): the quick middle median is 1.24, outside the 15 % band
+    # but not the 0.09 of the linear interpolation ("the gate makes the fronts depend on strengthening",
+    # withdrawn); the single ratios scatter by an order of magnitude either way; no left front pairs
+    assert 0.9 < c["v_middle_ratio_median"] < 1.6
+    r = np.asarray(c["v_middle_ratio_without_over_with"], float)
+    assert np.all(np.isfinite(r)) and r.min() < 0.2 and r.max() > 5
+    assert np.isnan(c["v_left_ratio_median"])
 
 
 def test_choices_none_nucleates_at_the_left_edge(claims):
@@ -118,7 +122,9 @@ def test_readings_two_reading_subset():
     res = readings.run([readings.DEFAULT, readings.DEFAULT | {"relaxation_gate": "none"}], nodes=60, device=DEVICE)
     stress, none = ({c: v["result"] for c, v in r["claims"].items()} for r in res["readings"])
     assert all(r["failed_members"] == {} and r["members_without_peak"] == [] for r in res["readings"])
-    for claim in ("fig11_sudden_stop_stops_every_front", "fig13_mu_s_rises_in_log_v", "fig14_mu_s_falls_to_plateau"):
+    # fig10: the stress-gate default passes the power laws since the quadratic arrival times (engine 17a79aa)
+    for claim in ("fig10_power_laws_in_v", "fig11_sudden_stop_stops_every_front", "fig13_mu_s_rises_in_log_v",
+                  "fig14_mu_s_falls_to_plateau"):
         assert stress[claim] == none[claim] == "pass", claim
     for claim in ("fig3_left_edge_nucleation", "fig3_time_window", "fig4_higher_towards_trailing_edge",
                   "fig5_saturation_with_force", "fig8_left_precursor_500_1000_5000"):
@@ -137,12 +143,12 @@ def test_committed_factorial_holds_the_readme_score_table():
     assert all(r["failed_members"] == {} and r["members_without_peak"] == [] for r in res["readings"])
     assert set(res["not_scored_by_claim"].values()) == {0}
     counts = [res["passed_by_claim"][c] for c in readings.CLAIMS]
-    assert counts == [53, 0, 30, 16, 52, 84, 0, 4, 66, 164, 192, 119, 384, 368]
+    assert counts == [50, 0, 30, 16, 52, 84, 0, 6, 70, 185, 192, 121, 384, 368]
     physical = [sum(r["claims"][c]["result"] == "pass" for r in res["readings"]
                     if "counterfactual" not in r["reading"]["torque_arm"]) for c in readings.CLAIMS]
-    assert physical == [29, 0, 30, 16, 4, 40, 0, 4, 52, 130, 128, 87, 288, 272]
+    assert physical == [26, 0, 30, 16, 4, 40, 0, 6, 50, 137, 128, 92, 288, 272]
     by_label = {r["label"]: r["passed"] for r in res["readings"]}
-    assert by_label[readings.label(readings.DEFAULT)] == 3
+    assert by_label[readings.label(readings.DEFAULT)] == 4  # 3 with the linear interpolation (claim 10 failed)
     assert by_label[readings.label(readings.DEFAULT | {"relaxation_gate": "none"})] == 6
     best_physical = {g: max(r["passed"] for r in res["readings"] if r["reading"]["relaxation_gate"] == g
                             and "counterfactual" not in r["reading"]["torque_arm"]) for g in readings.FACTORS["relaxation_gate"]}
