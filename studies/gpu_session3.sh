@@ -4,6 +4,7 @@
 #   bash studies/gpu_session3.sh bench    # engine benchmark: stress gate vs no gate, fronts off/on
 #   bash studies/gpu_session3.sh stability  # hard-case map under the stress gate (float64)
 #   bash studies/gpu_session3.sh figures  # every figure study, full size, under the stress gate
+#   bash studies/gpu_session3.sh figures-nogate  # the same with relaxation_gate="none" (NAME_nogate files)
 #   bash studies/gpu_session3.sh float32  # float32 (gate-less law) benchmark and stability map, straggler rule on
 # Logs and JSON under $OUT.
 set -uo pipefail
@@ -26,6 +27,9 @@ case "${1:-}" in
       2>&1 | grep -v "pass [12]/2" | tee "$OUT/stability_h100_stress.log" | tail -25 ;;
   figures)
     timeout 560 python3 studies/figures.py all --device cuda:0 --outdir "$OUT/figures" 2>&1 | tee "$OUT/figures_h100.log" | tail -12 ;;
+  figures-nogate)
+    timeout 560 python3 studies/figures.py all --device cuda:0 --relaxation-gate none --outdir "$OUT/figures" 2>&1 \
+      | tee "$OUT/figures_h100_nogate.log" | tail -12 ;;
   float32)
     # issue 11's benchmark: float32 (gate-less law; the stress gate refuses float32) against float64
     python3 studies/bench_engine.py --device cuda:0 --members 10000 --dtypes float64 float32 --repeat 1 \
