@@ -315,6 +315,18 @@ def make_model_terms(ft, model):
                 dtf_dgate, darea_dgate)
 
     @wp.func
+    def sliding_gate_of(c: Coeffs, tau_f: ft, area: ft, scale: ft):
+        """theta_w(x) and d theta_w/dx at x = (|tau_f|/A - tau_c)*scale, theta_w = (1 + tanh x)/2."""
+        x = (wp.abs(tau_f) / area - c.tau_c) * scale
+        th = wp.tanh(x)
+        return ft(0.5) * (ft(1.0) + th), ft(0.5) * (ft(1.0) - th * th)
+
+    @wp.func
+    def margin_slope(tau_f: ft, area: ft, dtau_f: ft, darea: ft, scale: ft):
+        """dx/dq of x = (|tau_f|/A - tau_c)*scale from d tau_f/dq and dA/dq (any variable q)."""
+        return (wp.sign(tau_f) * dtau_f - wp.abs(tau_f) * darea / area) / area * scale
+
+    @wp.func
     def interface_friction(
         c: Coeffs, sigma: ft, velocity: ft, v_disc: ft, z_tau: ft, z_phi: ft, g: ft, gate: ft, sliding: ft,
         width: ft,
@@ -347,11 +359,8 @@ def make_model_terms(ft, model):
                 dF_dgate = ft(1.0)
                 dtheta = ft(0.0)
                 for _it in range(SLIDING_NEWTON_ITERATIONS):
-                    x = (wp.abs(tau_f) / area - c.tau_c) * scale
-                    theta = ft(0.5) * (ft(1.0) + wp.tanh(x))
-                    dtheta = ft(0.5) * (ft(1.0) - wp.tanh(x) * wp.tanh(x))
-                    dx_dgate = (wp.sign(tau_f) * dtf_dgate - wp.abs(tau_f) * darea_dgate / area) / area * scale
-                    dF_dgate = ft(1.0) - dtheta * dx_dgate
+                    theta, dtheta = sliding_gate_of(c, tau_f, area, scale)
+                    dF_dgate = ft(1.0) - dtheta * margin_slope(tau_f, area, dtf_dgate, darea_dgate, scale)
                     F = gate - theta
                     new_gate = wp.clamp(gate - F / dF_dgate, ft(0.0), ft(1.0))
                     if wp.abs(new_gate - gate) <= ft(SLIDING_GATE_TOL):
@@ -364,12 +373,10 @@ def make_model_terms(ft, model):
                      dtf_dgate, darea_dgate) = friction_at_gate(c, sigma, s, z_tau, z_phi, g, gate)
                 if area > ft(0.0):
                     # the gate follows s and sigma_n: d gate = theta' (dx/ds ds + dx/dsigma dsigma) / dF_dgate
-                    x = (wp.abs(tau_f) / area - c.tau_c) * scale
-                    dtheta = ft(0.5) * (ft(1.0) - wp.tanh(x) * wp.tanh(x))
-                    dx_dgate = (wp.sign(tau_f) * dtf_dgate - wp.abs(tau_f) * darea_dgate / area) / area * scale
-                    dF_dgate = ft(1.0) - dtheta * dx_dgate
-                    dx_ds = (wp.sign(tau_f) * dtf_ds - wp.abs(tau_f) * darea_ds / area) / area * scale
-                    dx_dsigma = (wp.sign(tau_f) * dtf_dsigma - wp.abs(tau_f) * darea_dsigma / area) / area * scale
+                    theta, dtheta = sliding_gate_of(c, tau_f, area, scale)
+                    dF_dgate = ft(1.0) - dtheta * margin_slope(tau_f, area, dtf_dgate, darea_dgate, scale)
+                    dx_ds = margin_slope(tau_f, area, dtf_ds, darea_ds, scale)
+                    dx_dsigma = margin_slope(tau_f, area, dtf_dsigma, darea_dsigma, scale)
                     dtf_ds = dtf_ds + dtf_dgate * dtheta * dx_ds / dF_dgate
                     dtf_dsigma = dtf_dsigma + dtf_dgate * dtheta * dx_dsigma / dF_dgate
         return tau_f, dtf_dsigma, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, gate
