@@ -362,11 +362,11 @@ def _make_integrator(dtype: str, model):
                     work[W_MARGIN, i, m] = z1
                     # d(dz/dt)/d(gate) at the end of the step: the gate enters the rates of tau_el
                     # and phi (and A through phi); the pad's rates do not depend on it
-                    relax = wp.abs(v_disc - c.kif * vel) * c.inv_D
+                    slip = v_disc - c.kif * vel
+                    relax = wp.abs(slip) * c.inv_D
                     darea_dgate = contact * sigma * c.inv_hardness * c.b / (c.phi0 + phi) * (-phi * relax)
                     dtau_dgate = -tau_el * relax
                     if wp.static(viscous):
-                        slip = v_disc - c.kif * vel
                         dtau_dgate += c.eta_vstar * wp.sign(slip) * wp.log(ft(1.0) + wp.abs(slip) / c.vstar) * darea_dgate
                     work[W_DMARGIN, i, m] = wp.sign(tau_f) * dtau_dgate - c.tau_c * darea_dgate
                     open_now = ft(0.0)
@@ -377,10 +377,9 @@ def _make_integrator(dtype: str, model):
                         theta = ft(0.0)
                         if z0 != z1:
                             theta = wp.clamp(z0 / (z0 - z1), ft(0.0), ft(1.0))
-                        slip_rate = wp.abs(v_disc - c.kif * vel) * c.inv_D
                         rate = wp.max(
-                            wp.abs(tau_el) * slip_rate / (rtol * (c.tau_scale + wp.abs(tau_el))),
-                            phi * slip_rate / (rtol * (c.phi_scale + wp.abs(phi))),
+                            wp.abs(tau_el) * relax / (rtol * (c.tau_scale + wp.abs(tau_el))),
+                            phi * relax / (rtol * (c.phi_scale + wp.abs(phi))),
                         )
                         e = (ft(1.0) - theta) * h * rate
                         switch_error = wp.max(switch_error, e)
@@ -450,9 +449,7 @@ def _make_integrator(dtype: str, model):
                 dr = work[W_DMARGIN, i, m]
                 if dr < ft(0.0) and h > ft(0.0) and new_gate != gate:
                     r_obs = (z1 - z0) / h
-                    rate_far = r_obs - gate * dr  # the closed side's rate, coming from the open side
-                    if gate == ft(0.0):
-                        rate_far = r_obs + dr  # the open side's rate, coming from the closed side
+                    rate_far = r_obs + (ft(1.0) - ft(2.0) * gate) * dr  # the rate with the other gate value
                     if (gate == ft(0.0) and rate_far < ft(0.0)) or (gate == ft(1.0) and rate_far > ft(0.0)):
                         new_sliding = ft(1.0)
                         new_gate = wp.clamp(gate + (-z1 / h - r_obs) / dr, ft(0.0), ft(1.0))  # start value
@@ -531,12 +528,13 @@ def _make_integrator(dtype: str, model):
     def track_fronts(
         p: MemberParams, st: IntegratorState, m: int, n: int, state: array3, K: array4, work: array3, s2: int, s3: int,
         t_old: wp.float64, t_new: wp.float64, arrival: wp.array2d(dtype=wp.float64),
-        arrival_step: wp.array2d(dtype=wp.float64), direction: int,
+        arrival_error: wp.array2d(dtype=wp.float64), direction: int,
         threshold: wp.float64, use_stage2: int,
     ):
         """Fold an accepted step (before the state is advanced) into the front tracking: the running
-        maximum of the detachment velocity w, each node's first crossing of st.front_level,
-        interpolated linearly in time, and front_last: the last step at which some node had
+        maximum of the detachment velocity w, each node's first crossing of st.front_level (on the
+        quadratic through the step's ends and its second stage, linear after a backward-Euler
+        restart, with its error estimate in arrival_error), and front_last: the last step at which some node had
         w >= threshold * (running maximum). Every first crossing of threshold * (final maximum)
         ends a step at or before front_last, so the arrival pass may stop there.
         Window: from the disc start to the sudden stop (or the end). A node without contact at the
@@ -564,10 +562,10 @@ def _make_integrator(dtype: str, model):
                             st.front_level, t_old, w_old, wp.float64(C2), w_mid, t_new, w_new
                         )
                         arrival[i, m] = t_cross
-                        arrival_step[i, m] = t_err
+                        arrival_error[i, m] = t_err
                 elif w_new >= st.front_level:
                     arrival[i, m] = crossing_time(st.front_level, t_old, w_old, t_new, w_new)
-                    arrival_step[i, m] = t_new - t_old  # backward-Euler step: no inner point
+                    arrival_error[i, m] = t_new - t_old  # backward-Euler step: no inner point
         if w_step > wp.float64(0.0) and w_step >= threshold * st.front_max:
             st.front_last = t_new
         st.front_now = w_step
@@ -677,7 +675,7 @@ def _make_integrator(dtype: str, model):
         launch_steps: int,
         outputs: OutputSettings,
         arrival: wp.array2d(dtype=wp.float64),
-        arrival_step: wp.array2d(dtype=wp.float64),
+        arrival_error: wp.array2d(dtype=wp.float64),
         record_times: wp.array(dtype=wp.float64),
         record_previous: array3,
         record: array4,
@@ -741,7 +739,7 @@ def _make_integrator(dtype: str, model):
                         c, p, settings, m, n, work, gates, K, s3, g, t_new, t, d0, a, ft(h), 1
                     )
                     if outputs.fronts == 1:
-                        st = track_fronts(p, st, m, n, state, K, work, s2, s3, t, t_new, arrival, arrival_step, outputs.front_direction, outputs.front_threshold, 0)
+                        st = track_fronts(p, st, m, n, state, K, work, s2, s3, t, t_new, arrival, arrival_error, outputs.front_direction, outputs.front_threshold, 0)
                     advance_state(m, n, state, K, s1, s2, s3, ft(h), 1)
                     if wp.static(stress_gate):
                         st = switch_gates(c, p, st, m, n, state, K, s3, gates, work, t, t_new, yield_time)
@@ -802,7 +800,7 @@ def _make_integrator(dtype: str, model):
                     st.unlocated_switches = st.unlocated_switches + 1
             if err <= wp.float64(1.0):
                 if outputs.fronts == 1:
-                    st = track_fronts(p, st, m, n, state, K, work, s2, s3, t, t_new, arrival, arrival_step, outputs.front_direction, outputs.front_threshold, 1)
+                    st = track_fronts(p, st, m, n, state, K, work, s2, s3, t, t_new, arrival, arrival_error, outputs.front_direction, outputs.front_threshold, 1)
                 advance_state(m, n, state, K, s1, s2, s3, ft(h), 0)
                 if wp.static(stress_gate):
                     switches_before = st.gate_switches

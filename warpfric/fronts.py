@@ -123,13 +123,13 @@ def speed_errors(metrics: dict, arrival_time, arrival_error, length) -> dict:
     out = {"arrival_time_error": dt}
     nuc = np.rint((metrics["nucleation_position"] + 0.5 * length) / np.where(dx > 0, dx, 1.0))
     for seg in ("left", "middle", "right"):
-        bound = np.full(n_members, np.nan)
+        error = np.full(n_members, np.nan)
         start, end, v = metrics[f"{seg}_front_start"], metrics[f"{seg}_front_end"], metrics[f"v_{seg}"]
         for m in np.flatnonzero(np.isfinite(v) & np.isfinite(start) & np.isfinite(end)):
             a = int(round((start[m] + 0.5 * length[m]) / dx[m]))
             b = int(round((end[m] + 0.5 * length[m]) / dx[m]))
             if not (0 <= a < b < n) or not (np.isfinite(ta[m, a]) and np.isfinite(ta[m, b])):
-                bound[m] = np.inf  # an end never arrived: the speed comes from the interval sums
+                error[m] = np.inf  # an end never arrived: the speed comes from the interval sums
                 continue
             spent = abs(ta[m, b] - ta[m, a])
             slack = dt[m, a] + dt[m, b]
@@ -137,6 +137,6 @@ def speed_errors(metrics: dict, arrival_time, arrival_error, length) -> dict:
             if a < k < b and np.isfinite(ta[m, k]):
                 spent = (ta[m, a] - ta[m, k]) + (ta[m, b] - ta[m, k])
                 slack += 2 * dt[m, k]
-            bound[m] = v[m] * slack / (spent - slack) if spent > slack else np.inf
-        out[f"v_{seg}_error"] = bound
+            error[m] = v[m] * slack / (spent - slack) if spent > slack else np.inf
+        out[f"v_{seg}_error"] = error
     return out

@@ -13,15 +13,7 @@ import xarray as xr
 
 from . import __version__
 from .members import resolve_members
-from .parameters import (
-    Fronts,
-    Model,
-    Parameters,
-    Record,
-    Solver,
-    parameter_long_name,
-    parameter_units,
-)
+from .parameters import Fronts, Model, Parameters, Record, Solver, parameter_long_name, parameter_units
 
 
 def _warp():
@@ -192,7 +184,7 @@ def simulate(
         n_rec = len(record.members) if record is not None else 0
         outputs.n_record_times = len(record.times) if record is not None else 0
         arrival = wp.zeros((n, n_members) if fronts is not None else (1, 1), dtype=wp.float64)
-        arrival_step = wp.zeros_like(arrival)
+        arrival_error = wp.zeros_like(arrival)
         rec_times = wp.array(np.asarray(record.times if record is not None else [0.0]), dtype=wp.float64)
         rec_shape = (len(RECORD_FIELDS), n, max(n_rec, 1))
         rec_previous = wp.zeros(rec_shape, dtype=ft)
@@ -206,7 +198,7 @@ def simulate(
         # pass 1 integrates the whole protocol: every output but the arrival times, and the event
         # maximum; pass 2 (fronts only) repeats the same trajectory up to the last possible crossing
         # (front_last of pass 1) and records the arrival times at the now known level
-        front_max = front_last = None
+        front_max = front_last = event = None
         end = params_np["end_time"]
         for pass_index in range(n_passes):
             states_np = np.zeros(n_members, dtype=IntegratorState.numpy_dtype())
@@ -221,7 +213,6 @@ def simulate(
             states_np["switch_limit"] = 1e300
             states_np["record_slot"] = record_slots if pass_index == 0 else -1
             if pass_index == 1:
-                event = _real_event(front_max, front_last, values, fronts)
                 states_np["front_level"] = np.where(event, fronts.threshold * front_max, np.inf)
                 states_np["front_until"] = np.where(event, front_last, -np.inf)  # no event: nothing to redo
                 end = np.where(event, np.minimum(front_last, params_np["end_time"]), 1.0)
@@ -230,7 +221,7 @@ def simulate(
             states = wp.array(states_np, dtype=IntegratorState)
             state = wp.array(state_np, dtype=ft)
             arrival.fill_(np.nan)
-            arrival_step.fill_(np.nan)
+            arrival_error.fill_(np.nan)
             gates.zero_()  # every gate closed: no friction stress at the start
             yield_time.fill_(np.nan)
             label = " ".join(p for p in (prefix, f"pass {pass_index + 1}/{n_passes}" if n_passes > 1 else "") if p)
@@ -240,7 +231,7 @@ def simulate(
                     kern["integrate"],
                     dim=n_members,
                     inputs=[params, settings, states, state, stages, work, solver.steps_per_launch,
-                            outputs, arrival, arrival_step, rec_times, rec_previous, rec_out, gates, yield_time],
+                            outputs, arrival, arrival_error, rec_times, rec_previous, rec_out, gates, yield_time],
                 )
                 st_now = states.numpy()
                 if pass_index == 0 and _flag_stragglers(st_now, solver, STATUS_MEANINGS.index("stalled")):
@@ -253,6 +244,7 @@ def simulate(
             if pass_index == 0:
                 st = st_now
                 front_max, front_last = st["front_max"], st["front_last"]
+                event = _real_event(front_max, front_last, values, fronts) if fronts is not None else None
                 sigma_out = wp.zeros((n, n_members), dtype=ft)
                 tau_out = wp.zeros((n, n_members), dtype=ft)
                 wp.launch(kern["evaluate_fields"], dim=n_members, inputs=[params, states, state, sigma_out, tau_out])
@@ -263,8 +255,8 @@ def simulate(
                 gate_np = gates.numpy()[0] if stress_gate else None
         front = None
         if fronts is not None:
-            front = _front_metrics(wp, fronts, values, arrival, arrival_step, n, n_members, device)
-            front["event_max_velocity"] = np.where(_real_event(front_max, front_last, values, fronts), front_max, np.nan)
+            front = _front_metrics(wp, fronts, values, arrival, arrival_error, n, n_members, device)
+            front["event_max_velocity"] = np.where(event, front_max, np.nan)
         recorded = rec_out.numpy() if record is not None else None
         wp.synchronize_device(device)
     wall = time.perf_counter() - t_start
@@ -326,15 +318,14 @@ def _record_slots(record: Record | None, n_members: int) -> np.ndarray:
     return slots
 
 
-def _front_metrics(wp, fronts: Fronts, values, arrival, arrival_step, n: int, n_members: int, device: str) -> dict:
+def _front_metrics(wp, fronts: Fronts, values, arrival, arrival_error, n: int, n_members: int, device: str) -> dict:
     """Segment the arrival times (kernel launched on the simulation's device); return {name: array}."""
-    from .fronts import speed_errors
-    from .fronts import segment
+    from .fronts import segment, speed_errors
 
     arrival_time = arrival.numpy().T.copy()
     metrics = segment(arrival_time, values["length"], fronts, device=device)
     metrics["arrival_time"] = arrival_time
-    metrics.update(speed_errors(metrics, arrival_time, arrival_step.numpy().T, values["length"]))
+    metrics.update(speed_errors(metrics, arrival_time, arrival_error.numpy().T, values["length"]))
     return metrics
 
 
