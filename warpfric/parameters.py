@@ -231,6 +231,11 @@ class Solver:
                       max(stall_min_steps, stall_factor * their median) attempted steps stops with
                       status 'stalled' (NaN outputs), so that one straggler cannot hold a launch.
     stall_min_steps:  see stall_factor.
+    float32_fallback: dtype='float32' only: members that end max_steps_reached, non_finite_state,
+                      step_size_underflow or stalled are run again in float64 (after the float32
+                      launch, on the same device) and their outputs replaced; the output
+                      ``working_precision`` says which precision produced each member
+                      (docs/model.md, "Precision"). False keeps the float32 failure statuses.
     method:           time integrator; 'tr-bdf2' (L-stable ESDIRK, order 2, embedded order 3).
     """
 
@@ -248,6 +253,7 @@ class Solver:
     steps_per_launch: int = 500
     stall_factor: float = 10.0
     stall_min_steps: int = 2000
+    float32_fallback: bool = True
     method: str = "tr-bdf2"
 
     def __post_init__(self):
@@ -288,6 +294,8 @@ class Solver:
              self.stall_factor, "a number >= 1 (inf: never)")
         need(is_int(self.stall_min_steps) and self.stall_min_steps >= 1, "stall_min_steps", self.stall_min_steps,
              "an integer >= 1")
+        need(isinstance(self.float32_fallback, (bool, np.bool_)), "float32_fallback", self.float32_fallback,
+             "True or False")
 
 
 _FRONT_DIRECTIONS = ("against_disc", "with_disc", "absolute")

@@ -275,7 +275,54 @@ def simulate(
         _add_fronts(ds, front, fronts)
     if record is not None:
         _add_record(ds, record, recorded, ds.x, member_offset)
+    if solver.dtype == "float32" and solver.float32_fallback:
+        _rerun_failed_in_float64(ds, values, scene, model, solver, fronts, record, device)
     return ds
+
+
+# statuses of a run that did not reach its end (ok and no_peak did)
+_FAILED_RUN = ("max_steps_reached", "non_finite_state", "step_size_underflow", "stalled")
+
+
+def _rerun_failed_in_float64(ds, values, scene, model, solver, fronts, record, device) -> None:
+    """Solver.float32_fallback: run the float32 members that failed again in float64 and put their
+    outputs into ``ds`` (in place, cast to the file's float32), with working_precision 64.
+
+    Why: float32 round-off of the displacement excites the grid's highest elastic mode (about
+    omega_max*eps*|u| of pad velocity); without damping the error control resolves it with ~1e-8 s
+    steps for ever (docs/model.md, "Precision"). float64 does not see it."""
+    meanings = ds.status.attrs["flag_meanings"].split()
+    failed = np.isin(ds.status.values, [meanings.index(name) for name in _FAILED_RUN])
+    if not failed.any():
+        return
+    index = np.flatnonzero(failed)
+    sub_members = {name: values[name][index] for name in values}
+    sub_record = None
+    recorded_pos = []
+    if record is not None:
+        chosen = [k for k, member in enumerate(record.members) if failed[member]]
+        if chosen:
+            position = {int(member): j for j, member in enumerate(index)}
+            sub_record = dataclasses.replace(record, members=tuple(position[int(record.members[k])] for k in chosen))
+            recorded_pos = chosen
+    sub = simulate(sub_members, scene=scene, model=model, solver=dataclasses.replace(solver, dtype="float64"),
+                   fronts=fronts, record=sub_record, device=device, progress=False)
+    for name, var in sub.data_vars.items():
+        if name not in ds.data_vars:
+            continue
+        target = ds[name]
+        if "member" in var.dims:
+            values_new = target.values.copy()
+            values_new[index] = var.values.astype(values_new.dtype)
+            ds[name] = target.copy(data=values_new)
+        elif "recorded" in var.dims and recorded_pos:
+            values_new = target.values.copy()
+            values_new[recorded_pos] = var.values.astype(values_new.dtype)
+            ds[name] = target.copy(data=values_new)
+    precision = ds.working_precision.values.copy()
+    precision[index] = 64
+    ds["working_precision"] = ds.working_precision.copy(data=precision)
+    ds.attrs["wall_time_s"] = ds.attrs["wall_time_s"] + sub.attrs["wall_time_s"]
 
 
 def _real_event(front_max, front_last, values, fronts: Fronts) -> np.ndarray:
@@ -443,6 +490,11 @@ def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, 
             "flag_meanings": " ".join(meanings),
         },
     )
+    data["working_precision"] = xr.DataArray(
+        np.full(n_members, 32 if solver.dtype == "float32" else 64, dtype=np.int8), dims=("member",),
+        attrs={"long_name": "floating-point precision that produced the member's outputs (float32 runs: "
+               "64 where Solver.float32_fallback re-ran a failed member in float64)",
+               "flag_values": np.array([32, 64], dtype=np.int8), "flag_meanings": "float32 float64"})
     scalars = {
         "mu_s": st["mu_s"],
         "mu_s_time": st["mu_s_time"],
@@ -502,7 +554,8 @@ def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, 
         value = getattr(model, f.name)
         attrs[f"model_{f.name}"] = value if isinstance(value, str) else int(value)
     for f in dataclasses.fields(solver):
-        attrs[f"solver_{f.name}"] = getattr(solver, f.name)
+        value = getattr(solver, f.name)
+        attrs[f"solver_{f.name}"] = int(value) if isinstance(value, bool) else value  # netCDF has no bool
     try:
         import warp as wp
 
