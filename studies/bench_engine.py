@@ -107,6 +107,7 @@ def main(argv=None):
                 mean_rejected_steps=float(ds.steps_rejected.values.mean()),
                 mean_newton_per_step=float(ds.newton_iterations.values.sum() / max(steps.sum(), 1)),
                 status_ok=int((ds.status.values == 0).sum()), mu_s_max_rel_error=err,
+                rerun_in_float64=int((ds.working_precision.values == 64).sum()) if dtype == "float32" else 0,
             )
             rows.append(row)
             print(json.dumps(row), flush=True)

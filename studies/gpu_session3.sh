@@ -6,6 +6,8 @@
 #   bash studies/gpu_session3.sh figures  # every figure study, full size, under the stress gate
 #   bash studies/gpu_session3.sh figures-nogate  # the same with relaxation_gate="none" (NAME_nogate files)
 #   bash studies/gpu_session3.sh float32  # float32 (gate-less law) benchmark and stability map, straggler rule on
+#   bash studies/gpu_session3.sh fallback  # session 4: the same with the float64 re-run of failed float32 members,
+#                                          # and the float64 map of the gate-less law beside it
 # Logs and JSON under $OUT.
 set -uo pipefail
 export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1
@@ -37,5 +39,12 @@ case "${1:-}" in
     timeout 420 python3 studies/stability.py --device cuda:0 --dtypes float32 --relaxation-gate none \
       --stall-factor 10 --out "$OUT/stability_h100_none_f32.nc" 2>&1 | grep -v "pass [12]/2" \
       | tee "$OUT/stability_h100_none_f32.log" | head -12 ;;
-  *) echo "usage: $0 tests|bench|stability|figures|float32"; exit 2 ;;
+  fallback)
+    python3 studies/bench_engine.py --device cuda:0 --members 10000 --dtypes float64 float32 --repeat 2 \
+      --relaxation-gate none --out "$OUT/bench_engine_h100_none_f32_fallback.json" 2>&1 \
+      | tee "$OUT/bench_h100_none_f32_fallback.log" | tail -3
+    timeout 400 python3 studies/stability.py --device cuda:0 --dtypes float64 float32 --relaxation-gate none \
+      --stall-factor 10 --out "$OUT/stability_h100_none_fallback.nc" 2>&1 | grep -v "pass [12]/2" \
+      | tee "$OUT/stability_h100_none_fallback.log" | grep -v "failed:" | head -24 ;;
+  *) echo "usage: $0 tests|bench|stability|figures|float32|fallback"; exit 2 ;;
 esac

@@ -52,6 +52,9 @@ def summarise(ds: xr.Dataset, axes=None) -> str:
     lines = [f"{ds.sizes['member']} members ({ds.attrs.get('solver_dtype')}, N = {ds.attrs.get('solver_nodes')}, "
              f"rtol {ds.attrs.get('solver_rtol')}): " + ", ".join(
                  f"{meanings[k]} {int((status == k).sum())}" for k in range(len(meanings)) if (status == k).any())]
+    if ds.attrs.get("solver_dtype") == "float32" and "working_precision" in ds:
+        lines.append(f"  re-run in float64 (Solver.float32_fallback): {int((ds.working_precision.values == 64).sum())} "
+                     "members (their float32 run failed)")
     finite = np.isfinite(ds.mu_s.values) | (status != 0)
     lines.append(f"  non-finite mu_s among ok members: {int((~np.isfinite(ds.mu_s.values) & (status == 0)).sum())}; "
                  f"rejected-step fraction: median {np.median(ds.steps_rejected.values / steps):.3f}, "
