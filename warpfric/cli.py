@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .parameters import RELAXATION_GATES, Model, Parameters, Solver
+from .parameters import RELAXATION_GATES, Fronts, Model, Parameters, Solver
 
 
 class UsageError(ValueError):
@@ -61,7 +61,11 @@ def _print_member(ds, solver: Solver) -> None:
             start, end = float(m[f"{seg}_front_start"]), float(m[f"{seg}_front_end"])
             where = f"x = {start * 1e3:.1f} .. {end * 1e3:.1f} mm" if np.isfinite(start) else "absent"
             err = f"+- {_fmt(m[f'v_{seg}_error'], '', '.2g')}" if f"v_{seg}_error" in m and np.isfinite(float(m[f"v_{seg}"])) else ""
+            if f"v_{seg}_grid_error" in m and np.isfinite(float(m[f"v_{seg}"])):
+                err += f" (grid: {_fmt(m[f'v_{seg}_grid_error'], '', '.2g')})"
             print(f"  v_{seg:<6} = {_fmt(m[f'v_{seg}'], 'm/s', '.3g'):>10} {err:<10} {where}")
+        if "v_middle_grid_error" not in m:
+            print("  (+- : time-discretisation error only; --grid-check adds the grid's, usually the larger)")
     print(f"status    = {_status_name(ds, m.status)}; steps accepted {int(m.steps_accepted)}, rejected "
           f"{int(m.steps_rejected)}; lift-off {'yes' if int(m.lift_off) else 'no'}; wall {ds.attrs['wall_time_s']:.2f} s")
 
@@ -96,8 +100,8 @@ def _run_default(args) -> int:
         _check_output(Path(args.output), args.resume, args.overwrite)
     offset = args.member_offset or 0
     check_member_offset(offset, 1, "--member-offset")
-    ds = simulate(scene=scene, model=model, solver=solver, device=args.device, progress=not args.quiet,
-                  member_offset=offset)
+    ds = simulate(scene=scene, model=model, solver=solver, fronts=Fronts(grid_check=args.grid_check), device=args.device,
+                  progress=not args.quiet, member_offset=offset)
     _print_member(ds, solver)
     if args.output:
         write_ensemble(ds, args.output, command=args.command_line)
@@ -315,6 +319,8 @@ def main(argv=None) -> int:
     scene.add_argument("--rtol", type=float, default=Solver.rtol, help=f"relative tolerance (default {Solver.rtol:g})")
     scene.add_argument("--end-time", type=float, default=None,
                        help="s (default: when the detachment is over, at most max_end_time = 80 s)")
+    scene.add_argument("--grid-check", action="store_true",
+                       help="also run on about half the nodes and report each front speed's change (its grid error)")
     scene.add_argument("--relaxation-gate", default=Model.relaxation_gate, choices=RELAXATION_GATES,
                        help="friction law's gate (default stress: GRL 2012; none: the SPEC v1 law)")
     info = sub.add_parser("info", help="summary of an ensemble file (or of an interrupted run, or of several files combined)")

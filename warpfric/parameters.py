@@ -323,6 +323,12 @@ class Fronts:
     min_event_fraction:    a detachment event needs a maximum detachment velocity of at least this
                            fraction of |disc_velocity|; below it there is no front (all front
                            outputs NaN). Measured events: 1e-4 .. 3e-3 of |v_max| for 1e-6 .. 1e-2 m/s.
+    grid_check:            also run the ensemble on a grid of about half the nodes ((N+1)//2) and
+                           report the change as ``v_*_grid_error`` and ``mu_s_grid_error``: the
+                           front speeds' error is mostly spatial (a fast middle front at e = -0.2
+                           changes by a factor 5 from N = 50 to 400; docs/performance.md, "Front
+                           speeds against the grid"), which ``v_*_error`` (time only) does not see.
+                           Costs a third run on the coarse grid (about +50 %); off by default.
 
     Front metrics cost a second pass of the integrator (the event maximum must be known before the
     arrival times are taken); ``simulate(fronts=None)`` skips them.
@@ -335,6 +341,7 @@ class Fronts:
     speed_ratio: float = 1.5
     edge_zone_fraction: float = 0.1
     min_event_fraction: float = 1e-6
+    grid_check: bool = False
 
     def __post_init__(self):
         def need(cond, name, value, valid):
@@ -346,6 +353,7 @@ class Fronts:
 
         need(real(self.threshold) and 0 < self.threshold < 1, "threshold", self.threshold, "a number in (0, 1)")
         need(self.direction in _FRONT_DIRECTIONS, "direction", self.direction, " or ".join(_FRONT_DIRECTIONS))
+        need(isinstance(self.grid_check, (bool, np.bool_)), "grid_check", self.grid_check, "True or False")
         need(real(self.min_segment_fraction) and 0 < self.min_segment_fraction <= 1 / 3, "min_segment_fraction",
              self.min_segment_fraction, "a number in (0, 1/3]")
         need(real(self.fast_fraction) and 0 < self.fast_fraction <= 1, "fast_fraction",

@@ -277,7 +277,32 @@ def simulate(
         _add_record(ds, record, recorded, ds.x, member_offset)
     if solver.dtype == "float32" and solver.float32_fallback:
         _rerun_failed_in_float64(ds, values, scene, model, solver, fronts, record, device)
+    if fronts is not None and fronts.grid_check:
+        _add_grid_check(ds, values, scene, model, solver, fronts, device, progress)
     return ds
+
+
+def _add_grid_check(ds, values, scene, model, solver, fronts, device, progress) -> None:
+    """Fronts.grid_check: the same members on (N+1)//2 nodes; |change| of mu_s and of each front speed
+    as ``*_grid_error`` (in place). A segment present on one grid and absent on the other: inf (not
+    resolved); absent on both, or a failed member: NaN."""
+    coarse_nodes = max(3, (solver.nodes + 1) // 2)
+    label = (progress if isinstance(progress, str) else "") + " grid check"
+    coarse = simulate({name: values[name] for name in values}, scene=scene, model=model,
+                      solver=dataclasses.replace(solver, nodes=coarse_nodes),
+                      fronts=dataclasses.replace(fronts, grid_check=False), device=device,
+                      progress=label.strip() if progress else progress)
+    usable = (ds.status.values == 0) & (coarse.status.values == 0)
+    for name, units, what in [("mu_s", "1", "mu_s")] + [(f"v_{seg}", "m s-1", f"v_{seg}") for seg in ("left", "middle", "right")]:
+        fine_v, coarse_v = ds[name].values, coarse[name].values
+        change = np.abs(fine_v - coarse_v)
+        change = np.where(np.isfinite(fine_v) != np.isfinite(coarse_v), np.inf, change)
+        change = np.where(usable & (np.isfinite(fine_v) | np.isfinite(coarse_v)), change, np.nan)
+        ds[f"{name}_grid_error"] = xr.DataArray(change, dims=("member",), attrs={
+            "units": units, "long_name": f"change of {what} from the grid of {solver.nodes} nodes to {coarse_nodes} "
+            "nodes (estimate of its spatial error; inf: present on one grid only)"})
+    ds.attrs["grid_check_nodes"] = coarse_nodes
+    ds.attrs["wall_time_s"] = ds.attrs["wall_time_s"] + coarse.attrs["wall_time_s"]
 
 
 # statuses of a run that did not reach its end (ok and no_peak did)
@@ -411,7 +436,8 @@ def _add_fronts(ds: xr.Dataset, front: dict, fronts: Fronts) -> None:
         dims = ("member", "x") if arr.ndim == 2 else ("member",)
         ds[name] = xr.DataArray(arr, dims=dims, attrs={"units": units, "long_name": long_name})
     for f in dataclasses.fields(fronts):
-        ds.attrs[f"fronts_{f.name}"] = getattr(fronts, f.name)
+        value = getattr(fronts, f.name)
+        ds.attrs[f"fronts_{f.name}"] = int(value) if isinstance(value, bool) else value  # netCDF has no bool
 
 
 def _add_record(ds: xr.Dataset, record: Record, recorded: np.ndarray, x, member_offset: int = 0) -> None:
