@@ -1,0 +1,75 @@
+"""Refactor guard: save every output of a fixed set of scenes, or compare against a saved set.
+
+    python studies/outputs_equal.py save  FILE.npz [--device cpu]
+    python studies/outputs_equal.py compare FILE.npz [--device cpu]
+
+Scenes (N = 30, CPU-sized), each with the members e = 0, -0.2 (1000 N), 0.3 (300 N) and 0.6
+(3000 N, lift-off): the default law with fronts and two recorded members, the gate-less and the
+velocity-gate laws, float32 (gate-less), the model switches off (inertia, tilt, poisson_coupling,
+viscous_friction), and the default law without fronts. ``compare`` prints the largest relative
+difference of each scene's outputs and exits 1 above --rtol (default 1e-12; 0 asks for bit
+equality).
+"""
+
+import argparse
+import sys
+
+import numpy as np
+
+import warpfric as wf
+
+MEMBERS = {"eccentricity": [0.0, -0.2, 0.3, 0.6], "normal_force": [1000.0, 1000.0, 300.0, 3000.0]}
+
+
+def scenes():
+    rec = wf.Record.window(20.1, 20.4, 7, members=(0, 2))
+    yield "stress", dict(model=wf.Model(), record=rec)
+    yield "none", dict(model=wf.Model(relaxation_gate="none"))
+    yield "velocity", dict(model=wf.Model(relaxation_gate="velocity"))
+    yield "none_f32", dict(model=wf.Model(relaxation_gate="none"), dtype="float32")
+    yield "switches_off", dict(model=wf.Model(inertia=False, tilt=False, poisson_coupling=False, viscous_friction=False))
+    yield "stress_no_fronts", dict(model=wf.Model(), fronts=None)
+
+
+def run(device):
+    out = {}
+    for name, kw in scenes():
+        ds = wf.simulate(MEMBERS, model=kw["model"], solver=wf.Solver(nodes=30, dtype=kw.get("dtype", "float64")),
+                         fronts=kw.get("fronts", wf.Fronts()), record=kw.get("record"), device=device, progress=False)
+        for var, arr in ds.data_vars.items():
+            if np.issubdtype(arr.dtype, np.number):
+                out[f"{name}/{var}"] = arr.values
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("action", choices=("save", "compare"))
+    ap.add_argument("file")
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--rtol", type=float, default=1e-12)
+    args = ap.parse_args(argv)
+    now = run(args.device)
+    if args.action == "save":
+        np.savez_compressed(args.file, **now)
+        print(f"saved {len(now)} arrays to {args.file}")
+        return 0
+    ref = dict(np.load(args.file))
+    worst = 0.0
+    missing = sorted(set(ref) ^ set(now))
+    for key in sorted(set(ref) & set(now)):
+        a, b = ref[key].astype(np.float64), now[key].astype(np.float64)
+        same_nan = np.array_equal(np.isnan(a), np.isnan(b)) and np.array_equal(np.isinf(a), np.isinf(b))
+        fin = np.isfinite(a) & np.isfinite(b)
+        rel = float(np.max(np.abs(a[fin] - b[fin]) / np.maximum(np.abs(a[fin]), 1e-300), initial=0.0))
+        if not same_nan:
+            rel = np.inf
+        if rel > args.rtol:
+            print(f"  {key}: max relative difference {rel:.3g}")
+        worst = max(worst, rel)
+    print(f"{len(ref)} arrays compared; largest relative difference {worst:.3g}; missing/new: {missing or 'none'}")
+    return 0 if worst <= args.rtol and not missing else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
