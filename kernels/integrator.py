@@ -182,39 +182,40 @@ def _make_integrator(dtype: str, model):
                 if i < n - 1:
                     u_r = work[W_ZU, i + 1, m] + g * work[W_V, i + 1, m]
                 vel = work[W_V, i, m]
-                sigma, ds_ul, ds_uc, ds_ur, ds_d0, ds_a = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
-                tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, gate_used = interface_friction(
+                ns = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
+                sigma = ns.value
+                fr = interface_friction(
                     c, sigma, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m], g, node_gate(gates, i, m),
                     node_sliding(gates, i, m), ft(s.sliding_width),
                 )
-                f_el, df_ul, df_uc, df_ur, df_d0, df_a = elastic_force(c, i, n, u_l, u_c, u_r, delta0, tilt)
-                residual = -(f_el + tau_f - c.damping * vel)
-                jac_c = -g * (df_uc + dtf_dsig * ds_uc) + c.kif * dtf_ds + c.damping
+                ef = elastic_force(c, i, n, u_l, u_c, u_r, delta0, tilt)
+                residual = -(ef.value + fr.stress - c.damping * vel)
+                jac_c = -g * (ef.d_u_center + fr.d_normal * ns.d_u_center) + c.kif * fr.d_slip + c.damping
                 if wp.static(inertia):
                     residual += c.rhoH * (vel - work[W_ZV, i, m]) / g
                     jac_c += c.rhoH / g
                     work[W_DIAG, i, m] = jac_c
-                jac_l = -g * (df_ul + dtf_dsig * ds_ul)
-                jac_r = -g * (df_ur + dtf_dsig * ds_ur)
-                col_d0 = -(df_d0 + dtf_dsig * ds_d0)
-                col_a = -(df_a + dtf_dsig * ds_a)
+                jac_l = -g * (ef.d_u_left + fr.d_normal * ns.d_u_left)
+                jac_r = -g * (ef.d_u_right + fr.d_normal * ns.d_u_right)
+                col_d0 = -(ef.d_delta0 + fr.d_normal * ns.d_delta0)
+                col_a = -(ef.d_tilt + fr.d_normal * ns.d_tilt)
                 # plate balance rows: force (1) and moment (2), per unit depth
                 wgt = node_weight(c, i, n)
                 wmom = node_moment_weight(c, i, n)
-                e1 += wgt * contact * sigma
-                e2 += wmom * contact * sigma + c.h_arm * wgt * tau_f
-                d11 += wgt * contact * ds_d0
-                d12 += wgt * contact * ds_a
-                d21 += (wmom * contact + c.h_arm * wgt * dtf_dsig) * ds_d0
-                d22 += (wmom * contact + c.h_arm * wgt * dtf_dsig) * ds_a
-                q1 = wgt * contact * g
-                q2 = (wmom * contact + c.h_arm * wgt * dtf_dsig) * g
-                c1_prev += q1 * ds_ul
-                c1_cur += q1 * ds_uc
-                c1_next = q1 * ds_ur
-                c2_prev += q2 * ds_ul
-                c2_cur += q2 * ds_uc - c.h_arm * wgt * c.kif * dtf_ds
-                c2_next = q2 * ds_ur
+                e1 += wgt * fr.contact * sigma
+                e2 += wmom * fr.contact * sigma + c.h_arm * wgt * fr.stress
+                d11 += wgt * fr.contact * ns.d_delta0
+                d12 += wgt * fr.contact * ns.d_tilt
+                d21 += (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * ns.d_delta0
+                d22 += (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * ns.d_tilt
+                q1 = wgt * fr.contact * g
+                q2 = (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * g
+                c1_prev += q1 * ns.d_u_left
+                c1_cur += q1 * ns.d_u_center
+                c1_next = q1 * ns.d_u_right
+                c2_prev += q2 * ns.d_u_left
+                c2_cur += q2 * ns.d_u_center - c.h_arm * wgt * c.kif * fr.d_slip
+                c2_next = q2 * ns.d_u_right
                 if i > 0:
                     work[W_C1, i - 1, m] = c1_prev
                     work[W_C2, i - 1, m] = c2_prev
@@ -347,39 +348,40 @@ def _make_integrator(dtype: str, model):
             if i < n - 1:
                 u_r = work[W_ZU, i + 1, m] + g * work[W_V, i + 1, m]
             vel = work[W_V, i, m]
-            sigma, ds_ul, ds_uc, ds_ur, ds_d0, ds_a = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
+            ns = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
+            sigma = ns.value
             sliding = node_sliding(gates, i, m)
-            tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, gate = interface_friction(
+            fr = interface_friction(
                 c, sigma, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m], g, node_gate(gates, i, m), sliding,
                 ft(s.sliding_width),
             )
             if check_gates == 1:
-                work[W_CONTACT, i, m] = contact  # at the end of the step: fronts skip lifted-off nodes
-                work[W_GATE_END, i, m] = gate
+                work[W_CONTACT, i, m] = fr.contact  # at the end of the step: fronts skip lifted-off nodes
+                work[W_GATE_END, i, m] = fr.gate
             if wp.static(stress_gate):
                 if check_gates == 1:
-                    z1 = yield_margin(c, tau_f, area)
+                    z1 = yield_margin(c, fr.stress, fr.area)
                     work[W_MARGIN, i, m] = z1
                     # d(dz/dt)/d(gate) at the end of the step: the gate enters the rates of tau_el
                     # and phi (and A through phi); the pad's rates do not depend on it
                     slip = v_disc - c.kif * vel
                     relax = wp.abs(slip) * c.inv_D
-                    darea_dgate = contact * sigma * c.inv_hardness * c.b / (c.phi0 + phi) * (-phi * relax)
-                    dtau_dgate = -tau_el * relax
+                    darea_dgate = fr.contact * sigma * c.inv_hardness * c.b / (c.phi0 + fr.contact_age) * (-fr.contact_age * relax)
+                    dtau_dgate = -fr.elastic_stress * relax
                     if wp.static(viscous):
                         dtau_dgate += c.eta_vstar * wp.sign(slip) * wp.log(ft(1.0) + wp.abs(slip) / c.vstar) * darea_dgate
-                    work[W_DMARGIN, i, m] = wp.sign(tau_f) * dtau_dgate - c.tau_c * darea_dgate
+                    work[W_DMARGIN, i, m] = wp.sign(fr.stress) * dtau_dgate - c.tau_c * darea_dgate
                     open_now = ft(0.0)
                     if z1 > ft(0.0):
                         open_now = ft(1.0)
-                    if sliding == ft(0.0) and open_now != gate:
+                    if sliding == ft(0.0) and open_now != fr.gate:
                         z0 = gates[G_MARGIN, i, m]
                         theta = ft(0.0)
                         if z0 != z1:
                             theta = wp.clamp(z0 / (z0 - z1), ft(0.0), ft(1.0))
                         rate = wp.max(
-                            wp.abs(tau_el) * relax / (rtol * (c.tau_scale + wp.abs(tau_el))),
-                            phi * relax / (rtol * (c.phi_scale + wp.abs(phi))),
+                            wp.abs(fr.elastic_stress) * relax / (rtol * (c.tau_scale + wp.abs(fr.elastic_stress))),
+                            fr.contact_age * relax / (rtol * (c.phi_scale + wp.abs(fr.contact_age))),
                         )
                         e = (ft(1.0) - theta) * h * rate
                         switch_error = wp.max(switch_error, e)
@@ -390,11 +392,11 @@ def _make_integrator(dtype: str, model):
                 K[slot, C_V, i, m] = (vel - work[W_ZV, i, m]) / g
             else:
                 K[slot, C_V, i, m] = ft(0.0)
-            K[slot, C_TAU, i, m] = rate_tau
-            K[slot, C_PHI, i, m] = rate_phi
+            K[slot, C_TAU, i, m] = fr.elastic_stress_rate
+            K[slot, C_PHI, i, m] = fr.contact_age_rate
             wgt = wp.float64(node_weight(c, i, n))
-            sum_tau += wgt * wp.float64(tau_f)
-            sum_sigma += wgt * wp.float64(contact * sigma)
+            sum_tau += wgt * wp.float64(fr.stress)
+            sum_sigma += wgt * wp.float64(fr.contact * sigma)
             min_sigma = wp.min(min_sigma, wp.float64(sigma))
             u_l = u_c
             u_c = u_r
@@ -596,11 +598,12 @@ def _make_integrator(dtype: str, model):
             if i < n - 1:
                 u_r = state[C_U, i + 1, m]
             vel = state[C_V, i, m]
-            sigma, ds_ul, ds_uc, ds_ur, ds_d0, ds_a = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
-            tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, gate = interface_friction(
+            ns = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
+            sigma = ns.value
+            fr = interface_friction(
                 c, sigma, vel, v_disc, state[C_TAU, i, m], state[C_PHI, i, m], ft(0.0), ft(1.0), ft(0.0), ft(1.0)
             )
-            current = wp.vector(vel, v_disc - c.kif * vel, contact * sigma, tau_f, length=4, dtype=ft)
+            current = wp.vector(vel, v_disc - c.kif * vel, fr.contact * sigma, fr.stress, length=4, dtype=ft)
             for k in range(st.record_next, k_end):
                 frac = ft(1.0)
                 if span > wp.float64(0.0):
@@ -853,12 +856,13 @@ def _make_integrator(dtype: str, model):
             u_r = ft(0.0)
             if i < n - 1:
                 u_r = state[C_U, i + 1, m]
-            sigma, ds_ul, ds_uc, ds_ur, ds_d0, ds_a = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
-            tau_f, dtf_dsig, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, gate = interface_friction(
+            ns = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
+            sigma = ns.value
+            fr = interface_friction(
                 c, sigma, state[C_V, i, m], v_disc, state[C_TAU, i, m], state[C_PHI, i, m], ft(0.0), ft(1.0), ft(0.0), ft(1.0)
             )
-            normal_stress_out[i, m] = contact * sigma
-            friction_stress_out[i, m] = tau_f
+            normal_stress_out[i, m] = fr.contact * sigma
+            friction_stress_out[i, m] = fr.stress
             u_l = u_c
             u_c = u_r
 

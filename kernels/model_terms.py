@@ -118,6 +118,37 @@ def make_model_terms(ft, model):
         delta_scale: ft
         tilt_scale: ft
 
+    @wp.struct
+    class StencilTerm:
+        """A node quantity of the 3-point stencil and its partial derivatives with respect to
+        u_{i-1}, u_i, u_{i+1} (per m), the plate compression delta0 (per m) and tilt a (per rad)."""
+
+        value: ft
+        d_u_left: ft
+        d_u_center: ft
+        d_u_right: ft
+        d_delta0: ft
+        d_tilt: ft
+
+    @wp.struct
+    class Friction:
+        """The friction law at one node over an implicit stage (interface_friction, friction_at_gate)."""
+
+        stress: ft  # tau_f, Pa
+        d_normal: ft  # d tau_f/d sigma_n (1)
+        d_slip: ft  # d tau_f/d s, Pa s/m (total: through phi, tau_el and, sliding, the gate)
+        elastic_stress: ft  # tau_el, Pa
+        contact_age: ft  # phi, s
+        elastic_stress_rate: ft  # d tau_el/dt, Pa/s
+        contact_age_rate: ft  # d phi/dt (1)
+        contact: ft  # 1 where sigma_n >= 0, else 0
+        area: ft  # real-contact fraction A (1)
+        d_area_normal: ft  # dA/d sigma_n, 1/Pa
+        d_area_slip: ft  # dA/ds (gate fixed), s/m
+        d_gate: ft  # d tau_f/d gate (slip fixed), Pa
+        d_area_gate: ft  # dA/d gate (1)
+        gate: ft  # the gate used (1)
+
     @wp.func
     def make_coeffs(p: MemberParams, n: int):
         c = Coeffs()
@@ -184,6 +215,17 @@ def make_model_terms(ft, model):
         return x * c.dx
 
     @wp.func
+    def stencil_term(value: ft, d_u_left: ft, d_u_center: ft, d_u_right: ft, d_delta0: ft, d_tilt: ft):
+        t = StencilTerm()
+        t.value = value
+        t.d_u_left = d_u_left
+        t.d_u_center = d_u_center
+        t.d_u_right = d_u_right
+        t.d_delta0 = d_delta0
+        t.d_tilt = d_tilt
+        return t
+
+    @wp.func
     def normal_stress(c: Coeffs, i: int, n: int, u_l: ft, u_c: ft, u_r: ft, delta0: ft, tilt: ft):
         """Interface normal stress sigma_n at node i (Pa, compressive > 0) and its derivatives
         with respect to u_{i-1}, u_i, u_{i+1}, delta0 and the tilt a.
@@ -222,7 +264,7 @@ def make_model_terms(ft, model):
                 d_uc += f * c.inv_dx
                 d_ur -= f * c.inv_dx
             sigma -= f * (e_l + e_r)
-        return sigma, d_ul, d_uc, d_ur, d_d0, d_a
+        return stencil_term(sigma, d_ul, d_uc, d_ur, d_d0, d_a)
 
     @wp.func
     def elastic_force(c: Coeffs, i: int, n: int, u_l: ft, u_c: ft, u_r: ft, delta0: ft, tilt: ft):
@@ -264,14 +306,12 @@ def make_model_terms(ft, model):
         d_uc -= c.two_G_over_H
         if wp.static(not tilt_on):
             d_a = ft(0.0)
-        return force, d_ul, d_uc, d_ur, d_d0, d_a
+        return stencil_term(force, d_ul, d_uc, d_ur, d_d0, d_a)
 
     @wp.func
     def friction_at_gate(c: Coeffs, sigma: ft, s: ft, z_tau: ft, z_phi: ft, g: ft, gate: ft):
         """The closed-form stage solution of the friction law at one node for a given slip rate s and
-        gate (see interface_friction). Returns tau_f, d tau_f/d sigma_n, d tau_f/d s (total through
-        phi and tau_el, gate fixed), tau_el, phi, d tau_el/dt, d phi/dt, contact, A, d A/d sigma_n,
-        d A/d s (gate fixed), d tau_f/d gate, d A/d gate."""
+        gate (see interface_friction), as a Friction (d_slip through phi and tau_el, gate fixed)."""
         a_s = wp.abs(s)
         sg = wp.sign(s)
         r = a_s * gate
@@ -309,10 +349,22 @@ def make_model_terms(ft, model):
         dtf_ds += dtf_darea * darea_ds
         dtf_dsigma = dtf_darea * darea_dsigma
         dtf_dgate = dtel_dgate + dtf_darea * darea_dgate
-        rate_tau = c.Kh * area * s - tau_el * r * c.inv_D
-        rate_phi = ft(1.0) - phi * r * c.inv_D
-        return (tau_f, dtf_dsigma, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, darea_dsigma, darea_ds,
-                dtf_dgate, darea_dgate)
+        out = Friction()
+        out.stress = tau_f
+        out.d_normal = dtf_dsigma
+        out.d_slip = dtf_ds
+        out.elastic_stress = tau_el
+        out.contact_age = phi
+        out.elastic_stress_rate = c.Kh * area * s - tau_el * r * c.inv_D
+        out.contact_age_rate = ft(1.0) - phi * r * c.inv_D
+        out.contact = contact
+        out.area = area
+        out.d_area_normal = darea_dsigma
+        out.d_area_slip = darea_ds
+        out.d_gate = dtf_dgate
+        out.d_area_gate = darea_dgate
+        out.gate = gate
+        return out
 
     @wp.func
     def sliding_gate_of(c: Coeffs, tau_f: ft, area: ft, scale: ft):
@@ -346,40 +398,37 @@ def make_model_terms(ft, model):
         width of the yield stress (Newton on the gate, started from ``gate``; unique root since
         dx/dgate < 0 there); the derivatives then include the gate's response.
 
-        Returns tau_f (Pa), d tau_f/d sigma_n, d tau_f/d s (total), tau_el (Pa), phi (s),
-        d tau_el/dt (Pa/s), d phi/dt (1), contact indicator (1 or 0), real-contact fraction A (1),
-        and the gate used.
+        Returns a Friction (d_slip and d_normal total, including a sliding gate's response).
         """
         s = v_disc - c.kif * velocity
-        (tau_f, dtf_dsigma, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, darea_dsigma, darea_ds,
-         dtf_dgate, darea_dgate) = friction_at_gate(c, sigma, s, z_tau, z_phi, g, gate)
+        fr = friction_at_gate(c, sigma, s, z_tau, z_phi, g, gate)
         if wp.static(stress_gate):
-            if sliding > ft(0.0) and g > ft(0.0) and area > ft(0.0):
+            if sliding > ft(0.0) and g > ft(0.0) and fr.area > ft(0.0):
                 scale = ft(1.0) / (width * c.tau_c)
                 dF_dgate = ft(1.0)
                 dtheta = ft(0.0)
                 for _it in range(SLIDING_NEWTON_ITERATIONS):
-                    theta, dtheta = sliding_gate_of(c, tau_f, area, scale)
-                    dF_dgate = ft(1.0) - dtheta * margin_slope(tau_f, area, dtf_dgate, darea_dgate, scale)
+                    theta, dtheta = sliding_gate_of(c, fr.stress, fr.area, scale)
+                    dF_dgate = ft(1.0) - dtheta * margin_slope(fr.stress, fr.area, fr.d_gate, fr.d_area_gate, scale)
                     F = gate - theta
                     new_gate = wp.clamp(gate - F / dF_dgate, ft(0.0), ft(1.0))
                     if wp.abs(new_gate - gate) <= ft(SLIDING_GATE_TOL):
                         gate = new_gate
-                        (tau_f, dtf_dsigma, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, darea_dsigma,
-                         darea_ds, dtf_dgate, darea_dgate) = friction_at_gate(c, sigma, s, z_tau, z_phi, g, gate)
+                        fr = friction_at_gate(c, sigma, s, z_tau, z_phi, g, gate)
                         break
                     gate = new_gate
-                    (tau_f, dtf_dsigma, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, darea_dsigma, darea_ds,
-                     dtf_dgate, darea_dgate) = friction_at_gate(c, sigma, s, z_tau, z_phi, g, gate)
-                if area > ft(0.0):
+                    fr = friction_at_gate(c, sigma, s, z_tau, z_phi, g, gate)
+                if fr.area > ft(0.0):
                     # the gate follows s and sigma_n: d gate = theta' (dx/ds ds + dx/dsigma dsigma) / dF_dgate
-                    theta, dtheta = sliding_gate_of(c, tau_f, area, scale)
-                    dF_dgate = ft(1.0) - dtheta * margin_slope(tau_f, area, dtf_dgate, darea_dgate, scale)
-                    dx_ds = margin_slope(tau_f, area, dtf_ds, darea_ds, scale)
-                    dx_dsigma = margin_slope(tau_f, area, dtf_dsigma, darea_dsigma, scale)
-                    dtf_ds = dtf_ds + dtf_dgate * dtheta * dx_ds / dF_dgate
-                    dtf_dsigma = dtf_dsigma + dtf_dgate * dtheta * dx_dsigma / dF_dgate
-        return tau_f, dtf_dsigma, dtf_ds, tau_el, phi, rate_tau, rate_phi, contact, area, gate
+                    theta, dtheta = sliding_gate_of(c, fr.stress, fr.area, scale)
+                    dF_dgate = ft(1.0) - dtheta * margin_slope(fr.stress, fr.area, fr.d_gate, fr.d_area_gate, scale)
+                    dx_ds = margin_slope(fr.stress, fr.area, fr.d_slip, fr.d_area_slip, scale)
+                    dx_dsigma = margin_slope(fr.stress, fr.area, fr.d_normal, fr.d_area_normal, scale)
+                    d_slip = fr.d_slip + fr.d_gate * dtheta * dx_ds / dF_dgate
+                    d_normal = fr.d_normal + fr.d_gate * dtheta * dx_dsigma / dF_dgate
+                    fr.d_slip = d_slip
+                    fr.d_normal = d_normal
+        return fr
 
     @wp.func
     def yield_margin(c: Coeffs, tau_f: ft, area: ft):
@@ -390,6 +439,8 @@ def make_model_terms(ft, model):
 
     return dict(
         Coeffs=Coeffs,
+        StencilTerm=StencilTerm,
+        Friction=Friction,
         make_coeffs=make_coeffs,
         node_x=node_x,
         node_weight=node_weight,
