@@ -14,7 +14,7 @@ the free edges, so the elastic force sums to zero over the pad exactly.
 
 import warp as wp
 
-from .params import MemberParams
+from .types import MemberParams
 
 FLOAT32_VELOCITY_FLOOR = 1.0e-4  # m/s, smallest velocity reference of the error weights in float32
 SLIDING_NEWTON_ITERATIONS = 12  # Newton iterations on the gate of a node sliding on the yield surface

@@ -9,7 +9,7 @@ maximised instead (docs/model.md, "Outputs").
 
 import warp as wp
 
-from .params import FRONT_ABSOLUTE, FRONT_WITH_DISC, IntegratorState
+from .types import FRONT_ABSOLUTE, FRONT_WITH_DISC, IntegratorState
 
 
 @wp.func

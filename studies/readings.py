@@ -48,7 +48,7 @@ from pathlib import Path
 import numpy as np
 
 import warpfric as wf
-from warpfric.kernels.params import STATUS_MEANINGS
+from warpfric.kernels.types import STATUS_MEANINGS
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from figures import linfit  # noqa: E402

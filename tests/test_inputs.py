@@ -50,7 +50,8 @@ def test_bad_parameters(members, words):
         (dict(dtype="float32", rtol=1e-7), ["rtol", "1e-07", "float32"]),
         (dict(max_steps=0), ["max_steps"]),
         (dict(min_step=1.0, initial_step=1e-6), ["initial_step"]),
-        (dict(method="euler"), ["method", "euler"]),
+        (dict(step_safety=1.5), ["step_safety", "1.5", "(0, 1)"]),
+        (dict(failure_factor=0.0), ["failure_factor", "0.0"]),
     ],
 )
 def test_bad_solver_settings(kw, words):

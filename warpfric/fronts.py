@@ -82,7 +82,7 @@ def arrival_times_from_history(times, velocity, disc_velocity=1.0, fronts: Front
     Returns (arrival_time (members, nodes) s, event_max_velocity (members,) m/s).
     """
     wp = _warp()
-    from warpfric.kernels.params import FRONT_DIRECTIONS
+    from warpfric.kernels.types import FRONT_DIRECTIONS
     from warpfric.kernels.reductions import arrival_from_history
 
     v = np.asarray(velocity, dtype=np.float64)

@@ -202,7 +202,6 @@ class Model:
 
 _DTYPES = ("float32", "float64")
 FLOAT32_MIN_RTOL = 1e-5  # docs/performance.md: float32 stalls below this
-_METHODS = ("tr-bdf2",)
 
 
 @dataclass(frozen=True)
@@ -231,12 +230,16 @@ class Solver:
                       max(stall_min_steps, stall_factor * their median) attempted steps stops with
                       status 'stalled' (NaN outputs), so that one straggler cannot hold a launch.
     stall_min_steps:  see stall_factor.
+    step_safety, step_min_factor, step_max_factor:
+                      step-size controller (kernels/controller.py): after a step with error norm err
+                      the next step is h*clamp(step_safety*err^(-1/3), step_min_factor,
+                      step_max_factor); a rejected step shrinks by at least step_safety.
+    failure_factor:   a step whose Newton solve fails is retried with failure_factor*h.
     float32_fallback: dtype='float32' only: members that end max_steps_reached, non_finite_state,
                       step_size_underflow or stalled are run again in float64 (after the float32
                       launch, on the same device) and their outputs replaced; the output
                       ``working_precision`` says which precision produced each member
                       (docs/model.md, "Precision"). False keeps the float32 failure statuses.
-    method:           time integrator; 'tr-bdf2' (L-stable ESDIRK, order 2, embedded order 3).
     """
 
     nodes: int = 100
@@ -253,8 +256,11 @@ class Solver:
     steps_per_launch: int = 500
     stall_factor: float = 10.0
     stall_min_steps: int = 2000
+    step_safety: float = 0.9
+    step_min_factor: float = 0.2
+    step_max_factor: float = 5.0
+    failure_factor: float = 0.25
     float32_fallback: bool = True
-    method: str = "tr-bdf2"
 
     def __post_init__(self):
         def need(cond, name, value, valid):
@@ -289,7 +295,13 @@ class Solver:
              "a number in (0, 0.1]")
         need(is_int(self.steps_per_launch) and self.steps_per_launch >= 1, "steps_per_launch",
              self.steps_per_launch, "an integer >= 1")
-        need(self.method in _METHODS, "method", self.method, " or ".join(_METHODS))
+        need(is_real(self.step_safety) and 0 < self.step_safety < 1, "step_safety", self.step_safety, "a number in (0, 1)")
+        need(is_real(self.step_min_factor) and 0 < self.step_min_factor < 1, "step_min_factor", self.step_min_factor,
+             "a number in (0, 1)")
+        need(is_real(self.step_max_factor) and self.step_max_factor > 1, "step_max_factor", self.step_max_factor,
+             "a number > 1")
+        need(is_real(self.failure_factor) and 0 < self.failure_factor < 1, "failure_factor", self.failure_factor,
+             "a number in (0, 1)")
         need((is_real(self.stall_factor) or self.stall_factor == math.inf) and self.stall_factor >= 1, "stall_factor",
              self.stall_factor, "a number >= 1 (inf: never)")
         need(is_int(self.stall_min_steps) and self.stall_min_steps >= 1, "stall_min_steps", self.stall_min_steps,

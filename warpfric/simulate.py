@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import math
 import sys
 import time
 from typing import Any
@@ -42,34 +41,6 @@ def _check_device(device: str | None) -> str:
     if str(device) not in names:
         raise ValueError(f"device {device!r} is not available; valid: {', '.join(names)} (or None)")
     return str(device)
-
-
-class _Progress:
-    """One-line progress on stderr: members done and mean simulated-time fraction."""
-
-    def __init__(self, enabled: bool, n_members: int, label: str = ""):
-        self.enabled = enabled
-        self.label = (label + " ") if label else ""
-        self.n = n_members
-        self.tty = sys.stderr.isatty()  # in a log, "\r" does not overwrite: only the final line
-        self.t0 = time.perf_counter()
-        self.last = 0.0
-
-    def update(self, done: int, fraction: float, final: bool = False):
-        if not self.enabled:
-            return
-        now = time.perf_counter()
-        if not final and (not self.tty or now - self.last < 0.5):
-            return
-        self.last = now
-        bar = "#" * int(30 * fraction) + "-" * (30 - int(30 * fraction))
-        sys.stderr.write(
-            ("\r" if self.tty else "") + f"warpfric {self.label}[{bar}] {100 * fraction:5.1f}% simulated time, "
-            f"{done}/{self.n} members done, {now - self.t0:7.1f} s"
-        )
-        if final:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
 
 
 def simulate(
@@ -135,133 +106,22 @@ def simulate(
         raise ValueError(f"member_offset = {member_offset!r} is invalid; valid: an integer in [0, {2**31 - 2**24})")
     values, varying = resolve_members(members, scene)
     device = _check_device(device)
-    wp = _warp()
-    from warpfric.kernels.integrator import C_PHI, N_COMPONENTS, N_GATE, N_STAGE_SLOTS, N_WORK, get_integrator
-    from warpfric.kernels.params import (
-        FRONT_DIRECTIONS,
-        RECORD_FIELDS,
-        STATUS_MEANINGS,
-        IntegratorState,
-        MemberParams,
-        OutputSettings,
-        SolverSettings,
-    )
+    from warpfric.kernels.types import STATUS_MEANINGS
 
-    n_members = values["normal_force"].shape[0]
-    n = solver.nodes
-    kern = get_integrator(solver.dtype, model)
-    np_dtype = np.float64 if solver.dtype == "float64" else np.float32
-    ft = kern["ft"]
+    from . import engine
 
-    params_np = np.zeros(n_members, dtype=MemberParams.numpy_dtype())
-    for name in params_np.dtype.names:
-        if name in values:
-            params_np[name] = values[name]
-    params_np["end_time"] = np.minimum(values["end_time"], values["max_end_time"])
-    params_np["auto_end"] = np.isinf(values["end_time"]).astype(np.float64)
-    settings = SolverSettings()
-    settings.rtol = solver.rtol
-    settings.initial_step = solver.initial_step
-    settings.min_step = solver.min_step
-    settings.max_step = solver.max_step
-    settings.newton_tol = solver.newton_tol
-    settings.switch_rtol = solver.rtol * solver.switch_tol
-    settings.sliding_width = solver.sliding_width
-    settings.max_steps = solver.max_steps
-    settings.newton_max_iter = solver.newton_max_iter
-
+    _warp()
+    show = sys.stderr.isatty() if progress is None else bool(progress)
     t_start = time.perf_counter()
-    record_slots = _record_slots(record, n_members)
-    n_passes = 2 if fronts is not None else 1
-    with wp.ScopedDevice(device):
-        params = wp.array(params_np, dtype=MemberParams)
-        stages = wp.zeros((N_STAGE_SLOTS, N_COMPONENTS, n, n_members), dtype=ft)
-        work = wp.zeros((N_WORK, n, n_members), dtype=ft)
-        outputs = OutputSettings()
-        outputs.fronts = 1 if fronts is not None else 0
-        outputs.front_direction = FRONT_DIRECTIONS.index(fronts.direction) if fronts is not None else 0
-        outputs.front_threshold = fronts.threshold if fronts is not None else 1.0
-        n_rec = len(record.members) if record is not None else 0
-        outputs.n_record_times = len(record.times) if record is not None else 0
-        arrival = wp.zeros((n, n_members) if fronts is not None else (1, 1), dtype=wp.float64)
-        arrival_error = wp.zeros_like(arrival)
-        rec_times = wp.array(np.asarray(record.times if record is not None else [0.0]), dtype=wp.float64)
-        rec_shape = (len(RECORD_FIELDS), n, max(n_rec, 1))
-        rec_previous = wp.zeros(rec_shape, dtype=ft)
-        rec_out = wp.full((len(RECORD_FIELDS), outputs.n_record_times if n_rec else 1, n, max(n_rec, 1)), np.nan,
-                          dtype=ft)  # NaN: a time after the end of the run is never sampled
-        stress_gate = model.relaxation_gate == "stress"
-        gates = wp.zeros((N_GATE, n, n_members) if stress_gate else (N_GATE, 1, 1), dtype=ft)
-        yield_time = wp.zeros((n, n_members) if stress_gate else (1, 1), dtype=wp.float64)
-        show = sys.stderr.isatty() if progress is None else bool(progress)
-        prefix = progress if isinstance(progress, str) else ""
-        # pass 1 integrates the whole protocol: every output but the arrival times, and the event
-        # maximum; pass 2 (fronts only) repeats the same trajectory up to the last possible crossing
-        # (front_last of pass 1) and records the arrival times at the now known level
-        front_max = front_last = event = None
-        end = params_np["end_time"]
-        for pass_index in range(n_passes):
-            states_np = np.zeros(n_members, dtype=IntegratorState.numpy_dtype())
-            states_np["h"] = solver.initial_step
-            states_np["restart"] = 1
-            states_np["mu_s"] = -np.inf
-            states_np["front_max"] = -np.inf
-            states_np["front_last"] = -np.inf
-            states_np["front_now"] = -np.inf
-            states_np["front_level"] = np.inf
-            states_np["front_until"] = np.inf
-            states_np["switch_limit"] = 1e300
-            states_np["record_slot"] = record_slots if pass_index == 0 else -1
-            if pass_index == 1:
-                states_np["front_level"] = np.where(event, fronts.threshold * front_max, np.inf)
-                states_np["front_until"] = np.where(event, front_last, -np.inf)  # no event: nothing to redo
-                end = np.where(event, np.minimum(front_last, params_np["end_time"]), 1.0)
-            state_np = np.zeros((N_COMPONENTS, n, n_members), dtype=np_dtype)
-            state_np[C_PHI] = values["initial_age"][None, :]
-            states = wp.array(states_np, dtype=IntegratorState)
-            state = wp.array(state_np, dtype=ft)
-            arrival.fill_(np.nan)
-            arrival_error.fill_(np.nan)
-            gates.zero_()  # every gate closed: no friction stress at the start
-            yield_time.fill_(np.nan)
-            label = " ".join(p for p in (prefix, f"pass {pass_index + 1}/{n_passes}" if n_passes > 1 else "") if p)
-            bar = _Progress(show, n_members, label)
-            while True:
-                wp.launch(
-                    kern["integrate"],
-                    dim=n_members,
-                    inputs=[params, settings, states, state, stages, work, solver.steps_per_launch,
-                            outputs, arrival, arrival_error, rec_times, rec_previous, rec_out, gates, yield_time],
-                )
-                st_now = states.numpy()
-                if pass_index == 0 and _flag_stragglers(st_now, solver, STATUS_MEANINGS.index("stalled")):
-                    states = wp.array(st_now, dtype=IntegratorState)
-                n_done = int(st_now["done"].sum())
-                bar.update(n_done, float(np.mean(np.minimum(st_now["t"] / end, 1.0))))
-                if n_done == n_members:
-                    break
-            bar.update(n_done, 1.0, final=True)
-            if pass_index == 0:
-                st = st_now
-                front_max, front_last = st["front_max"], st["front_last"]
-                event = _real_event(front_max, front_last, values, fronts) if fronts is not None else None
-                sigma_out = wp.zeros((n, n_members), dtype=ft)
-                tau_out = wp.zeros((n, n_members), dtype=ft)
-                wp.launch(kern["evaluate_fields"], dim=n_members, inputs=[params, states, state, sigma_out, tau_out])
-                fields = state.numpy()
-                sigma = sigma_out.numpy()
-                tau = tau_out.numpy()
-                yield_np = yield_time.numpy() if stress_gate else None
-                gate_np = gates.numpy()[0] if stress_gate else None
-        front = None
-        if fronts is not None:
-            front = _front_metrics(wp, fronts, values, arrival, arrival_error, n, n_members, device)
-            front["event_max_velocity"] = np.where(event, front_max, np.nan)
-        recorded = rec_out.numpy() if record is not None else None
-        wp.synchronize_device(device)
+    result = engine.run(values, model, solver, fronts, record, device, show, progress if isinstance(progress, str) else "")
+    front = None
+    if fronts is not None:
+        front = _front_metrics(fronts, values, result.arrival, result.arrival_error, device)
+        front["event_max_velocity"] = np.where(result.event, result.member_states["front_max"], np.nan)
     wall = time.perf_counter() - t_start
-    ds = _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, wall, STATUS_MEANINGS,
-                     member_offset)
+    st, yield_np, gate_np = result.member_states, result.yield_time, result.yield_gate
+    ds = _to_dataset(values, varying, st, result.fields, result.normal_stress, result.friction_stress, model, solver,
+                     device, wall, STATUS_MEANINGS, member_offset)
     if yield_np is not None:
         broken = (ds.status.values != 0) & (ds.status.values != STATUS_MEANINGS.index("no_peak"))
         yt = np.where(broken[:, None], np.nan, yield_np.T)  # a run cut short still has real opening times
@@ -274,7 +134,7 @@ def simulate(
     if front is not None:
         _add_fronts(ds, front, fronts)
     if record is not None:
-        _add_record(ds, record, recorded, ds.x, member_offset)
+        _add_record(ds, record, result.record, ds.x, member_offset)
     if solver.dtype == "float32" and solver.float32_fallback:
         _rerun_failed_in_float64(ds, values, scene, model, solver, fronts, record, device)
     if fronts is not None and fronts.grid_check:
@@ -350,49 +210,15 @@ def _rerun_failed_in_float64(ds, values, scene, model, solver, fronts, record, d
     ds.attrs["wall_time_s"] = ds.attrs["wall_time_s"] + sub.attrs["wall_time_s"]
 
 
-def _real_event(front_max, front_last, values, fronts: Fronts) -> np.ndarray:
-    """Members with a detachment event: a maximum detachment velocity of at least
-    fronts.min_event_fraction * |disc_velocity| (docs/model.md, "Fronts"). Below it (e.g. a disc that
-    never moves: round-off of 1e-22 m/s) there is no front, and every front output is NaN."""
-    floor = fronts.min_event_fraction * np.abs(values["disc_velocity"])
-    return (front_max > 0) & (front_max >= floor) & np.isfinite(front_last)
-
-
-def _flag_stragglers(st: np.ndarray, solver: Solver, stalled: int) -> bool:
-    """Stop the members that need far more steps than their peers (in place; True if any).
-
-    Once at least half of the members have ended ok, a running member whose attempted steps exceed
-    max(stall_min_steps, stall_factor * the median of theirs) gets status ``stalled``: one member
-    can then cost a launch at most about stall_factor times a typical member. A lone member (no
-    peers) is bounded by max_steps only."""
-    finished = (st["done"] != 0) & (st["status"] == 0)
-    if finished.sum() * 2 < st.shape[0] or not finished.any():
-        return False
-    attempts = st["steps_accepted"].astype(np.int64) + st["steps_rejected"]
-    limit = max(solver.stall_min_steps, solver.stall_factor * float(np.median(attempts[finished])))
-    late = (st["done"] == 0) & (attempts > limit)
-    if not late.any():
-        return False
-    st["status"][late] = stalled
-    st["done"][late] = 1
-    return True
-
-
-def _record_slots(record: Record | None, n_members: int) -> np.ndarray:
-    """Per member: its index among the recorded members, or -1."""
-    slots = np.full(n_members, -1, dtype=np.int32)
-    if record is None:
-        return slots
-    for slot, member in enumerate(record.members):
-        if member >= n_members:
-            raise ValueError(f"record setting 'members' contains {member}; valid: member indices 0..{n_members - 1}")
-        slots[member] = slot
-    return slots
-
-
-def _front_metrics(wp, fronts: Fronts, values, arrival, arrival_error, n: int, n_members: int, device: str) -> dict:
-    """Segment the arrival times (kernel launched on the simulation's device); return {name: array}."""
+def _front_metrics(fronts: Fronts, values, arrival: np.ndarray, arrival_error: np.ndarray, device: str) -> dict:
+    """Segment the arrival times (node, member; kernel launched on the simulation's device); return {name: array}."""
     from .fronts import segment, speed_errors
+
+    arrival_time = arrival.T.copy()
+    metrics = segment(arrival_time, values["length"], fronts, device=device)
+    metrics["arrival_time"] = arrival_time
+    metrics.update(speed_errors(metrics, arrival_time, arrival_error.T, values["length"]))
+    return metrics
 
     arrival_time = arrival.numpy().T.copy()
     metrics = segment(arrival_time, values["length"], fronts, device=device)
@@ -441,7 +267,7 @@ def _add_fronts(ds: xr.Dataset, front: dict, fronts: Fronts) -> None:
 
 
 def _add_record(ds: xr.Dataset, record: Record, recorded: np.ndarray, x, member_offset: int = 0) -> None:
-    from warpfric.kernels.params import RECORD_FIELDS
+    from warpfric.kernels.types import RECORD_FIELDS
 
     ds.coords["time"] = xr.DataArray(np.asarray(record.times), dims=("time",),
                                      attrs={"units": "s", "long_name": "recording time"})
@@ -487,7 +313,7 @@ _OUTPUT_ATTRS = {
 
 
 def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, wall, meanings, member_offset=0):
-    from warpfric.kernels.integrator import C_PHI, C_TAU, C_U, C_V
+    from warpfric.kernels.types import C_PHI, C_TAU, C_U, C_V
 
     n_members = st.shape[0]
     n = solver.nodes

@@ -1,0 +1,196 @@
+"""The stress gate's state between steps (docs/model.md, "Gate switches"): each node's yield gate is
+held over a step; a switch inside a step is located by rejecting the step and retrying up to just
+past it; after an accepted step each node's regime (closed, open, sliding on the yield surface) is
+chosen for the next one and the FSAL derivatives are corrected in closed form.
+
+``make_gates(ft, model, terms)`` builds the functions for one working precision and model; with
+another law than the stress gate they compile to constants (gate 1, not sliding).
+"""
+
+import warp as wp
+
+from .model_terms import disc_velocity_at
+from .types import G_GATE, G_MARGIN, G_SLIDE, C_PHI, C_TAU, C_V, W_DMARGIN, W_GATE_END, W_MARGIN, IntegratorState, MemberParams, SolverSettings
+
+# a gate switch that MAX_SWITCH_RETRIES retries could not place within its tolerance (a strongly
+# curved margin makes the linear crossing estimate creep towards it, like regula falsi) is accepted
+# at the end of the step and counted in unlocated_switches: the cost of one is bounded
+MAX_SWITCH_RETRIES = 8
+
+
+def make_gates(ft, model, terms):
+    stress_gate = model.relaxation_gate == "stress"
+    viscous = bool(model.viscous_friction)
+    Coeffs = terms["Coeffs"]
+    Friction = terms["Friction"]
+    yield_margin = terms["yield_margin"]
+    array3 = wp.array3d(dtype=ft)
+    array4 = wp.array4d(dtype=ft)
+
+    @wp.struct
+    class SwitchTest:
+        """A step's gate-switch test: its error (1 = the tolerance) and the fraction of the step to
+        retry with (1: no retry)."""
+
+        error: ft
+        retry_fraction: ft
+
+    @wp.func
+    def no_switch():
+        test = SwitchTest()
+        test.error = ft(0.0)
+        test.retry_fraction = ft(1.0)
+        return test
+
+    @wp.func
+    def node_gate(gates: array3, i: int, m: int):
+        """The yield gate of node i over the current step (1 for the gate-less and velocity laws)."""
+        if wp.static(stress_gate):
+            return gates[G_GATE, i, m]
+        return ft(1.0)
+
+    @wp.func
+    def node_sliding(gates: array3, i: int, m: int):
+        """1 where node i slides on the yield surface (stress gate), else 0."""
+        if wp.static(stress_gate):
+            return gates[G_SLIDE, i, m]
+        return ft(0.0)
+
+    @wp.func
+    def test_switch(
+        c: Coeffs, settings: SolverSettings, gates: array3, work: array3, i: int, m: int, fr: Friction, sigma: ft,
+        velocity: ft, v_disc: ft, h: ft, test: SwitchTest,
+    ):
+        """At the end of a step of size h, node i: store the yield margin z1 (work[W_MARGIN]) and its
+        slope with respect to the gate (work[W_DMARGIN]), and fold the node into the step's switch test.
+
+        Where z1 has the other sign than the gate held, the switch happened inside the step, at the
+        fraction theta = z0/(z0 - z1) (linear in time); the relaxation then ran with the wrong gate
+        over (1 - theta)*h, a local error of (1 - theta)*h*(|tau_el|, phi)*|s|/D. Its error-weighted
+        size (like the step's error norm) is the switch error; > 1 rejects the step, and the retry
+        ends where that error is 0.5."""
+        rtol = ft(wp.min(settings.switch_rtol, wp.float64(1.0e30)))
+        z1 = yield_margin(c, fr.stress, fr.area)
+        work[W_MARGIN, i, m] = z1
+        # d(dz/dt)/d(gate) at the end of the step: the gate enters the rates of tau_el and phi (and A
+        # through phi); the pad's rates do not depend on it
+        slip = v_disc - c.kif * velocity
+        relax = wp.abs(slip) * c.inv_D
+        darea_dgate = fr.contact * sigma * c.inv_hardness * c.b / (c.phi0 + fr.contact_age) * (-fr.contact_age * relax)
+        dtau_dgate = -fr.elastic_stress * relax
+        if wp.static(viscous):
+            dtau_dgate += c.eta_vstar * wp.sign(slip) * wp.log(ft(1.0) + wp.abs(slip) / c.vstar) * darea_dgate
+        work[W_DMARGIN, i, m] = wp.sign(fr.stress) * dtau_dgate - c.tau_c * darea_dgate
+        open_now = ft(0.0)
+        if z1 > ft(0.0):
+            open_now = ft(1.0)
+        if node_sliding(gates, i, m) == ft(0.0) and open_now != fr.gate:
+            z0 = gates[G_MARGIN, i, m]
+            theta = ft(0.0)
+            if z0 != z1:
+                theta = wp.clamp(z0 / (z0 - z1), ft(0.0), ft(1.0))
+            rate = wp.max(
+                wp.abs(fr.elastic_stress) * relax / (rtol * (c.tau_scale + wp.abs(fr.elastic_stress))),
+                fr.contact_age * relax / (rtol * (c.phi_scale + wp.abs(fr.contact_age))),
+            )
+            e = (ft(1.0) - theta) * h * rate
+            test.error = wp.max(test.error, e)
+            if e > ft(1.0):
+                test.retry_fraction = wp.min(test.retry_fraction, theta + ft(0.5) * (ft(1.0) - theta) / e)
+        return test
+
+    @wp.func
+    def locate_switch(st: IntegratorState, settings: SolverSettings, t: wp.float64, h: wp.float64, test: SwitchTest):
+        """A step that passed the error test but not the switch test: return (st, 1) to retry it up to
+        just past the switch (st.switch_limit; the error-controlled st.h is kept), or (st, 0) to
+        accept it, counting an unlocated switch when the retries are spent."""
+        if test.error > ft(1.0):
+            if wp.float64(test.retry_fraction) * h > settings.min_step and st.switch_retries < MAX_SWITCH_RETRIES:
+                st.steps_rejected = st.steps_rejected + 1
+                st.switch_retries = st.switch_retries + 1
+                st.switch_limit = t + wp.float64(test.retry_fraction) * h
+                return st, 1
+            st.unlocated_switches = st.unlocated_switches + 1
+        return st, 0
+
+    @wp.func
+    def gate_regime(gate: ft, sliding: ft):
+        """0: closed, 1: sliding on the yield surface, 2: open."""
+        if sliding > ft(0.0):
+            return 1
+        if gate >= ft(1.0):
+            return 2
+        return 0
+
+    @wp.func
+    def switch_gates(
+        c: Coeffs, p: MemberParams, st: IntegratorState, m: int, n: int, state: array3, K: array4,
+        slot: int, gates: array3, work: array3, t_old: wp.float64, t_new: wp.float64,
+        yield_time: wp.array2d(dtype=wp.float64),
+    ):
+        """After an accepted step (state advanced): choose each node's gate regime for the next step
+        from its end-of-step yield margin z1, store the margin, correct the FSAL derivatives K[slot] of
+        the nodes whose gate changed (the gate enters only the relaxation rates of tau_el and phi,
+        closed-form in the state) and record the first opening time (linear in the margin).
+
+        A closed or open node takes the Heaviside theta(z1), unless it crossed the yield surface
+        z = 0 into a side whose field points back (Filippov sliding): the margin's rate is affine in
+        the gate, dz/dt(g) = r_obs + (g - g_old)*dr, r_obs seen over the step and dr = d(dz/dt)/dg
+        at its end (work[W_DMARGIN]); with dr < 0 and the far side's rate of opposite sign the node
+        slides. A sliding node's gate is solved in every stage from |tau_f| = tau_c*A
+        (interface_friction), pinned at 1 or 0 where that cannot hold; the node keeps that implicit
+        regime for the rest of the run."""
+        v_disc = ft(disc_velocity_at(p, t_new, t_old))
+        h = ft(t_new - t_old)
+        for i in range(n):
+            z1 = work[W_MARGIN, i, m]
+            z0 = gates[G_MARGIN, i, m]
+            sliding = gates[G_SLIDE, i, m]
+            gate = gates[G_GATE, i, m]
+            new_sliding = ft(0.0)
+            new_gate = ft(0.0)
+            if sliding > ft(0.0):
+                # a sliding node stays in the implicit regime: where |tau_f| = tau_c*A cannot hold, its
+                # solved gate is pinned at 1 (open) or 0 (closed), which is the Heaviside value; leaving
+                # the regime would only trade the implicit gate for repeated located switches
+                gate = work[W_GATE_END, i, m]  # the last stage's solved gate: K[slot] is consistent with it
+                new_gate = gate
+                new_sliding = ft(1.0)
+            else:
+                if z1 > ft(0.0):
+                    new_gate = ft(1.0)
+                dr = work[W_DMARGIN, i, m]
+                if dr < ft(0.0) and h > ft(0.0) and new_gate != gate:
+                    r_obs = (z1 - z0) / h
+                    rate_far = r_obs + (ft(1.0) - ft(2.0) * gate) * dr  # the rate with the other gate value
+                    if (gate == ft(0.0) and rate_far < ft(0.0)) or (gate == ft(1.0) and rate_far > ft(0.0)):
+                        new_sliding = ft(1.0)
+                        new_gate = wp.clamp(gate + (-z1 / h - r_obs) / dr, ft(0.0), ft(1.0))  # start value
+            if new_gate != gate:
+                relax = (new_gate - gate) * wp.abs(v_disc - c.kif * state[C_V, i, m]) * c.inv_D
+                K[slot, C_TAU, i, m] = K[slot, C_TAU, i, m] - state[C_TAU, i, m] * relax
+                K[slot, C_PHI, i, m] = K[slot, C_PHI, i, m] - state[C_PHI, i, m] * relax
+            if gate_regime(new_gate, new_sliding) != gate_regime(gate, sliding):
+                st.gate_switches = st.gate_switches + 1
+            if new_gate > ft(0.0) and not wp.isfinite(yield_time[i, m]):
+                theta = wp.float64(0.0)
+                if z0 != z1 and z1 > ft(0.0):
+                    theta = wp.clamp(wp.float64(z0) / wp.float64(z0 - z1), wp.float64(0.0), wp.float64(1.0))
+                yield_time[i, m] = t_old + theta * (t_new - t_old)
+            gates[G_GATE, i, m] = new_gate
+            gates[G_SLIDE, i, m] = new_sliding
+            gates[G_MARGIN, i, m] = z1
+        return st
+
+    @wp.func
+    def after_accept(st: IntegratorState, switches_before: int, test: SwitchTest, t_new: wp.float64):
+        """Bookkeeping of the switch location after an accepted TR-BDF2 step."""
+        if st.gate_switches != switches_before or test.error > ft(1.0):
+            st.switch_retries = 0  # the located switch happened (or was given up)
+        if t_new >= st.switch_limit:
+            st.switch_limit = wp.float64(1.0e300)
+        return st
+
+    return dict(SwitchTest=SwitchTest, no_switch=no_switch, node_gate=node_gate, node_sliding=node_sliding,
+                test_switch=test_switch, locate_switch=locate_switch, switch_gates=switch_gates,
+                after_accept=after_accept)

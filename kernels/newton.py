@@ -1,0 +1,354 @@
+"""One implicit stage of the pad model, solved by Newton's method (docs/model.md, "Time integration").
+
+The unknowns are the pad velocity at every node, V_0..V_{N-1}, and the plate's compression delta0
+and tilt a. At a given V the stage equations of the contact age and of the elastic friction stress
+are linear and are solved in closed form per node (model_terms.interface_friction), so the Newton
+matrix is tridiagonal in V, bordered by two columns (delta0, a) and two dense rows (force and moment
+balance of the plate):
+
+    [ J  B ] [dV     ]   [-R]        J: tridiagonal (N x N), B: columns B0 (delta0), B1 (a)
+    [ C  D ] [dd0, da] = [-E]        C: rows C1 (force), C2 (moment), D: 2 x 2
+
+It is solved with the Thomas algorithm on three right-hand sides, y0 = J^-1 (-R), y1 = J^-1 B0,
+y2 = J^-1 B1, and the 2 x 2 Schur complement (D - C y1|y2) (dd0, da) = -E - C y0; then
+dV = y0 - y1 dd0 - y2 da: O(N) work and memory per member. ``forward_row``, ``back_substitution``,
+``schur_solve`` and ``solution_row`` are that solver alone (tests/test_kernels.py checks them against
+numpy.linalg.solve); ``newton_solve`` assembles the rows from the model terms and calls them row by
+row, so that nothing but the Thomas rows is stored. ``stage_derivatives`` evaluates f(Y) of a
+converged stage.
+
+``make_newton(ft, model, terms, gates)`` builds the functions for one working precision and model.
+"""
+
+import warp as wp
+
+from .model_terms import disc_velocity_at, normal_force_at
+from .types import (
+    C_PHI,
+    C_TAU,
+    C_U,
+    C_V,
+    W_C1,
+    W_C2,
+    W_CONTACT,
+    W_CP,
+    W_DIAG,
+    W_GATE_END,
+    W_R0,
+    W_R1,
+    W_R2,
+    W_V,
+    W_ZP,
+    W_ZT,
+    W_ZU,
+    W_ZV,
+    MemberParams,
+    SolverSettings,
+)
+
+
+def make_bordered_solver(ft, tilt_on: bool):
+    """The bordered tridiagonal solve for scalar type ``ft``; without tilt the system has one border
+    (delta0) and the third right-hand side is skipped."""
+    array3 = wp.array3d(dtype=ft)
+
+    @wp.func
+    def forward_row(
+        work: array3, i: int, m: int, lower: ft, diagonal: ft, upper: ft, rhs: ft, border_d0: ft, border_tilt: ft,
+        cp_prev: ft, r0_prev: ft, r1_prev: ft, r2_prev: ft,
+    ):
+        """Thomas forward elimination of row i (lower, diagonal, upper of J; rhs = -R_i; the border
+        columns B0_i, B1_i): stores the modified upper diagonal and right-hand sides in work[W_CP],
+        work[W_R0..R2] and returns them for the next row."""
+        den = diagonal - lower * cp_prev
+        cp = upper / den
+        r0 = (rhs - lower * r0_prev) / den
+        r1 = (border_d0 - lower * r1_prev) / den
+        work[W_CP, i, m] = cp
+        work[W_R0, i, m] = r0
+        work[W_R1, i, m] = r1
+        r2 = ft(0.0)
+        if wp.static(tilt_on):
+            r2 = (border_tilt - lower * r2_prev) / den
+            work[W_R2, i, m] = r2
+        return cp, r0, r1, r2
+
+    @wp.func
+    def back_substitution(work: array3, n: int, m: int):
+        """Back substitution of the three right-hand sides (y0, y1, y2 overwrite work[W_R0..R2]) and
+        the border products C1.y0, C1.y1, C1.y2, C2.y0, C2.y1, C2.y2 (C rows in work[W_C1], work[W_C2])."""
+        y0_next = ft(0.0)
+        y1_next = ft(0.0)
+        y2_next = ft(0.0)
+        s10 = ft(0.0)
+        s11 = ft(0.0)
+        s12 = ft(0.0)
+        s20 = ft(0.0)
+        s21 = ft(0.0)
+        s22 = ft(0.0)
+        for k in range(n):
+            i = n - 1 - k
+            cp = work[W_CP, i, m]
+            y0 = work[W_R0, i, m] - cp * y0_next
+            y1 = work[W_R1, i, m] - cp * y1_next
+            work[W_R0, i, m] = y0
+            work[W_R1, i, m] = y1
+            c1 = work[W_C1, i, m]
+            s10 += c1 * y0
+            s11 += c1 * y1
+            y0_next = y0
+            y1_next = y1
+            if wp.static(tilt_on):
+                y2 = work[W_R2, i, m] - cp * y2_next
+                work[W_R2, i, m] = y2
+                c2 = work[W_C2, i, m]
+                s12 += c1 * y2
+                s20 += c2 * y0
+                s21 += c2 * y1
+                s22 += c2 * y2
+                y2_next = y2
+        return s10, s11, s12, s20, s21, s22
+
+    @wp.func
+    def schur_solve(
+        d11: ft, d12: ft, d21: ft, d22: ft, e1: ft, e2: ft, s10: ft, s11: ft, s12: ft, s20: ft, s21: ft, s22: ft,
+    ):
+        """(dd0, da) from the 2 x 2 Schur complement (D - C y1|y2) (dd0, da) = -E - C y0 (without tilt:
+        the 1 x 1 one, da = 0)."""
+        d_delta0 = ft(0.0)
+        d_tilt = ft(0.0)
+        if wp.static(tilt_on):
+            a11 = d11 - s11
+            a12 = d12 - s12
+            a21 = d21 - s21
+            a22 = d22 - s22
+            b1 = -e1 - s10
+            b2 = -e2 - s20
+            det = a11 * a22 - a12 * a21
+            d_delta0 = (b1 * a22 - a12 * b2) / det
+            d_tilt = (a11 * b2 - a21 * b1) / det
+        else:
+            d_delta0 = (-e1 - s10) / (d11 - s11)
+        return d_delta0, d_tilt
+
+    @wp.func
+    def solution_row(work: array3, i: int, m: int, d_delta0: ft, d_tilt: ft):
+        """dV_i = y0_i - y1_i dd0 - y2_i da."""
+        dv = work[W_R0, i, m] - work[W_R1, i, m] * d_delta0
+        if wp.static(tilt_on):
+            dv -= work[W_R2, i, m] * d_tilt
+        return dv
+
+    return dict(forward_row=forward_row, back_substitution=back_substitution, schur_solve=schur_solve,
+                solution_row=solution_row)
+
+
+def make_newton(ft, model, terms, gates):
+    inertia = bool(model.inertia)
+    tilt_on = bool(model.tilt)
+    Coeffs = terms["Coeffs"]
+    node_weight = terms["node_weight"]
+    node_moment_weight = terms["node_moment_weight"]
+    normal_stress = terms["normal_stress"]
+    elastic_force = terms["elastic_force"]
+    interface_friction = terms["interface_friction"]
+    node_gate = gates["node_gate"]
+    node_sliding = gates["node_sliding"]
+    test_switch = gates["test_switch"]
+    SwitchTest = gates["SwitchTest"]
+    no_switch = gates["no_switch"]
+    solver = make_bordered_solver(ft, tilt_on)
+    forward_row = solver["forward_row"]
+    back_substitution = solver["back_substitution"]
+    schur_solve = solver["schur_solve"]
+    solution_row = solver["solution_row"]
+    stress_gate = model.relaxation_gate == "stress"
+    array3 = wp.array3d(dtype=ft)
+    array4 = wp.array4d(dtype=ft)
+
+    @wp.struct
+    class StageSums:
+        """Integrals over the pad of a converged stage, per unit depth: int tau_f dx (N/m),
+        int sigma_n^+ dx (N/m), and min sigma_n (Pa)."""
+
+        friction: wp.float64
+        normal: wp.float64
+        min_normal: wp.float64
+
+    @wp.func
+    def stage_displacement(work: array3, i: int, n: int, m: int, g: ft):
+        """u_i of the stage: z_u + g*V_i (0 beyond the last node)."""
+        if i >= n:
+            return ft(0.0)
+        return work[W_ZU, i, m] + g * work[W_V, i, m]
+
+    @wp.func
+    def newton_solve(
+        c: Coeffs, p: MemberParams, settings: SolverSettings, m: int, n: int, work: array3, gates: array3,
+        g: ft, t_stage: wp.float64, t_step: wp.float64, delta0_in: ft, tilt_in: ft,
+    ):
+        """Solve one implicit stage (stage constants z in work[W_ZU..W_ZP], start V in work[W_V], the
+        stage coefficient g = gamma*h). Returns (converged, delta0, tilt, iterations, non_finite);
+        the solved V is left in work[W_V]."""
+        v_disc = ft(disc_velocity_at(p, t_stage, t_step))
+        force = normal_force_at(p, t_stage)
+        force_per_depth = ft(force / p.depth)
+        moment_per_depth = ft(force * p.eccentricity * wp.float64(0.5) * p.length / p.depth)
+        rtol = ft(settings.rtol)
+        delta0 = delta0_in
+        tilt = tilt_in
+        converged = int(0)
+        non_finite = int(0)
+        iters = int(0)
+        prev_norm = ft(1.0e30)
+        for it in range(settings.newton_max_iter):
+            iters = it + 1
+            # ---- pass 1: residuals, Jacobian rows, forward elimination (3 right-hand sides) ----
+            e1 = -force_per_depth  # force balance residual E1 (N/m)
+            e2 = -moment_per_depth  # moment balance residual E2 (N)
+            d11 = ft(0.0)
+            d12 = ft(0.0)
+            d21 = ft(0.0)
+            d22 = ft(0.0)
+            # the border rows C1, C2 get three contributions per node (i-1, i, i+1): a row entry is
+            # complete one node later
+            c1_prev = ft(0.0)
+            c1_cur = ft(0.0)
+            c2_prev = ft(0.0)
+            c2_cur = ft(0.0)
+            cp_prev = ft(0.0)
+            r0_prev = ft(0.0)
+            r1_prev = ft(0.0)
+            r2_prev = ft(0.0)
+            u_l = ft(0.0)
+            u_c = stage_displacement(work, 0, n, m, g)
+            for i in range(n):
+                u_r = stage_displacement(work, i + 1, n, m, g)
+                vel = work[W_V, i, m]
+                ns = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
+                sigma = ns.value
+                fr = interface_friction(
+                    c, sigma, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m], g, node_gate(gates, i, m),
+                    node_sliding(gates, i, m), ft(settings.sliding_width),
+                )
+                ef = elastic_force(c, i, n, u_l, u_c, u_r, delta0, tilt)
+                residual = -(ef.value + fr.stress - c.damping * vel)
+                jac_c = -g * (ef.d_u_center + fr.d_normal * ns.d_u_center) + c.kif * fr.d_slip + c.damping
+                if wp.static(inertia):
+                    residual += c.rhoH * (vel - work[W_ZV, i, m]) / g
+                    jac_c += c.rhoH / g
+                    work[W_DIAG, i, m] = jac_c
+                jac_l = -g * (ef.d_u_left + fr.d_normal * ns.d_u_left)
+                jac_r = -g * (ef.d_u_right + fr.d_normal * ns.d_u_right)
+                col_d0 = -(ef.d_delta0 + fr.d_normal * ns.d_delta0)
+                col_a = -(ef.d_tilt + fr.d_normal * ns.d_tilt)
+                # plate balance rows: force (1) and moment (2), per unit depth
+                wgt = node_weight(c, i, n)
+                wmom = node_moment_weight(c, i, n)
+                e1 += wgt * fr.contact * sigma
+                e2 += wmom * fr.contact * sigma + c.h_arm * wgt * fr.stress
+                d11 += wgt * fr.contact * ns.d_delta0
+                d12 += wgt * fr.contact * ns.d_tilt
+                d21 += (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * ns.d_delta0
+                d22 += (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * ns.d_tilt
+                q1 = wgt * fr.contact * g
+                q2 = (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * g
+                c1_prev += q1 * ns.d_u_left
+                c1_cur += q1 * ns.d_u_center
+                c1_next = q1 * ns.d_u_right
+                c2_prev += q2 * ns.d_u_left
+                c2_cur += q2 * ns.d_u_center - c.h_arm * wgt * c.kif * fr.d_slip
+                c2_next = q2 * ns.d_u_right
+                if i > 0:
+                    work[W_C1, i - 1, m] = c1_prev
+                    work[W_C2, i - 1, m] = c2_prev
+                c1_prev = c1_cur
+                c1_cur = c1_next
+                c2_prev = c2_cur
+                c2_cur = c2_next
+                cp_prev, r0_prev, r1_prev, r2_prev = forward_row(
+                    work, i, m, jac_l, jac_c, jac_r, -residual, col_d0, col_a, cp_prev, r0_prev, r1_prev, r2_prev
+                )
+                u_l = u_c
+                u_c = u_r
+            work[W_C1, n - 1, m] = c1_prev
+            work[W_C2, n - 1, m] = c2_prev
+            # ---- pass 2: back substitution and the border products; the Schur complement ----
+            s10, s11, s12, s20, s21, s22 = back_substitution(work, n, m)
+            d_delta0, d_tilt = schur_solve(d11, d12, d21, d22, e1, e2, s10, s11, s12, s20, s21, s22)
+            # ---- pass 3: update and error-weighted norm of the update ----
+            norm = ft(0.0)
+            for i in range(n):
+                dv = solution_row(work, i, m, d_delta0, d_tilt)
+                vel = work[W_V, i, m] + dv
+                work[W_V, i, m] = vel
+                u = work[W_ZU, i, m] + g * vel
+                norm = wp.max(norm, wp.abs(dv) / (rtol * (c.v_scale + wp.abs(vel))))
+                norm = wp.max(norm, g * wp.abs(dv) / (rtol * (c.u_scale + wp.abs(u))))
+            delta0 = delta0 + d_delta0
+            tilt = tilt + d_tilt
+            norm = wp.max(norm, wp.abs(d_delta0) / (rtol * (c.delta_scale + wp.abs(delta0))))
+            norm = wp.max(norm, wp.abs(d_tilt) / (rtol * (c.tilt_scale + wp.abs(tilt))))
+            if not wp.isfinite(norm):
+                non_finite = 1
+                break
+            if norm <= ft(settings.newton_tol):
+                converged = 1
+                break
+            # stagnation inside the error tolerance: the update has reached the round-off level of
+            # the working precision (float32), further iterations cannot improve it
+            if it > 0 and norm <= ft(1.0) and norm > ft(0.5) * prev_norm:
+                converged = 1
+                break
+            prev_norm = norm
+        return converged, delta0, tilt, iters, non_finite
+
+    @wp.func
+    def stage_derivatives(
+        c: Coeffs, p: MemberParams, settings: SolverSettings, m: int, n: int, work: array3, gates: array3,
+        K: array4, slot: int, g: ft, t_stage: wp.float64, t_step: wp.float64, delta0: ft, tilt: ft,
+        h: ft, end_of_step: int,
+    ):
+        """Stage derivatives K[slot] = f(Y) of a converged stage; returns its StageSums and, at the end
+        of a step (end_of_step = 1: the last stage of a step of size h), the gate-switch test of the
+        step (kernels/gates.py; the stress gate only), and stores each node's contact and gate for
+        the fronts and the gate update."""
+        v_disc = ft(disc_velocity_at(p, t_stage, t_step))
+        sums = StageSums()
+        sums.friction = wp.float64(0.0)
+        sums.normal = wp.float64(0.0)
+        sums.min_normal = wp.float64(1.0e300)
+        test = no_switch()
+        u_l = ft(0.0)
+        u_c = stage_displacement(work, 0, n, m, g)
+        for i in range(n):
+            u_r = stage_displacement(work, i + 1, n, m, g)
+            vel = work[W_V, i, m]
+            ns = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
+            sigma = ns.value
+            fr = interface_friction(
+                c, sigma, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m], g, node_gate(gates, i, m),
+                node_sliding(gates, i, m), ft(settings.sliding_width),
+            )
+            if end_of_step == 1:
+                work[W_CONTACT, i, m] = fr.contact  # at the end of the step: fronts skip lifted-off nodes
+                work[W_GATE_END, i, m] = fr.gate
+                if wp.static(stress_gate):
+                    test = test_switch(c, settings, gates, work, i, m, fr, sigma, vel, v_disc, h, test)
+            K[slot, C_U, i, m] = vel
+            if wp.static(inertia):
+                K[slot, C_V, i, m] = (vel - work[W_ZV, i, m]) / g
+            else:
+                K[slot, C_V, i, m] = ft(0.0)
+            K[slot, C_TAU, i, m] = fr.elastic_stress_rate
+            K[slot, C_PHI, i, m] = fr.contact_age_rate
+            wgt = wp.float64(node_weight(c, i, n))
+            sums.friction += wgt * wp.float64(fr.stress)
+            sums.normal += wgt * wp.float64(fr.contact * sigma)
+            sums.min_normal = wp.min(sums.min_normal, wp.float64(sigma))
+            u_l = u_c
+            u_c = u_r
+        return sums, test
+
+    return dict(StageSums=StageSums, newton_solve=newton_solve, stage_derivatives=stage_derivatives,
+                SwitchTest=SwitchTest, **solver)

@@ -1,0 +1,199 @@
+"""What the integrator records of an accepted step (docs/model.md, "Outputs", "Fronts", "End of a run"):
+the friction coefficient and its maximum mu_s, lift-off, the detachment fronts (event maximum and
+arrival times) and the recorded fields; and the automatic end of a run, which is decided from them.
+
+``on_accept`` is the one hook the integrator calls after each accepted step (the state already
+advanced); the front and recording observers are compiled in always but run only when the launch
+asks for them (OutputSettings.fronts, IntegratorState.record_slot).
+
+``make_observers(ft, model, terms)`` builds the functions for one working precision and model.
+"""
+
+import warp as wp
+
+from .esdirk import C2
+from .model_terms import disc_travel_at, disc_velocity_at, normal_force_at
+from .reductions import crossing_time, crossing_time_quadratic, detachment_velocity, record_friction_point
+from .types import C_PHI, C_TAU, C_U, C_V, W_CONTACT, IntegratorState, MemberParams, OutputSettings
+
+# automatic end (end_time None, docs/model.md "End of a run"): mu has fallen this fraction below its
+# maximum, and (front metrics on) every node's detachment velocity is below this fraction of the
+# arrival level
+AUTO_END_PEAK_DROP = 0.01
+AUTO_END_FRONT_FRACTION = 0.5
+# ... and the maximum came after the disc had slid this many memory lengths D: a detachment needs
+# slip of order D (the measured peaks: 2.7-3.6 D from 1e-6 to 1e-4 m/s); earlier wiggles of mu(t)
+# (the start of the disc, 1e-8 in mu) are not the peak
+AUTO_END_MIN_TRAVEL = 0.5
+
+
+@wp.func
+def friction_point(st: IntegratorState, p: MemberParams, t_new: wp.float64, friction: wp.float64,
+                   normal: wp.float64, min_normal: wp.float64):
+    """Count the accepted point at t_new: mu = sign(v_d) * int tau_f dx / int sigma_n^+ dx into the
+    running maximum (reductions.record_friction_point), lift-off (sigma_n < 0 somewhere while loaded),
+    and a restart when the step ended on the sudden stop."""
+    st.t = t_new
+    st.steps_accepted = st.steps_accepted + 1
+    sign_v = wp.float64(1.0)
+    if p.disc_velocity < wp.float64(0.0):
+        sign_v = wp.float64(-1.0)
+    mu = wp.float64(0.0)
+    if normal > wp.float64(0.0):
+        mu = sign_v * friction / normal
+    st = record_friction_point(st, t_new, mu)
+    if min_normal < wp.float64(0.0) and normal_force_at(p, t_new) > wp.float64(0.0):
+        st.lift_off = 1
+    if t_new == p.stop_time:
+        st.restart = 1
+    return st
+
+
+@wp.func
+def detachment_over(p: MemberParams, st: IntegratorState, outputs: OutputSettings):
+    """The automatic end: mu has passed a maximum reached after the disc slid AUTO_END_MIN_TRAVEL*D
+    and fallen AUTO_END_PEAK_DROP below it, and (fronts on) no node is above
+    AUTO_END_FRONT_FRACTION of the arrival level."""
+    if st.t <= p.rest_until or st.npts < 3 or st.mu_s <= wp.float64(0.0):
+        return False
+    if disc_travel_at(p, st.mu_s_time) < wp.float64(AUTO_END_MIN_TRAVEL) * p.memory_length:
+        return False  # the maximum must come from the sliding disc
+    if st.mu_final > (wp.float64(1.0) - wp.float64(AUTO_END_PEAK_DROP)) * st.mu_s:
+        return False
+    if outputs.fronts == 1 and st.front_max > wp.float64(0.0):
+        if st.front_now >= wp.float64(AUTO_END_FRONT_FRACTION) * outputs.front_threshold * st.front_max:
+            return False
+    return True
+
+
+@wp.func
+def run_finished(p: MemberParams, st: IntegratorState, outputs: OutputSettings):
+    """True when the member has reached its end: end_time, the end of the arrival pass (front_until)
+    or, with end_time None, the end of the detachment."""
+    if st.t >= p.end_time or st.t >= st.front_until:
+        return True
+    if p.auto_end > wp.float64(0.0) and detachment_over(p, st, outputs):
+        return True
+    return False
+
+
+def make_observers(ft, model, terms):
+    Coeffs = terms["Coeffs"]
+    normal_stress = terms["normal_stress"]
+    interface_friction = terms["interface_friction"]
+    array3 = wp.array3d(dtype=ft)
+    array4 = wp.array4d(dtype=ft)
+
+    @wp.func
+    def track_fronts(
+        p: MemberParams, st: IntegratorState, m: int, n: int, K: array4, work: array3, s1: int, s2: int, s3: int,
+        t_old: wp.float64, t_new: wp.float64, arrival: wp.array2d(dtype=wp.float64),
+        arrival_error: wp.array2d(dtype=wp.float64), direction: int,
+        threshold: wp.float64, use_stage2: int,
+    ):
+        """Fold an accepted step into the front tracking (the pad velocity at t_old is the FSAL
+        slot's K[s1, C_U], at t_new the last stage's K[s3, C_U]): the running maximum of the
+        detachment velocity w, each node's first crossing of st.front_level (on the quadratic through
+        the step's ends and its second stage, linear after a backward-Euler restart, with its error
+        estimate in arrival_error), and front_last: the last step at which some node had
+        w >= threshold * (running maximum). Every first crossing of threshold * (final maximum)
+        ends a step at or before front_last, so the arrival pass may stop there.
+        Window: from the disc start to the sudden stop (or the end). A node without contact at the
+        end of the step (lifted off) is skipped: it never arrives, nucleates or sets the maximum."""
+        if t_new <= p.rest_until or t_old >= p.stop_time:
+            return st
+        disc_sign = wp.float64(1.0)
+        if p.disc_velocity < wp.float64(0.0):
+            disc_sign = wp.float64(-1.0)
+        w_step = wp.float64(-1.0e300)
+        for i in range(n):
+            if work[W_CONTACT, i, m] == ft(0.0):
+                continue
+            w_old = detachment_velocity(wp.float64(K[s1, C_U, i, m]), disc_sign, direction)
+            w_new = detachment_velocity(wp.float64(K[s3, C_U, i, m]), disc_sign, direction)
+            st.front_max = wp.max(st.front_max, w_new)
+            w_step = wp.max(w_step, w_new)
+            if not wp.isfinite(arrival[i, m]):
+                if use_stage2 == 1:
+                    # quadratic through the step's ends and its second stage (at c2*h): a sharper
+                    # crossing time, and its distance to the linear one as the error estimate
+                    w_mid = detachment_velocity(wp.float64(K[s2, C_U, i, m]), disc_sign, direction)
+                    if w_new >= st.front_level or w_mid >= st.front_level:
+                        t_cross, t_err = crossing_time_quadratic(
+                            st.front_level, t_old, w_old, wp.float64(C2), w_mid, t_new, w_new
+                        )
+                        arrival[i, m] = t_cross
+                        arrival_error[i, m] = t_err
+                elif w_new >= st.front_level:
+                    arrival[i, m] = crossing_time(st.front_level, t_old, w_old, t_new, w_new)
+                    arrival_error[i, m] = t_new - t_old  # backward-Euler step: no inner point
+        if w_step > wp.float64(0.0) and w_step >= threshold * st.front_max:
+            st.front_last = t_new
+        st.front_now = w_step
+        return st
+
+    @wp.func
+    def record_fields(
+        c: Coeffs, p: MemberParams, st: IntegratorState, m: int, n: int, state: array3,
+        t_old: wp.float64, t_new: wp.float64, delta0: ft, tilt: ft, times: wp.array(dtype=wp.float64),
+        previous: array3, record: array4,
+    ):
+        """Sample the fields (pad velocity, slip rate, contact pressure, friction stress) of a
+        recorded member at the grid times in (t_old, t_new], by linear interpolation between the
+        accepted points; ``previous`` holds the fields at t_old."""
+        slot = st.record_slot
+        n_times = times.shape[0]
+        k_end = st.record_next
+        while k_end < n_times:
+            if times[k_end] > t_new:
+                break
+            k_end += 1
+        v_disc = ft(disc_velocity_at(p, t_new, t_old))
+        span = t_new - t_old
+        u_l = ft(0.0)
+        u_c = state[C_U, 0, m]
+        for i in range(n):
+            u_r = ft(0.0)
+            if i < n - 1:
+                u_r = state[C_U, i + 1, m]
+            vel = state[C_V, i, m]
+            ns = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
+            sigma = ns.value
+            fr = interface_friction(
+                c, sigma, vel, v_disc, state[C_TAU, i, m], state[C_PHI, i, m], ft(0.0), ft(1.0), ft(0.0), ft(1.0)
+            )
+            current = wp.vector(vel, v_disc - c.kif * vel, fr.contact * sigma, fr.stress, length=4, dtype=ft)
+            for k in range(st.record_next, k_end):
+                frac = ft(1.0)
+                if span > wp.float64(0.0):
+                    frac = ft(wp.clamp((times[k] - t_old) / span, wp.float64(0.0), wp.float64(1.0)))
+                for f in range(4):
+                    record[f, k, i, slot] = previous[f, i, slot] + frac * (current[f] - previous[f, i, slot])
+            for f in range(4):
+                previous[f, i, slot] = current[f]
+            u_l = u_c
+            u_c = u_r
+        st.record_next = k_end
+        return st
+
+    @wp.func
+    def on_accept(
+        c: Coeffs, p: MemberParams, st: IntegratorState, outputs: OutputSettings, m: int, n: int, state: array3,
+        K: array4, work: array3, s1: int, s2: int, s3: int, t_old: wp.float64, t_new: wp.float64, delta0: ft,
+        tilt: ft, friction: wp.float64, normal: wp.float64, min_normal: wp.float64, backward_euler: int,
+        arrival: wp.array2d(dtype=wp.float64), arrival_error: wp.array2d(dtype=wp.float64),
+        record_times: wp.array(dtype=wp.float64), record_previous: array3, record: array4,
+    ):
+        """After an accepted step from t_old to t_new (state advanced, K[s1] still f(y_old)): fronts,
+        recording, then the friction point (mu(t) may jump across a backward-Euler restart: no
+        parabola through it)."""
+        if outputs.fronts == 1:
+            st = track_fronts(p, st, m, n, K, work, s1, s2, s3, t_old, t_new, arrival, arrival_error,
+                              outputs.front_direction, outputs.front_threshold, 1 - backward_euler)
+        if st.record_slot >= 0:
+            st = record_fields(c, p, st, m, n, state, t_old, t_new, delta0, tilt, record_times, record_previous, record)
+        if backward_euler == 1:
+            st.npts = 0
+        return friction_point(st, p, t_new, friction, normal, min_normal)
+
+    return dict(on_accept=on_accept, track_fronts=track_fronts, record_fields=record_fields)

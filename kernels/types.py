@@ -1,0 +1,208 @@
+"""What the kernels work on: the device arrays (shapes in named dimensions, units) and the structs of
+per-member parameters, solver settings, output settings and integrator state.
+
+Parameters and times are float64 whatever the working precision ``ft``: a float32 time has only
+~2 us resolution at t = 20 s, coarser than the steps the detachment needs.
+
+Device arrays of one launch (allocated by :func:`allocate`; dims named as in mujoco_warp's
+``types.py``; "member" is the fastest index, so neighbouring GPU threads read neighbouring
+addresses):
+
+=================  ==================================  =====  ===============================================
+name               shape                               dtype  content (units)
+=================  ==================================  =====  ===============================================
+params             (member,)                           struct MemberParams (SI)
+states             (member,)                           struct IntegratorState (persists between launches)
+state              (component, node, member)           ft     y = (u m, u_t m/s, tau_el Pa, phi s) at time t
+stages             (stage_slot, component, node, mbr)  ft     stage derivatives K = f(Y) (per s); FSAL slot
+work               (work_slot, node, member)           ft     stage constants, Newton iterate, Thomas rows
+gates              (gate_slot, node, member)           ft     stress gate: gate (1), margin (Pa), sliding (1);
+                                                              (gate_slot, 1, 1) for the other laws
+yield_time         (node, member)                      f64    first gate opening (s); (1, 1) unless stress gate
+arrival            (node, member)                      f64    front arrival time t_a (s), NaN: none; (1, 1)
+                                                              without fronts
+arrival_error      (node, member)                      f64    its error estimate (s)
+record_times       (time,)                             f64    recording grid (s)
+record_previous    (record_field, node, recorded)      ft     recorded fields at the last accepted point
+record             (record_field, time, node, recorded) ft    sampled fields (RECORD_FIELDS; NaN: not reached)
+=================  ==================================  =====  ===============================================
+"""
+
+import dataclasses
+
+import numpy as np
+import warp as wp
+
+# state components (first index of ``state``, second of ``stages``)
+C_U, C_V, C_TAU, C_PHI = 0, 1, 2, 3
+N_COMPONENTS = 4
+# work slots (first index of ``work``): the stage constants z (in the order of the components), the
+# Newton iterate of the pad velocity, the Thomas sweep's rows (cp, three right-hand sides), the two
+# border rows of the plate balance, the Jacobian diagonal (velocity error filter), and the
+# end-of-step margin, its gate slope, contact and solved gate of the stress gate
+W_ZU, W_ZV, W_ZT, W_ZP, W_V, W_CP, W_R0, W_R1, W_R2, W_C1, W_C2, W_DIAG, W_MARGIN, W_DMARGIN, W_CONTACT, W_GATE_END = range(16)
+N_WORK = 16
+# gate slots (stress gate, first index of ``gates``): the gate held over the next step (0 closed,
+# 1 open; for a sliding node the start of its implicit solve), the yield margin |tau_f| - tau_c*A
+# (Pa) at the last accepted point, and the sliding flag (1: solved on the yield surface each stage)
+G_GATE, G_MARGIN, G_SLIDE = 0, 1, 2
+N_GATE = 3
+N_STAGE_SLOTS = 3
+
+# status codes of a member (netCDF flag_values / flag_meanings)
+STATUS_MAX_STEPS = 1
+STATUS_NON_FINITE = 2
+STATUS_STEP_UNDERFLOW = 3
+STATUS_NO_PEAK = 4  # set on the host: the friction coefficient was still rising at the end of the run
+STATUS_STALLED = 5  # set on the host: far more steps than its peers (Solver.stall_factor)
+STATUS_MEANINGS = ("ok", "max_steps_reached", "non_finite_state", "step_size_underflow", "no_peak", "stalled")
+
+
+@wp.struct
+class MemberParams:
+    """One member's physical parameters (SI), as resolved by warpfric.parameters."""
+
+    shear_modulus: wp.float64
+    poisson_ratio: wp.float64
+    density: wp.float64
+    memory_length: wp.float64
+    shear_strength: wp.float64
+    hardness: wp.float64
+    viscous_coefficient: wp.float64
+    reference_velocity: wp.float64
+    aging_coefficient: wp.float64
+    aging_time: wp.float64
+    interface_stiffness: wp.float64
+    gate_velocity: wp.float64
+    height: wp.float64
+    length: wp.float64
+    depth: wp.float64
+    damping: wp.float64
+    normal_force: wp.float64
+    eccentricity: wp.float64
+    disc_velocity: wp.float64
+    force_ramp_time: wp.float64
+    rest_until: wp.float64
+    velocity_ramp_time: wp.float64
+    stop_time: wp.float64
+    end_time: wp.float64  # s, min(end_time, max_end_time)
+    auto_end: wp.float64  # 1: end_time was None, the run ends when the detachment is over
+    interface_velocity_factor: wp.float64
+    torque_arm: wp.float64
+    initial_age: wp.float64
+
+
+@wp.struct
+class SolverSettings:
+    """warpfric.Solver's settings as the kernels see them (see its docstring)."""
+
+    rtol: wp.float64
+    initial_step: wp.float64
+    min_step: wp.float64
+    max_step: wp.float64
+    newton_tol: wp.float64
+    switch_rtol: wp.float64  # relative tolerance of the gate-switch location (rtol * switch_tol)
+    sliding_width: wp.float64  # relative width of the regularised gate of nodes sliding on the yield surface
+    max_steps: wp.int32
+    newton_max_iter: wp.int32
+    step_safety: wp.float64  # step-size controller (kernels/controller.py)
+    step_min_factor: wp.float64
+    step_max_factor: wp.float64
+    failure_factor: wp.float64
+
+
+# how the detachment velocity w is read from the pad velocity u_t (docs/model.md, "Fronts")
+FRONT_AGAINST_DISC = 0  # w = -sign(v_max) * u_t: the pad springing back as the interface lets go
+FRONT_WITH_DISC = 1  # w = sign(v_max) * u_t
+FRONT_ABSOLUTE = 2  # w = |u_t|
+FRONT_DIRECTIONS = ("against_disc", "with_disc", "absolute")
+
+# fields that Record can sample (first index of the record array)
+RECORD_FIELDS = ("velocity", "slip_rate", "normal_stress", "friction_stress")
+
+
+@wp.struct
+class OutputSettings:
+    """What the integrator records besides mu_s."""
+
+    front_direction: wp.int32  # FRONT_* code
+    fronts: wp.int32  # 1: track the detachment velocity (event maximum and arrival times)
+    front_threshold: wp.float64  # arrival level as a fraction of the event maximum
+
+
+@wp.struct
+class IntegratorState:
+    """Per-member integrator state that persists between launches, and the in-kernel reductions."""
+
+    t: wp.float64  # s, time of the state
+    h: wp.float64  # s, next step size
+    delta0: wp.float64  # m, mean compression of the pad
+    tilt: wp.float64  # rad, tilt a of the backing plate
+    mu_s: wp.float64  # static friction coefficient (running maximum, refined)
+    mu_s_time: wp.float64  # s
+    t1: wp.float64  # last two accepted (t, mu) points, for the parabolic refinement
+    mu1: wp.float64
+    t2: wp.float64
+    mu2: wp.float64
+    mu_final: wp.float64  # friction coefficient at the last accepted step
+    npts: wp.int32
+    steps_accepted: wp.int32
+    steps_rejected: wp.int32
+    newton_iterations: wp.int32
+    status: wp.int32
+    lift_off: wp.int32
+    fsal: wp.int32  # slot of K holding f(y_n)
+    restart: wp.int32  # 1: next step is a backward-Euler (re)start
+    done: wp.int32
+    front_max: wp.float64  # m/s, running maximum of the detachment velocity w over nodes and the window
+    front_level: wp.float64  # m/s, arrival level (threshold * event maximum of a first pass); inf: none
+    front_last: wp.float64  # s, last accepted time with max_x w >= threshold * running maximum (pass 1)
+    front_now: wp.float64  # m/s, max over nodes of w at the last accepted step (pass 1)
+    front_until: wp.float64  # s, the arrival pass stops here (front_last of pass 1); inf in pass 1
+    switch_limit: wp.float64  # s, steps end at or before this time (a gate switch located in a rejected step)
+    gate_switches: wp.int32  # accepted gate switches (stress gate)
+    switch_retries: wp.int32  # consecutive steps rejected to locate a gate switch
+    unlocated_switches: wp.int32  # steps accepted with a switch error > 1 after MAX_SWITCH_RETRIES
+    record_slot: wp.int32  # index among the recorded members, -1: not recorded
+    record_next: wp.int32  # next index of the recording time grid
+
+
+@dataclasses.dataclass
+class DeviceArrays:
+    """The arrays of one launch (see the module docstring for shapes and units)."""
+
+    params: wp.array
+    state: wp.array
+    stages: wp.array
+    work: wp.array
+    gates: wp.array
+    yield_time: wp.array
+    arrival: wp.array
+    arrival_error: wp.array
+    record_times: wp.array
+    record_previous: wp.array
+    record: wp.array
+
+
+def allocate(ft, params_np: np.ndarray, n_nodes: int, stress_gate: bool, fronts: bool,
+             record_times, n_recorded: int) -> DeviceArrays:
+    """Allocate the arrays of a launch on the current Warp device. ``params_np``: MemberParams as a
+    numpy structured array (member,); arrays a scene does not need get a (.., 1, 1) placeholder."""
+    n_members = params_np.shape[0]
+    times = np.asarray(record_times if n_recorded else [0.0], dtype=np.float64)
+    per_node = (n_nodes, n_members)
+    return DeviceArrays(
+        params=wp.array(params_np, dtype=MemberParams),
+        state=wp.zeros((N_COMPONENTS, n_nodes, n_members), dtype=ft),
+        stages=wp.zeros((N_STAGE_SLOTS, N_COMPONENTS, n_nodes, n_members), dtype=ft),
+        work=wp.zeros((N_WORK, n_nodes, n_members), dtype=ft),
+        gates=wp.zeros((N_GATE, n_nodes, n_members) if stress_gate else (N_GATE, 1, 1), dtype=ft),
+        yield_time=wp.zeros(per_node if stress_gate else (1, 1), dtype=wp.float64),
+        arrival=wp.zeros(per_node if fronts else (1, 1), dtype=wp.float64),
+        arrival_error=wp.zeros(per_node if fronts else (1, 1), dtype=wp.float64),
+        record_times=wp.array(times, dtype=wp.float64),
+        record_previous=wp.zeros((len(RECORD_FIELDS), n_nodes, max(n_recorded, 1)), dtype=ft),
+        # NaN: a time after the end of the run is never sampled
+        record=wp.full((len(RECORD_FIELDS), times.shape[0] if n_recorded else 1, n_nodes, max(n_recorded, 1)),
+                       np.nan, dtype=ft),
+    )

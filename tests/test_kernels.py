@@ -1,0 +1,390 @@
+"""Each stage of the integrator alone (kernels/*.py), against an independent computation:
+model-term derivatives against central differences, the bordered tridiagonal solve against
+numpy.linalg.solve, the TR-BDF2 tableau's orders on a linear stiff system, the step-size controller
+on scripted inputs, the observers on synthetic trajectories, and the kernel-visible structs against
+the public parameter types."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+import warp as wp
+from conftest import DEVICE
+
+import warpfric as wf
+from warpfric.engine import member_params, solver_settings
+from warpfric.kernels import controller, esdirk, types
+from warpfric.kernels.integrator import make_stages
+from warpfric.kernels.observers import friction_point
+from warpfric.members import resolve_members
+
+f64 = wp.float64
+
+
+def _coeffs_params(**scene):
+    values, _ = resolve_members(None, wf.Parameters(**scene))
+    return wp.array(member_params(values), dtype=types.MemberParams, device=DEVICE)
+
+
+# ------------------------------------------------------------------------------------------------
+# model terms
+# ------------------------------------------------------------------------------------------------
+
+_TERM_INPUTS = ("u_l", "u_c", "u_r", "delta0", "tilt", "velocity", "v_disc", "z_tau", "z_phi", "g", "gate", "sliding")
+_TERM_OUTPUTS = ("sigma", "sigma_ul", "sigma_uc", "sigma_ur", "sigma_d0", "sigma_a",
+                 "force", "force_ul", "force_uc", "force_ur", "force_d0", "force_a",
+                 "tau_f", "tau_f_sigma", "tau_f_slip", "gate_used")
+
+
+def _terms_kernel(model):
+    stages = make_stages(f64, model)
+    terms = stages["terms"]
+    make_coeffs, normal_stress = terms["make_coeffs"], terms["normal_stress"]
+    elastic_force, interface_friction = terms["elastic_force"], terms["interface_friction"]
+
+    @wp.kernel(module="unique")
+    def evaluate(params: wp.array(dtype=types.MemberParams), nodes: int, node: wp.array(dtype=int),
+                 x: wp.array2d(dtype=f64), out: wp.array2d(dtype=f64)):
+        k = wp.tid()
+        c = make_coeffs(params[0], nodes)
+        i = node[k]
+        ns = normal_stress(c, i, nodes, x[k, 0], x[k, 1], x[k, 2], x[k, 3], x[k, 4])
+        ef = elastic_force(c, i, nodes, x[k, 0], x[k, 1], x[k, 2], x[k, 3], x[k, 4])
+        # the friction law at this node's sigma_n
+        fr = interface_friction(c, ns.value, x[k, 5], x[k, 6], x[k, 7], x[k, 8], x[k, 9], x[k, 10], x[k, 11], f64(1e-3))
+        row = wp.vector(ns.value, ns.d_u_left, ns.d_u_center, ns.d_u_right, ns.d_delta0, ns.d_tilt,
+                        ef.value, ef.d_u_left, ef.d_u_center, ef.d_u_right, ef.d_delta0, ef.d_tilt,
+                        fr.stress, fr.d_normal, fr.d_slip, fr.gate, length=16, dtype=f64)
+        for j in range(16):
+            out[k, j] = row[j]
+
+    return evaluate
+
+
+def _evaluate_terms(kernel, params, nodes, node, x):
+    x = np.atleast_2d(np.asarray(x, dtype=np.float64))
+    node = np.broadcast_to(np.asarray(node, dtype=np.int32), (x.shape[0],)).copy()
+    out = wp.zeros((x.shape[0], len(_TERM_OUTPUTS)), dtype=f64, device=DEVICE)
+    wp.launch(kernel, dim=x.shape[0], inputs=[params, nodes, wp.array(node, dtype=int, device=DEVICE),
+                                               wp.array(x, dtype=f64, device=DEVICE), out], device=DEVICE)
+    return dict(zip(_TERM_OUTPUTS, out.numpy().T))
+
+
+def _random_state(rng, gate, sliding):
+    """A loaded, sliding pad near the default scene: u ~ 1e-6 m, delta0 ~ 5e-6 m, slip ~ 1e-4 m/s."""
+    return np.array([rng.normal(0, 1e-6), rng.normal(0, 1e-6), rng.normal(0, 1e-6), 6e-6 + rng.normal(0, 1e-7),
+                     rng.normal(0, 1e-6), rng.normal(0, 5e-5), 1e-4, 4e4 + rng.normal(0, 1e3), 0.3 + rng.uniform(0, 0.1),
+                     1e-5 * rng.uniform(0.5, 2.0), gate, sliding])
+
+
+@pytest.mark.parametrize("gate_law", ["stress", "none", "velocity"])
+def test_model_term_derivatives_match_central_differences(gate_law):
+    """The exact partial derivatives that the Newton matrix uses, against central differences of the
+    values (relative step 1e-6), at the two edge nodes and an interior node, random states."""
+    model = wf.Model(relaxation_gate=gate_law)
+    kernel = _terms_kernel(model)
+    nodes = 11
+    params = _coeffs_params()
+    rng = np.random.default_rng(3)
+    for node in (0, 5, nodes - 1):
+        for gate, sliding in ((1.0, 0.0), (0.0, 0.0)) + (((0.5, 1.0),) if gate_law == "stress" else ()):
+            x0 = _random_state(rng, gate, sliding)
+            base = _evaluate_terms(kernel, params, nodes, node, x0)
+            # normal stress and elastic force: derivatives with respect to u_l, u_c, u_r, delta0, tilt
+            for j, name in enumerate(("ul", "uc", "ur", "d0", "a")):
+                step = 1e-6 * max(abs(x0[j]), 1e-7)
+                xp, xm = x0.copy(), x0.copy()
+                xp[j] += step
+                xm[j] -= step
+                plus, minus = _evaluate_terms(kernel, params, nodes, node, xp), _evaluate_terms(kernel, params, nodes, node, xm)
+                for term in ("sigma", "force"):
+                    # both are linear in these variables: the central difference is exact but for
+                    # round-off of the value over the step
+                    fd = (plus[term][0] - minus[term][0]) / (2 * step)
+                    exact = base[f"{term}_{name}"][0]
+                    natural = abs(base[term][0]) / max(abs(x0[j]), 1e-7)
+                    assert abs(fd - exact) <= 1e-6 * max(abs(exact), natural), (gate_law, node, gate, term, name, fd, exact)
+            # friction: d tau_f/d sigma_n through delta0 (d sigma/d delta0 = M/H), d tau_f/d s through v_disc
+            step = 1e-7 * abs(x0[3])
+            xp, xm = x0.copy(), x0.copy()
+            xp[3] += step
+            xm[3] -= step
+            plus, minus = _evaluate_terms(kernel, params, nodes, node, xp), _evaluate_terms(kernel, params, nodes, node, xm)
+            fd = (plus["tau_f"][0] - minus["tau_f"][0]) / (plus["sigma"][0] - minus["sigma"][0])
+            np.testing.assert_allclose(base["tau_f_sigma"][0], fd, rtol=1e-5, atol=1e-9 * abs(base["tau_f"][0]) / 1e6)
+            step = 1e-6 * abs(x0[6])
+            xp, xm = x0.copy(), x0.copy()
+            xp[6] += step
+            xm[6] -= step
+            plus, minus = _evaluate_terms(kernel, params, nodes, node, xp), _evaluate_terms(kernel, params, nodes, node, xm)
+            fd = (plus["tau_f"][0] - minus["tau_f"][0]) / (2 * step)
+            np.testing.assert_allclose(base["tau_f_slip"][0], fd, rtol=1e-5)
+
+
+# ------------------------------------------------------------------------------------------------
+# bordered tridiagonal solve
+# ------------------------------------------------------------------------------------------------
+
+def _bordered_kernel(tilt_on):
+    from warpfric.kernels.newton import make_bordered_solver
+
+    solver = make_bordered_solver(f64, tilt_on)
+    forward_row, back_substitution = solver["forward_row"], solver["back_substitution"]
+    schur_solve, solution_row = solver["schur_solve"], solver["solution_row"]
+
+    @wp.kernel(module="unique")
+    def solve(bands: wp.array3d(dtype=f64), border: wp.array2d(dtype=f64), work: wp.array3d(dtype=f64),
+              dv: wp.array2d(dtype=f64), dp: wp.array2d(dtype=f64)):
+        """bands[m, i] = (lower, diagonal, upper, rhs, B0, B1, C1, C2); border[m] = (d11, d12, d21, d22, e1, e2)."""
+        m = wp.tid()
+        n = bands.shape[1]
+        cp = f64(0.0)
+        r0 = f64(0.0)
+        r1 = f64(0.0)
+        r2 = f64(0.0)
+        for i in range(n):
+            cp, r0, r1, r2 = forward_row(work, i, m, bands[m, i, 0], bands[m, i, 1], bands[m, i, 2], bands[m, i, 3],
+                                         bands[m, i, 4], bands[m, i, 5], cp, r0, r1, r2)
+            work[types.W_C1, i, m] = bands[m, i, 6]
+            work[types.W_C2, i, m] = bands[m, i, 7]
+        s10, s11, s12, s20, s21, s22 = back_substitution(work, n, m)
+        d_delta0, d_tilt = schur_solve(border[m, 0], border[m, 1], border[m, 2], border[m, 3], border[m, 4], border[m, 5],
+                                       s10, s11, s12, s20, s21, s22)
+        for i in range(n):
+            dv[m, i] = solution_row(work, i, m, d_delta0, d_tilt)
+        dp[m, 0] = d_delta0
+        dp[m, 1] = d_tilt
+
+    return solve
+
+
+@pytest.mark.parametrize("tilt_on", [True, False])
+def test_bordered_tridiagonal_solve_matches_numpy(tilt_on):
+    """[[J, B], [C, D]] (dV, dd0, da) = (rhs, -e) for random diagonally dominant J and random borders,
+    5 systems of 17 unknowns: the kernel's Thomas + Schur solve equals numpy.linalg.solve to 1e-11."""
+    rng = np.random.default_rng(7)
+    members, n = 5, 17
+    bands = rng.normal(size=(members, n, 8))
+    bands[:, :, 1] = 4.0 + np.abs(bands[:, :, 1])  # diagonal dominance (the Newton matrix has it)
+    bands[:, 0, 0] = 0.0
+    bands[:, -1, 2] = 0.0
+    border = rng.normal(size=(members, 6))
+    border[:, 0] += 10.0
+    border[:, 3] += 10.0
+    work = wp.zeros((types.N_WORK, n, members), dtype=f64, device=DEVICE)
+    dv = wp.zeros((members, n), dtype=f64, device=DEVICE)
+    dp = wp.zeros((members, 2), dtype=f64, device=DEVICE)
+    wp.launch(_bordered_kernel(tilt_on), dim=members, inputs=[wp.array(bands, dtype=f64, device=DEVICE),
+              wp.array(border, dtype=f64, device=DEVICE), work, dv, dp], device=DEVICE)
+    k = 2 if tilt_on else 1
+    for m in range(members):
+        a = np.zeros((n + k, n + k))
+        for i in range(n):
+            a[i, i] = bands[m, i, 1]
+            if i > 0:
+                a[i, i - 1] = bands[m, i, 0]
+            if i < n - 1:
+                a[i, i + 1] = bands[m, i, 2]
+        a[:n, n] = bands[m, :, 4]
+        a[n, :n] = bands[m, :, 6]
+        a[n, n] = border[m, 0]
+        if tilt_on:
+            a[:n, n + 1] = bands[m, :, 5]
+            a[n + 1, :n] = bands[m, :, 7]
+            a[n, n + 1], a[n + 1, n], a[n + 1, n + 1] = border[m, 1], border[m, 2], border[m, 3]
+        rhs = np.concatenate([bands[m, :, 3], -border[m, 4:4 + k]])
+        x = np.linalg.solve(a, rhs)
+        np.testing.assert_allclose(dv.numpy()[m], x[:n], rtol=1e-11, atol=1e-13)
+        np.testing.assert_allclose(dp.numpy()[m, :k], x[n:], rtol=1e-11, atol=1e-13)
+        if not tilt_on:
+            assert dp.numpy()[m, 1] == 0.0
+
+
+# ------------------------------------------------------------------------------------------------
+# TR-BDF2 tableau
+# ------------------------------------------------------------------------------------------------
+
+def _tableau_kernel():
+    tab = esdirk.make_tableau(f64)
+    stage_constant, solution_increment, error_increment = tab["stage_constant"], tab["solution_increment"], tab["error_increment"]
+
+    @wp.func
+    def solve_stage(a: wp.mat22d, g: f64, z: wp.vec2d):
+        """Y = (I - g A)^-1 z."""
+        return wp.inverse(wp.identity(n=2, dtype=f64) - g * a) * z
+
+    @wp.kernel(module="unique")
+    def integrate(a: wp.mat22d, y0: wp.vec2d, h: wp.array(dtype=f64), steps: wp.array(dtype=int),
+                  y_end: wp.array(dtype=wp.vec2d), first_error: wp.array(dtype=wp.vec2d)):
+        """y' = A y at fixed step h[k] for steps[k] steps with the kernel's TR-BDF2 tableau."""
+        k = wp.tid()
+        hk = h[k]
+        g = f64(esdirk.GAMMA) * hk
+        y = y0
+        k1 = a * y
+        for s in range(steps[k]):
+            z2 = wp.vec2d(stage_constant(y[0], hk, f64(esdirk.GAMMA), k1[0], f64(0.0), k1[0], 1),
+                          stage_constant(y[1], hk, f64(esdirk.GAMMA), k1[1], f64(0.0), k1[1], 1))
+            k2 = a * solve_stage(a, g, z2)
+            z3 = wp.vec2d(stage_constant(y[0], hk, f64(esdirk.W_TRB), k1[0], f64(esdirk.W_TRB), k2[0], 2),
+                          stage_constant(y[1], hk, f64(esdirk.W_TRB), k1[1], f64(esdirk.W_TRB), k2[1], 2))
+            y3 = solve_stage(a, g, z3)
+            k3 = a * y3
+            y_new = wp.vec2d(y[0] + solution_increment(hk, k1[0], k2[0], k3[0]), y[1] + solution_increment(hk, k1[1], k2[1], k3[1]))
+            if s == 0:
+                first_error[k] = wp.vec2d(error_increment(hk, k1[0], k2[0], k3[0]), error_increment(hk, k1[1], k2[1], k3[1]))
+            y = y_new
+            k1 = k3  # FSAL: stiffly accurate, y_new is the last stage
+        y_end[k] = y
+
+    return integrate
+
+
+def _run_tableau(a, y0, hs, steps):
+    kernel = _tableau_kernel()
+    y_end = wp.zeros(len(hs), dtype=wp.vec2d, device=DEVICE)
+    err = wp.zeros(len(hs), dtype=wp.vec2d, device=DEVICE)
+    wp.launch(kernel, dim=len(hs), inputs=[wp.mat22d(*a.ravel()), wp.vec2d(*y0), wp.array(hs, dtype=f64, device=DEVICE),
+              wp.array(steps, dtype=int, device=DEVICE), y_end, err], device=DEVICE)
+    return y_end.numpy(), err.numpy()
+
+
+def test_tr_bdf2_orders_and_l_stability_on_a_linear_stiff_system():
+    """y' = A y, A with eigenvalues -1 and -1e4 (not normal): at fixed steps the global error at t = 1
+    falls with order 2, the embedded error estimate of one step with order 3, and the stiff mode is
+    damped (L-stability: |R(h lambda)| -> 0) even at h*lambda = -1e4."""
+    from scipy.linalg import expm
+
+    a = np.array([[-1.0, 50.0], [0.0, -1e4]])
+    y0 = np.array([1.0, 1.0])
+    exact = expm(a * 1.0) @ y0
+    hs = np.array([1 / 20, 1 / 40, 1 / 80, 1 / 160])
+    y_end, err = _run_tableau(a, y0, hs, (1.0 / hs).round().astype(int))
+    global_error = np.abs(y_end[:, 0] - exact[0])
+    orders = np.log2(global_error[:-1] / global_error[1:])
+    assert np.all(np.abs(orders - 2.0) < 0.15), orders
+    # error estimate of the first step on the non-stiff problem (A = diag(-1, -2): both modes resolved)
+    smooth = np.diag([-1.0, -2.0])
+    _, err_smooth = _run_tableau(smooth, y0, hs, np.ones(len(hs), dtype=int))
+    est_orders = np.log2(np.abs(err_smooth[:-1, 0]) / np.abs(err_smooth[1:, 0]))
+    assert np.all(np.abs(est_orders - 3.0) < 0.1), est_orders
+    # the estimate is of the size of the true local error (the embedded solution is order 3)
+    y_one, _ = _run_tableau(smooth, y0, hs, np.ones(len(hs), dtype=int))
+    true_local = np.abs(y_one[:, 0] - np.exp(-hs))
+    assert np.all((np.abs(err_smooth[:, 0]) > 0.3 * true_local) & (np.abs(err_smooth[:, 0]) < 3 * true_local))
+    # L-stability: one step of h = 1 on y' = -1e4 y leaves |y| < 1e-3
+    y_stiff, _ = _run_tableau(np.diag([-1e4, -1e4]), y0, np.array([1.0]), np.array([1]))
+    assert np.all(np.abs(y_stiff) < 1e-3)
+    # the tableau's conditions (the constants themselves): sum b = 1, sum b c = 1/2, b_hat order 3
+    b = np.array([esdirk.W_TRB, esdirk.W_TRB, esdirk.GAMMA])
+    c = np.array([0.0, esdirk.C2, 1.0])
+    b_hat = np.array(esdirk.B_HAT)
+    assert abs(b.sum() - 1) < 1e-15 and abs(b @ c - 0.5) < 1e-15
+    assert abs(b_hat.sum() - 1) < 1e-15 and abs(b_hat @ c - 0.5) < 1e-15 and abs(b_hat @ c**2 - 1 / 3) < 1e-15
+
+
+# ------------------------------------------------------------------------------------------------
+# step-size controller
+# ------------------------------------------------------------------------------------------------
+
+@wp.kernel
+def _controller_kernel(params: wp.array(dtype=types.MemberParams), settings: types.SolverSettings,
+                       states: wp.array(dtype=types.IntegratorState), errors: wp.array(dtype=f64),
+                       factors: wp.array(dtype=f64), steps: wp.array(dtype=controller.Step),
+                       next_h: wp.array(dtype=f64), rejected: wp.array(dtype=types.IntegratorState)):
+    k = wp.tid()
+    st = states[k]
+    factors[k] = controller.step_factor(errors[k], settings)
+    step = controller.propose_step(params[k], st, settings, st.t)
+    steps[k] = step
+    next_h[k] = controller.accepted_step_size(st, step, factors[k])
+    rejected[k] = controller.reject(st, settings, step.h * wp.min(factors[k], settings.step_safety), 0)
+
+
+def test_controller_on_scripted_inputs():
+    """step_factor against its formula; steps clipped to breakpoints, halved before them, ended at
+    a located switch; a clipped step keeps its size; a rejected step below min_step underflows."""
+    solver = wf.Solver(min_step=1e-12, initial_step=1e-6)
+    settings = solver_settings(solver)
+    values, _ = resolve_members({"eccentricity": np.zeros(6)}, wf.Parameters(end_time=30.0))
+    params = member_params(values)
+    st = np.zeros(6, dtype=types.IntegratorState.numpy_dtype())
+    st["switch_limit"] = 1e300
+    # (t, h): far from a breakpoint; passing the force-ramp end (10 s); within 2 h of it; at a switch
+    st["t"] = [1.0, 9.5, 9.0, 1.0, 1.0, 5.0]
+    st["h"] = [0.1, 1.0, 0.6, 0.1, 0.1, 1e-12]
+    st["switch_limit"][3] = 1.05
+    errors = np.array([0.5, 0.0, 8.0, 1e6, 1.0, 4.0])
+    arrays = [wp.array(params, dtype=types.MemberParams, device=DEVICE), settings,
+              wp.array(st, dtype=types.IntegratorState, device=DEVICE), wp.array(errors, dtype=f64, device=DEVICE)]
+    factors = wp.zeros(6, dtype=f64, device=DEVICE)
+    steps = wp.zeros(6, dtype=controller.Step, device=DEVICE)
+    next_h = wp.zeros(6, dtype=f64, device=DEVICE)
+    rejected = wp.zeros(6, dtype=types.IntegratorState, device=DEVICE)
+    wp.launch(_controller_kernel, dim=6, inputs=arrays + [factors, steps, next_h, rejected], device=DEVICE)
+    exponent = controller.ERROR_EXPONENT
+    expected = np.where(errors > 0, np.clip(0.9 * np.maximum(errors, 1e-300) ** exponent, 0.2, 5.0), 5.0)
+    np.testing.assert_allclose(factors.numpy(), expected, rtol=1e-15)
+    assert abs(exponent + 1 / 3) < 1e-7  # -1/3 (rounded to float32: see controller.py)
+    s = steps.numpy()
+    assert s["clipped"].tolist() == [0, 1, 0, 2, 0, 0]
+    np.testing.assert_allclose(s["t_new"], [1.1, 10.0, 9.5, 1.05, 1.1, 5.0 + 1e-12], rtol=1e-15)
+    assert s["t_new"][1] == 10.0 and s["t_new"][3] == 1.05  # exactly on the breakpoint and the switch
+    np.testing.assert_allclose(next_h.numpy()[[0, 1]], [0.1 * expected[0], max(0.5 * expected[1], 1.0)], rtol=1e-15)
+    rej = rejected.numpy()
+    assert (rej["steps_rejected"] == 1).all()
+    meanings = types.STATUS_MEANINGS
+    assert meanings[rej["status"][5]] == "step_size_underflow" and rej["done"][5] == 1
+    assert (rej["done"][:5] == 0).all()
+
+
+# ------------------------------------------------------------------------------------------------
+# observers
+# ------------------------------------------------------------------------------------------------
+
+@wp.kernel
+def _friction_points(params: wp.array(dtype=types.MemberParams), times: wp.array(dtype=f64),
+                     mu: wp.array(dtype=f64), states: wp.array(dtype=types.IntegratorState)):
+    st = states[0]
+    for k in range(times.shape[0]):
+        # int tau dx = mu, int sigma dx = 1: the coefficient is mu
+        st = friction_point(st, params[0], times[k], mu[k], f64(1.0), f64(1.0))
+    states[0] = st
+
+
+def test_mu_s_observer_on_a_synthetic_peak():
+    """mu(t) = 0.5 - 3 (t - 20.3)^2 sampled at irregular times: the running maximum refined by the
+    parabola through the last three points is the exact peak (0.5 at 20.3 s), though no sample lies
+    on it; lift-off stays 0 with sigma_n > 0."""
+    rng = np.random.default_rng(1)
+    times = np.sort(rng.uniform(20.0, 20.6, 40))
+    times = times[np.abs(times - 20.3) > 0.01]
+    mu = 0.5 - 3 * (times - 20.3) ** 2
+    values, _ = resolve_members(None, wf.Parameters())
+    st = np.zeros(1, dtype=types.IntegratorState.numpy_dtype())
+    st["mu_s"] = -np.inf
+    states = wp.array(st, dtype=types.IntegratorState, device=DEVICE)
+    wp.launch(_friction_points, dim=1, inputs=[wp.array(member_params(values), dtype=types.MemberParams, device=DEVICE),
+              wp.array(times, dtype=f64, device=DEVICE), wp.array(mu, dtype=f64, device=DEVICE), states], device=DEVICE)
+    out = states.numpy()[0]
+    assert mu.max() < 0.5 - 1e-4
+    assert abs(out["mu_s"] - 0.5) < 1e-12 and abs(out["mu_s_time"] - 20.3) < 1e-10
+    assert out["steps_accepted"] == len(times) and out["lift_off"] == 0 and out["mu_final"] == mu[-1]
+
+
+# ------------------------------------------------------------------------------------------------
+# kernel-visible structs in step with the public types
+# ------------------------------------------------------------------------------------------------
+
+def test_kernel_structs_stay_in_step_with_the_public_parameters():
+    """Every field of MemberParams is a public parameter (plus the two derived: auto_end), every
+    public parameter the kernels need reaches them, and every SolverSettings field is filled from
+    warpfric.Solver by engine.solver_settings (no field left at its zero default)."""
+    kernel_fields = set(types.MemberParams.vars)
+    public = {f.name for f in dataclasses.fields(wf.Parameters)}
+    assert kernel_fields - public == {"auto_end"}
+    assert public - kernel_fields == {"max_end_time"}  # folded into end_time by engine.member_params
+    settings = solver_settings(wf.Solver(rtol=1e-4, switch_tol=2.0))
+    for name in types.SolverSettings.vars:
+        assert getattr(settings, name) != 0, name
+    assert settings.switch_rtol == pytest.approx(2e-4)

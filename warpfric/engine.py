@@ -1,0 +1,249 @@
+"""The engine behind ``simulate``: kernel-visible settings from the public ones, the device arrays,
+the integration passes (launch, straggler rule, progress) and the read-back to NumPy.
+
+Two passes when front metrics are asked for (docs/model.md, "Fronts"): pass 1 integrates the whole
+protocol (every output but the arrival times, and the event maximum of the detachment velocity);
+pass 2 repeats the same deterministic trajectory up to the last possible crossing (front_last of
+pass 1) and records the arrival times at the level that pass 1 found.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+
+import numpy as np
+
+from .parameters import Fronts, Model, Record, Solver
+
+
+@dataclasses.dataclass
+class EngineResult:
+    """What the passes produced, on the host. Shapes: member_states (member,); fields (component, node,
+    member); normal_stress, friction_stress, yield_time, yield_gate, arrival, arrival_error (node,
+    member); record (record_field, time, node, recorded); event (member,) bool."""
+
+    member_states: np.ndarray
+    fields: np.ndarray
+    normal_stress: np.ndarray
+    friction_stress: np.ndarray
+    yield_time: np.ndarray | None
+    yield_gate: np.ndarray | None
+    arrival: np.ndarray | None
+    arrival_error: np.ndarray | None
+    event: np.ndarray | None
+    record: np.ndarray | None
+
+
+def solver_settings(solver: Solver):
+    """warpfric.Solver -> the kernels' SolverSettings."""
+    from warpfric.kernels.types import SolverSettings
+
+    s = SolverSettings()
+    s.rtol = solver.rtol
+    s.initial_step = solver.initial_step
+    s.min_step = solver.min_step
+    s.max_step = solver.max_step
+    s.newton_tol = solver.newton_tol
+    s.switch_rtol = solver.rtol * solver.switch_tol
+    s.sliding_width = solver.sliding_width
+    s.max_steps = solver.max_steps
+    s.newton_max_iter = solver.newton_max_iter
+    s.step_safety = solver.step_safety
+    s.step_min_factor = solver.step_min_factor
+    s.step_max_factor = solver.step_max_factor
+    s.failure_factor = solver.failure_factor
+    return s
+
+
+def output_settings(fronts: Fronts | None):
+    """warpfric.Fronts (or None) -> the kernels' OutputSettings."""
+    from warpfric.kernels.types import FRONT_DIRECTIONS, OutputSettings
+
+    out = OutputSettings()
+    out.fronts = 1 if fronts is not None else 0
+    out.front_direction = FRONT_DIRECTIONS.index(fronts.direction) if fronts is not None else 0
+    out.front_threshold = fronts.threshold if fronts is not None else 1.0
+    return out
+
+
+def member_params(values: dict) -> np.ndarray:
+    """Resolved parameters (name -> (member,) float64) -> MemberParams as a structured array.
+    end_time None (inf) becomes the automatic end, capped at max_end_time."""
+    from warpfric.kernels.types import MemberParams
+
+    params = np.zeros(values["normal_force"].shape[0], dtype=MemberParams.numpy_dtype())
+    for name in params.dtype.names:
+        if name in values:
+            params[name] = values[name]
+    params["end_time"] = np.minimum(values["end_time"], values["max_end_time"])
+    params["auto_end"] = np.isinf(values["end_time"]).astype(np.float64)
+    return params
+
+
+def initial_states(n_members: int, solver: Solver, record_slots: np.ndarray) -> np.ndarray:
+    """IntegratorState of every member at t = 0 (a backward-Euler start, no maximum yet)."""
+    from warpfric.kernels.types import IntegratorState
+
+    st = np.zeros(n_members, dtype=IntegratorState.numpy_dtype())
+    st["h"] = solver.initial_step
+    st["restart"] = 1
+    st["mu_s"] = -np.inf
+    st["front_max"] = -np.inf
+    st["front_last"] = -np.inf
+    st["front_now"] = -np.inf
+    st["front_level"] = np.inf
+    st["front_until"] = np.inf
+    st["switch_limit"] = 1e300
+    st["record_slot"] = record_slots
+    return st
+
+
+def record_slots(record: Record | None, n_members: int) -> np.ndarray:
+    """Per member: its index among the recorded members, or -1."""
+    slots = np.full(n_members, -1, dtype=np.int32)
+    if record is None:
+        return slots
+    for slot, member in enumerate(record.members):
+        if member >= n_members:
+            raise ValueError(f"record setting 'members' contains {member}; valid: member indices 0..{n_members - 1}")
+        slots[member] = slot
+    return slots
+
+
+def flag_stragglers(st: np.ndarray, solver: Solver, stalled: int) -> bool:
+    """Stop the members that need far more steps than their peers (in place; True if any).
+
+    Once at least half of the members have ended ok, a running member whose attempted steps exceed
+    max(stall_min_steps, stall_factor * the median of theirs) gets status ``stalled``: one member
+    can then cost a launch at most about stall_factor times a typical member. A lone member (no
+    peers) is bounded by max_steps only."""
+    finished = (st["done"] != 0) & (st["status"] == 0)
+    if finished.sum() * 2 < st.shape[0] or not finished.any():
+        return False
+    attempts = st["steps_accepted"].astype(np.int64) + st["steps_rejected"]
+    limit = max(solver.stall_min_steps, solver.stall_factor * float(np.median(attempts[finished])))
+    late = (st["done"] == 0) & (attempts > limit)
+    if not late.any():
+        return False
+    st["status"][late] = stalled
+    st["done"][late] = 1
+    return True
+
+
+def real_event(front_max, front_last, values, fronts: Fronts) -> np.ndarray:
+    """Members with a detachment event: a maximum detachment velocity of at least
+    fronts.min_event_fraction * |disc_velocity| (docs/model.md, "Fronts"). Below it (e.g. a disc that
+    never moves: round-off of 1e-22 m/s) there is no front, and every front output is NaN."""
+    floor = fronts.min_event_fraction * np.abs(values["disc_velocity"])
+    return (front_max > 0) & (front_max >= floor) & np.isfinite(front_last)
+
+
+class Progress:
+    """One-line progress on stderr: members done and mean simulated-time fraction."""
+
+    def __init__(self, enabled: bool, n_members: int, label: str = ""):
+        self.enabled = enabled
+        self.label = (label + " ") if label else ""
+        self.n = n_members
+        self.tty = sys.stderr.isatty()  # in a log, "\r" does not overwrite: only the final line
+        self.t0 = time.perf_counter()
+        self.last = 0.0
+
+    def update(self, done: int, fraction: float, final: bool = False):
+        if not self.enabled:
+            return
+        now = time.perf_counter()
+        if not final and (not self.tty or now - self.last < 0.5):
+            return
+        self.last = now
+        bar = "#" * int(30 * fraction) + "-" * (30 - int(30 * fraction))
+        sys.stderr.write(
+            ("\r" if self.tty else "") + f"warpfric {self.label}[{bar}] {100 * fraction:5.1f}% simulated time, "
+            f"{done}/{self.n} members done, {now - self.t0:7.1f} s"
+        )
+        if final:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+
+def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, record: Record | None, device: str,
+        show_progress: bool = False, label: str = "") -> EngineResult:
+    """Allocate, integrate every member through its passes, read back. ``values``: resolved
+    parameters (name -> (member,) float64); a progress line on stderr when show_progress."""
+    import warp as wp
+
+    from warpfric.kernels.integrator import get_integrator
+    from warpfric.kernels.types import C_PHI, STATUS_MEANINGS, IntegratorState, allocate
+
+    n_members = values["normal_force"].shape[0]
+    n = solver.nodes
+    kern = get_integrator(solver.dtype, model)
+    ft = kern["ft"]
+    np_dtype = np.float64 if solver.dtype == "float64" else np.float32
+    params_np = member_params(values)
+    settings = solver_settings(solver)
+    outputs = output_settings(fronts)
+    slots = record_slots(record, n_members)
+    stress_gate = model.relaxation_gate == "stress"
+    n_passes = 2 if fronts is not None else 1
+    with wp.ScopedDevice(device):
+        arrays = allocate(ft, params_np, n, stress_gate, fronts is not None,
+                          record.times if record is not None else None, len(record.members) if record is not None else 0)
+        front_max = front_last = event = None
+        end = params_np["end_time"]
+        for pass_index in range(n_passes):
+            states_np = initial_states(n_members, solver, slots if pass_index == 0 else np.full(n_members, -1, np.int32))
+            if pass_index == 1:
+                states_np["front_level"] = np.where(event, fronts.threshold * front_max, np.inf)
+                states_np["front_until"] = np.where(event, front_last, -np.inf)  # no event: nothing to redo
+                end = np.where(event, np.minimum(front_last, params_np["end_time"]), 1.0)
+            state_np = np.zeros(arrays.state.shape, dtype=np_dtype)
+            state_np[C_PHI] = values["initial_age"][None, :]
+            member_states = wp.array(states_np, dtype=IntegratorState)
+            arrays.state = wp.array(state_np, dtype=ft)
+            arrays.stages.zero_()  # K[fsal] holds f(y) of the state: zero for the state at rest
+            arrays.arrival.fill_(np.nan)
+            arrays.arrival_error.fill_(np.nan)
+            arrays.gates.zero_()  # every gate closed: no friction stress at the start
+            arrays.yield_time.fill_(np.nan)
+            pass_label = " ".join(p for p in (label, f"pass {pass_index + 1}/{n_passes}" if n_passes > 1 else "") if p)
+            bar = Progress(show_progress, n_members, pass_label)
+            while True:
+                wp.launch(
+                    kern["integrate"],
+                    dim=n_members,
+                    inputs=[arrays.params, settings, outputs, solver.steps_per_launch, arrays.record_times,
+                            member_states, arrays.state, arrays.stages, arrays.work, arrays.gates, arrays.record_previous],
+                    outputs=[arrays.arrival, arrays.arrival_error, arrays.yield_time, arrays.record],
+                )
+                st_now = member_states.numpy()
+                if pass_index == 0 and flag_stragglers(st_now, solver, STATUS_MEANINGS.index("stalled")):
+                    member_states = wp.array(st_now, dtype=IntegratorState)
+                n_done = int(st_now["done"].sum())
+                bar.update(n_done, float(np.mean(np.minimum(st_now["t"] / end, 1.0))))
+                if n_done == n_members:
+                    break
+            bar.update(n_done, 1.0, final=True)
+            if pass_index == 0:
+                st = st_now
+                front_max, front_last = st["front_max"], st["front_last"]
+                event = real_event(front_max, front_last, values, fronts) if fronts is not None else None
+                sigma_out = wp.zeros((n, n_members), dtype=ft)
+                tau_out = wp.zeros((n, n_members), dtype=ft)
+                wp.launch(kern["evaluate_fields"], dim=n_members, inputs=[arrays.params, member_states, arrays.state],
+                          outputs=[sigma_out, tau_out])
+                fields = arrays.state.numpy()
+                sigma = sigma_out.numpy()
+                tau = tau_out.numpy()
+                yield_np = arrays.yield_time.numpy() if stress_gate else None
+                gate_np = arrays.gates.numpy()[0] if stress_gate else None
+        result = EngineResult(
+            member_states=st, fields=fields, normal_stress=sigma, friction_stress=tau, yield_time=yield_np, yield_gate=gate_np,
+            arrival=arrays.arrival.numpy() if fronts is not None else None,
+            arrival_error=arrays.arrival_error.numpy() if fronts is not None else None,
+            event=event, record=arrays.record.numpy() if record is not None else None,
+        )
+        wp.synchronize_device(device)
+    return result
