@@ -388,3 +388,86 @@ def test_kernel_structs_stay_in_step_with_the_public_parameters():
     for name in types.SolverSettings.vars:
         assert getattr(settings, name) != 0, name
     assert settings.switch_rtol == pytest.approx(2e-4)
+
+
+def _fronts_kernel():
+    observers = make_stages(f64, wf.Model())["observers"]
+    track_fronts = observers["track_fronts"]
+
+    @wp.kernel(module="unique")
+    def sweep(params: wp.array(dtype=types.MemberParams), states: wp.array(dtype=types.IntegratorState),
+              crossing: wp.array(dtype=f64), slope: wp.array(dtype=f64), curvature: f64, contact: wp.array(dtype=f64),
+              h: f64, steps: int, use_stage2: int, K: wp.array4d(dtype=f64), work: wp.array3d(dtype=f64),
+              arrival: wp.array2d(dtype=f64), arrival_error: wp.array2d(dtype=f64)):
+        """Steps of size h from t = 20.5 through a field whose detachment velocity at node i is
+        w_i(t) = level + slope_i (t - crossing_i) + curvature (t - crossing_i)^2 (pad velocity -w: the
+        disc moves in +x), fed to track_fronts as the FSAL, second-stage and last-stage slots."""
+        st = states[0]
+        n = crossing.shape[0]
+        level = st.front_level
+        for i in range(n):
+            work[types.W_CONTACT, i, 0] = contact[i]
+        for k in range(steps):
+            t_old = f64(20.5) + f64(k) * h
+            t_new = t_old + h
+            t_mid = t_old + f64(esdirk.C2) * h
+            for i in range(n):
+                d0 = t_old - crossing[i]
+                dm = t_mid - crossing[i]
+                d1 = t_new - crossing[i]
+                K[0, types.C_U, i, 0] = -(level + slope[i] * d0 + curvature * d0 * d0)
+                K[1, types.C_U, i, 0] = -(level + slope[i] * dm + curvature * dm * dm)
+                K[2, types.C_U, i, 0] = -(level + slope[i] * d1 + curvature * d1 * d1)
+            st = track_fronts(params[0], st, 0, n, K, work, 0, 1, 2, t_old, t_new, arrival, arrival_error, 0,
+                              f64(0.4), use_stage2)
+        states[0] = st
+
+    return sweep
+
+
+@pytest.mark.parametrize("use_stage2", [1, 0])
+def test_front_observer_on_a_synthetic_field(use_stage2):
+    """Arrival times from a field with known crossings: exact on the quadratic through the step's
+    ends and its second stage (TR-BDF2 steps), the linear crossing after a backward-Euler step, each
+    with its error estimate; a node without contact never arrives; the event maximum is the largest
+    w seen at a step end."""
+    n, h, steps = 6, 0.01, 40
+    crossing = 20.5 + np.array([0.053, 0.1, 0.1475, 0.21, 0.30, 0.11])
+    slope = np.array([1e-3, 2e-3, 5e-4, 1e-3, 3e-3, 1e-3])
+    curvature = 2e-3
+    contact = np.array([1.0, 1.0, 1.0, 1.0, 1.0, 0.0])
+    values, _ = resolve_members(None, wf.Parameters())
+    st = np.zeros(1, dtype=types.IntegratorState.numpy_dtype())
+    level = 1e-4
+    st["front_level"] = level
+    st["front_max"] = -np.inf
+    arrays = dict(K=wp.zeros((3, types.N_COMPONENTS, n, 1), dtype=f64, device=DEVICE),
+                  work=wp.zeros((types.N_WORK, n, 1), dtype=f64, device=DEVICE),
+                  arrival=wp.full((n, 1), np.nan, dtype=f64, device=DEVICE),
+                  arrival_error=wp.full((n, 1), np.nan, dtype=f64, device=DEVICE))
+    states = wp.array(st, dtype=types.IntegratorState, device=DEVICE)
+    wp.launch(_fronts_kernel(), dim=1, device=DEVICE, inputs=[
+        wp.array(member_params(values), dtype=types.MemberParams, device=DEVICE), states,
+        wp.array(crossing, dtype=f64, device=DEVICE), wp.array(slope, dtype=f64, device=DEVICE), curvature,
+        wp.array(contact, dtype=f64, device=DEVICE), h, steps, use_stage2,
+        arrays["K"], arrays["work"], arrays["arrival"], arrays["arrival_error"]])
+    arrival = arrays["arrival"].numpy()[:, 0]
+    error = arrays["arrival_error"].numpy()[:, 0]
+    assert np.isnan(arrival[5]) and np.isnan(error[5])  # lifted off
+    if use_stage2:
+        np.testing.assert_allclose(arrival[:5], crossing[:5], rtol=0, atol=1e-12)
+        # the estimate is the distance to the linear crossing: nonzero inside a step (the field is
+        # curved), zero where the crossing falls on a step end (0.1, 0.21, 0.30 s after the start)
+        on_step_end = np.abs((crossing[:5] - 20.5) / h - np.round((crossing[:5] - 20.5) / h)) < 1e-9
+        assert on_step_end.tolist() == [False, True, False, True, True]
+        assert np.all(error[:5][~on_step_end] > 1e-6) and np.all(error[:5] < h)
+        np.testing.assert_allclose(error[:5][on_step_end], 0.0, atol=1e-12)
+    else:
+        t_old = 20.5 + np.floor((crossing[:5] - 20.5) / h + 1e-9) * h
+        w = lambda t, i: level + slope[i] * (t - crossing[i]) + curvature * (t - crossing[i]) ** 2  # noqa: E731
+        lin = [t_old[i] + h * (level - w(t_old[i], i)) / (w(t_old[i] + h, i) - w(t_old[i], i)) for i in range(5)]
+        np.testing.assert_allclose(arrival[:5], lin, rtol=0, atol=1e-12)
+        np.testing.assert_allclose(error[:5], h)
+    t_end = 20.5 + steps * h
+    w_end = level + slope[:5] * (t_end - crossing[:5]) + curvature * (t_end - crossing[:5]) ** 2
+    assert states.numpy()[0]["front_max"] == pytest.approx(w_end.max(), rel=1e-12)
