@@ -28,7 +28,6 @@ class UsageError(ValueError):
     pass
 
 
-FINAL_FIELDS = ("displacement", "velocity", "elastic_stress", "contact_age", "normal_stress", "friction_stress")
 
 
 def _fail(message: str) -> int:
@@ -71,20 +70,9 @@ def _print_member(ds, solver: Solver) -> None:
 
 
 def _check_output(path: Path, resume: bool, overwrite: bool) -> None:
-    from .io import parts_dir
+    from .runner import check_output
 
-    if resume and overwrite:
-        raise UsageError("--resume and --overwrite exclude each other")
-    if path.suffix != ".nc":
-        raise UsageError(f"output {str(path)!r}: expected a file name ending in .nc")
-    if not path.parent.exists():
-        raise UsageError(f"output {str(path)!r}: folder {str(path.parent)!r} does not exist")
-    if path.exists() and not overwrite:
-        raise UsageError(f"output {str(path)!r} exists; pass --overwrite to replace it"
-                         + (" (it is complete: nothing to resume)" if resume else ""))
-    if parts_dir(path).exists() and not (resume or overwrite):
-        raise UsageError(f"{str(parts_dir(path))!r} holds an interrupted run; pass --resume to finish it "
-                         "or --overwrite to start again")
+    check_output(path, resume, overwrite)
 
 
 def _run_default(args) -> int:
@@ -110,75 +98,13 @@ def _run_default(args) -> int:
 
 
 def _run_sweep(args) -> int:
-    from .io import ChunkStore, parts_dir, sweep_digest, write_ensemble
-    from .simulate import _check_device, simulate
-    from .sweep import check_member_offset, load_sweep
+    from .runner import run_sweep
 
-    sweep = load_sweep(args.sweep)
-    out = Path(args.output) if args.output else Path(args.sweep).with_suffix(".nc")
-    _check_output(out, args.resume, args.overwrite)
-    parts = parts_dir(out)
-    previous = ChunkStore.load(parts) if args.resume and parts.exists() else None
-    # an omitted option takes, in this order: the interrupted run's value (--resume), the sweep's [run]
-    chunk = args.chunk or (previous.chunk if previous else None) or sweep.run.get("chunk") or sweep.n_members
-    offset = next(v for v in (args.member_offset, previous and previous.member_offset,
-                              sweep.run.get("member_offset"), 0) if v is not None)
-    check_member_offset(offset, sweep.n_members, "--member-offset")
-    device = _check_device(args.device or sweep.run.get("device"))
-    if sweep.record is not None and max(sweep.record.members) >= sweep.n_members:
-        raise UsageError(f"[record] members: index {max(sweep.record.members)} but the sweep has "
-                         f"{sweep.n_members} members (valid 0..{sweep.n_members - 1})")
-    digest = sweep_digest(f"{sweep.text}\nchunk={chunk}" + (f"\nmember_offset={offset}" if offset else ""))
-    if previous is not None:
-        store = previous
-        if store.digest != digest:
-            raise UsageError(f"{str(parts)!r} belongs to a different sweep, chunk size ({store.chunk}) or member "
-                             f"offset ({store.member_offset}); run with --overwrite to start again")
-    else:
-        store = ChunkStore.create(parts, digest, sweep.n_members, chunk, member_offset=offset,
-                                  sweep_file=str(Path(args.sweep).resolve()), device=args.device)
-    todo = [i for i in range(store.n_chunks) if not store.is_done(i)]
-    print(f"warpfric: {sweep.n_members} members (numbers {offset}..{offset + sweep.n_members - 1}) in "
-          f"{store.n_chunks} chunks of <= {chunk}, {len(todo)} to run, device {device}; "
-          f"swept: {', '.join(sweep.varying) or 'nothing'}", file=sys.stderr)
-    t0 = time.perf_counter()
-    n_failed = 0
-    for count, index in enumerate(todo, start=1):
-        sl = store.members(index)
-        record = _chunk_record(sweep.record, sl)
-        label = f"chunk {index + 1}/{store.n_chunks} ({count}/{len(todo)} this run, members {sl.start}..{sl.stop - 1})"
-        ds = simulate(sweep.member_slice(sl) or None, scene=sweep.scene, model=sweep.model, solver=sweep.solver,
-                      fronts=sweep.fronts, record=record, device=device,
-                      progress=False if args.quiet else label, member_offset=offset + sl.start)
-        if record is not None:  # member numbers, as the member coordinate
-            ds = ds.assign_coords(recorded_member=ds.recorded_member.copy(data=ds.member.values[list(record.members)]))
-        ds.attrs["title"] = sweep.title or ds.attrs["title"]
-        ds.attrs["sweep_file"] = str(args.sweep)
-        ds.attrs["sweep_toml"] = sweep.text
-        ds.attrs["chunk_index"] = index
-        if sweep.design is not None:
-            import json
-
-            from .sensitivity import DESIGN_ATTR
-
-            ds.attrs[DESIGN_ATTR] = json.dumps(sweep.design)
-        n_failed += int((ds.status.values != 0).sum())
-        if not sweep.run.get("final_fields", True):
-            ds = ds.drop_vars([v for v in FINAL_FIELDS if v in ds])
-        write_ensemble(ds, store.chunk_path(index), varying=sweep.varying, command=args.command_line)
-    store.combine(out, command=args.command_line)
-    print(f"warpfric: wrote {out} ({sweep.n_members} members, {time.perf_counter() - t0:.1f} s this run, "
-          f"{n_failed} failed members in the chunks run now)", file=sys.stderr)
-    return 0 if n_failed == 0 else 1
-
-
-def _chunk_record(record, sl: slice):
-    from .parameters import Record
-
-    if record is None:
-        return None
-    members = tuple(i - sl.start for i in record.members if sl.start <= i < sl.stop)
-    return Record(members=members, times=record.times) if members else None
+    report = run_sweep(args.sweep, args.output, chunk=args.chunk, member_offset=args.member_offset, device=args.device,
+                       resume=args.resume, overwrite=args.overwrite, scheduler=args.scheduler,
+                       local=True if args.local_cluster else None, workers=args.workers, quiet=args.quiet,
+                       command=args.command_line)
+    return 0 if report.output is not None and report.failed_members == 0 else 1
 
 
 def _run(args) -> int:
@@ -310,6 +236,13 @@ def main(argv=None) -> int:
     run.add_argument("--resume", action="store_true", help="finish an interrupted run of the same sweep")
     run.add_argument("--overwrite", action="store_true", help="replace an existing output (and interrupted parts)")
     run.add_argument("--quiet", action="store_true", help="no progress line")
+    dask = run.add_argument_group("Dask (sweeps; pip install 'warpfric[distributed]', docs/sweeps.md)")
+    dask.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                      help="run the chunks on the Dask scheduler at ADDRESS (e.g. tcp://host:8786), one task each")
+    dask.add_argument("--local-cluster", action="store_true",
+                      help="start a local Dask cluster: one worker per GPU (dask-cuda if installed), else CPU processes")
+    dask.add_argument("--workers", type=int, default=None, metavar="N",
+                      help="workers of --local-cluster (default: the GPU count, else the core count)")
     scene = run.add_argument_group("default scene (without a sweep file)")
     scene.add_argument("--normal-force", type=float, default=Parameters.normal_force, help="N (default 1000)")
     scene.add_argument("--eccentricity", type=float, default=Parameters.eccentricity, help="2e/L (default 0)")

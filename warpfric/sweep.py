@@ -15,6 +15,7 @@ A sweep file (examples in studies/sweeps/, reference in docs/sweeps.md)::
     [run]     chunk = 1000, device = "cpu"              # defaults of the command-line options;
               final_fields = false                      # leave out the final-state fields (member, x)
               member_offset = 0                         # number of the first member (combining runs)
+              scheduler = "local"                       # or "tcp://host:8786": chunks as Dask tasks
 
 Members are every combination of one grid point, one zip row and one sample row, in C order over
 the blocks: grid keys in file order, then the zip rows, then the sample rows (fastest). Each sampled parameter draws from its own random stream, seeded by (seed, name), so
@@ -38,7 +39,8 @@ from .parameters import PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solv
 
 TOP_KEYS = ("title", "description", "scene", "model", "solver", "fronts", "record", "grid", "zip", "sample", "design",
             "run")
-RUN_KEYS = {"chunk": int, "device": str, "final_fields": bool, "member_offset": int}
+RUN_KEYS = {"chunk": int, "device": str, "final_fields": bool, "member_offset": int, "scheduler": str,
+            "workers": int}
 MEMBER_NUMBER_LIMIT = 2**31 - 2**24  # member numbers are int32 (simulate's member_offset bound)
 MEMBERS_NEEDED = ("a sweep file needs members: a [grid], [zip], [sample] or [design] table, or a [scene] table "
                   "(even an empty one) to run that scene as one member")
@@ -315,3 +317,11 @@ def _dataclass_like(table: dict, kinds: dict, where: str) -> dict:
             raise SweepError(f"{_where(where, key)} = {value!r}: expected {expected}")
         out[key] = value
     return out
+
+
+def run(sweep_file, output=None, **options):
+    """Run a sweep file in resumable chunks, here or on a Dask cluster (``client=``, ``scheduler=``,
+    ``local=True``): see :func:`warpfric.runner.run_sweep`."""
+    from .runner import run_sweep
+
+    return run_sweep(sweep_file, output, **options)

@@ -1,0 +1,158 @@
+"""Sweeps on a Dask cluster (warpfric.runner): a LocalCluster of 2 CPU worker processes gives the
+single-process result bit for bit; a worker killed mid-sweep costs only its chunk; a killed client
+leaves a run that --resume completes. CPU only (CI)."""
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pytest
+import xarray as xr
+
+distributed = pytest.importorskip("distributed")
+
+from warpfric.io import parts_dir  # noqa: E402
+from warpfric.runner import run_sweep  # noqa: E402
+
+SWEEP = """
+title = "dask test"
+[solver]
+nodes = 24
+rtol = 1e-4
+[grid]
+eccentricity = [-0.2, -0.1, 0.0, 0.1, 0.2]
+normal_force = [800.0, 1200.0]
+[run]
+chunk = 2
+"""
+TIMING_ATTRS = ("wall_time_s", "device", "history")
+
+
+def _outputs(path):
+    with xr.open_dataset(path) as ds:
+        ds = ds.load()
+    for key in TIMING_ATTRS:
+        ds.attrs.pop(key, None)
+    return ds
+
+
+def _assert_same_outputs(a, b):
+    """Every variable and coordinate equal, bit for bit (NaN where NaN); the timing attributes aside."""
+    da, db = _outputs(a), _outputs(b)
+    assert sorted(da.data_vars) == sorted(db.data_vars)
+    for name in da.variables:
+        np.testing.assert_array_equal(da[name].values, db[name].values, err_msg=name)
+    assert np.array_equal(da.member.values, np.arange(da.sizes["member"]))  # every member once
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """The sweep run in this process (it also fills Warp's kernel cache for the workers)."""
+    folder = tmp_path_factory.mktemp("ref")
+    sweep = folder / "s.toml"
+    sweep.write_text(SWEEP)
+    report = run_sweep(sweep, folder / "single.nc", device="cpu", quiet=True)
+    assert report.output is not None and report.failed_members == 0
+    return sweep, folder / "single.nc"
+
+
+@pytest.fixture
+def client():
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None)
+    c = distributed.Client(cluster)
+    yield c
+    c.close()
+    cluster.close()
+
+
+def test_a_local_cluster_gives_the_single_process_result(reference, client, tmp_path):
+    sweep, single = reference
+    report = run_sweep(sweep, tmp_path / "dask.nc", client=client, quiet=True)
+    assert report.output == tmp_path / "dask.nc" and not report.errors
+    assert len(report.chunks) == 5 and sum(c["members"] for c in report.chunks) == 10
+    assert len({c["pid"] for c in report.chunks}) == 2  # both workers ran chunks
+    assert os.getpid() not in {c["pid"] for c in report.chunks}
+    _assert_same_outputs(single, tmp_path / "dask.nc")
+    # the same through the command line and the scheduler's address
+    from warpfric.cli import main
+
+    code = main(["run", str(sweep), "-o", str(tmp_path / "cli.nc"), "--scheduler", client.scheduler.address, "--quiet"])
+    assert code == 0
+    _assert_same_outputs(single, tmp_path / "cli.nc")
+
+
+def test_a_worker_killed_mid_sweep_costs_only_its_chunk(reference, client, tmp_path):
+    """One worker is killed (SIGKILL, by its PID) while it holds a chunk; the nanny starts a new one,
+    Dask runs the chunk again, and the sweep completes with every member exactly once."""
+    sweep, single = reference
+    pids = client.run(os.getpid)  # worker address -> pid
+    result = {}
+    thread = threading.Thread(target=lambda: result.update(report=run_sweep(sweep, tmp_path / "k.nc", client=client,
+                                                                            quiet=True)))
+    thread.start()
+    killed = None
+    deadline = time.time() + 60
+    while killed is None and time.time() < deadline:
+        busy = {addr for addr, keys in client.processing().items() if keys}
+        if busy:
+            address = sorted(busy)[0]
+            killed = pids[address]
+            os.kill(killed, signal.SIGKILL)
+        else:
+            time.sleep(0.02)
+    thread.join(timeout=180)
+    assert killed is not None and not thread.is_alive()
+    report = result["report"]
+    assert report.output is not None and not report.errors
+    assert len(report.chunks) == 5 and sum(c["members"] for c in report.chunks) == 10
+    restarted = client.run(os.getpid)
+    assert len(restarted) == 2 and killed not in restarted.values()  # the nanny started a new worker
+    assert not list(tmp_path.glob("*.tmp")) and not parts_dir(tmp_path / "k.nc").exists()
+    _assert_same_outputs(single, tmp_path / "k.nc")
+
+
+def test_a_killed_client_leaves_a_run_that_resume_completes(reference, tmp_path):
+    """`warpfric run --local-cluster` is killed (SIGKILL to its PID) after its first chunk; its worker
+    processes are stopped too; `--resume` in one process finishes the same run."""
+    psutil = pytest.importorskip("psutil")
+    sweep, single = reference
+    out = tmp_path / "c.nc"
+    slow = tmp_path / "slow.toml"  # more, smaller chunks: the kill lands while chunks remain
+    slow.write_text(SWEEP.replace("chunk = 2", "chunk = 1"))
+    proc = subprocess.Popen([sys.executable, "-m", "warpfric", "run", str(slow), "-o", str(out), "--local-cluster",
+                             "--workers", "2", "--device", "cpu", "--quiet"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    parts = parts_dir(out)
+    deadline = time.time() + 120
+    while time.time() < deadline and not list(parts.glob("chunk-*.nc")):
+        time.sleep(0.05)
+    children = psutil.Process(proc.pid).children(recursive=True)
+    os.kill(proc.pid, signal.SIGKILL)
+    proc.wait(timeout=30)
+    for child in children:  # the cluster's processes, started by the killed client
+        try:
+            child.kill()
+        except psutil.NoSuchProcess:
+            pass
+    assert not out.exists()
+    finished = len(list(parts.glob("chunk-*.nc")))
+    assert 1 <= finished < 10, finished
+    report = run_sweep(slow, out, resume=True, device="cpu", quiet=True)
+    assert report.output == out and len(report.chunks) == 10 - finished
+    _assert_same_outputs(single, out)
+
+
+def test_a_chunk_that_fails_is_reported_by_member_range(reference, client, tmp_path):
+    """Chunks asking for a GPU on CPU-only workers raise on the worker: each is reported with its
+    member range and error, nothing is combined, and the parts stay for --resume."""
+    sweep, _ = reference
+    out = tmp_path / "gpu.nc"
+    report = run_sweep(sweep, out, client=client, device="cuda:0", quiet=True)
+    assert report.output is None and not out.exists() and parts_dir(out).exists()
+    assert [(e["start"], e["stop"]) for e in sorted(report.errors, key=lambda e: e["start"])] == [
+        (0, 2), (2, 4), (4, 6), (6, 8), (8, 10)]
+    assert all("has no CUDA device" in e["error"] for e in report.errors)

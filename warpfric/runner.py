@@ -1,0 +1,332 @@
+"""Running a sweep file in chunks: in this process, or each chunk as one Dask task on a cluster
+(docs/sweeps.md, "Several GPUs and clusters").
+
+The unit of work is a chunk: a slice of the sweep's members, simulated and written atomically to
+``OUT.nc.parts/chunk-NNNNNN.nc`` (a ``.tmp`` file renamed on completion). Whoever runs the chunks
+(this process, or Dask workers on one host or many) the chunk files, the manifest, ``--resume``,
+``warpfric info`` and the combined file are the same, and so are the outputs, bit for bit (each
+member is integrated alone by the same kernels; only the timing attributes differ).
+
+Dask (``pip install warpfric[distributed]``): each chunk is one task (``pure=False``, one retry
+budget per chunk, Dask's default of 3 worker deaths). A worker that dies mid-chunk leaves at most a
+``.tmp`` file; Dask runs the chunk again elsewhere, so a chunk is never written half and a finished
+chunk is never written again. A chunk that raises is reported with its member range and the run
+goes on; its chunk file is missing, so ``--resume`` runs it again later. Workers keep their
+compiled kernels between chunks (one Warp module cache per process).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+FINAL_FIELDS = ("displacement", "velocity", "elastic_stress", "contact_age", "normal_stress", "friction_stress")
+
+
+class RunError(ValueError):
+    """A sweep run that cannot start or finish as asked (one line, for the command line's exit 2)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class ChunkJob:
+    """Everything a worker needs to run one chunk (plain values: it travels to Dask workers)."""
+
+    sweep_text: str
+    sweep_name: str
+    index: int
+    n_chunks: int
+    start: int
+    stop: int
+    member_offset: int
+    path: str
+    device: str | None  # None: the worker's own device (its GPU if it has one, else the CPU)
+    command: str | None
+    progress: bool
+
+
+def worker_device() -> str:
+    """The Warp device of this process: on a Dask worker of a multi-GPU host where every worker sees
+    every GPU (a plain LocalCluster), the GPU numbered by the worker's name modulo the GPU count; else
+    the first CUDA device, else the CPU (with dask-cuda each worker sees only its own GPU: cuda:0)."""
+    from .simulate import default_device
+
+    device = default_device()
+    if not device.startswith("cuda"):
+        return device
+    try:
+        from distributed import get_worker
+
+        name = get_worker().name
+    except (ImportError, ValueError):
+        return device
+    import warp as wp
+
+    count = wp.get_cuda_device_count()
+    if count > 1 and isinstance(name, (int, np.integer)):
+        return f"cuda:{int(name) % count}"
+    return device
+
+
+def run_chunk(job: ChunkJob) -> dict:
+    """Simulate the members of one chunk and write its file atomically; return a report (chunk
+    index, members, failed members, device, wall time, process id)."""
+    from .io import write_ensemble
+    from .simulate import simulate
+    from .sweep import parse_sweep
+
+    t0 = time.perf_counter()
+    sweep = parse_sweep(job.sweep_text, job.sweep_name)
+    device = job.device or worker_device()
+    if device.startswith("cuda"):
+        import warp as wp
+
+        wp.init()
+        if wp.get_cuda_device_count() == 0:
+            raise RunError(f"chunk {job.index + 1} (members {job.start}..{job.stop - 1}): device {device} asked for, "
+                           f"but this worker (pid {os.getpid()}) has no CUDA device")
+    sl = slice(job.start, job.stop)
+    record = chunk_record(sweep.record, sl)
+    label = (f"chunk {job.index + 1}/{job.n_chunks} (members {job.start}..{job.stop - 1})" if job.progress else False)
+    ds = simulate(sweep.member_slice(sl) or None, scene=sweep.scene, model=sweep.model, solver=sweep.solver,
+                  fronts=sweep.fronts, record=record, device=device, progress=label,
+                  member_offset=job.member_offset + job.start)
+    if record is not None:  # member numbers, as the member coordinate
+        ds = ds.assign_coords(recorded_member=ds.recorded_member.copy(data=ds.member.values[list(record.members)]))
+    ds.attrs["title"] = sweep.title or ds.attrs["title"]
+    ds.attrs["sweep_file"] = job.sweep_name
+    ds.attrs["sweep_toml"] = sweep.text
+    ds.attrs["chunk_index"] = job.index
+    if sweep.design is not None:
+        import json
+
+        from .sensitivity import DESIGN_ATTR
+
+        ds.attrs[DESIGN_ATTR] = json.dumps(sweep.design)
+    failed = int((ds.status.values != 0).sum())
+    if not sweep.run.get("final_fields", True):
+        ds = ds.drop_vars([v for v in FINAL_FIELDS if v in ds])
+    write_ensemble(ds, job.path, varying=sweep.varying, command=job.command)
+    return dict(index=job.index, members=job.stop - job.start, failed=failed, device=device,
+                wall_s=time.perf_counter() - t0, pid=os.getpid())
+
+
+def chunk_record(record, sl: slice):
+    """The Record of the members of ``sl`` that the sweep records (indices within the chunk), or None."""
+    from .parameters import Record
+
+    if record is None:
+        return None
+    members = tuple(i - sl.start for i in record.members if sl.start <= i < sl.stop)
+    return Record(members=members, times=record.times) if members else None
+
+
+@dataclasses.dataclass
+class RunReport:
+    """What a sweep run did: chunk reports of the chunks run now, the chunks that raised (with their
+    member ranges and errors), the output path (None while chunks are missing) and the wall time."""
+
+    chunks: list
+    errors: list
+    output: Path | None
+    wall_s: float
+
+    @property
+    def failed_members(self) -> int:
+        return sum(c["failed"] for c in self.chunks)
+
+
+def _say(message: str, quiet: bool) -> None:
+    if not quiet:
+        print(f"warpfric: {message}", file=sys.stderr, flush=True)
+
+
+def run_local(jobs: list, quiet: bool = False) -> tuple[list, list]:
+    """Run the chunks one after the other in this process."""
+    reports = []
+    for job in jobs:
+        reports.append(run_chunk(job))
+    return reports, []
+
+
+def run_on_client(jobs: list, client, quiet: bool = False) -> tuple[list, list]:
+    """Run each chunk as one Dask task on ``client``'s cluster; progress (chunks done, in flight,
+    members/s) on stderr as they finish. Returns (reports, errors): a chunk that raised is reported by
+    its member range and the others go on."""
+    from distributed import as_completed
+
+    if not jobs:
+        return [], []
+    t0 = time.perf_counter()
+    futures = {}
+    for job in jobs:
+        key = f"warpfric-chunk-{job.index:06d}-{Path(job.path).parent.name}-{os.getpid()}-{time.time_ns()}"
+        futures[client.submit(run_chunk, job, key=key, pure=False)] = job
+    reports, errors = [], []
+    members_done = 0
+    for future in as_completed(list(futures)):
+        job = futures[future]
+        try:
+            report = future.result()
+        except Exception as err:  # noqa: BLE001 - reported by member range, the rest goes on
+            errors.append(dict(index=job.index, start=job.start, stop=job.stop, error=f"{type(err).__name__}: {err}"))
+            _say(f"chunk {job.index + 1}/{job.n_chunks} (members {job.start}..{job.stop - 1}) FAILED: "
+                 f"{type(err).__name__}: {err}", False)
+            continue
+        reports.append(report)
+        members_done += report["members"]
+        elapsed = time.perf_counter() - t0
+        in_flight = len(jobs) - len(reports) - len(errors)
+        _say(f"{len(reports)}/{len(jobs)} chunks done ({members_done} members, {members_done / elapsed:.1f} members/s), "
+             f"{in_flight} to go; chunk {job.index + 1} ran on {report['device']} (pid {report['pid']}) in "
+             f"{report['wall_s']:.1f} s", quiet)
+    return reports, errors
+
+
+def local_cluster(workers: int | None = None):
+    """A Dask client on a new local cluster: one worker per CUDA device (dask-cuda's LocalCUDACluster
+    when it is installed, else a LocalCluster whose workers pick their GPU by name) when GPUs are
+    present, else a LocalCluster of ``workers`` single-threaded CPU processes (default: the core
+    count). The caller closes it (``client.close(); client.cluster.close()``)."""
+    try:
+        from distributed import Client, LocalCluster
+    except ImportError:
+        raise RunError("a Dask cluster needs the distributed package: pip install 'warpfric[distributed]'") from None
+    import warp as wp
+
+    wp.config.quiet = True
+    wp.init()
+    n_gpus = wp.get_cuda_device_count()
+    if n_gpus > 0:
+        try:
+            from dask_cuda import LocalCUDACluster
+
+            cluster = LocalCUDACluster(n_workers=workers or n_gpus, threads_per_worker=1)
+        except ImportError:
+            cluster = LocalCluster(n_workers=workers or n_gpus, threads_per_worker=1, processes=True)
+    else:
+        cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True)
+    return Client(cluster)
+
+
+def connect(address: str):
+    """A Dask client of the scheduler at ``address`` (e.g. tcp://host:8786)."""
+    try:
+        from distributed import Client
+    except ImportError:
+        raise RunError("--scheduler needs the distributed package: pip install 'warpfric[distributed]'") from None
+    try:
+        return Client(address, timeout="20s")
+    except OSError as err:
+        raise RunError(f"scheduler {address!r}: cannot connect ({err})") from None
+
+
+def check_output(path: Path, resume: bool, overwrite: bool) -> None:
+    """Refuse an output that would lose results: an existing file without overwrite, an interrupted
+    run's parts without resume or overwrite (RunError, one line)."""
+    from .io import parts_dir
+
+    if resume and overwrite:
+        raise RunError("--resume and --overwrite exclude each other")
+    if path.suffix != ".nc":
+        raise RunError(f"output {str(path)!r}: expected a file name ending in .nc")
+    if not path.parent.exists():
+        raise RunError(f"output {str(path)!r}: folder {str(path.parent)!r} does not exist")
+    if path.exists() and not overwrite:
+        raise RunError(f"output {str(path)!r} exists; pass --overwrite to replace it"
+                       + (" (it is complete: nothing to resume)" if resume else ""))
+    if parts_dir(path).exists() and not (resume or overwrite):
+        raise RunError(f"{str(parts_dir(path))!r} holds an interrupted run; pass --resume to finish it "
+                       "or --overwrite to start again")
+
+
+def run_sweep(sweep_file, output=None, *, chunk: int | None = None, member_offset: int | None = None,
+              device: str | None = None, resume: bool = False, overwrite: bool = False, client=None,
+              scheduler: str | None = None, local: bool | None = None, workers: int | None = None,
+              quiet: bool = False, command: str | None = None) -> RunReport:
+    """Run a sweep file in resumable chunks into ``output`` (default: the sweep's name with .nc).
+
+    Where the chunks run: ``client`` (a ``distributed.Client``), else ``scheduler`` (an address), else
+    ``local=True`` (a new local cluster: one worker per GPU, or ``workers`` CPU processes), else the
+    sweep's ``[run] scheduler`` ("local" or an address), else this process. ``chunk``,
+    ``member_offset`` and ``device`` default to the interrupted run's (resume), then the sweep's
+    ``[run]`` table; ``device`` None on a cluster: each worker's own GPU (or CPU).
+    Returns a RunReport; ``output`` is written once every chunk exists (else report.output is None
+    and ``resume=True`` finishes the run). Raises RunError/SweepError (ValueError) before running."""
+    from .io import ChunkStore, parts_dir, sweep_digest
+    from .simulate import _check_device
+    from .sweep import check_member_offset, load_sweep
+
+    sweep = load_sweep(sweep_file)
+    out = Path(output) if output else Path(sweep_file).with_suffix(".nc")
+    check_output(out, resume, overwrite)
+    if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1):
+        raise RunError(f"--chunk {chunk}: expected an integer >= 1 (members per chunk file)")
+    parts = parts_dir(out)
+    previous = ChunkStore.load(parts) if resume and parts.exists() else None
+    # an omitted option takes, in this order: the interrupted run's value (resume), the sweep's [run]
+    chunk = chunk or (previous.chunk if previous else None) or sweep.run.get("chunk") or sweep.n_members
+    offset = next(v for v in (member_offset, previous and previous.member_offset, sweep.run.get("member_offset"), 0)
+                  if v is not None)
+    check_member_offset(offset, sweep.n_members, "--member-offset")
+    if sweep.record is not None and max(sweep.record.members) >= sweep.n_members:
+        raise RunError(f"[record] members: index {max(sweep.record.members)} but the sweep has "
+                       f"{sweep.n_members} members (valid 0..{sweep.n_members - 1})")
+    where = scheduler or sweep.run.get("scheduler")
+    workers = workers or sweep.run.get("workers")
+    use_cluster = client is not None or bool(local) or (where is not None and local is not False)
+    device = device or sweep.run.get("device")
+    if device is not None or not use_cluster:
+        device = _check_device(device) if not use_cluster else device  # a worker checks its own device
+    digest = sweep_digest(f"{sweep.text}\nchunk={chunk}" + (f"\nmember_offset={offset}" if offset else ""))
+    if previous is not None:
+        store = previous
+        if store.digest != digest:
+            raise RunError(f"{str(parts)!r} belongs to a different sweep, chunk size ({store.chunk}) or member "
+                           f"offset ({store.member_offset}); run with --overwrite to start again")
+    else:
+        store = ChunkStore.create(parts, digest, sweep.n_members, chunk, member_offset=offset,
+                                  sweep_file=str(Path(sweep_file).resolve()), device=device)
+    todo = [i for i in range(store.n_chunks) if not store.is_done(i)]
+    own_client = None
+    if use_cluster and client is None:
+        own_client = local_cluster(workers) if (local or where == "local") else connect(where)
+        client = own_client
+    try:
+        place = "this process, device " + str(device)
+        if client is not None:
+            n_workers = len(client.scheduler_info().get("workers", {}))
+            place = f"Dask cluster {client.scheduler.address} ({n_workers} workers, dashboard {client.dashboard_link})"
+        _say(f"{sweep.n_members} members (numbers {offset}..{offset + sweep.n_members - 1}) in {store.n_chunks} chunks "
+             f"of <= {chunk}, {len(todo)} to run on {place}; swept: {', '.join(sweep.varying) or 'nothing'}", False)
+        t0 = time.perf_counter()
+        jobs = [ChunkJob(sweep_text=sweep.text, sweep_name=str(sweep_file), index=i, n_chunks=store.n_chunks,
+                         start=store.members(i).start, stop=store.members(i).stop, member_offset=offset,
+                         path=str(store.chunk_path(i)), device=device, command=command,
+                         progress=not quiet and client is None)
+                for i in todo]
+        if client is None:
+            reports, errors = run_local(jobs, quiet)
+        else:
+            reports, errors = run_on_client(jobs, client, quiet)
+    finally:
+        if own_client is not None:
+            cluster = own_client.cluster
+            own_client.close()
+            if cluster is not None:
+                cluster.close()
+    wall = time.perf_counter() - t0
+    if errors or any(not store.is_done(i) for i in range(store.n_chunks)):
+        ranges = ", ".join(f"{e['start']}..{e['stop'] - 1}" for e in errors)
+        _say(f"{len(errors)} chunks failed (members {ranges}); the finished chunks are kept in {parts}: "
+             f"`warpfric run {sweep_file} -o {out} --resume` runs the rest", False)
+        return RunReport(chunks=reports, errors=errors, output=None, wall_s=wall)
+    store.combine(out, command=command)
+    report = RunReport(chunks=reports, errors=[], output=out, wall_s=wall)
+    _say(f"wrote {out} ({sweep.n_members} members, {wall:.1f} s this run, {report.failed_members} failed members in "
+         "the chunks run now)", False)
+    return report
