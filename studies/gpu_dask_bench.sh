@@ -14,7 +14,7 @@ python3 -c "import distributed, warp as wp; wp.config.quiet = True; wp.init(); p
 run() {  # label, extra options
   local label=$1; shift
   local t0=$(date +%s.%N)
-  python3 -m warpfric run "$SWEEP" -o "$OUT/$label.nc" --quiet "$@" 2>&1 | tee "$OUT/$label.log" | grep -v "^Warp\|^   " | tail -3
+  python3 -m warpfric run "$SWEEP" -o "$OUT/$label.nc" "$@" 2>&1 | tee "$OUT/$label.log" | grep -v "^Warp\|^   " | grep -v "chunks done" | tail -4
   echo "$label: $(python3 -c "print(f'{$(date +%s.%N) - $t0:.1f}')") s wall (process start to exit)" | tee -a "$OUT/times.txt"
 }
 run plain --device cuda:0

@@ -49,19 +49,22 @@ class ChunkJob:
     progress: bool
 
 
-def worker_device() -> str:
+def worker_device(worker=None) -> str:
     """The Warp device of this process: on a Dask worker of a multi-GPU host where every worker sees
     every GPU (a plain LocalCluster), the GPU numbered by the worker's name modulo the GPU count; else
-    the first CUDA device, else the CPU (with dask-cuda each worker sees only its own GPU: cuda:0)."""
+    the first CUDA device, else the CPU (with dask-cuda each worker sees only its own GPU: cuda:0).
+    ``worker``: the Dask worker (found from the running task when None)."""
     from .simulate import default_device
 
     device = default_device()
     if not device.startswith("cuda"):
         return device
     try:
-        from distributed import get_worker
+        if worker is None:
+            from distributed import get_worker
 
-        name = get_worker().name
+            worker = get_worker()
+        name = worker.name
     except (ImportError, ValueError):
         return device
     import warp as wp
@@ -113,6 +116,22 @@ def run_chunk(job: ChunkJob) -> dict:
     write_ensemble(ds, job.path, varying=sweep.varying, command=job.command)
     return dict(index=job.index, members=job.stop - job.start, failed=failed, device=device,
                 wall_s=time.perf_counter() - t0, pid=os.getpid())
+
+
+def prepare_worker(sweep_text: str, sweep_name: str, device: str | None, dask_worker=None) -> dict:
+    """Load this worker's kernels before the timed run (compile or read Warp's cache, load the
+    modules on its device): one member, two steps. Returns its device, pid and the seconds it took."""
+    import dataclasses as dc
+
+    from .simulate import simulate
+    from .sweep import parse_sweep
+
+    t0 = time.perf_counter()
+    sweep = parse_sweep(sweep_text, sweep_name)
+    device = device or worker_device(dask_worker)  # client.run passes dask_worker
+    simulate(sweep.member_slice(slice(0, 1)) or None, scene=sweep.scene, model=sweep.model,
+             solver=dc.replace(sweep.solver, max_steps=2), fronts=sweep.fronts, device=device, progress=False)
+    return dict(device=device, pid=os.getpid(), seconds=time.perf_counter() - t0)
 
 
 def chunk_record(record, sl: slice):
@@ -303,6 +322,18 @@ def run_sweep(sweep_file, output=None, *, chunk: int | None = None, member_offse
             place = f"Dask cluster {client.scheduler.address} ({n_workers} workers, dashboard {client.dashboard_link})"
         _say(f"{sweep.n_members} members (numbers {offset}..{offset + sweep.n_members - 1}) in {store.n_chunks} chunks "
              f"of <= {chunk}, {len(todo)} to run on {place}; swept: {', '.join(sweep.varying) or 'nothing'}", False)
+        if client is not None and todo:
+            t_ready = time.perf_counter()
+            try:  # every worker loads its kernels once, outside the timed run
+                ready = client.run(prepare_worker, sweep.text, str(sweep_file), device)
+                devices = sorted({r["device"] for r in ready.values()})
+                _say(f"{len(ready)} workers ready in {time.perf_counter() - t_ready:.1f} s (kernels loaded on "
+                     f"{', '.join(devices)})", quiet)
+            except Exception as err:  # noqa: BLE001 - the chunks report it by member range
+                _say(f"preparing the workers failed ({type(err).__name__}: {err}); running the chunks anyway", quiet)
+        elif todo:  # compile (or load from Warp's cache) before the timed run, and say how long it took
+            ready = prepare_worker(sweep.text, str(sweep_file), device)
+            _say(f"kernels ready on {ready['device']} in {ready['seconds']:.1f} s", quiet)
         t0 = time.perf_counter()
         jobs = [ChunkJob(sweep_text=sweep.text, sweep_name=str(sweep_file), index=i, n_chunks=store.n_chunks,
                          start=store.members(i).start, stop=store.members(i).stop, member_offset=offset,
