@@ -17,7 +17,7 @@ from .gates import make_gates
 from .model_terms import disc_velocity_at, make_model_terms
 from .newton import make_newton
 from .observers import make_observers, run_finished
-from .types import C_PHI, C_TAU, C_U, C_V, IntegratorState, MemberParams, OutputSettings, SolverSettings
+from .types import IntegratorState, MemberParams, OutputSettings, SolverSettings
 
 _CACHE: dict = {}
 
@@ -45,8 +45,8 @@ def _make_integrator(dtype: str, model):
     stages = make_stages(ft, model)
     terms, gates, esdirk, observers = stages["terms"], stages["gates"], stages["esdirk"], stages["observers"]
     make_coeffs = terms["make_coeffs"]
-    normal_stress = terms["normal_stress"]
-    interface_friction = terms["interface_friction"]
+    state_displacement = observers["state_displacement"]
+    state_contact = observers["state_contact"]
     backward_euler_step = esdirk["backward_euler_step"]
     tr_bdf2_step = esdirk["tr_bdf2_step"]
     advance_state = esdirk["advance_state"]
@@ -169,16 +169,10 @@ def _make_integrator(dtype: str, model):
         tilt = ft(st.tilt)
         v_disc = ft(disc_velocity_at(p, st.t, st.t))
         u_l = ft(0.0)
-        u_c = state[C_U, 0, m]
+        u_c = state_displacement(state, 0, n, m)
         for i in range(n):
-            u_r = ft(0.0)
-            if i < n - 1:
-                u_r = state[C_U, i + 1, m]
-            ns = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
-            fr = interface_friction(
-                c, ns.value, state[C_V, i, m], v_disc, state[C_TAU, i, m], state[C_PHI, i, m], ft(0.0), ft(1.0), ft(0.0),
-                ft(1.0),
-            )
+            u_r = state_displacement(state, i + 1, n, m)
+            ns, fr = state_contact(c, state, i, n, m, u_l, u_c, u_r, delta0, tilt, v_disc)
             normal_stress_out[i, m] = fr.contact * ns.value
             friction_stress_out[i, m] = fr.stress
             u_l = u_c

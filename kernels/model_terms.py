@@ -431,6 +431,19 @@ def make_model_terms(ft, model):
         return fr
 
     @wp.func
+    def contact_terms(
+        c: Coeffs, i: int, n: int, u_l: ft, u_c: ft, u_r: ft, delta0: ft, tilt: ft, velocity: ft, v_disc: ft,
+        z_tau: ft, z_phi: ft, g: ft, gate: ft, sliding: ft, width: ft,
+    ):
+        """The interface at node i: its normal stress (from the displacement stencil and the plate)
+        and the friction law there (a stage of coefficient g, or g = 0: the law at the state).
+        Returns (StencilTerm, Friction). Every node sweep of the integrator evaluates the interface
+        through this one function."""
+        ns = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
+        fr = interface_friction(c, ns.value, velocity, v_disc, z_tau, z_phi, g, gate, sliding, width)
+        return ns, fr
+
+    @wp.func
     def yield_margin(c: Coeffs, tau_f: ft, area: ft):
         """|tau_f| - tau_c*A (Pa): the stress gate is open where this is > 0, i.e. where the
         asperity-level stress |tau_f|/A exceeds tau_c; a point without contact area (A = 0) that still
@@ -448,5 +461,6 @@ def make_model_terms(ft, model):
         normal_stress=normal_stress,
         elastic_force=elastic_force,
         interface_friction=interface_friction,
+        contact_terms=contact_terms,
         yield_margin=yield_margin,
     )

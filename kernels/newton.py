@@ -149,9 +149,8 @@ def make_newton(ft, model, terms, gates):
     Coeffs = terms["Coeffs"]
     node_weight = terms["node_weight"]
     node_moment_weight = terms["node_moment_weight"]
-    normal_stress = terms["normal_stress"]
     elastic_force = terms["elastic_force"]
-    interface_friction = terms["interface_friction"]
+    contact_terms = terms["contact_terms"]
     node_gate = gates["node_gate"]
     node_sliding = gates["node_sliding"]
     test_switch = gates["test_switch"]
@@ -225,12 +224,10 @@ def make_newton(ft, model, terms, gates):
             for i in range(n):
                 u_r = stage_displacement(work, i + 1, n, m, g)
                 vel = work[W_V, i, m]
-                ns = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
+                ns, fr = contact_terms(c, i, n, u_l, u_c, u_r, delta0, tilt, vel, v_disc, work[W_ZT, i, m],
+                                       work[W_ZP, i, m], g, node_gate(gates, i, m), node_sliding(gates, i, m),
+                                       ft(settings.sliding_width))
                 sigma = ns.value
-                fr = interface_friction(
-                    c, sigma, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m], g, node_gate(gates, i, m),
-                    node_sliding(gates, i, m), ft(settings.sliding_width),
-                )
                 ef = elastic_force(c, i, n, u_l, u_c, u_r, delta0, tilt)
                 residual = -(ef.value + fr.stress - c.damping * vel)
                 jac_c = -g * (ef.d_u_center + fr.d_normal * ns.d_u_center) + c.kif * fr.d_slip + c.damping
@@ -324,12 +321,9 @@ def make_newton(ft, model, terms, gates):
         for i in range(n):
             u_r = stage_displacement(work, i + 1, n, m, g)
             vel = work[W_V, i, m]
-            ns = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
+            ns, fr = contact_terms(c, i, n, u_l, u_c, u_r, delta0, tilt, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m],
+                                   g, node_gate(gates, i, m), node_sliding(gates, i, m), ft(settings.sliding_width))
             sigma = ns.value
-            fr = interface_friction(
-                c, sigma, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m], g, node_gate(gates, i, m),
-                node_sliding(gates, i, m), ft(settings.sliding_width),
-            )
             if end_of_step == 1:
                 work[W_CONTACT, i, m] = fr.contact  # at the end of the step: fronts skip lifted-off nodes
                 work[W_GATE_END, i, m] = fr.gate

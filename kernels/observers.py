@@ -79,10 +79,23 @@ def run_finished(p: MemberParams, st: IntegratorState, outputs: OutputSettings):
 
 def make_observers(ft, model, terms):
     Coeffs = terms["Coeffs"]
-    normal_stress = terms["normal_stress"]
-    interface_friction = terms["interface_friction"]
+    contact_terms = terms["contact_terms"]
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
+
+    @wp.func
+    def state_displacement(state: array3, i: int, n: int, m: int):
+        """u_i of the state (0 beyond the last node)."""
+        if i >= n:
+            return ft(0.0)
+        return state[C_U, i, m]
+
+    @wp.func
+    def state_contact(c: Coeffs, state: array3, i: int, n: int, m: int, u_l: ft, u_c: ft, u_r: ft, delta0: ft, tilt: ft,
+                      v_disc: ft):
+        """The interface at node i of the state itself (the friction law at the state: g = 0)."""
+        return contact_terms(c, i, n, u_l, u_c, u_r, delta0, tilt, state[C_V, i, m], v_disc, state[C_TAU, i, m],
+                             state[C_PHI, i, m], ft(0.0), ft(1.0), ft(0.0), ft(1.0))
 
     @wp.func
     def track_fronts(
@@ -151,17 +164,12 @@ def make_observers(ft, model, terms):
         v_disc = ft(disc_velocity_at(p, t_new, t_old))
         span = t_new - t_old
         u_l = ft(0.0)
-        u_c = state[C_U, 0, m]
+        u_c = state_displacement(state, 0, n, m)
         for i in range(n):
-            u_r = ft(0.0)
-            if i < n - 1:
-                u_r = state[C_U, i + 1, m]
+            u_r = state_displacement(state, i + 1, n, m)
             vel = state[C_V, i, m]
-            ns = normal_stress(c, i, n, u_l, u_c, u_r, delta0, tilt)
+            ns, fr = state_contact(c, state, i, n, m, u_l, u_c, u_r, delta0, tilt, v_disc)
             sigma = ns.value
-            fr = interface_friction(
-                c, sigma, vel, v_disc, state[C_TAU, i, m], state[C_PHI, i, m], ft(0.0), ft(1.0), ft(0.0), ft(1.0)
-            )
             current = wp.vector(vel, v_disc - c.kif * vel, fr.contact * sigma, fr.stress, length=4, dtype=ft)
             for k in range(st.record_next, k_end):
                 frac = ft(1.0)
@@ -196,4 +204,5 @@ def make_observers(ft, model, terms):
             st.npts = 0
         return friction_point(st, p, t_new, friction, normal, min_normal)
 
-    return dict(on_accept=on_accept, track_fronts=track_fronts, record_fields=record_fields)
+    return dict(on_accept=on_accept, track_fronts=track_fronts, record_fields=record_fields,
+                state_displacement=state_displacement, state_contact=state_contact)
