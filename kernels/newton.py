@@ -275,25 +275,29 @@ def make_newton(ft, model, terms, gates):
             d_delta0, d_tilt = schur_solve(d11, d12, d21, d22, e1, e2, s10, s11, s12, s20, s21, s22)
             # ---- pass 3: update and error-weighted norm of the update ----
             norm = ft(0.0)
+            finite = wp.isfinite(d_delta0) and wp.isfinite(d_tilt)  # wp.max drops NaN (fmax): test each
             for i in range(n):
                 dv = solution_row(work, i, m, d_delta0, d_tilt)
                 vel = work[W_V, i, m] + dv
                 work[W_V, i, m] = vel
                 u = work[W_ZU, i, m] + g * vel
+                if not wp.isfinite(dv):
+                    finite = False
                 norm = wp.max(norm, wp.abs(dv) / (rtol * (c.v_scale + wp.abs(vel))))
                 norm = wp.max(norm, g * wp.abs(dv) / (rtol * (c.u_scale + wp.abs(u))))
             delta0 = delta0 + d_delta0
             tilt = tilt + d_tilt
             norm = wp.max(norm, wp.abs(d_delta0) / (rtol * (c.delta_scale + wp.abs(delta0))))
             norm = wp.max(norm, wp.abs(d_tilt) / (rtol * (c.tilt_scale + wp.abs(tilt))))
-            if not wp.isfinite(norm):
+            if not finite or not wp.isfinite(norm):
                 non_finite = 1
                 break
             if norm <= ft(settings.newton_tol):
                 converged = 1
                 break
-            # stagnation inside the error tolerance: the update has reached the round-off level of
-            # the working precision (float32), further iterations cannot improve it
+            # stagnation inside the error tolerance: an update within the step's tolerance (norm <= 1)
+            # that no longer halves has reached the round-off level of the working precision (the
+            # case it is meant for is float32; it applies to float64 too, where it is rare)
             if it > 0 and norm <= ft(1.0) and norm > ft(0.5) * prev_norm:
                 converged = 1
                 break

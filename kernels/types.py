@@ -197,9 +197,10 @@ def allocate(ft, params_np: np.ndarray, n_nodes: int, stress_gate: bool, fronts:
         stages=wp.zeros((N_STAGE_SLOTS, N_COMPONENTS, n_nodes, n_members), dtype=ft),
         work=wp.zeros((N_WORK, n_nodes, n_members), dtype=ft),
         gates=wp.zeros((N_GATE, n_nodes, n_members) if stress_gate else (N_GATE, 1, 1), dtype=ft),
-        yield_time=wp.zeros(per_node if stress_gate else (1, 1), dtype=wp.float64),
-        arrival=wp.zeros(per_node if fronts else (1, 1), dtype=wp.float64),
-        arrival_error=wp.zeros(per_node if fronts else (1, 1), dtype=wp.float64),
+        # NaN: not set yet (the kernels test isfinite)
+        yield_time=wp.full(per_node if stress_gate else (1, 1), np.nan, dtype=wp.float64),
+        arrival=wp.full(per_node if fronts else (1, 1), np.nan, dtype=wp.float64),
+        arrival_error=wp.full(per_node if fronts else (1, 1), np.nan, dtype=wp.float64),
         record_times=wp.array(times, dtype=wp.float64),
         record_previous=wp.zeros((len(RECORD_FIELDS), n_nodes, max(n_recorded, 1)), dtype=ft),
         # NaN: a time after the end of the run is never sampled

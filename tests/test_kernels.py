@@ -471,3 +471,43 @@ def test_front_observer_on_a_synthetic_field(use_stage2):
     t_end = 20.5 + steps * h
     w_end = level + slope[:5] * (t_end - crossing[:5]) + curvature * (t_end - crossing[:5]) ** 2
     assert states.numpy()[0]["front_max"] == pytest.approx(w_end.max(), rel=1e-12)
+
+
+def _newton_kernel():
+    stages = make_stages(f64, wf.Model())
+    make_coeffs = stages["terms"]["make_coeffs"]
+    newton_solve = stages["newton"]["newton_solve"]
+
+    @wp.kernel(module="unique")
+    def solve(params: wp.array(dtype=types.MemberParams), settings: types.SolverSettings, work: wp.array3d(dtype=f64),
+              gates: wp.array3d(dtype=f64), out: wp.array2d(dtype=int)):
+        m = wp.tid()
+        n = work.shape[1]
+        c = make_coeffs(params[m], n)
+        ok, d0, a, iters, bad = newton_solve(c, params[m], settings, m, n, work, gates, f64(1e-6), f64(10.0),
+                                             f64(10.0), f64(6e-6), f64(0.0))
+        out[m, 0] = ok
+        out[m, 1] = bad
+        out[m, 2] = iters
+
+    return solve
+
+
+def test_newton_flags_a_non_finite_update():
+    """A stage whose contact age is negative (log of a negative number: NaN friction) must end as a
+    non-finite Newton failure, never as converged: Warp's wp.max drops NaN (fmax), so a norm alone
+    would read 0. Member 1, with a positive contact age, has no non-finite update."""
+    nodes = 11
+    values, _ = resolve_members({"eccentricity": [0.0, 0.0]}, wf.Parameters())
+    work = np.zeros((types.N_WORK, nodes, 2))
+    work[types.W_ZP, :, 0] = -1.0  # contact age phi < 0 in member 0
+    work[types.W_ZP, :, 1] = 0.3
+    gates = np.ones((types.N_GATE, nodes, 2))
+    gates[types.G_SLIDE] = 0.0
+    out = wp.zeros((2, 3), dtype=int, device=DEVICE)
+    wp.launch(_newton_kernel(), dim=2, device=DEVICE, inputs=[
+        wp.array(member_params(values), dtype=types.MemberParams, device=DEVICE), solver_settings(wf.Solver()),
+        wp.array(work, dtype=f64, device=DEVICE), wp.array(gates, dtype=f64, device=DEVICE), out])
+    result = out.numpy()
+    assert result[0, 0] == 0 and result[0, 1] == 1 and result[0, 2] == 1  # stopped at the first NaN update
+    assert result[1, 1] == 0
