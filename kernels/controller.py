@@ -4,8 +4,9 @@ solver settings; the constants are fields of ``warpfric.Solver`` (step_safety, s
 step_max_factor, failure_factor).
 
 - Steps land exactly on the protocol's breakpoints (ramp ends, disc start, sudden stop, end): a
-  step that would pass one ends on it (clipped), one that would end within twice its size of it is
-  halved, so that the breakpoint is reached by two equal steps rather than a long one and a sliver.
+  step that would pass one ends on it (clipped); a step longer than half the distance to it is cut
+  to that half, so that the breakpoint is reached by two equal steps rather than a long one and a
+  sliver.
 - With the stress gate, a step also ends at ``switch_limit``: just past a gate switch located by a
   rejected step (kernels/gates.py).
 - After a step with error norm err (1 = the tolerance): h_next = h * clamp(safety * err^(-1/3),

@@ -14,8 +14,9 @@ stage and the algebraic plate state.
 
 The stage derivatives live in three slots of ``stages`` (K); s1 holds f(y_n), and the slot of the
 last stage becomes the next step's s1. ``stage_constant``, ``solution_increment`` and
-``error_increment`` are the tableau alone (tests/test_kernels.py measures the orders 2 and 3 on a
-linear stiff system with them); the array functions apply them to every node and component.
+``error_increment`` are the tableau alone (tests/test_kernels.py measures with them the order 2 of
+the solution on a linear stiff system, the order 3 of the error estimate on a non-stiff one, and
+L-stability); the array functions apply them to every node and component.
 
 ``make_esdirk(ft, model, terms, newton, gates)`` builds the functions for one working precision and model.
 """

@@ -6,7 +6,8 @@ arrival times) and the recorded fields; and the automatic end of a run, which is
 advanced); the front and recording observers are compiled in always but run only when the launch
 asks for them (OutputSettings.fronts, IntegratorState.record_slot).
 
-``make_observers(ft, model, terms)`` builds the functions for one working precision and model.
+``make_observers(ft, model, terms)`` builds the functions for one working precision and model (the
+model's switches reach them through ``terms``).
 """
 
 import warp as wp

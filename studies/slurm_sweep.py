@@ -11,6 +11,7 @@ new cluster). Adapt the resources (memory, walltime, account) to your site.
 """
 
 import argparse
+from pathlib import Path
 
 from dask_jobqueue import SLURMCluster
 from distributed import Client
@@ -28,13 +29,14 @@ def main():
     ap.add_argument("--memory", default="32GB")
     ap.add_argument("--chunk", type=int, default=20000)
     args = ap.parse_args()
-    cluster = SLURMCluster(queue=args.queue, cores=4, processes=1, memory=args.memory, walltime=args.walltime,
-                           job_extra_directives=["--gres=gpu:1"], worker_extra_args=["--nthreads", "1"])
+    # one worker with one thread per job (cores=1); the chunk files must be on a filesystem every node sees
+    cluster = SLURMCluster(queue=args.queue, cores=1, processes=1, memory=args.memory, walltime=args.walltime,
+                           job_extra_directives=["--gres=gpu:1"])
     cluster.scale(jobs=args.jobs)
     client = Client(cluster)
     print("dashboard:", client.dashboard_link)
     client.wait_for_workers(args.jobs)
-    report = warpfric.sweep.run(args.sweep, args.output, client=client, chunk=args.chunk, device="cuda:0",
+    report = warpfric.sweep.run(args.sweep, Path(args.output).resolve(), client=client, chunk=args.chunk, device="cuda:0",
                                 resume=False)
     print(f"{len(report.chunks)} chunks, {report.failed_members} failed members, wrote {report.output}")
     client.close()

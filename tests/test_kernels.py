@@ -377,17 +377,27 @@ def test_mu_s_observer_on_a_synthetic_peak():
 # ------------------------------------------------------------------------------------------------
 
 def test_kernel_structs_stay_in_step_with_the_public_parameters():
-    """Every field of MemberParams is a public parameter (plus the two derived: auto_end), every
-    public parameter the kernels need reaches them, and every SolverSettings field is filled from
-    warpfric.Solver by engine.solver_settings (no field left at its zero default)."""
+    """Every field of MemberParams is a public parameter (plus the derived auto_end), every public
+    parameter reaches the kernels (max_end_time folded into end_time), every SolverSettings field
+    is filled from its warpfric.Solver setting, and OutputSettings from warpfric.Fronts."""
     kernel_fields = set(types.MemberParams.vars)
     public = {f.name for f in dataclasses.fields(wf.Parameters)}
     assert kernel_fields - public == {"auto_end"}
     assert public - kernel_fields == {"max_end_time"}  # folded into end_time by engine.member_params
-    settings = solver_settings(wf.Solver(rtol=1e-4, switch_tol=2.0))
+    solver = wf.Solver(rtol=1e-4, switch_tol=2.0, initial_step=2e-6, min_step=3e-14, max_step=0.5, newton_tol=0.04,
+                       sliding_width=2e-3, max_steps=1234, newton_max_iter=7, step_safety=0.8, step_min_factor=0.3,
+                       step_max_factor=4.0, failure_factor=0.2)
+    settings = solver_settings(solver)
+    derived = {"switch_rtol": 2e-4}
     for name in types.SolverSettings.vars:
-        assert getattr(settings, name) != 0, name
-    assert settings.switch_rtol == pytest.approx(2e-4)
+        expected = derived.get(name, getattr(solver, name, None))
+        assert expected is not None, f"SolverSettings.{name} has no Solver setting"
+        assert getattr(settings, name) == pytest.approx(expected), name
+    from warpfric.engine import output_settings
+
+    out = output_settings(wf.Fronts(threshold=0.3, direction="absolute"))
+    assert (out.fronts, out.front_direction, out.front_threshold) == (1, types.FRONT_DIRECTIONS.index("absolute"), 0.3)
+    assert output_settings(None).fronts == 0
 
 
 def _fronts_kernel():

@@ -88,3 +88,14 @@ def test_float32_members_that_stall_are_rerun_in_float64():
     np.testing.assert_array_equal(ds.velocity_history.values[1], f64.velocity_history.values[1].astype(np.float32))
     np.testing.assert_array_equal(ds.velocity_history.values[0], plain.velocity_history.values[0])  # float32 member kept
     assert abs(ds.mu_s.values[1] - f64.mu_s.values[1]) < 1e-6
+
+
+def test_grid_check_needs_a_grid_to_halve():
+    """grid_check compares with (N + 1)//2 nodes: below 5 nodes that is no coarser grid (3 -> 3, a
+    change of exactly 0 would pass for a converged speed): refused before running."""
+    import pytest
+
+    import warpfric as wf
+
+    with pytest.raises(ValueError, match=r"grid_check.*nodes.*>= 5 \(got 4\)"):
+        run(nodes=4, fronts=wf.Fronts(grid_check=True))

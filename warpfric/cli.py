@@ -28,8 +28,6 @@ class UsageError(ValueError):
     pass
 
 
-
-
 def _fail(message: str) -> int:
     print(f"warpfric: error: {message}", file=sys.stderr)
     return 2
@@ -110,8 +108,18 @@ def _run_sweep(args) -> int:
 def _run(args) -> int:
     if args.chunk is not None and args.chunk < 1:
         raise UsageError(f"--chunk {args.chunk}: expected an integer >= 1 (members per chunk file)")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers {args.workers}: expected an integer >= 1")
+    if args.scheduler and args.local_cluster:
+        raise UsageError("--scheduler and --local-cluster exclude each other (an existing cluster, or a new one)")
     if args.sweep is None:
+        for flag, given in (("--scheduler", args.scheduler), ("--local-cluster", args.local_cluster),
+                            ("--workers", args.workers is not None)):
+            if given:
+                raise UsageError(f"{flag} runs the chunks of a sweep file; give one (warpfric run SWEEP.toml ...)")
         return _run_default(args)
+    if args.grid_check:
+        raise UsageError("--grid-check is for the default scene; in a sweep file write [fronts] grid_check = true")
     return _run_sweep(args)
 
 

@@ -31,6 +31,7 @@ import datetime
 import hashlib
 import json
 import os
+import uuid
 import shutil
 from pathlib import Path
 
@@ -140,7 +141,8 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
     earlier = out.attrs.get("history", "")
     out.attrs["history"] = _history_line(command) + ("\n" + earlier if earlier else "")
     out = _to_file_layout(out)
-    tmp = path.with_name(path.name + ".tmp")
+    # a name of its own per writer: two writers of one chunk (a task run twice) never share a file
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
     out.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=_encoding(out, complevel))
     os.replace(tmp, path)
     return path

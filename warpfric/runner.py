@@ -50,14 +50,14 @@ class ChunkJob:
 
 
 def worker_device(worker=None) -> str:
-    """The Warp device of this process: on a Dask worker of a multi-GPU host where every worker sees
-    every GPU (a plain LocalCluster), the GPU numbered by the worker's name modulo the GPU count; else
-    the first CUDA device, else the CPU (with dask-cuda each worker sees only its own GPU: cuda:0).
-    ``worker``: the Dask worker (found from the running task when None)."""
+    """The Warp device of this process: cuda:0 where CUDA_VISIBLE_DEVICES lists this worker's GPU first
+    (dask-cuda's LocalCUDACluster, a SLURM GPU job); on a plain LocalCluster of a multi-GPU host, where
+    every worker sees every GPU, the GPU numbered by the worker's name modulo the GPU count; else the
+    first CUDA device, else the CPU. ``worker``: the Dask worker (found from the running task when None)."""
     from .simulate import default_device
 
     device = default_device()
-    if not device.startswith("cuda"):
+    if not device.startswith("cuda") or os.environ.get("CUDA_VISIBLE_DEVICES", "").strip():
         return device
     try:
         if worker is None:
@@ -118,9 +118,10 @@ def run_chunk(job: ChunkJob) -> dict:
                 wall_s=time.perf_counter() - t0, pid=os.getpid())
 
 
-def prepare_worker(sweep_text: str, sweep_name: str, device: str | None, dask_worker=None) -> dict:
+def prepare_worker(sweep_text: str, sweep_name: str, device: str | None) -> dict:
     """Load this worker's kernels before the timed run (compile or read Warp's cache, load the
-    modules on its device): one member, two steps. Returns its device, pid and the seconds it took."""
+    modules on its device): one member, two steps, no fallback or grid check. Returns its device,
+    pid and the seconds it took."""
     import dataclasses as dc
 
     from .simulate import simulate
@@ -128,9 +129,11 @@ def prepare_worker(sweep_text: str, sweep_name: str, device: str | None, dask_wo
 
     t0 = time.perf_counter()
     sweep = parse_sweep(sweep_text, sweep_name)
-    device = device or worker_device(dask_worker)  # client.run passes dask_worker
+    device = device or worker_device()
+    fronts = dc.replace(sweep.fronts, grid_check=False) if sweep.fronts is not None else None
     simulate(sweep.member_slice(slice(0, 1)) or None, scene=sweep.scene, model=sweep.model,
-             solver=dc.replace(sweep.solver, max_steps=2), fronts=sweep.fronts, device=device, progress=False)
+             solver=dc.replace(sweep.solver, max_steps=2, float32_fallback=False), fronts=fronts, device=device,
+             progress=False)
     return dict(device=device, pid=os.getpid(), seconds=time.perf_counter() - t0)
 
 
@@ -220,9 +223,14 @@ def local_cluster(workers: int | None = None):
     wp.config.quiet = True
     wp.init()
     n_gpus = wp.get_cuda_device_count()
+    if workers is not None and (isinstance(workers, bool) or workers < 1):
+        raise RunError(f"--workers {workers}: expected an integer >= 1")
     if n_gpus > 0:
+        if workers is not None and workers > n_gpus:
+            raise RunError(f"--workers {workers}: this host has {n_gpus} GPUs; a local cluster runs at most one "
+                           "worker per GPU")
         try:
-            from dask_cuda import LocalCUDACluster
+            from dask_cuda import LocalCUDACluster  # each worker: its GPU first in CUDA_VISIBLE_DEVICES
 
             cluster = LocalCUDACluster(n_workers=workers or n_gpus, threads_per_worker=1)
         except ImportError:
@@ -298,7 +306,13 @@ def run_sweep(sweep_file, output=None, *, chunk: int | None = None, member_offse
     where = scheduler or sweep.run.get("scheduler")
     workers = workers or sweep.run.get("workers")
     use_cluster = client is not None or bool(local) or (where is not None and local is not False)
-    device = device or sweep.run.get("device")
+    if device is None and previous is not None:
+        device = previous.manifest.get("device")  # a resumed run keeps its device: one file, one device
+    if device is None and sweep.run.get("device"):
+        device = sweep.run["device"]
+        if use_cluster:
+            _say(f"[run] device = {device!r} pins every worker to that device (--device to choose another; "
+                 "leave it out to let each worker use its own GPU)", False)
     if device is not None or not use_cluster:
         device = _check_device(device) if not use_cluster else device  # a worker checks its own device
     digest = sweep_digest(f"{sweep.text}\nchunk={chunk}" + (f"\nmember_offset={offset}" if offset else ""))
@@ -324,9 +338,12 @@ def run_sweep(sweep_file, output=None, *, chunk: int | None = None, member_offse
              f"of <= {chunk}, {len(todo)} to run on {place}; swept: {', '.join(sweep.varying) or 'nothing'}", False)
         if client is not None and todo:
             t_ready = time.perf_counter()
-            try:  # every worker loads its kernels once, outside the timed run
-                ready = client.run(prepare_worker, sweep.text, str(sweep_file), device)
-                devices = sorted({r["device"] for r in ready.values()})
+            try:  # every worker loads its kernels once, outside the timed run (a task each: heartbeats go on)
+                addresses = list(client.scheduler_info().get("workers", {}))
+                # loose restriction: a worker that dies meanwhile must not leave its warm-up unrunnable
+                ready = client.gather([client.submit(prepare_worker, sweep.text, str(sweep_file), device, workers=[a],
+                                                     allow_other_workers=True, pure=False) for a in addresses])
+                devices = sorted({r["device"] for r in ready})
                 _say(f"{len(ready)} workers ready in {time.perf_counter() - t_ready:.1f} s (kernels loaded on "
                      f"{', '.join(devices)})", quiet)
             except Exception as err:  # noqa: BLE001 - the chunks report it by member range
@@ -337,7 +354,7 @@ def run_sweep(sweep_file, output=None, *, chunk: int | None = None, member_offse
         t0 = time.perf_counter()
         jobs = [ChunkJob(sweep_text=sweep.text, sweep_name=str(sweep_file), index=i, n_chunks=store.n_chunks,
                          start=store.members(i).start, stop=store.members(i).stop, member_offset=offset,
-                         path=str(store.chunk_path(i)), device=device, command=command,
+                         path=str(store.chunk_path(i).resolve()), device=device, command=command,
                          progress=not quiet and client is None)
                 for i in todo]
         if client is None:
@@ -351,10 +368,12 @@ def run_sweep(sweep_file, output=None, *, chunk: int | None = None, member_offse
             if cluster is not None:
                 cluster.close()
     wall = time.perf_counter() - t0
-    if errors or any(not store.is_done(i) for i in range(store.n_chunks)):
-        ranges = ", ".join(f"{e['start']}..{e['stop'] - 1}" for e in errors)
-        _say(f"{len(errors)} chunks failed (members {ranges}); the finished chunks are kept in {parts}: "
-             f"`warpfric run {sweep_file} -o {out} --resume` runs the rest", False)
+    missing = [i for i in range(store.n_chunks) if not store.is_done(i)]
+    if errors or missing:
+        ranges = ", ".join(f"{store.members(i).start}..{store.members(i).stop - 1}" for i in missing)
+        resume = f"warpfric run {sweep_file} -o {out} --resume" + (f" --device {device}" if device else "")
+        _say(f"{len(missing)} chunks missing (members {ranges}; {len(errors)} raised, see above); the finished chunks "
+             f"are kept in {parts}: `{resume}` runs the rest", False)
         return RunReport(chunks=reports, errors=errors, output=None, wall_s=wall)
     store.combine(out, command=command)
     report = RunReport(chunks=reports, errors=[], output=out, wall_s=wall)

@@ -104,6 +104,9 @@ def simulate(
         0 <= member_offset < 2**31 - 2**24
     ):
         raise ValueError(f"member_offset = {member_offset!r} is invalid; valid: an integer in [0, {2**31 - 2**24})")
+    if fronts is not None and fronts.grid_check and solver.nodes < 5:
+        raise ValueError(f"fronts setting 'grid_check' needs solver setting 'nodes' >= 5 (got {solver.nodes}): the "
+                         "check compares with (nodes + 1)//2 nodes")
     values, varying = resolve_members(members, scene)
     device = _check_device(device)
     from warpfric.kernels.types import STATUS_MEANINGS
@@ -190,8 +193,9 @@ def _rerun_failed_in_float64(ds, values, scene, model, solver, fronts, record, d
             position = {int(member): j for j, member in enumerate(index)}
             sub_record = dataclasses.replace(record, members=tuple(position[int(record.members[k])] for k in chosen))
             recorded_pos = chosen
+    sub_fronts = dataclasses.replace(fronts, grid_check=False) if fronts is not None else None
     sub = simulate(sub_members, scene=scene, model=model, solver=dataclasses.replace(solver, dtype="float64"),
-                   fronts=fronts, record=sub_record, device=device, progress=False)
+                   fronts=sub_fronts, record=sub_record, device=device, progress=False)
     for name, var in sub.data_vars.items():
         if name not in ds.data_vars:
             continue
@@ -218,12 +222,6 @@ def _front_metrics(fronts: Fronts, values, arrival: np.ndarray, arrival_error: n
     metrics = segment(arrival_time, values["length"], fronts, device=device)
     metrics["arrival_time"] = arrival_time
     metrics.update(speed_errors(metrics, arrival_time, arrival_error.T, values["length"]))
-    return metrics
-
-    arrival_time = arrival.numpy().T.copy()
-    metrics = segment(arrival_time, values["length"], fronts, device=device)
-    metrics["arrival_time"] = arrival_time
-    metrics.update(speed_errors(metrics, arrival_time, arrival_error.numpy().T, values["length"]))
     return metrics
 
 
