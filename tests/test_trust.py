@@ -99,3 +99,18 @@ def test_grid_check_needs_a_grid_to_halve():
 
     with pytest.raises(ValueError, match=r"grid_check.*nodes.*>= 5 \(got 4\)"):
         run(nodes=4, fronts=wf.Fronts(grid_check=True))
+
+
+def test_device_none_keeps_small_ensembles_on_the_cpu():
+    """device=None: up to 16 members on the CPU whatever the GPUs (a lone member is ~30x faster on a
+    CPU core), more on cuda:0 when there is one."""
+    import warp as wp
+
+    import warpfric as wf
+    from warpfric.simulate import SMALL_ENSEMBLE
+
+    assert SMALL_ENSEMBLE == 16
+    assert wf.default_device(1) == wf.default_device(16) == "cpu"
+    assert wf.default_device(17) == ("cuda:0" if wp.get_cuda_device_count() > 0 else "cpu")
+    ds = wf.simulate({"eccentricity": [0.0]}, solver=wf.Solver(nodes=11), fronts=None, device=None, progress=False)
+    assert ds.attrs["device"] == "cpu"
