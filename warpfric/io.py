@@ -27,12 +27,13 @@ in ``OUT.nc.parts/`` until all are done, then combines them into ``OUT.nc``.
 
 from __future__ import annotations
 
+import contextlib
 import datetime
 import hashlib
 import json
 import os
-import uuid
 import shutil
+import uuid
 from pathlib import Path
 
 import numpy as np
@@ -119,6 +120,18 @@ def collapse_constants(ds: xr.Dataset, varying) -> xr.Dataset:
     return out
 
 
+def _in_process_locks():
+    """A context in which xarray writes with an in-process lock. Inside a Dask worker xarray would take
+    a distributed.Lock (a round trip to the scheduler per variable): that made each chunk's file 6x
+    slower to write on a worker (0.24 s against 0.04 s, 60 members, CPU) and the worker ~10 % slower
+    than a plain process on the H200s. The data are in memory, so no Dask scheduler is needed."""
+    try:
+        import dask
+    except ImportError:
+        return contextlib.nullcontext()
+    return dask.config.set(scheduler="synchronous")
+
+
 def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, command: str | None = None) -> Path:
     """Write ``ds`` (from :func:`warpfric.simulate`) to netCDF4 at ``path``, atomically.
 
@@ -143,7 +156,8 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
     out = _to_file_layout(out)
     # a name of its own per writer: two writers of one chunk (a task run twice) never share a file
     tmp = path.with_name(f"{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    out.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=_encoding(out, complevel))
+    with _in_process_locks():
+        out.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=_encoding(out, complevel))
     os.replace(tmp, path)
     return path
 
