@@ -521,3 +521,20 @@ def test_newton_flags_a_non_finite_update():
     result = out.numpy()
     assert result[0, 0] == 0 and result[0, 1] == 1 and result[0, 2] == 1  # stopped at the first NaN update
     assert result[1, 1] == 0
+
+
+@pytest.mark.parametrize("dtype, gate, fronts", [("float64", "stress", True), ("float32", "none", False)])
+def test_device_memory_per_member_is_reported(dtype, gate, fronts):
+    """device_bytes_per_member counts the integration arrays of kernels/types.py: state (4 N),
+    stages (12 N), work (16 N) in the working precision, the stress gate's gates (3 N, working
+    precision) and yield times (N, float64), the fronts' arrival times and errors (2 N, float64),
+    and the member's parameter and state structs; kernel builds are timed apart from the run."""
+    n = 24
+    ds = wf.simulate({"eccentricity": [0.0, 0.1, 0.2]}, model=wf.Model(relaxation_gate=gate),
+                     solver=wf.Solver(nodes=n, dtype=dtype), fronts=wf.Fronts() if fronts else None, device=DEVICE,
+                     progress=False)
+    size = 8 if dtype == "float64" else 4
+    expected = size * n * (4 + 12 + 16) + (size * 3 * n + 8 * n if gate == "stress" else 0) + (16 * n if fronts else 0)
+    expected += np.dtype(types.MemberParams.numpy_dtype()).itemsize + np.dtype(types.IntegratorState.numpy_dtype()).itemsize
+    assert ds.attrs["device_bytes_per_member"] == expected
+    assert ds.attrs["kernel_build_time_s"] >= 0 and ds.attrs["wall_time_s"] > 0

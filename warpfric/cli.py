@@ -64,7 +64,9 @@ def _print_member(ds, solver: Solver) -> None:
         if "v_middle_grid_error" not in m:
             print("  (+- : time-discretisation error only; --grid-check adds the grid's, usually the larger)")
     print(f"status    = {_status_name(ds, m.status)}; steps accepted {int(m.steps_accepted)}, rejected "
-          f"{int(m.steps_rejected)}; lift-off {'yes' if int(m.lift_off) else 'no'}; wall {ds.attrs['wall_time_s']:.2f} s")
+          f"{int(m.steps_rejected)}; lift-off {'yes' if int(m.lift_off) else 'no'}; wall {ds.attrs['wall_time_s']:.2f} s "
+          f"(+ {ds.attrs.get('kernel_build_time_s', 0.0):.2f} s compiling/loading kernels; "
+          f"{ds.attrs.get('device_bytes_per_member', 0.0) / 1024:.1f} KiB device memory per member)")
 
 
 def _check_output(path: Path, resume: bool, overwrite: bool) -> None:

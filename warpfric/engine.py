@@ -34,6 +34,9 @@ class EngineResult:
     arrival_error: np.ndarray | None
     event: np.ndarray | None
     record: np.ndarray | None
+    kernel_build_s: float  # compiling (or loading from Warp's cache) the integrator's modules, s
+    device_bytes_per_member: float  # device memory of the integration arrays per member, bytes (recorded
+    # fields, the front segmentation and the read-back copies not included)
 
 
 def solver_settings(solver: Solver):
@@ -179,7 +182,11 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
 
     n_members = values["normal_force"].shape[0]
     n = solver.nodes
+    t_build = time.perf_counter()
     kern = get_integrator(solver.dtype, model)
+    for name in ("integrate", "evaluate_fields"):  # compile or load now, so that it is timed apart
+        wp.load_module(kern[name].module, device=device)
+    kernel_build_s = time.perf_counter() - t_build
     ft = kern["ft"]
     np_dtype = np.float64 if solver.dtype == "float64" else np.float32
     params_np = member_params(values)
@@ -191,6 +198,11 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     with wp.ScopedDevice(device):
         arrays = allocate(ft, params_np, n, stress_gate, fronts is not None,
                           record.times if record is not None else None, len(record.members) if record is not None else 0)
+        per_member = [arrays.params, arrays.state, arrays.stages, arrays.work]  # not the (.., 1, 1) placeholders
+        per_member += [arrays.gates, arrays.yield_time] if stress_gate else []
+        per_member += [arrays.arrival, arrays.arrival_error] if fronts is not None else []
+        n_bytes = sum(a.capacity for a in per_member) + n_members * np.dtype(IntegratorState.numpy_dtype()).itemsize
+        device_bytes_per_member = n_bytes / n_members
         front_max = front_last = event = None
         end = params_np["end_time"]
         for pass_index in range(n_passes):
@@ -244,6 +256,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             arrival=arrays.arrival.numpy() if fronts is not None else None,
             arrival_error=arrays.arrival_error.numpy() if fronts is not None else None,
             event=event, record=arrays.record.numpy() if record is not None else None,
+            kernel_build_s=kernel_build_s, device_bytes_per_member=device_bytes_per_member,
         )
         wp.synchronize_device(device)
     return result

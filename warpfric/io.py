@@ -306,7 +306,7 @@ def concat_members(datasets, names=None) -> xr.Dataset:
     concatenated, recorded fields along ``recorded``; a parameter that is a scalar in one and
     differs or varies in another becomes a variable along member. Refuses repeated member numbers
     and different model/solver/front settings (ValueError). Global attributes of the first;
-    wall_time_s summed."""
+    wall_time_s and kernel_build_time_s summed."""
     names = names or [f"dataset {i}" for i in range(len(datasets))]
     message = duplicate_members(datasets, names)
     if message:
@@ -349,5 +349,6 @@ def concat_members(datasets, names=None) -> xr.Dataset:
         out = out.merge(rec)
     out.attrs = dict(first.attrs)
     out.attrs["varying_parameters"] = " ".join(p for p in PARAMETER_NAMES if p in varying)
-    out.attrs["wall_time_s"] = float(sum(float(ds.attrs.get("wall_time_s", 0.0)) for ds in datasets))
+    for key in ("wall_time_s", "kernel_build_time_s"):
+        out.attrs[key] = float(sum(float(ds.attrs.get(key, 0.0)) for ds in datasets))
     return out
