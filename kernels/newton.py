@@ -154,7 +154,6 @@ def make_newton(ft, model, terms, gates):
     node_gate = gates["node_gate"]
     node_sliding = gates["node_sliding"]
     test_switch = gates["test_switch"]
-    SwitchTest = gates["SwitchTest"]
     no_switch = gates["no_switch"]
     solver = make_bordered_solver(ft, tilt_on)
     forward_row = solver["forward_row"]
@@ -349,4 +348,4 @@ def make_newton(ft, model, terms, gates):
         return sums, test
 
     return dict(StageSums=StageSums, newton_solve=newton_solve, stage_derivatives=stage_derivatives,
-                SwitchTest=SwitchTest, **solver)
+                **solver)

@@ -14,8 +14,6 @@ import json
 import time
 from pathlib import Path
 
-import numpy as np
-
 import warpfric as wf
 
 MEMBERS = {"eccentricity": [0.0, 0.2, -0.2]}

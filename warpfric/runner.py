@@ -167,12 +167,9 @@ def _say(message: str, quiet: bool) -> None:
         print(f"warpfric: {message}", file=sys.stderr, flush=True)
 
 
-def run_local(jobs: list, quiet: bool = False) -> tuple[list, list]:
-    """Run the chunks one after the other in this process."""
-    reports = []
-    for job in jobs:
-        reports.append(run_chunk(job))
-    return reports, []
+def run_local(jobs: list) -> tuple[list, list]:
+    """Run the chunks one after the other in this process (progress: each job's own line)."""
+    return [run_chunk(job) for job in jobs], []
 
 
 def run_on_client(jobs: list, client, quiet: bool = False) -> tuple[list, list]:
@@ -313,8 +310,8 @@ def run_sweep(sweep_file, output=None, *, chunk: int | None = None, member_offse
         if use_cluster:
             _say(f"[run] device = {device!r} pins every worker to that device (--device to choose another; "
                  "leave it out to let each worker use its own GPU)", False)
-    if device is not None or not use_cluster:
-        device = _check_device(device) if not use_cluster else device  # a worker checks its own device
+    if not use_cluster:  # on a cluster, each worker checks its own device
+        device = _check_device(device)
     digest = sweep_digest(f"{sweep.text}\nchunk={chunk}" + (f"\nmember_offset={offset}" if offset else ""))
     if previous is not None:
         store = previous
@@ -358,7 +355,7 @@ def run_sweep(sweep_file, output=None, *, chunk: int | None = None, member_offse
                          progress=not quiet and client is None)
                 for i in todo]
         if client is None:
-            reports, errors = run_local(jobs, quiet)
+            reports, errors = run_local(jobs)
         else:
             reports, errors = run_on_client(jobs, client, quiet)
     finally:
