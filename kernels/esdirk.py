@@ -62,8 +62,10 @@ def make_tableau(ft):
     return dict(stage_constant=stage_constant, solution_increment=solution_increment, error_increment=error_increment)
 
 
-def make_esdirk(ft, model, terms, newton, gates):
+def make_esdirk(ft, model, terms, newton, gates, team):
     inertia = bool(model.inertia)
+    team_max = team["team_max"]
+    barrier = team["barrier"]
     Coeffs = terms["Coeffs"]
     StageSums = newton["StageSums"]
     SwitchTest = gates["SwitchTest"]
@@ -93,12 +95,13 @@ def make_esdirk(ft, model, terms, newton, gates):
 
     @wp.func
     def prepare_stage(
-        m: int, n: int, state: array3, K: array4, work: array3,
+        c: Coeffs, m: int, n: int, state: array3, K: array4, work: array3,
         h: ft, a1: ft, s1: int, a2: ft, s2: int, n_terms: int, extrapolate: ft,
     ):
         """Stage constants z = y_n + h*(a1*K[s1] + a2*K[s2]) (first n_terms terms) into work[0..3] and
-        the Newton start for V into work[W_V]: v_n + extrapolate*(V(stage s2) - v_n)."""
-        for i in range(n):
+        the Newton start for V into work[W_V]: v_n + extrapolate*(V(stage s2) - v_n). (The lane's
+        nodes; the Newton solve that follows reads its neighbours' halo nodes: a barrier.)"""
+        for i in range(c.first_node, c.end_node):
             for comp in range(N_COMPONENTS):
                 work[comp, i, m] = stage_constant(state[comp, i, m], h, a1, K[s1, comp, i, m], a2, K[s2, comp, i, m], n_terms)
             v = state[C_V, i, m]
@@ -106,6 +109,7 @@ def make_esdirk(ft, model, terms, newton, gates):
             if n_terms >= 2:
                 guess = v + extrapolate * (K[s2, C_U, i, m] - v)
             work[W_V, i, m] = guess
+        barrier()
 
     @wp.func
     def error_norm(
@@ -120,7 +124,7 @@ def make_esdirk(ft, model, terms, newton, gates):
         g = ft(GAMMA) * h
         rtol = ft(s.rtol)
         err = ft(0.0)
-        for i in range(n):
+        for i in range(c.first_node, c.end_node):
             for comp in range(N_COMPONENTS):
                 use = True
                 scale = c.u_scale
@@ -144,13 +148,14 @@ def make_esdirk(ft, model, terms, newton, gates):
                     err = wp.max(err, wp.abs(e) / wgt)
                     if not wp.isfinite(e):
                         err = ft(1.0e30)
-        return err
+        return team_max(err)
 
     @wp.func
-    def advance_state(m: int, n: int, state: array3, K: array4, s1: int, s2: int, s3: int, h: ft, backward_euler: int):
+    def advance_state(c: Coeffs, m: int, n: int, state: array3, K: array4, s1: int, s2: int, s3: int, h: ft,
+                      backward_euler: int):
         """y_{n+1} = y_n + h * sum_j b_j K_j (backward Euler: y_n + h*K[s3]); the velocity is the last
-        stage's (stiffly accurate, and algebraic without inertia)."""
-        for i in range(n):
+        stage's (stiffly accurate, and algebraic without inertia). The lane's nodes."""
+        for i in range(c.first_node, c.end_node):
             for comp in range(N_COMPONENTS):
                 if comp == C_V:
                     state[comp, i, m] = K[s3, C_U, i, m]
@@ -172,7 +177,7 @@ def make_esdirk(ft, model, terms, newton, gates):
         res = StepResult()
         res.error = wp.float64(0.0)
         g = ft(h)
-        prepare_stage(m, n, state, K, work, ft(h), ft(0.0), s1, ft(0.0), s1, 0, ft(0.0))
+        prepare_stage(c, m, n, state, K, work, ft(h), ft(0.0), s1, ft(0.0), s1, 0, ft(0.0))
         ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, gates, g, t_new, t, delta0, tilt)
         res.ok = ok
         res.iterations = iters
@@ -196,12 +201,12 @@ def make_esdirk(ft, model, terms, newton, gates):
         res = StepResult()
         res.error = wp.float64(0.0)
         g = ft(wp.float64(GAMMA) * h)
-        prepare_stage(m, n, state, K, work, ft(h), ft(GAMMA), s1, ft(0.0), s1, 1, ft(0.0))
+        prepare_stage(c, m, n, state, K, work, ft(h), ft(GAMMA), s1, ft(0.0), s1, 1, ft(0.0))
         ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, gates, g, t + wp.float64(C2) * h, t, delta0, tilt)
         iterations = iters
         if ok == 1:
             stage_derivatives(c, p, settings, m, n, work, gates, K, s2, g, t + wp.float64(C2) * h, t, d0, a, ft(h), 0)
-            prepare_stage(m, n, state, K, work, ft(h), ft(W_TRB), s1, ft(W_TRB), s2, 2, ft(EXTRAPOLATE_STAGE3))
+            prepare_stage(c, m, n, state, K, work, ft(h), ft(W_TRB), s1, ft(W_TRB), s2, 2, ft(EXTRAPOLATE_STAGE3))
             ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, gates, g, t_new, t, d0, a)
             iterations = iterations + iters
             if ok == 1:

@@ -18,12 +18,15 @@ from .types import G_GATE, G_MARGIN, G_SLIDE, C_PHI, C_TAU, C_V, W_DMARGIN, W_GA
 MAX_SWITCH_RETRIES = 8
 
 
-def make_gates(ft, model, terms):
+def make_gates(ft, model, terms, team):
     stress_gate = model.relaxation_gate == "stress"
     viscous = bool(model.viscous_friction)
     Coeffs = terms["Coeffs"]
     Friction = terms["Friction"]
     yield_margin = terms["yield_margin"]
+    team_count = team["team_count"]
+    team_max = team["team_max"]
+    team_min = team["team_min"]
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
 
@@ -100,6 +103,14 @@ def make_gates(ft, model, terms):
         return test
 
     @wp.func
+    def team_switch_test(test: SwitchTest):
+        """The step's switch test over the team: the largest error, the smallest retry fraction."""
+        out = SwitchTest()
+        out.error = team_max(test.error)
+        out.retry_fraction = team_min(test.retry_fraction)
+        return out
+
+    @wp.func
     def locate_switch(st: IntegratorState, settings: SolverSettings, t: wp.float64, h: wp.float64, test: SwitchTest):
         """A step that passed the error test but not the switch test: return (st, 1) to retry it up to
         just past the switch (st.switch_limit; the error-controlled st.h is kept), or (st, 0) to
@@ -139,10 +150,12 @@ def make_gates(ft, model, terms):
         at its end (work[W_DMARGIN]); with dr < 0 and the far side's rate of opposite sign the node
         slides. A sliding node's gate is solved in every stage from |tau_f| = tau_c*A
         (interface_friction), pinned at 1 or 0 where that cannot hold; the node keeps that implicit
-        regime for the rest of the run."""
+        regime for the rest of the run. The lane's nodes; the switches are counted over the team
+        (which is also the barrier before the next step reads the halo's gates)."""
         v_disc = ft(disc_velocity_at(p, t_new, t_old))
         h = ft(t_new - t_old)
-        for i in range(n):
+        switches = int(0)
+        for i in range(c.first_node, c.end_node):
             z1 = work[W_MARGIN, i, m]
             z0 = gates[G_MARGIN, i, m]
             sliding = gates[G_SLIDE, i, m]
@@ -171,7 +184,7 @@ def make_gates(ft, model, terms):
                 K[slot, C_TAU, i, m] = K[slot, C_TAU, i, m] - state[C_TAU, i, m] * relax
                 K[slot, C_PHI, i, m] = K[slot, C_PHI, i, m] - state[C_PHI, i, m] * relax
             if gate_regime(new_gate, new_sliding) != gate_regime(gate, sliding):
-                st.gate_switches = st.gate_switches + 1
+                switches += 1
             if new_gate > ft(0.0) and not wp.isfinite(yield_time[i, m]):
                 theta = wp.float64(0.0)
                 if z0 != z1 and z1 > ft(0.0):
@@ -180,6 +193,7 @@ def make_gates(ft, model, terms):
             gates[G_GATE, i, m] = new_gate
             gates[G_SLIDE, i, m] = new_sliding
             gates[G_MARGIN, i, m] = z1
+        st.gate_switches = st.gate_switches + team_count(switches)
         return st
 
     @wp.func
@@ -191,6 +205,6 @@ def make_gates(ft, model, terms):
             st.switch_limit = wp.float64(1.0e300)
         return st
 
-    return dict(SwitchTest=SwitchTest, no_switch=no_switch, node_gate=node_gate, node_sliding=node_sliding,
+    return dict(SwitchTest=SwitchTest, no_switch=no_switch, team_switch_test=team_switch_test, node_gate=node_gate, node_sliding=node_sliding,
                 test_switch=test_switch, locate_switch=locate_switch, switch_gates=switch_gates,
                 after_accept=after_accept)

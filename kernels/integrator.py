@@ -17,32 +17,38 @@ from .gates import make_gates
 from .model_terms import disc_velocity_at, make_model_terms
 from .newton import make_newton
 from .observers import make_observers, run_finished
+from .team import make_team, node_range
 from .types import IntegratorState, MemberParams, OutputSettings, SolverSettings
 
 _CACHE: dict = {}
 
 
-def get_integrator(dtype: str, model) -> dict:
-    """Compiled kernels for one working precision and one set of model switches (cached)."""
-    key = (dtype, model)
+def get_integrator(dtype: str, model, lanes: int = 1) -> dict:
+    """Compiled kernels for one working precision, one set of model switches and one team size
+    (lanes = 1: one thread per member; > 1: the cooperative kernel, launched with block_dim = lanes,
+    float64 only; kernels/team.py) (cached)."""
+    key = (dtype, model, lanes)
     if key not in _CACHE:
-        _CACHE[key] = _make_integrator(dtype, model)
+        _CACHE[key] = _make_integrator(dtype, model, lanes)
     return _CACHE[key]
 
 
-def make_stages(ft, model) -> dict:
-    """Every device function of the integrator for scalar type ``ft`` and ``model``, by stage."""
+def make_stages(ft, model, lanes: int = 1) -> dict:
+    """Every device function of the integrator for scalar type ``ft``, ``model`` and a team of
+    ``lanes`` threads per member, by stage."""
+    team = make_team(ft, lanes)
     terms = make_model_terms(ft, model)
-    gates = make_gates(ft, model, terms)
-    newton = make_newton(ft, model, terms, gates)
-    esdirk = make_esdirk(ft, model, terms, newton, gates)
-    observers = make_observers(ft, model, terms)
-    return dict(terms=terms, gates=gates, newton=newton, esdirk=esdirk, observers=observers)
+    gates = make_gates(ft, model, terms, team)
+    newton = make_newton(ft, model, terms, gates, team)
+    esdirk = make_esdirk(ft, model, terms, newton, gates, team)
+    observers = make_observers(ft, model, terms, team)
+    return dict(team=team, terms=terms, gates=gates, newton=newton, esdirk=esdirk, observers=observers)
 
 
-def _make_integrator(dtype: str, model):
+def _make_integrator(dtype: str, model, lanes: int):
     ft = wp.float64 if dtype == "float64" else wp.float32
-    stages = make_stages(ft, model)
+    team_on = lanes > 1
+    stages = make_stages(ft, model, lanes)
     terms, gates, esdirk, observers = stages["terms"], stages["gates"], stages["esdirk"], stages["observers"]
     make_coeffs = terms["make_coeffs"]
     state_displacement = observers["state_displacement"]
@@ -80,14 +86,24 @@ def _make_integrator(dtype: str, model):
         record: array4,
     ):
         """Advance each member by at most ``launch_steps`` attempted steps (or to its end).
-        Shapes and units: kernels/types.py."""
-        m = wp.tid()
+        Shapes and units: kernels/types.py. A team: every lane keeps the same IntegratorState; lane
+        0 stores it."""
+        lane = int(0)
+        if wp.static(team_on):
+            m, lane = wp.tid()
+        else:
+            m = wp.tid()
         st = member_states[m]
         if st.done != 0:
             return
         p = params[m]
         n = state.shape[1]
         c = make_coeffs(p, n)
+        if wp.static(team_on):
+            c.lane = lane
+            first_node, end_node = node_range(lane, lanes, n)
+            c.first_node = first_node
+            c.end_node = end_node
         delta0 = ft(st.delta0)
         tilt = ft(st.tilt)
         for _attempt in range(launch_steps):
@@ -127,7 +143,7 @@ def _make_integrator(dtype: str, model):
                     break
                 continue
             # ---- accepted: advance, gates, observers ----
-            advance_state(m, n, state, K, s1, s2, s3, ft(step.h), restart)
+            advance_state(c, m, n, state, K, s1, s2, s3, ft(step.h), restart)
             if wp.static(stress_gate):
                 switches_before = st.gate_switches
                 st = switch_gates(c, p, st, m, n, state, K, s3, gates, work, t, step.t_new, yield_time)
@@ -148,7 +164,8 @@ def _make_integrator(dtype: str, model):
                 st.h = settings.initial_step  # the step ended on the sudden stop: restart
         st.delta0 = wp.float64(delta0)
         st.tilt = wp.float64(tilt)
-        member_states[m] = st
+        if lane == 0:
+            member_states[m] = st
 
     @wp.kernel(module="unique")
     def evaluate_fields(

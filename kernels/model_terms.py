@@ -117,6 +117,11 @@ def make_model_terms(ft, model):
         phi_scale: ft
         delta_scale: ft
         tilt_scale: ft
+        # the nodes this thread works on, [first_node, end_node), and its lane in the member's team
+        # (kernels/team.py; all nodes and lane 0 for the thread-per-member kernel)
+        first_node: wp.int32
+        end_node: wp.int32
+        lane: wp.int32
 
     @wp.struct
     class StencilTerm:
@@ -190,6 +195,9 @@ def make_model_terms(ft, model):
         c.phi_scale = ft(p.aging_time)
         c.delta_scale = ft(sigma0 / M * p.height)
         c.tilt_scale = ft(sigma0 / M * p.height / p.length)
+        c.first_node = 0
+        c.end_node = n
+        c.lane = 0
         return c
 
     @wp.func

@@ -23,6 +23,7 @@ converged stage.
 import warp as wp
 
 from .model_terms import disc_velocity_at, normal_force_at
+from .team import vec3d, vec5d, vec6d, vec12d
 from .types import (
     C_PHI,
     C_TAU,
@@ -37,6 +38,8 @@ from .types import (
     W_R0,
     W_R1,
     W_R2,
+    W_RL,
+    W_RR,
     W_V,
     W_ZP,
     W_ZT,
@@ -143,7 +146,103 @@ def make_bordered_solver(ft, tilt_on: bool):
                 solution_row=solution_row)
 
 
-def make_newton(ft, model, terms, gates):
+def make_team_solver(ft, team):
+    """The bordered tridiagonal solve split over a member's team (kernels/team.py): lane k's nodes
+    [lo, hi) are its interior rows lo..hi-2 and its separator row s = hi-1. Each lane eliminates its
+    interior rows with the Thomas algorithm on five right-hand sides: the three of the bordered
+    solve and the two coupling columns -a_lo e_lo (to the previous lane's separator E_{k-1}) and
+    -c_{hi-2} e_{hi-2} (to its own separator E_k), so that an interior unknown is
+    x_i = xP_i + E_{k-1} xL_i + E_k xR_i. Substituted into the separator rows this leaves a P x P
+    tridiagonal system in the separators (team.reduced_solve). Every lane owns >= 2 nodes."""
+    array3 = wp.array3d(dtype=ft)
+    from_next_lane = team["from_next_lane"]
+    reduced_solve = team["reduced_solve"]
+
+    @wp.func
+    def interior_forward_row(
+        work: array3, i: int, m: int, lower: ft, diagonal: ft, upper: ft, rhs: vec3d, couple_left: ft,
+        couple_right: ft, cp_prev: ft, r_prev: vec3d, rl_prev: ft, rr_prev: ft,
+    ):
+        """Thomas forward elimination of interior row i (rhs: -R_i, B0_i, B1_i; couple_left/right:
+        the coupling columns' entries of the row, 0 but at the lane's first and last interior row);
+        stores cp and the five modified right-hand sides in work[W_CP, W_R0..R2, W_RL, W_RR]."""
+        den = diagonal - lower * cp_prev
+        cp = upper / den
+        r = (rhs - lower * r_prev) / den
+        rl = (couple_left - lower * rl_prev) / den
+        rr = (couple_right - lower * rr_prev) / den
+        work[W_CP, i, m] = cp
+        work[W_R0, i, m] = r[0]
+        work[W_R1, i, m] = r[1]
+        work[W_R2, i, m] = r[2]
+        work[W_RL, i, m] = rl
+        work[W_RR, i, m] = rr
+        return cp, r, rl, rr
+
+    @wp.func
+    def interior_back_substitution(work: array3, lo: int, hi: int, m: int):
+        """Back substitution of the interior rows lo..hi-2 (five right-hand sides, in place). Returns
+        x_lo and x_{hi-2} as (xP0, xP1, xP2, xL, xR); with no interior row (a lane of one node) the
+        neighbours of its separator are the separators themselves: x_lo = E_k, x_{s-1} = E_{k-1}."""
+        first = vec5d(0.0, 0.0, 0.0, 0.0, 1.0)
+        last = vec5d(0.0, 0.0, 0.0, 1.0, 0.0)
+        nxt = vec5d()
+        for k in range(hi - 1 - lo):
+            i = hi - 2 - k
+            cp = work[W_CP, i, m]
+            y = vec5d(work[W_R0, i, m], work[W_R1, i, m], work[W_R2, i, m], work[W_RL, i, m], work[W_RR, i, m]) - cp * nxt
+            work[W_R0, i, m] = y[0]
+            work[W_R1, i, m] = y[1]
+            work[W_R2, i, m] = y[2]
+            work[W_RL, i, m] = y[3]
+            work[W_RR, i, m] = y[4]
+            if k == 0:
+                last = y
+            first = y
+            nxt = y
+        return first, last
+
+    @wp.func
+    def team_solve(
+        work: array3, lo: int, hi: int, m: int, lane: int, sep_lower: ft, sep_diagonal: ft, sep_upper: ft,
+        sep_rhs: vec3d,
+    ):
+        """The lane's part of the bordered solve after the interior elimination: exchange x_lo with
+        the previous lane, solve for the separators, write y0, y1, y2 of the lane's nodes into
+        work[W_R0..R2] and return the border products (C1.y0, C1.y1, C1.y2, C2.y0, C2.y1, C2.y2)
+        over the lane's nodes."""
+        first, last = interior_back_substitution(work, lo, hi, m)
+        nxt = from_next_lane(first, lane)  # x_{s+1} of the next lane's first node (0 for the last)
+        a = sep_lower
+        c = sep_upper
+        row = vec6d(
+            a * last[3],
+            sep_diagonal + a * last[4] + c * nxt[3],
+            c * nxt[4],
+            sep_rhs[0] - a * last[0] - c * nxt[0],
+            sep_rhs[1] - a * last[1] - c * nxt[1],
+            sep_rhs[2] - a * last[2] - c * nxt[2],
+        )
+        e_prev, e_self = reduced_solve(row, lane)
+        sums = vec6d()
+        for i in range(lo, hi):
+            y = e_self
+            if i < hi - 1:
+                y = vec3d(work[W_R0, i, m], work[W_R1, i, m], work[W_R2, i, m])
+                y = y + work[W_RL, i, m] * e_prev + work[W_RR, i, m] * e_self
+            work[W_R0, i, m] = y[0]
+            work[W_R1, i, m] = y[1]
+            work[W_R2, i, m] = y[2]
+            c1 = work[W_C1, i, m]
+            c2 = work[W_C2, i, m]
+            sums = sums + vec6d(c1 * y[0], c1 * y[1], c1 * y[2], c2 * y[0], c2 * y[1], c2 * y[2])
+        return sums
+
+    return dict(interior_forward_row=interior_forward_row, interior_back_substitution=interior_back_substitution,
+                team_solve=team_solve)
+
+
+def make_newton(ft, model, terms, gates, team):
     inertia = bool(model.inertia)
     tilt_on = bool(model.tilt)
     Coeffs = terms["Coeffs"]
@@ -156,6 +255,15 @@ def make_newton(ft, model, terms, gates):
     test_switch = gates["test_switch"]
     no_switch = gates["no_switch"]
     solver = make_bordered_solver(ft, tilt_on)
+    team_on = team["lanes"] > 1
+    team_solver = make_team_solver(ft, team) if team_on else {}
+    team_max = team["team_max"]
+    team_min = team["team_min"]
+    team_sum = team["team_sum"]
+    team_sum_vec12 = team.get("team_sum_vec12", None)
+    team_switch_test = gates["team_switch_test"]
+    interior_forward_row = team_solver.get("interior_forward_row", None)
+    team_solve = team_solver.get("team_solve", None)
     forward_row = solver["forward_row"]
     back_substitution = solver["back_substitution"]
     schur_solve = solver["schur_solve"]
@@ -204,6 +312,9 @@ def make_newton(ft, model, terms, gates):
             # ---- pass 1: residuals, Jacobian rows, forward elimination (3 right-hand sides) ----
             e1 = -force_per_depth  # force balance residual E1 (N/m)
             e2 = -moment_per_depth  # moment balance residual E2 (N)
+            if wp.static(team_on):  # a lane sums its nodes; the load enters once, after the team sum
+                e1 = ft(0.0)
+                e2 = ft(0.0)
             d11 = ft(0.0)
             d12 = ft(0.0)
             d21 = ft(0.0)
@@ -218,9 +329,28 @@ def make_newton(ft, model, terms, gates):
             r0_prev = ft(0.0)
             r1_prev = ft(0.0)
             r2_prev = ft(0.0)
+            # a lane of a team also evaluates the halo nodes lo-1 and hi: their terms complete the
+            # border rows C1, C2 of its first and last node
+            lo = c.first_node
+            hi = c.end_node
+            first = lo
+            last = hi
+            r_prev = vec3d()
+            rl_prev = ft(0.0)
+            rr_prev = ft(0.0)
+            sep_lower = ft(0.0)
+            sep_diagonal = ft(1.0)
+            sep_upper = ft(0.0)
+            sep_rhs = vec3d()
+            if wp.static(team_on):
+                first = wp.max(lo - 1, 0)
+                last = wp.min(hi + 1, n)
             u_l = ft(0.0)
-            u_c = stage_displacement(work, 0, n, m, g)
-            for i in range(n):
+            if first > 0:
+                u_l = stage_displacement(work, first - 1, n, m, g)
+            u_c = stage_displacement(work, first, n, m, g)
+            for i in range(first, last):
+                owned = i >= lo and i < hi
                 u_r = stage_displacement(work, i + 1, n, m, g)
                 vel = work[W_V, i, m]
                 ns, fr = contact_terms(c, i, n, u_l, u_c, u_r, delta0, tilt, vel, v_disc, work[W_ZT, i, m],
@@ -233,7 +363,8 @@ def make_newton(ft, model, terms, gates):
                 if wp.static(inertia):
                     residual += c.rhoH * (vel - work[W_ZV, i, m]) / g
                     jac_c += c.rhoH / g
-                    work[W_DIAG, i, m] = jac_c
+                    if owned:
+                        work[W_DIAG, i, m] = jac_c
                 jac_l = -g * (ef.d_u_left + fr.d_normal * ns.d_u_left)
                 jac_r = -g * (ef.d_u_right + fr.d_normal * ns.d_u_right)
                 col_d0 = -(ef.d_delta0 + fr.d_normal * ns.d_delta0)
@@ -241,12 +372,13 @@ def make_newton(ft, model, terms, gates):
                 # plate balance rows: force (1) and moment (2), per unit depth
                 wgt = node_weight(c, i, n)
                 wmom = node_moment_weight(c, i, n)
-                e1 += wgt * fr.contact * sigma
-                e2 += wmom * fr.contact * sigma + c.h_arm * wgt * fr.stress
-                d11 += wgt * fr.contact * ns.d_delta0
-                d12 += wgt * fr.contact * ns.d_tilt
-                d21 += (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * ns.d_delta0
-                d22 += (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * ns.d_tilt
+                if owned:
+                    e1 += wgt * fr.contact * sigma
+                    e2 += wmom * fr.contact * sigma + c.h_arm * wgt * fr.stress
+                    d11 += wgt * fr.contact * ns.d_delta0
+                    d12 += wgt * fr.contact * ns.d_tilt
+                    d21 += (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * ns.d_delta0
+                    d22 += (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * ns.d_tilt
                 q1 = wgt * fr.contact * g
                 q2 = (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * g
                 c1_prev += q1 * ns.d_u_left
@@ -255,27 +387,62 @@ def make_newton(ft, model, terms, gates):
                 c2_prev += q2 * ns.d_u_left
                 c2_cur += q2 * ns.d_u_center - c.h_arm * wgt * c.kif * fr.d_slip
                 c2_next = q2 * ns.d_u_right
-                if i > 0:
+                if i - 1 >= lo and i - 1 < hi:
                     work[W_C1, i - 1, m] = c1_prev
                     work[W_C2, i - 1, m] = c2_prev
                 c1_prev = c1_cur
                 c1_cur = c1_next
                 c2_prev = c2_cur
                 c2_cur = c2_next
-                cp_prev, r0_prev, r1_prev, r2_prev = forward_row(
-                    work, i, m, jac_l, jac_c, jac_r, -residual, col_d0, col_a, cp_prev, r0_prev, r1_prev, r2_prev
-                )
+                if wp.static(team_on):
+                    if owned:
+                        if i == hi - 1:  # the lane's separator row: kept for the reduced system
+                            sep_lower = jac_l
+                            sep_diagonal = jac_c
+                            if hi < n:
+                                sep_upper = jac_r
+                            sep_rhs = vec3d(-residual, col_d0, col_a)
+                        else:
+                            couple_left = ft(0.0)
+                            couple_right = ft(0.0)
+                            upper = jac_r
+                            if i == lo and lo > 0:
+                                couple_left = -jac_l
+                            if i == hi - 2:
+                                couple_right = -jac_r
+                                upper = ft(0.0)
+                            cp_prev, r_prev, rl_prev, rr_prev = interior_forward_row(
+                                work, i, m, jac_l, jac_c, upper, vec3d(-residual, col_d0, col_a), couple_left,
+                                couple_right, cp_prev, r_prev, rl_prev, rr_prev
+                            )
+                else:
+                    cp_prev, r0_prev, r1_prev, r2_prev = forward_row(
+                        work, i, m, jac_l, jac_c, jac_r, -residual, col_d0, col_a, cp_prev, r0_prev, r1_prev, r2_prev
+                    )
                 u_l = u_c
                 u_c = u_r
-            work[W_C1, n - 1, m] = c1_prev
-            work[W_C2, n - 1, m] = c2_prev
+            if last == hi:
+                work[W_C1, last - 1, m] = c1_prev
+                work[W_C2, last - 1, m] = c2_prev
             # ---- pass 2: back substitution and the border products; the Schur complement ----
-            s10, s11, s12, s20, s21, s22 = back_substitution(work, n, m)
+            if wp.static(team_on):
+                products = team_solve(work, lo, hi, m, c.lane, sep_lower, sep_diagonal, sep_upper, sep_rhs)
+                total = team_sum_vec12(vec12d(e1, e2, d11, d12, d21, d22, products[0], products[1], products[2],
+                                              products[3], products[4], products[5]))
+                e1 = total[0] - force_per_depth
+                e2 = total[1] - moment_per_depth
+                d11 = total[2]
+                d12 = total[3]
+                d21 = total[4]
+                d22 = total[5]
+                s10, s11, s12, s20, s21, s22 = total[6], total[7], total[8], total[9], total[10], total[11]
+            else:
+                s10, s11, s12, s20, s21, s22 = back_substitution(work, n, m)
             d_delta0, d_tilt = schur_solve(d11, d12, d21, d22, e1, e2, s10, s11, s12, s20, s21, s22)
             # ---- pass 3: update and error-weighted norm of the update ----
             norm = ft(0.0)
             finite = wp.isfinite(d_delta0) and wp.isfinite(d_tilt)  # wp.max drops NaN (fmax): test each
-            for i in range(n):
+            for i in range(lo, hi):
                 dv = solution_row(work, i, m, d_delta0, d_tilt)
                 vel = work[W_V, i, m] + dv
                 work[W_V, i, m] = vel
@@ -284,6 +451,13 @@ def make_newton(ft, model, terms, gates):
                     finite = False
                 norm = wp.max(norm, wp.abs(dv) / (rtol * (c.v_scale + wp.abs(vel))))
                 norm = wp.max(norm, g * wp.abs(dv) / (rtol * (c.u_scale + wp.abs(u))))
+            if wp.static(team_on):
+                # every lane must take the same branch: a lane's non-finite update reaches the
+                # others as an infinite norm (the team maximum drops NaN)
+                if not finite or not wp.isfinite(norm):
+                    norm = ft(wp.inf)
+                norm = team_max(norm)
+                finite = wp.isfinite(d_delta0) and wp.isfinite(d_tilt)
             delta0 = delta0 + d_delta0
             tilt = tilt + d_tilt
             norm = wp.max(norm, wp.abs(d_delta0) / (rtol * (c.delta_scale + wp.abs(delta0))))
@@ -320,8 +494,10 @@ def make_newton(ft, model, terms, gates):
         sums.min_normal = wp.float64(1.0e300)
         test = no_switch()
         u_l = ft(0.0)
-        u_c = stage_displacement(work, 0, n, m, g)
-        for i in range(n):
+        if c.first_node > 0:
+            u_l = stage_displacement(work, c.first_node - 1, n, m, g)
+        u_c = stage_displacement(work, c.first_node, n, m, g)
+        for i in range(c.first_node, c.end_node):
             u_r = stage_displacement(work, i + 1, n, m, g)
             vel = work[W_V, i, m]
             ns, fr = contact_terms(c, i, n, u_l, u_c, u_r, delta0, tilt, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m],
@@ -345,6 +521,12 @@ def make_newton(ft, model, terms, gates):
             sums.min_normal = wp.min(sums.min_normal, wp.float64(sigma))
             u_l = u_c
             u_c = u_r
+        if wp.static(team_on):
+            sums.friction = team_sum(sums.friction)
+            sums.normal = team_sum(sums.normal)
+            sums.min_normal = team_min(sums.min_normal)
+            if end_of_step == 1 and wp.static(stress_gate):
+                test = team_switch_test(test)
         return sums, test
 
     return dict(StageSums=StageSums, newton_solve=newton_solve, stage_derivatives=stage_derivatives,

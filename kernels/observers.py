@@ -78,8 +78,10 @@ def run_finished(p: MemberParams, st: IntegratorState, outputs: OutputSettings):
     return False
 
 
-def make_observers(ft, model, terms):
+def make_observers(ft, model, terms, team):
     Coeffs = terms["Coeffs"]
+    team_max = team["team_max"]
+    barrier = team["barrier"]
     contact_terms = terms["contact_terms"]
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
@@ -100,7 +102,7 @@ def make_observers(ft, model, terms):
 
     @wp.func
     def track_fronts(
-        p: MemberParams, st: IntegratorState, m: int, n: int, K: array4, work: array3, s1: int, s2: int, s3: int,
+        c: Coeffs, p: MemberParams, st: IntegratorState, m: int, n: int, K: array4, work: array3, s1: int, s2: int, s3: int,
         t_old: wp.float64, t_new: wp.float64, arrival: wp.array2d(dtype=wp.float64),
         arrival_error: wp.array2d(dtype=wp.float64), direction: int,
         threshold: wp.float64, use_stage2: int,
@@ -120,12 +122,11 @@ def make_observers(ft, model, terms):
         if p.disc_velocity < wp.float64(0.0):
             disc_sign = wp.float64(-1.0)
         w_step = wp.float64(-1.0e300)
-        for i in range(n):
+        for i in range(c.first_node, c.end_node):
             if work[W_CONTACT, i, m] == ft(0.0):
                 continue
             w_old = detachment_velocity(wp.float64(K[s1, C_U, i, m]), disc_sign, direction)
             w_new = detachment_velocity(wp.float64(K[s3, C_U, i, m]), disc_sign, direction)
-            st.front_max = wp.max(st.front_max, w_new)
             w_step = wp.max(w_step, w_new)
             if not wp.isfinite(arrival[i, m]):
                 if use_stage2 == 1:
@@ -141,6 +142,9 @@ def make_observers(ft, model, terms):
                 elif w_new >= st.front_level:
                     arrival[i, m] = crossing_time(st.front_level, t_old, w_old, t_new, w_new)
                     arrival_error[i, m] = t_new - t_old  # backward-Euler step: no inner point
+        w_step = team_max(w_step)  # over the team's nodes (max is exact: the same in any order)
+        if w_step > wp.float64(-1.0e300):  # some node in contact (front_max stays -inf before)
+            st.front_max = wp.max(st.front_max, w_step)
         if w_step > wp.float64(0.0) and w_step >= threshold * st.front_max:
             st.front_last = t_new
         st.front_now = w_step
@@ -154,7 +158,9 @@ def make_observers(ft, model, terms):
     ):
         """Sample the fields (pad velocity, slip rate, contact pressure, friction stress) of a
         recorded member at the grid times in (t_old, t_new], by linear interpolation between the
-        accepted points; ``previous`` holds the fields at t_old."""
+        accepted points; ``previous`` holds the fields at t_old. The lane's nodes (after a barrier:
+        the stencil reads the halo's displacement, just advanced by the neighbour)."""
+        barrier()
         slot = st.record_slot
         n_times = times.shape[0]
         k_end = st.record_next
@@ -165,8 +171,10 @@ def make_observers(ft, model, terms):
         v_disc = ft(disc_velocity_at(p, t_new, t_old))
         span = t_new - t_old
         u_l = ft(0.0)
-        u_c = state_displacement(state, 0, n, m)
-        for i in range(n):
+        if c.first_node > 0:
+            u_l = state_displacement(state, c.first_node - 1, n, m)
+        u_c = state_displacement(state, c.first_node, n, m)
+        for i in range(c.first_node, c.end_node):
             u_r = state_displacement(state, i + 1, n, m)
             vel = state[C_V, i, m]
             ns, fr = state_contact(c, state, i, n, m, u_l, u_c, u_r, delta0, tilt, v_disc)
@@ -197,7 +205,7 @@ def make_observers(ft, model, terms):
         recording, then the friction point (mu(t) may jump across a backward-Euler restart: no
         parabola through it)."""
         if outputs.fronts == 1:
-            st = track_fronts(p, st, m, n, K, work, s1, s2, s3, t_old, t_new, arrival, arrival_error,
+            st = track_fronts(c, p, st, m, n, K, work, s1, s2, s3, t_old, t_new, arrival, arrival_error,
                               outputs.front_direction, outputs.front_threshold, 1 - backward_euler)
         if st.record_slot >= 0:
             st = record_fields(c, p, st, m, n, state, t_old, t_new, delta0, tilt, record_times, record_previous, record)

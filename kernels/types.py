@@ -39,9 +39,11 @@ N_COMPONENTS = 4
 # work slots (first index of ``work``): the stage constants z (in the order of the components), the
 # Newton iterate of the pad velocity, the Thomas sweep's rows (cp, three right-hand sides), the two
 # border rows of the plate balance, the Jacobian diagonal (velocity error filter), and the
-# end-of-step margin, its gate slope, contact and solved gate of the stress gate
+# end-of-step margin, its gate slope, contact and solved gate of the stress gate; last, the
+# cooperative kernel's two coupling columns of a lane's interior rows (kernels/team.py)
 W_ZU, W_ZV, W_ZT, W_ZP, W_V, W_CP, W_R0, W_R1, W_R2, W_C1, W_C2, W_DIAG, W_MARGIN, W_DMARGIN, W_CONTACT, W_GATE_END = range(16)
-N_WORK = 16
+W_RL, W_RR = 16, 17
+N_WORK = 18
 # gate slots (stress gate, first index of ``gates``): the gate held over the next step (0 closed,
 # 1 open; for a sliding node the start of its implicit solve), the yield margin |tau_f| - tau_c*A
 # (Pa) at the last accepted point, and the sliding flag (1: solved on the yield surface each stage)
@@ -184,19 +186,43 @@ class DeviceArrays:
     record: wp.array
 
 
+def member_array(values, ft, member_major: bool):
+    """A device array (.., node, member) from ``values`` (a numpy array of that shape). With
+    member_major the memory holds each member's block contiguously, member slowest (the cooperative
+    kernel: a member's lanes read neighbouring nodes); the array is a transposed view, indexed the
+    same way as the member-fastest one."""
+    values = np.asarray(values)
+    if not member_major:
+        return wp.array(values, dtype=ft)
+    order = (values.ndim - 1,) + tuple(range(values.ndim - 1))
+    back = tuple(range(1, values.ndim)) + (0,)
+    return wp.array(np.ascontiguousarray(values.transpose(order)), dtype=ft).transpose(back)
+
+
+def member_zeros(shape, ft, member_major: bool):
+    """Zeros of ``shape`` (.., node, member) laid out as :func:`member_array` says."""
+    if not member_major:
+        return wp.zeros(shape, dtype=ft)
+    back = tuple(range(1, len(shape))) + (0,)
+    return wp.zeros((shape[-1],) + tuple(shape[:-1]), dtype=ft).transpose(back)
+
+
 def allocate(ft, params_np: np.ndarray, n_nodes: int, stress_gate: bool, fronts: bool,
-             record_times, n_recorded: int) -> DeviceArrays:
+             record_times, n_recorded: int, member_major: bool = False) -> DeviceArrays:
     """Allocate the arrays of a launch on the current Warp device. ``params_np``: MemberParams as a
-    numpy structured array (member,); arrays a scene does not need get a (.., 1, 1) placeholder."""
+    numpy structured array (member,); arrays a scene does not need get a (.., 1, 1) placeholder;
+    member_major: the state, stages, work and gates arrays hold each member contiguously
+    (:func:`member_array`)."""
     n_members = params_np.shape[0]
     times = np.asarray(record_times if n_recorded else [0.0], dtype=np.float64)
     per_node = (n_nodes, n_members)
     return DeviceArrays(
         params=wp.array(params_np, dtype=MemberParams),
-        state=wp.zeros((N_COMPONENTS, n_nodes, n_members), dtype=ft),
-        stages=wp.zeros((N_STAGE_SLOTS, N_COMPONENTS, n_nodes, n_members), dtype=ft),
-        work=wp.zeros((N_WORK, n_nodes, n_members), dtype=ft),
-        gates=wp.zeros((N_GATE, n_nodes, n_members) if stress_gate else (N_GATE, 1, 1), dtype=ft),
+        state=member_zeros((N_COMPONENTS, n_nodes, n_members), ft, member_major),
+        stages=member_zeros((N_STAGE_SLOTS, N_COMPONENTS, n_nodes, n_members), ft, member_major),
+        work=member_zeros((N_WORK, n_nodes, n_members), ft, member_major),
+        gates=member_zeros((N_GATE, n_nodes, n_members), ft, member_major) if stress_gate
+        else wp.zeros((N_GATE, 1, 1), dtype=ft),
         # NaN: not set yet (the kernels test isfinite)
         yield_time=wp.full(per_node if stress_gate else (1, 1), np.nan, dtype=wp.float64),
         arrival=wp.full(per_node if fronts else (1, 1), np.nan, dtype=wp.float64),

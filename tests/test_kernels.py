@@ -12,7 +12,7 @@ import warp as wp
 from conftest import DEVICE
 
 import warpfric as wf
-from warpfric.engine import member_params, solver_settings
+from warpfric.engine import cpu_blocks, member_params, solver_settings
 from warpfric.kernels import controller, esdirk, types
 from warpfric.kernels.integrator import make_stages
 from warpfric.kernels.observers import friction_point
@@ -158,10 +158,76 @@ def _bordered_kernel(tilt_on):
     return solve
 
 
-@pytest.mark.parametrize("tilt_on", [True, False])
-def test_bordered_tridiagonal_solve_matches_numpy(tilt_on):
+def _team_bordered_kernel(tilt_on, lanes):
+    from warpfric.kernels.newton import make_bordered_solver, make_team_solver
+    from warpfric.kernels.team import make_team, node_range, vec3d
+
+    team = make_team(f64, lanes)
+    team_solver = make_team_solver(f64, team)
+    interior_forward_row, team_solve = team_solver["interior_forward_row"], team_solver["team_solve"]
+    team_sum_vec12 = team["team_sum_vec12"]
+    schur_solve = make_bordered_solver(f64, tilt_on)["schur_solve"]
+    vec12d = wp.types.vector(length=12, dtype=f64)
+
+    @wp.kernel(module="unique")
+    def solve(bands: wp.array3d(dtype=f64), border: wp.array2d(dtype=f64), work: wp.array3d(dtype=f64),
+              dv: wp.array2d(dtype=f64), dp: wp.array2d(dtype=f64)):
+        """As _bordered_kernel, by a team of ``lanes`` threads per system (the rows as newton_solve
+        hands them to the partitioned solve)."""
+        m, lane = wp.tid()
+        n = bands.shape[1]
+        lo, hi = node_range(lane, lanes, n)
+        cp = f64(0.0)
+        r = vec3d()
+        rl = f64(0.0)
+        rr = f64(0.0)
+        sep_lower = f64(0.0)
+        sep_diagonal = f64(1.0)
+        sep_upper = f64(0.0)
+        sep_rhs = vec3d()
+        for i in range(lo, hi):
+            rhs = vec3d(bands[m, i, 3], bands[m, i, 4], bands[m, i, 5])
+            if i == hi - 1:
+                sep_lower = bands[m, i, 0]
+                sep_diagonal = bands[m, i, 1]
+                if hi < n:
+                    sep_upper = bands[m, i, 2]
+                sep_rhs = rhs
+            else:
+                couple_left = f64(0.0)
+                couple_right = f64(0.0)
+                upper = bands[m, i, 2]
+                if i == lo and lo > 0:
+                    couple_left = -bands[m, i, 0]
+                if i == hi - 2:
+                    couple_right = -upper
+                    upper = f64(0.0)
+                cp, r, rl, rr = interior_forward_row(work, i, m, bands[m, i, 0], bands[m, i, 1], upper, rhs,
+                                                     couple_left, couple_right, cp, r, rl, rr)
+            work[types.W_C1, i, m] = bands[m, i, 6]
+            work[types.W_C2, i, m] = bands[m, i, 7]
+        p = team_solve(work, lo, hi, m, lane, sep_lower, sep_diagonal, sep_upper, sep_rhs)
+        total = team_sum_vec12(vec12d(f64(0.0), f64(0.0), f64(0.0), f64(0.0), f64(0.0), f64(0.0),
+                                      p[0], p[1], p[2], p[3], p[4], p[5]))
+        d_delta0, d_tilt = schur_solve(border[m, 0], border[m, 1], border[m, 2], border[m, 3], border[m, 4], border[m, 5],
+                                       total[6], total[7], total[8], total[9], total[10], total[11])
+        for i in range(lo, hi):
+            dv[m, i] = work[types.W_R0, i, m] - work[types.W_R1, i, m] * d_delta0
+            if wp.static(tilt_on):
+                dv[m, i] = dv[m, i] - work[types.W_R2, i, m] * d_tilt
+        if lane == 0:
+            dp[m, 0] = d_delta0
+            dp[m, 1] = d_tilt
+
+    return solve
+
+
+@pytest.mark.parametrize("tilt_on, lanes", [(True, 1), (False, 1), (True, 4), (False, 3), (True, 8)])
+def test_bordered_tridiagonal_solve_matches_numpy(tilt_on, lanes):
     """[[J, B], [C, D]] (dV, dd0, da) = (rhs, -e) for random diagonally dominant J and random borders,
-    5 systems of 17 unknowns: the kernel's Thomas + Schur solve equals numpy.linalg.solve to 1e-11."""
+    5 systems of 17 unknowns: the kernel's Thomas + Schur solve (lanes = 1) and the partitioned solve
+    of a team (lanes > 1: 8 lanes leave lanes of two nodes, one interior row) equal
+    numpy.linalg.solve to 1e-11."""
     rng = np.random.default_rng(7)
     members, n = 5, 17
     bands = rng.normal(size=(members, n, 8))
@@ -174,8 +240,13 @@ def test_bordered_tridiagonal_solve_matches_numpy(tilt_on):
     work = wp.zeros((types.N_WORK, n, members), dtype=f64, device=DEVICE)
     dv = wp.zeros((members, n), dtype=f64, device=DEVICE)
     dp = wp.zeros((members, 2), dtype=f64, device=DEVICE)
-    wp.launch(_bordered_kernel(tilt_on), dim=members, inputs=[wp.array(bands, dtype=f64, device=DEVICE),
-              wp.array(border, dtype=f64, device=DEVICE), work, dv, dp], device=DEVICE)
+    inputs = [wp.array(bands, dtype=f64, device=DEVICE), wp.array(border, dtype=f64, device=DEVICE), work, dv, dp]
+    if lanes == 1:
+        wp.launch(_bordered_kernel(tilt_on), dim=members, inputs=inputs, device=DEVICE)
+    else:
+        with cpu_blocks(True):
+            wp.launch_tiled(_team_bordered_kernel(tilt_on, lanes), dim=[members], inputs=inputs, block_dim=lanes,
+                            device=DEVICE)
     k = 2 if tilt_on else 1
     for m in range(members):
         a = np.zeros((n + k, n + k))
@@ -401,8 +472,9 @@ def test_kernel_structs_stay_in_step_with_the_public_parameters():
 
 
 def _fronts_kernel():
-    observers = make_stages(f64, wf.Model())["observers"]
-    track_fronts = observers["track_fronts"]
+    stages = make_stages(f64, wf.Model())
+    track_fronts = stages["observers"]["track_fronts"]
+    make_coeffs = stages["terms"]["make_coeffs"]
 
     @wp.kernel(module="unique")
     def sweep(params: wp.array(dtype=types.MemberParams), states: wp.array(dtype=types.IntegratorState),
@@ -428,7 +500,7 @@ def _fronts_kernel():
                 K[0, types.C_U, i, 0] = -(level + slope[i] * d0 + curvature * d0 * d0)
                 K[1, types.C_U, i, 0] = -(level + slope[i] * dm + curvature * dm * dm)
                 K[2, types.C_U, i, 0] = -(level + slope[i] * d1 + curvature * d1 * d1)
-            st = track_fronts(params[0], st, 0, n, K, work, 0, 1, 2, t_old, t_new, arrival, arrival_error, 0,
+            st = track_fronts(make_coeffs(params[0], n), params[0], st, 0, n, K, work, 0, 1, 2, t_old, t_new, arrival, arrival_error, 0,
                               f64(0.4), use_stage2)
         states[0] = st
 
@@ -526,7 +598,7 @@ def test_newton_flags_a_non_finite_update():
 @pytest.mark.parametrize("dtype, gate, fronts", [("float64", "stress", True), ("float32", "none", False)])
 def test_device_memory_per_member_is_reported(dtype, gate, fronts):
     """device_bytes_per_member counts the integration arrays of kernels/types.py: state (4 N),
-    stages (12 N), work (16 N) in the working precision, the stress gate's gates (3 N, working
+    stages (12 N), work (N_WORK N = 18 N) in the working precision, the stress gate's gates (3 N, working
     precision) and yield times (N, float64), the fronts' arrival times and errors (2 N, float64),
     and the member's parameter and state structs; kernel builds are timed apart from the run."""
     n = 24
@@ -534,7 +606,7 @@ def test_device_memory_per_member_is_reported(dtype, gate, fronts):
                      solver=wf.Solver(nodes=n, dtype=dtype), fronts=wf.Fronts() if fronts else None, device=DEVICE,
                      progress=False)
     size = 8 if dtype == "float64" else 4
-    expected = size * n * (4 + 12 + 16) + (size * 3 * n + 8 * n if gate == "stress" else 0) + (16 * n if fronts else 0)
+    expected = size * n * (4 + 12 + types.N_WORK) + (size * 3 * n + 8 * n if gate == "stress" else 0) + (16 * n if fronts else 0)
     expected += np.dtype(types.MemberParams.numpy_dtype()).itemsize + np.dtype(types.IntegratorState.numpy_dtype()).itemsize
     assert ds.attrs["device_bytes_per_member"] == expected
     assert ds.attrs["kernel_build_time_s"] >= 0 and ds.attrs["wall_time_s"] > 0

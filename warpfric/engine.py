@@ -37,6 +37,43 @@ class EngineResult:
     kernel_build_s: float  # compiling (or loading from Warp's cache) the integrator's modules, s
     device_bytes_per_member: float  # device memory of the integration arrays per member, bytes (recorded
     # fields, the front segmentation and the read-back copies not included)
+    lanes: int  # threads per member (1: the thread-per-member kernel; > 1: the cooperative kernel)
+
+
+# the cooperative kernel's team size when Solver.lanes is None (docs/performance.md, "Cooperative
+# kernel"): on a CUDA device, float64, with at least 2 nodes per lane
+AUTO_LANES = 32
+
+
+def choose_lanes(solver: Solver, device: str) -> int:
+    """Threads per member: Solver.lanes, or for None the cooperative kernel with AUTO_LANES lanes on
+    a CUDA device in float64 when nodes >= 2*AUTO_LANES, else 1 (on the CPU a team's lanes run one
+    after the other: it only costs)."""
+    if solver.lanes is not None:
+        return solver.lanes
+    if str(device).startswith("cuda") and solver.dtype == "float64" and solver.nodes >= 2 * AUTO_LANES:
+        return AUTO_LANES
+    return 1
+
+
+class cpu_blocks:
+    """Let a launch on the CPU run blocks of several threads (Warp's cooperative CPU fibers; needed
+    by the cooperative kernel there, e.g. in the tests)."""
+
+    def __init__(self, enable: bool):
+        self.enable = enable
+
+    def __enter__(self):
+        import warp as wp
+
+        self.saved = wp.config.enable_cpu_blocks
+        if self.enable:
+            wp.config.enable_cpu_blocks = True
+
+    def __exit__(self, *exc):
+        import warp as wp
+
+        wp.config.enable_cpu_blocks = self.saved
 
 
 def solver_settings(solver: Solver):
@@ -178,14 +215,17 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     import warp as wp
 
     from warpfric.kernels.integrator import get_integrator
-    from warpfric.kernels.types import C_PHI, STATUS_MEANINGS, IntegratorState, allocate
+    from warpfric.kernels.types import C_PHI, STATUS_MEANINGS, IntegratorState, allocate, member_array
 
     n_members = values["normal_force"].shape[0]
     n = solver.nodes
+    lanes = choose_lanes(solver, device)
+    team = lanes > 1
     t_build = time.perf_counter()
-    kern = get_integrator(solver.dtype, model)
-    for name in ("integrate", "evaluate_fields"):  # compile or load now, so that it is timed apart
-        wp.load_module(kern[name].module, device=device)
+    kern = get_integrator(solver.dtype, model, lanes)
+    with cpu_blocks(team):  # compile or load now, so that it is timed apart
+        wp.load_module(kern["integrate"].module, device=device, block_dim=lanes if team else None)
+        wp.load_module(kern["evaluate_fields"].module, device=device)
     kernel_build_s = time.perf_counter() - t_build
     ft = kern["ft"]
     np_dtype = np.float64 if solver.dtype == "float64" else np.float32
@@ -197,7 +237,8 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     n_passes = 2 if fronts is not None else 1
     with wp.ScopedDevice(device):
         arrays = allocate(ft, params_np, n, stress_gate, fronts is not None,
-                          record.times if record is not None else None, len(record.members) if record is not None else 0)
+                          record.times if record is not None else None, len(record.members) if record is not None else 0,
+                          member_major=team)
         per_member = [arrays.params, arrays.state, arrays.stages, arrays.work]  # not the (.., 1, 1) placeholders
         per_member += [arrays.gates, arrays.yield_time] if stress_gate else []
         per_member += [arrays.arrival, arrays.arrival_error] if fronts is not None else []
@@ -214,7 +255,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             state_np = np.zeros(arrays.state.shape, dtype=np_dtype)
             state_np[C_PHI] = values["initial_age"][None, :]
             member_states = wp.array(states_np, dtype=IntegratorState)
-            arrays.state = wp.array(state_np, dtype=ft)
+            arrays.state = member_array(state_np, ft, team)
             arrays.stages.zero_()  # K[fsal] holds f(y) of the state: zero for the state at rest
             arrays.arrival.fill_(np.nan)
             arrays.arrival_error.fill_(np.nan)
@@ -223,13 +264,15 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             pass_label = " ".join(p for p in (label, f"pass {pass_index + 1}/{n_passes}" if n_passes > 1 else "") if p)
             bar = Progress(show_progress, n_members, pass_label)
             while True:
-                wp.launch(
-                    kern["integrate"],
-                    dim=n_members,
-                    inputs=[arrays.params, settings, outputs, solver.steps_per_launch, arrays.record_times,
-                            member_states, arrays.state, arrays.stages, arrays.work, arrays.gates, arrays.record_previous],
-                    outputs=[arrays.arrival, arrays.arrival_error, arrays.yield_time, arrays.record],
-                )
+                inputs = [arrays.params, settings, outputs, solver.steps_per_launch, arrays.record_times,
+                          member_states, arrays.state, arrays.stages, arrays.work, arrays.gates, arrays.record_previous]
+                outputs_ = [arrays.arrival, arrays.arrival_error, arrays.yield_time, arrays.record]
+                if team:
+                    with cpu_blocks(True):
+                        wp.launch_tiled(kern["integrate"], dim=[n_members], inputs=inputs, outputs=outputs_,
+                                        block_dim=lanes)
+                else:
+                    wp.launch(kern["integrate"], dim=n_members, inputs=inputs, outputs=outputs_)
                 st_now = member_states.numpy()
                 if pass_index == 0 and flag_stragglers(st_now, solver, STATUS_MEANINGS.index("stalled")):
                     member_states = wp.array(st_now, dtype=IntegratorState)
@@ -256,7 +299,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             arrival=arrays.arrival.numpy() if fronts is not None else None,
             arrival_error=arrays.arrival_error.numpy() if fronts is not None else None,
             event=event, record=arrays.record.numpy() if record is not None else None,
-            kernel_build_s=kernel_build_s, device_bytes_per_member=device_bytes_per_member,
+            kernel_build_s=kernel_build_s, device_bytes_per_member=device_bytes_per_member, lanes=lanes,
         )
         wp.synchronize_device(device)
     return result

@@ -202,6 +202,7 @@ class Model:
 
 _DTYPES = ("float32", "float64")
 FLOAT32_MIN_RTOL = 1e-5  # docs/performance.md: float32 stalls below this
+MAX_LANES = 1024  # threads per block (CUDA's limit)
 
 
 @dataclass(frozen=True)
@@ -240,6 +241,13 @@ class Solver:
                       launch, on the same device) and their outputs replaced; the output
                       ``working_precision`` says which precision produced each member
                       (docs/model.md, "Precision"). False keeps the float32 failure statuses.
+    lanes:            threads per member. 1: one thread integrates a member (the thread-per-member
+                      kernel); 2 .. min(1024, nodes // 2): a team of that many threads (one Warp tile
+                      block) shares each member's nodes, its tridiagonal Newton solve and its
+                      reductions (the cooperative kernel; float64 only). None (default): chosen per
+                      run, see warpfric.engine.choose_lanes and docs/performance.md, "Cooperative
+                      kernel". Results of the two kernels agree within the error control, not bit
+                      for bit (sums are taken in another order).
     """
 
     nodes: int = 100
@@ -261,6 +269,7 @@ class Solver:
     step_max_factor: float = 5.0
     failure_factor: float = 0.25
     float32_fallback: bool = True
+    lanes: int | None = None
 
     def __post_init__(self):
         def need(cond, name, value, valid):
@@ -308,6 +317,11 @@ class Solver:
              "an integer >= 1")
         need(isinstance(self.float32_fallback, (bool, np.bool_)), "float32_fallback", self.float32_fallback,
              "True or False")
+        max_lanes = min(MAX_LANES, self.nodes // 2)
+        need(self.lanes is None or (is_int(self.lanes) and (self.lanes == 1 or 2 <= self.lanes <= max_lanes)), "lanes",
+             self.lanes, f"None, 1, or an integer in [2, {max_lanes}] (at most nodes // 2 and {MAX_LANES})")
+        need(self.lanes in (None, 1) or self.dtype == "float64", "lanes", self.lanes,
+             "None or 1 with dtype='float32' (the cooperative kernel is float64 only)")
 
 
 _FRONT_DIRECTIONS = ("against_disc", "with_disc", "absolute")

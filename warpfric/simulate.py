@@ -138,6 +138,7 @@ def simulate(
                      device, wall, STATUS_MEANINGS, member_offset)
     ds.attrs["kernel_build_time_s"] = result.kernel_build_s
     ds.attrs["device_bytes_per_member"] = result.device_bytes_per_member
+    ds.attrs["lanes"] = result.lanes
     if yield_np is not None:
         broken = (ds.status.values != 0) & (ds.status.values != STATUS_MEANINGS.index("no_peak"))
         yt = np.where(broken[:, None], np.nan, yield_np.T)  # a run cut short still has real opening times
@@ -418,6 +419,8 @@ def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, 
         attrs[f"model_{f.name}"] = value if isinstance(value, str) else int(value)
     for f in dataclasses.fields(solver):
         value = getattr(solver, f.name)
+        if value is None:
+            value = "auto"  # Solver.lanes None: chosen per run (the run's choice is the attribute "lanes")
         attrs[f"solver_{f.name}"] = int(value) if isinstance(value, bool) else value  # netCDF has no bool
     try:
         import warp as wp

@@ -1,0 +1,155 @@
+"""Who works on a member: one thread (the thread-per-member kernel) or a team of ``lanes`` threads
+(one Warp tile block per member, the cooperative kernel; docs/performance.md, "Cooperative kernel").
+
+In a team, lane k owns the contiguous nodes [first_node, end_node) = [k*N//P, (k+1)*N//P) of its
+member (P = lanes <= N/2, so every lane owns at least two nodes) and runs every per-node loop of
+the integrator on them alone; what a loop reduces over the nodes (sums, maxima, the error norm) is
+combined over the lanes with Warp's tile primitives, which also give the whole team the same value,
+so that every lane takes the same decisions (step accepted, Newton converged, ...) and keeps an
+identical copy of the member's IntegratorState. A tile operation synchronises the block: the
+reductions double as barriers between a lane's writes and its neighbours' reads of halo nodes;
+``barrier`` is the explicit one where no reduction falls.
+
+``make_team(ft, lanes)`` builds the functions; with lanes = 1 they are the identity (no tile
+operation is compiled, the thread-per-member kernel is unchanged bit for bit). A team needs
+float64 (``ft``): the cooperative kernel is compiled for float64 only.
+"""
+
+from typing import Any
+
+import warp as wp
+
+# vector types the team exchanges (float64): the reduced system's rows (A, B, C, D0, D1, D2), a
+# node's solution as affine in the neighbouring separators (xP0, xP1, xP2, xL, xR), the Newton
+# sums (force and moment residuals, the 2 x 2 D block, the six border products)
+vec3d = wp.types.vector(length=3, dtype=wp.float64)
+vec5d = wp.types.vector(length=5, dtype=wp.float64)
+vec6d = wp.types.vector(length=6, dtype=wp.float64)
+vec12d = wp.types.vector(length=12, dtype=wp.float64)
+
+
+@wp.func
+def node_range(lane: int, lanes: int, n: int):
+    """The nodes [first, end) of lane ``lane`` of ``lanes`` (all n for a team of one)."""
+    return (lane * n) // lanes, ((lane + 1) * n) // lanes
+
+
+def make_team(ft, lanes: int):
+    """Reductions over a member's team (identity for lanes = 1)."""
+    if lanes == 1:
+
+        @wp.func
+        def team_max(x: Any):
+            return x
+
+        @wp.func
+        def team_min(x: Any):
+            return x
+
+        @wp.func
+        def team_sum(x: Any):
+            return x
+
+        @wp.func
+        def team_count(x: int):
+            return x
+
+        @wp.func
+        def barrier():
+            pass
+
+        return dict(lanes=1, team_max=team_max, team_min=team_min, team_sum=team_sum, team_count=team_count,
+                    barrier=barrier)
+
+    if ft != wp.float64:
+        raise ValueError("a team of lanes needs float64")
+
+    @wp.func
+    def team_max(x: wp.float64):
+        """Maximum over the lanes (a NaN lane value is dropped: callers map non-finite to inf)."""
+        return wp.tile_max(wp.tile(x))[0]
+
+    @wp.func
+    def team_min(x: wp.float64):
+        return wp.tile_min(wp.tile(x))[0]
+
+    @wp.func
+    def team_sum(x: wp.float64):
+        return wp.tile_sum(wp.tile(x))[0]
+
+    @wp.func
+    def team_count(x: int):
+        return wp.tile_sum(wp.tile(x))[0]
+
+    @wp.func
+    def barrier():
+        """Every lane's writes before this call are seen by every lane after it."""
+        wp.tile_sum(wp.tile(int(0)))
+
+    @wp.func
+    def team_sum_vec12(x: vec12d):
+        return wp.tile_sum(wp.tile(x, preserve_type=True))[0]
+
+    @wp.func
+    def from_next_lane(x: vec5d, lane: int):
+        """The value of lane + 1 (zero for the last lane)."""
+        t = wp.tile(x, preserve_type=True)
+        out = vec5d()
+        if lane + 1 < lanes:
+            out = wp.tile_extract(t, lane + 1)
+        return out
+
+    @wp.func
+    def reduced_solve(row: vec6d, lane: int):
+        """The separators of the partitioned tridiagonal solve: lane k gives row k of the P x P
+        tridiagonal system A_k E_{k-1} + B_k E_k + C_k E_{k+1} = D_k (three right-hand sides;
+        row = (A, B, C, D0, D1, D2)) and gets (E_{k-1}, E_k) (E_{-1} = 0). Each lane eliminates
+        the rows above it downwards and the rows below it upwards (a twisted factorisation, P - 1
+        row operations, no back substitution) and closes with its own row."""
+        t = wp.tile(row, preserve_type=True)
+        b_up = wp.float64(1.0)
+        c_up = wp.float64(0.0)
+        d_up = vec3d()
+        for j in range(lane):  # rows 0..k-1, eliminated downwards
+            r = wp.tile_extract(t, j)
+            d = vec3d(r[3], r[4], r[5])
+            if j == 0:
+                b_up = r[1]
+                d_up = d
+            else:
+                f = r[0] / b_up
+                b_up = r[1] - f * c_up
+                d_up = d - f * d_up
+            c_up = r[2]
+        b_dn = wp.float64(1.0)
+        a_dn = wp.float64(0.0)
+        d_dn = vec3d()
+        for jj in range(lanes - 1 - lane):  # rows P-1..k+1, eliminated upwards
+            j = lanes - 1 - jj
+            r = wp.tile_extract(t, j)
+            d = vec3d(r[3], r[4], r[5])
+            if jj == 0:
+                b_dn = r[1]
+                d_dn = d
+            else:
+                g = r[2] / b_dn
+                b_dn = r[1] - g * a_dn
+                d_dn = d - g * d_dn
+            a_dn = r[0]
+        num = vec3d(row[3], row[4], row[5])
+        den = row[1]
+        if lane > 0:
+            num = num - (row[0] / b_up) * d_up
+            den = den - row[0] * c_up / b_up
+        if lane < lanes - 1:
+            num = num - (row[2] / b_dn) * d_dn
+            den = den - row[2] * a_dn / b_dn
+        e_self = num / den
+        e_prev = vec3d()
+        if lane > 0:
+            e_prev = (d_up - c_up * e_self) / b_up
+        return e_prev, e_self
+
+    return dict(lanes=lanes, team_max=team_max, team_min=team_min, team_sum=team_sum, team_count=team_count,
+                barrier=barrier, team_sum_vec12=team_sum_vec12, from_next_lane=from_next_lane,
+                reduced_solve=reduced_solve)
