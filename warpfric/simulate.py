@@ -338,27 +338,27 @@ def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, 
     data = {}
     for name, arr in values.items():
         attrs = {"units": parameter_units(name), "long_name": parameter_long_name(name)}
-        data[name] = xr.DataArray(arr, dims=("member",), attrs=attrs)
+        data[name] = (("member",), arr, attrs)  # (dims, data, attrs): no per-variable alignment
     status = st["status"].astype(np.int32)
     # mu(t) still rising at the last accepted step: its maximum lies beyond end_time, and the running
     # maximum (the value at the end) is not mu_s
     # a maximum before the disc moves (a disc that never moves) is load noise, not a friction peak
     no_peak = (st["mu_s_time"] >= st["t"]) | (st["mu_s_time"] <= values["rest_until"])
     status = np.where((status == 0) & no_peak, meanings.index("no_peak"), status).astype(np.int32)
-    data["status"] = xr.DataArray(
+    data["status"] = (
+        ("member",),
         status,
-        dims=("member",),
-        attrs={
+        {
             "long_name": "member status",
             "flag_values": np.arange(len(meanings), dtype=np.int32),
             "flag_meanings": " ".join(meanings),
         },
     )
-    data["working_precision"] = xr.DataArray(
-        np.full(n_members, 32 if solver.dtype == "float32" else 64, dtype=np.int8), dims=("member",),
-        attrs={"long_name": "floating-point precision that produced the member's outputs (float32 runs: "
-               "64 where Solver.float32_fallback re-ran a failed member in float64)",
-               "flag_values": np.array([32, 64], dtype=np.int8), "flag_meanings": "float32 float64"})
+    data["working_precision"] = (
+        ("member",), np.full(n_members, 32 if solver.dtype == "float32" else 64, dtype=np.int8),
+        {"long_name": "floating-point precision that produced the member's outputs (float32 runs: "
+                      "64 where Solver.float32_fallback re-ran a failed member in float64)",
+         "flag_values": np.array([32, 64], dtype=np.int8), "flag_meanings": "float32 float64"})
     scalars = {
         "mu_s": st["mu_s"],
         "mu_s_time": st["mu_s_time"],
@@ -381,7 +381,7 @@ def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, 
             bad = failed if name != "mu_final" else failed & (status != meanings.index("no_peak"))
             arr = np.where(bad, np.nan, arr)
         units, long_name = _OUTPUT_ATTRS[name]
-        data[name] = xr.DataArray(arr, dims=("member",), attrs={"units": units, "long_name": long_name})
+        data[name] = (("member",), arr, {"units": units, "long_name": long_name})
     per_node = {
         "displacement": fields[C_U],
         "velocity": fields[C_V],
@@ -392,9 +392,7 @@ def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, 
     }
     for name, arr in per_node.items():
         units, long_name = _OUTPUT_ATTRS[name]
-        data[name] = xr.DataArray(
-            np.ascontiguousarray(arr.T), dims=("member", "x"), attrs={"units": units, "long_name": long_name}
-        )
+        data[name] = (("member", "x"), np.ascontiguousarray(arr.T), {"units": units, "long_name": long_name})
     coords = {
         "member": member,
         "x": xr.DataArray(
