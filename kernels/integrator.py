@@ -9,6 +9,8 @@ recording). Arrays and structs: kernels/types.py. Scheme and choices: docs/model
 integration" and "Gate switches".
 """
 
+import os
+
 import warp as wp
 
 from .controller import accepted_step_size, out_of_steps, propose_step, reject, step_factor
@@ -23,13 +25,22 @@ from .types import IntegratorState, MemberParams, OutputSettings, SolverSettings
 _CACHE: dict = {}
 
 
+def team_max_registers():
+    """Registers per thread the CUDA compiler may use in the cooperative kernel (None: its choice,
+    255 on the H100); the environment variable WARPFRIC_TEAM_MAX_REGISTERS sets it for benchmarks
+    (docs/performance.md, "Cooperative kernel")."""
+    value = int(os.environ.get("WARPFRIC_TEAM_MAX_REGISTERS", "0"))
+    return value if value > 0 else None
+
+
 def get_integrator(dtype: str, model, lanes: int = 1) -> dict:
     """Compiled kernels for one working precision, one set of model switches and one team size
     (lanes = 1: one thread per member; > 1: the cooperative kernel, launched with block_dim = lanes,
     float64 only; kernels/team.py) (cached)."""
-    key = (dtype, model, lanes)
+    registers = team_max_registers() if lanes > 1 else None
+    key = (dtype, model, lanes, registers)
     if key not in _CACHE:
-        _CACHE[key] = _make_integrator(dtype, model, lanes)
+        _CACHE[key] = _make_integrator(dtype, model, lanes, registers)
     return _CACHE[key]
 
 
@@ -45,7 +56,7 @@ def make_stages(ft, model, lanes: int = 1) -> dict:
     return dict(team=team, terms=terms, gates=gates, newton=newton, esdirk=esdirk, observers=observers)
 
 
-def _make_integrator(dtype: str, model, lanes: int):
+def _make_integrator(dtype: str, model, lanes: int, registers=None):
     ft = wp.float64 if dtype == "float64" else wp.float32
     team_on = lanes > 1
     stages = make_stages(ft, model, lanes)
@@ -64,7 +75,7 @@ def _make_integrator(dtype: str, model, lanes: int):
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
 
-    @wp.kernel(module="unique")
+    @wp.kernel(module="unique", cuda_max_registers=registers)
     def integrate(
         # inputs
         params: wp.array(dtype=MemberParams),

@@ -9,7 +9,7 @@ import pytest
 from conftest import DEVICE, run
 
 import warpfric as wf
-from warpfric.engine import AUTO_LANES, choose_lanes
+from warpfric.engine import AUTO_LANES, AUTO_MIN_NODES, choose_lanes
 
 # the members of studies/outputs_equal.py: e = 0, -0.2 (1000 N), 0.3 (300 N), 0.6 (3000 N: lift-off)
 MEMBERS = {"eccentricity": [0.0, -0.2, 0.3, 0.6], "normal_force": [1000.0, 1000.0, 300.0, 3000.0]}
@@ -25,7 +25,11 @@ def test_a_team_gives_the_thread_per_member_outputs(gate, lanes, fronts):
     model = wf.Model(relaxation_gate=gate)
     front = wf.Fronts() if fronts else None
     ref = run(MEMBERS, model=model, nodes=30, rtol=1e-5, fronts=front, lanes=1)
-    team = run(MEMBERS, model=model, nodes=30, rtol=1e-5, fronts=front, lanes=lanes)
+    if DEVICE.startswith("cuda"):
+        team = run(MEMBERS, model=model, nodes=30, rtol=1e-5, fronts=front, lanes=lanes)
+    else:
+        with pytest.warns(UserWarning, match="CPU fibers"):  # a team on the CPU is for tests only
+            team = run(MEMBERS, model=model, nodes=30, rtol=1e-5, fronts=front, lanes=lanes)
     assert ref.attrs["lanes"] == 1 and team.attrs["lanes"] == lanes
     np.testing.assert_array_equal(team.status.values, ref.status.values)
     assert (ref.status.values == 0).all() and ref.lift_off.values[3] == 1
@@ -40,7 +44,8 @@ def test_a_team_gives_the_thread_per_member_outputs(gate, lanes, fronts):
 
 def test_lanes_is_validated_and_chosen():
     """Solver.lanes: None, 1 or 2..nodes//2, float64 only; None picks the cooperative kernel on a
-    CUDA device in float64 with >= 2 nodes per lane, the thread-per-member kernel otherwise."""
+    CUDA device in float64 (the largest power of two <= min(32, nodes // 2) lanes, from 16 nodes),
+    the thread-per-member kernel otherwise."""
     for bad in (0, 51, 2.0, True):
         with pytest.raises(ValueError, match="lanes"):
             wf.Solver(nodes=100, lanes=bad)
@@ -48,7 +53,8 @@ def test_lanes_is_validated_and_chosen():
         wf.Solver(nodes=100, lanes=8, dtype="float32")
     assert choose_lanes(wf.Solver(nodes=100, lanes=8), "cpu") == 8
     assert choose_lanes(wf.Solver(nodes=100), "cpu") == 1
-    assert choose_lanes(wf.Solver(nodes=100), "cuda:0") == AUTO_LANES
-    assert choose_lanes(wf.Solver(nodes=2 * AUTO_LANES - 1), "cuda:0") == 1
+    assert choose_lanes(wf.Solver(nodes=200), "cuda:0") == AUTO_LANES == 32
+    assert choose_lanes(wf.Solver(nodes=40), "cuda:0") == 16  # a power of two, >= 2 nodes per lane
+    assert choose_lanes(wf.Solver(nodes=AUTO_MIN_NODES), "cuda:0") == 8
+    assert choose_lanes(wf.Solver(nodes=AUTO_MIN_NODES - 1), "cuda:0") == 1
     assert choose_lanes(wf.Solver(nodes=100, dtype="float32"), "cuda:0") == 1
-    assert DEVICE  # the fixture's device runs the agreement test above

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 import time
+import warnings
 
 import numpy as np
 
@@ -40,19 +41,22 @@ class EngineResult:
     lanes: int  # threads per member (1: the thread-per-member kernel; > 1: the cooperative kernel)
 
 
-# the cooperative kernel's team size when Solver.lanes is None (docs/performance.md, "Cooperative
-# kernel"): on a CUDA device, float64, with at least 2 nodes per lane
+# the cooperative kernel's largest team when Solver.lanes is None (docs/performance.md,
+# "Cooperative kernel": on the H100 32 lanes beat 8 and equal 64 at N = 200), and the fewest nodes
+# for which it is chosen (a team of 8 lanes of 2 nodes)
 AUTO_LANES = 32
+AUTO_MIN_NODES = 16
 
 
 def choose_lanes(solver: Solver, device: str) -> int:
-    """Threads per member: Solver.lanes, or for None the cooperative kernel with AUTO_LANES lanes on
-    a CUDA device in float64 when nodes >= 2*AUTO_LANES, else 1 (on the CPU a team's lanes run one
-    after the other: it only costs)."""
+    """Threads per member: Solver.lanes, or for None, on a CUDA device in float64 with at least
+    AUTO_MIN_NODES nodes, the cooperative kernel with the largest power of two <= min(AUTO_LANES,
+    nodes // 2) lanes; else 1 (the thread-per-member kernel: on the CPU a team's lanes run one
+    after the other on Warp's fibers, which only costs)."""
     if solver.lanes is not None:
         return solver.lanes
-    if str(device).startswith("cuda") and solver.dtype == "float64" and solver.nodes >= 2 * AUTO_LANES:
-        return AUTO_LANES
+    if str(device).startswith("cuda") and solver.dtype == "float64" and solver.nodes >= AUTO_MIN_NODES:
+        return 1 << (min(AUTO_LANES, solver.nodes // 2).bit_length() - 1)
     return 1
 
 
@@ -221,6 +225,10 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     n = solver.nodes
     lanes = choose_lanes(solver, device)
     team = lanes > 1
+    if team and not str(device).startswith("cuda"):
+        warnings.warn(f"Solver(lanes={lanes}) on {device}: the cooperative kernel runs there on Warp's experimental "
+                      "CPU fibers, slowly and for tests only (docs/performance.md, 'Cooperative kernel'); "
+                      "lanes=1 is the CPU's kernel", stacklevel=3)
     t_build = time.perf_counter()
     kern = get_integrator(solver.dtype, model, lanes)
     with cpu_blocks(team):  # compile or load now, so that it is timed apart
