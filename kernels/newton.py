@@ -452,12 +452,13 @@ def make_newton(ft, model, terms, gates, team):
                 norm = wp.max(norm, wp.abs(dv) / (rtol * (c.v_scale + wp.abs(vel))))
                 norm = wp.max(norm, g * wp.abs(dv) / (rtol * (c.u_scale + wp.abs(u))))
             if wp.static(team_on):
-                # every lane must take the same branch: a lane's non-finite update reaches the
-                # others as an infinite norm (the team maximum drops NaN)
+                # every lane must take the same branch, so every decision below reads the one
+                # reduced value: a lane's non-finite update reaches the others as an infinite norm
+                # (the team maximum drops NaN)
                 if not finite or not wp.isfinite(norm):
                     norm = ft(wp.inf)
                 norm = team_max(norm)
-                finite = wp.isfinite(d_delta0) and wp.isfinite(d_tilt)
+                finite = wp.isfinite(norm)
             delta0 = delta0 + d_delta0
             tilt = tilt + d_tilt
             norm = wp.max(norm, wp.abs(d_delta0) / (rtol * (c.delta_scale + wp.abs(delta0))))

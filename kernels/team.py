@@ -10,6 +10,13 @@ identical copy of the member's IntegratorState. A tile operation synchronises th
 reductions double as barriers between a lane's writes and its neighbours' reads of halo nodes;
 ``barrier`` is the explicit one where no reduction falls.
 
+Every reduction ends with ``settle``: a one-element shared tile assignment, which synchronises
+before it writes, so that no lane starts the next tile operation while another still reads this
+one's result. Without it, Warp's CPU reductions (cooperative fibers) write their flags into the
+freed shared memory of the previous result before their first synchronisation, and the lanes of
+a team of 2-8 read different sums (found in review: teams of 7 and 8 lanes failed on a lift-off
+member; tests/test_team.py checks the sums of every lane).
+
 ``make_team(ft, lanes)`` builds the functions; with lanes = 1 they are the identity (no tile
 operation is compiled, the thread-per-member kernel is unchanged bit for bit). A team needs
 float64 (``ft``): the cooperative kernel is compiled for float64 only.
@@ -65,30 +72,46 @@ def make_team(ft, lanes: int):
         raise ValueError("a team of lanes needs float64")
 
     @wp.func
+    def settle():
+        """A barrier that synchronises before it writes (a shared tile's assignment: sync, write,
+        sync): every lane has finished what it did before, reads of the last reduction included."""
+        wp.tile_extract(wp.tile(int(0)), 0)
+
+    @wp.func
     def team_max(x: wp.float64):
         """Maximum over the lanes (a NaN lane value is dropped: callers map non-finite to inf)."""
-        return wp.tile_max(wp.tile(x))[0]
+        r = wp.tile_max(wp.tile(x))[0]
+        settle()
+        return r
 
     @wp.func
     def team_min(x: wp.float64):
-        return wp.tile_min(wp.tile(x))[0]
+        r = wp.tile_min(wp.tile(x))[0]
+        settle()
+        return r
 
     @wp.func
     def team_sum(x: wp.float64):
-        return wp.tile_sum(wp.tile(x))[0]
+        r = wp.tile_sum(wp.tile(x))[0]
+        settle()
+        return r
 
     @wp.func
     def team_count(x: int):
-        return wp.tile_sum(wp.tile(x))[0]
+        r = wp.tile_sum(wp.tile(x))[0]
+        settle()
+        return r
 
     @wp.func
     def barrier():
         """Every lane's writes before this call are seen by every lane after it."""
-        wp.tile_sum(wp.tile(int(0)))
+        settle()
 
     @wp.func
     def team_sum_vec12(x: vec12d):
-        return wp.tile_sum(wp.tile(x, preserve_type=True))[0]
+        r = wp.tile_sum(wp.tile(x, preserve_type=True))[0]
+        settle()
+        return r
 
     @wp.func
     def from_next_lane(x: vec5d, lane: int):

@@ -202,7 +202,7 @@ class Model:
 
 _DTYPES = ("float32", "float64")
 FLOAT32_MIN_RTOL = 1e-5  # docs/performance.md: float32 stalls below this
-MAX_LANES = 1024  # threads per block (CUDA's limit)
+MAX_LANES = 256  # threads per block: the cooperative kernel takes 255 registers per thread on the H100, and a block has 65,536
 
 
 @dataclass(frozen=True)
@@ -242,7 +242,7 @@ class Solver:
                       ``working_precision`` says which precision produced each member
                       (docs/model.md, "Precision"). False keeps the float32 failure statuses.
     lanes:            threads per member. 1: one thread integrates a member (the thread-per-member
-                      kernel); 2 .. min(1024, nodes // 2): a team of that many threads (one Warp tile
+                      kernel); 2 .. min(256, nodes // 2): a team of that many threads (one Warp tile
                       block) shares each member's nodes, its tridiagonal Newton solve and its
                       reductions (the cooperative kernel; float64 only). None (default): chosen per
                       run, see warpfric.engine.choose_lanes and docs/performance.md, "Cooperative
@@ -319,7 +319,7 @@ class Solver:
              "True or False")
         max_lanes = min(MAX_LANES, self.nodes // 2)
         need(self.lanes is None or (is_int(self.lanes) and (self.lanes == 1 or 2 <= self.lanes <= max_lanes)), "lanes",
-             self.lanes, f"None, 1, or an integer in [2, {max_lanes}] (at most nodes // 2 and {MAX_LANES})")
+             self.lanes, f"None, 1, or an integer in [2, {max_lanes}] (at most nodes // 2 and {MAX_LANES}: a block of 255-register threads)")
         need(self.lanes in (None, 1) or self.dtype == "float64", "lanes", self.lanes,
              "None or 1 with dtype='float32' (the cooperative kernel is float64 only)")
 
