@@ -158,6 +158,33 @@ def make_team_solver(ft, team):
     from_next_lane = team["from_next_lane"]
     reduced_solve = team["reduced_solve"]
 
+    @wp.struct
+    class LaneRows:
+        """A lane's forward sweep in progress: the last interior row's modified upper diagonal cp
+        and right-hand sides (the three of the bordered solve, r, and the coupling columns, rl and
+        rr), and its separator row (lower, diagonal, upper, right-hand sides), kept for the reduced
+        system."""
+
+        cp: ft
+        r: vec3d
+        rl: ft
+        rr: ft
+        sep_lower: ft
+        sep_diagonal: ft
+        sep_upper: ft
+        sep_rhs: vec3d
+
+    @wp.func
+    def start_rows():
+        rows = LaneRows()
+        rows.cp = ft(0.0)
+        rows.rl = ft(0.0)
+        rows.rr = ft(0.0)
+        rows.sep_lower = ft(0.0)
+        rows.sep_diagonal = ft(1.0)
+        rows.sep_upper = ft(0.0)
+        return rows
+
     @wp.func
     def interior_forward_row(
         work: array3, i: int, m: int, lower: ft, diagonal: ft, upper: ft, rhs: vec3d, couple_left: ft,
@@ -178,6 +205,39 @@ def make_team_solver(ft, team):
         work[W_RL, i, m] = rl
         work[W_RR, i, m] = rr
         return cp, r, rl, rr
+
+    @wp.func
+    def lane_row(
+        rows: LaneRows, work: array3, i: int, m: int, lo: int, hi: int, n: int, lower: ft, diagonal: ft, upper: ft,
+        rhs: vec3d,
+    ):
+        """Row i of the lane's nodes [lo, hi) (lower, diagonal, upper of J; rhs = (-R_i, B0_i, B1_i)):
+        the separator row hi-1 is kept (its upper entry dropped at the last node), an interior row
+        is eliminated, its couplings to the previous lane's separator (the lane's first row, but in
+        lane 0) and to its own separator (row hi-2) moved to the coupling columns."""
+        out = rows
+        if i == hi - 1:
+            out.sep_lower = lower
+            out.sep_diagonal = diagonal
+            if hi < n:
+                out.sep_upper = upper
+            out.sep_rhs = rhs
+        else:
+            couple_left = ft(0.0)
+            couple_right = ft(0.0)
+            upper_kept = upper
+            if i == lo and lo > 0:
+                couple_left = -lower
+            if i == hi - 2:
+                couple_right = -upper
+                upper_kept = ft(0.0)
+            cp, r, rl, rr = interior_forward_row(work, i, m, lower, diagonal, upper_kept, rhs, couple_left, couple_right,
+                                                 rows.cp, rows.r, rows.rl, rows.rr)
+            out.cp = cp
+            out.r = r
+            out.rl = rl
+            out.rr = rr
+        return out
 
     @wp.func
     def interior_back_substitution(work: array3, lo: int, hi: int, m: int):
@@ -203,25 +263,22 @@ def make_team_solver(ft, team):
         return first, last
 
     @wp.func
-    def team_solve(
-        work: array3, lo: int, hi: int, m: int, lane: int, sep_lower: ft, sep_diagonal: ft, sep_upper: ft,
-        sep_rhs: vec3d,
-    ):
-        """The lane's part of the bordered solve after the interior elimination: exchange x_lo with
-        the previous lane, solve for the separators, write y0, y1, y2 of the lane's nodes into
-        work[W_R0..R2] and return the border products (C1.y0, C1.y1, C1.y2, C2.y0, C2.y1, C2.y2)
+    def team_solve(work: array3, lo: int, hi: int, m: int, lane: int, rows: LaneRows):
+        """The lane's part of the bordered solve after its rows went through lane_row: exchange
+        x_lo with the previous lane, solve for the separators, write y0, y1, y2 of the lane's nodes
+        into work[W_R0..R2] and return the border products (C1.y0, C1.y1, C1.y2, C2.y0, C2.y1, C2.y2)
         over the lane's nodes."""
         first, last = interior_back_substitution(work, lo, hi, m)
         nxt = from_next_lane(first, lane)  # x_{s+1} of the next lane's first node (0 for the last)
-        a = sep_lower
-        c = sep_upper
+        a = rows.sep_lower
+        c = rows.sep_upper
         row = vec6d(
             a * last[3],
-            sep_diagonal + a * last[4] + c * nxt[3],
+            rows.sep_diagonal + a * last[4] + c * nxt[3],
             c * nxt[4],
-            sep_rhs[0] - a * last[0] - c * nxt[0],
-            sep_rhs[1] - a * last[1] - c * nxt[1],
-            sep_rhs[2] - a * last[2] - c * nxt[2],
+            rows.sep_rhs[0] - a * last[0] - c * nxt[0],
+            rows.sep_rhs[1] - a * last[1] - c * nxt[1],
+            rows.sep_rhs[2] - a * last[2] - c * nxt[2],
         )
         e_prev, e_self = reduced_solve(row, lane)
         sums = vec6d()
@@ -238,8 +295,7 @@ def make_team_solver(ft, team):
             sums = sums + vec6d(c1 * y[0], c1 * y[1], c1 * y[2], c2 * y[0], c2 * y[1], c2 * y[2])
         return sums
 
-    return dict(interior_forward_row=interior_forward_row, interior_back_substitution=interior_back_substitution,
-                team_solve=team_solve)
+    return dict(LaneRows=LaneRows, start_rows=start_rows, lane_row=lane_row, team_solve=team_solve)
 
 
 def make_newton(ft, model, terms, gates, team):
@@ -262,7 +318,8 @@ def make_newton(ft, model, terms, gates, team):
     team_sum = team["team_sum"]
     team_sum_vec12 = team.get("team_sum_vec12", None)
     team_switch_test = gates["team_switch_test"]
-    interior_forward_row = team_solver.get("interior_forward_row", None)
+    start_rows = team_solver.get("start_rows", None)
+    lane_row = team_solver.get("lane_row", None)
     team_solve = team_solver.get("team_solve", None)
     forward_row = solver["forward_row"]
     back_substitution = solver["back_substitution"]
@@ -335,14 +392,8 @@ def make_newton(ft, model, terms, gates, team):
             hi = c.end_node
             first = lo
             last = hi
-            r_prev = vec3d()
-            rl_prev = ft(0.0)
-            rr_prev = ft(0.0)
-            sep_lower = ft(0.0)
-            sep_diagonal = ft(1.0)
-            sep_upper = ft(0.0)
-            sep_rhs = vec3d()
             if wp.static(team_on):
+                rows = start_rows()
                 first = wp.max(lo - 1, 0)
                 last = wp.min(hi + 1, n)
             u_l = ft(0.0)
@@ -396,25 +447,7 @@ def make_newton(ft, model, terms, gates, team):
                 c2_cur = c2_next
                 if wp.static(team_on):
                     if owned:
-                        if i == hi - 1:  # the lane's separator row: kept for the reduced system
-                            sep_lower = jac_l
-                            sep_diagonal = jac_c
-                            if hi < n:
-                                sep_upper = jac_r
-                            sep_rhs = vec3d(-residual, col_d0, col_a)
-                        else:
-                            couple_left = ft(0.0)
-                            couple_right = ft(0.0)
-                            upper = jac_r
-                            if i == lo and lo > 0:
-                                couple_left = -jac_l
-                            if i == hi - 2:
-                                couple_right = -jac_r
-                                upper = ft(0.0)
-                            cp_prev, r_prev, rl_prev, rr_prev = interior_forward_row(
-                                work, i, m, jac_l, jac_c, upper, vec3d(-residual, col_d0, col_a), couple_left,
-                                couple_right, cp_prev, r_prev, rl_prev, rr_prev
-                            )
+                        rows = lane_row(rows, work, i, m, lo, hi, n, jac_l, jac_c, jac_r, vec3d(-residual, col_d0, col_a))
                 else:
                     cp_prev, r0_prev, r1_prev, r2_prev = forward_row(
                         work, i, m, jac_l, jac_c, jac_r, -residual, col_d0, col_a, cp_prev, r0_prev, r1_prev, r2_prev
@@ -426,7 +459,7 @@ def make_newton(ft, model, terms, gates, team):
                 work[W_C2, last - 1, m] = c2_prev
             # ---- pass 2: back substitution and the border products; the Schur complement ----
             if wp.static(team_on):
-                products = team_solve(work, lo, hi, m, c.lane, sep_lower, sep_diagonal, sep_upper, sep_rhs)
+                products = team_solve(work, lo, hi, m, c.lane, rows)
                 total = team_sum_vec12(vec12d(e1, e2, d11, d12, d21, d22, products[0], products[1], products[2],
                                               products[3], products[4], products[5]))
                 e1 = total[0] - force_per_depth

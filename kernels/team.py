@@ -123,6 +123,18 @@ def make_team(ft, lanes: int):
         return out
 
     @wp.func
+    def eliminate(coupling: wp.float64, diagonal: wp.float64, rhs: vec3d, pivot: wp.float64, carried: wp.float64,
+                  carried_rhs: vec3d, first: bool):
+        """One step of a tridiagonal elimination: the row (coupling to the eliminated neighbour,
+        diagonal, right-hand sides) minus coupling/pivot times the neighbour's eliminated row
+        (pivot, its coupling back to this row: carried, its right-hand sides); the first row of a
+        sweep is kept. Returns the new pivot and right-hand sides."""
+        if first:
+            return diagonal, rhs
+        f = coupling / pivot
+        return diagonal - f * carried, rhs - f * carried_rhs
+
+    @wp.func
     def reduced_solve(row: vec6d, lane: int):
         """The separators of the partitioned tridiagonal solve: lane k gives row k of the P x P
         tridiagonal system A_k E_{k-1} + B_k E_k + C_k E_{k+1} = D_k (three right-hand sides;
@@ -135,14 +147,7 @@ def make_team(ft, lanes: int):
         d_up = vec3d()
         for j in range(lane):  # rows 0..k-1, eliminated downwards
             r = wp.tile_extract(t, j)
-            d = vec3d(r[3], r[4], r[5])
-            if j == 0:
-                b_up = r[1]
-                d_up = d
-            else:
-                f = r[0] / b_up
-                b_up = r[1] - f * c_up
-                d_up = d - f * d_up
+            b_up, d_up = eliminate(r[0], r[1], vec3d(r[3], r[4], r[5]), b_up, c_up, d_up, j == 0)
             c_up = r[2]
         b_dn = wp.float64(1.0)
         a_dn = wp.float64(0.0)
@@ -150,14 +155,7 @@ def make_team(ft, lanes: int):
         for jj in range(lanes - 1 - lane):  # rows P-1..k+1, eliminated upwards
             j = lanes - 1 - jj
             r = wp.tile_extract(t, j)
-            d = vec3d(r[3], r[4], r[5])
-            if jj == 0:
-                b_dn = r[1]
-                d_dn = d
-            else:
-                g = r[2] / b_dn
-                b_dn = r[1] - g * a_dn
-                d_dn = d - g * d_dn
+            b_dn, d_dn = eliminate(r[2], r[1], vec3d(r[3], r[4], r[5]), b_dn, a_dn, d_dn, jj == 0)
             a_dn = r[0]
         num = vec3d(row[3], row[4], row[5])
         den = row[1]

@@ -164,57 +164,33 @@ def _team_bordered_kernel(tilt_on, lanes):
 
     team = make_team(f64, lanes)
     team_solver = make_team_solver(f64, team)
-    interior_forward_row, team_solve = team_solver["interior_forward_row"], team_solver["team_solve"]
+    start_rows, lane_row, team_solve = team_solver["start_rows"], team_solver["lane_row"], team_solver["team_solve"]
     team_sum_vec12 = team["team_sum_vec12"]
-    schur_solve = make_bordered_solver(f64, tilt_on)["schur_solve"]
+    bordered = make_bordered_solver(f64, tilt_on)
+    schur_solve, solution_row = bordered["schur_solve"], bordered["solution_row"]
     vec12d = wp.types.vector(length=12, dtype=f64)
 
     @wp.kernel(module="unique")
     def solve(bands: wp.array3d(dtype=f64), border: wp.array2d(dtype=f64), work: wp.array3d(dtype=f64),
               dv: wp.array2d(dtype=f64), dp: wp.array2d(dtype=f64)):
-        """As _bordered_kernel, by a team of ``lanes`` threads per system (the rows as newton_solve
-        hands them to the partitioned solve)."""
+        """As _bordered_kernel, by a team of ``lanes`` threads per system (each row through lane_row,
+        as newton_solve hands them to the partitioned solve)."""
         m, lane = wp.tid()
         n = bands.shape[1]
         lo, hi = node_range(lane, lanes, n)
-        cp = f64(0.0)
-        r = vec3d()
-        rl = f64(0.0)
-        rr = f64(0.0)
-        sep_lower = f64(0.0)
-        sep_diagonal = f64(1.0)
-        sep_upper = f64(0.0)
-        sep_rhs = vec3d()
+        rows = start_rows()
         for i in range(lo, hi):
-            rhs = vec3d(bands[m, i, 3], bands[m, i, 4], bands[m, i, 5])
-            if i == hi - 1:
-                sep_lower = bands[m, i, 0]
-                sep_diagonal = bands[m, i, 1]
-                if hi < n:
-                    sep_upper = bands[m, i, 2]
-                sep_rhs = rhs
-            else:
-                couple_left = f64(0.0)
-                couple_right = f64(0.0)
-                upper = bands[m, i, 2]
-                if i == lo and lo > 0:
-                    couple_left = -bands[m, i, 0]
-                if i == hi - 2:
-                    couple_right = -upper
-                    upper = f64(0.0)
-                cp, r, rl, rr = interior_forward_row(work, i, m, bands[m, i, 0], bands[m, i, 1], upper, rhs,
-                                                     couple_left, couple_right, cp, r, rl, rr)
+            rows = lane_row(rows, work, i, m, lo, hi, n, bands[m, i, 0], bands[m, i, 1], bands[m, i, 2],
+                            vec3d(bands[m, i, 3], bands[m, i, 4], bands[m, i, 5]))
             work[types.W_C1, i, m] = bands[m, i, 6]
             work[types.W_C2, i, m] = bands[m, i, 7]
-        p = team_solve(work, lo, hi, m, lane, sep_lower, sep_diagonal, sep_upper, sep_rhs)
+        p = team_solve(work, lo, hi, m, lane, rows)
         total = team_sum_vec12(vec12d(f64(0.0), f64(0.0), f64(0.0), f64(0.0), f64(0.0), f64(0.0),
                                       p[0], p[1], p[2], p[3], p[4], p[5]))
         d_delta0, d_tilt = schur_solve(border[m, 0], border[m, 1], border[m, 2], border[m, 3], border[m, 4], border[m, 5],
                                        total[6], total[7], total[8], total[9], total[10], total[11])
         for i in range(lo, hi):
-            dv[m, i] = work[types.W_R0, i, m] - work[types.W_R1, i, m] * d_delta0
-            if wp.static(tilt_on):
-                dv[m, i] = dv[m, i] - work[types.W_R2, i, m] * d_tilt
+            dv[m, i] = solution_row(work, i, m, d_delta0, d_tilt)
         if lane == 0:
             dp[m, 0] = d_delta0
             dp[m, 1] = d_tilt
