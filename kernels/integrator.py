@@ -28,7 +28,7 @@ _CACHE: dict = {}
 def team_max_registers():
     """Registers per thread the CUDA compiler may use in the cooperative kernel (None: its choice,
     255 on the H100); the environment variable WARPFRIC_TEAM_MAX_REGISTERS sets it for benchmarks
-    (docs/performance.md, "Cooperative kernel")."""
+    (docs/performance.md, "Session 5: the cooperative kernel")."""
     value = int(os.environ.get("WARPFRIC_TEAM_MAX_REGISTERS", "0"))
     return value if value > 0 else None
 

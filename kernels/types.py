@@ -186,6 +186,11 @@ class DeviceArrays:
     record: wp.array
 
 
+def _member_first(ndim: int):
+    """Axes that move the last (member) axis first, and those that move it back."""
+    return (ndim - 1,) + tuple(range(ndim - 1)), tuple(range(1, ndim)) + (0,)
+
+
 def member_array(values, ft, member_major: bool):
     """A device array (.., node, member) from ``values`` (a numpy array of that shape). With
     member_major the memory holds each member's block contiguously, member slowest (the cooperative
@@ -194,8 +199,7 @@ def member_array(values, ft, member_major: bool):
     values = np.asarray(values)
     if not member_major:
         return wp.array(values, dtype=ft)
-    order = (values.ndim - 1,) + tuple(range(values.ndim - 1))
-    back = tuple(range(1, values.ndim)) + (0,)
+    order, back = _member_first(values.ndim)
     return wp.array(np.ascontiguousarray(values.transpose(order)), dtype=ft).transpose(back)
 
 
@@ -203,8 +207,8 @@ def member_zeros(shape, ft, member_major: bool):
     """Zeros of ``shape`` (.., node, member) laid out as :func:`member_array` says."""
     if not member_major:
         return wp.zeros(shape, dtype=ft)
-    back = tuple(range(1, len(shape))) + (0,)
-    return wp.zeros((shape[-1],) + tuple(shape[:-1]), dtype=ft).transpose(back)
+    order, back = _member_first(len(shape))
+    return wp.zeros(tuple(shape[k] for k in order), dtype=ft).transpose(back)
 
 
 def allocate(ft, params_np: np.ndarray, n_nodes: int, stress_gate: bool, fronts: bool,

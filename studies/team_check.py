@@ -13,8 +13,7 @@ import json
 import numpy as np
 
 import warpfric as wf
-
-MEMBERS = {"eccentricity": [0.0, -0.2, 0.3, 0.6], "normal_force": [1000.0, 1000.0, 300.0, 3000.0]}
+from outputs_equal import MEMBERS
 
 
 def main(argv=None):

@@ -245,8 +245,8 @@ class Solver:
                       kernel); 2 .. min(256, nodes // 2): a team of that many threads (one Warp tile
                       block) shares each member's nodes, its tridiagonal Newton solve and its
                       reductions (the cooperative kernel; float64 only). None (default): chosen per
-                      run, see warpfric.engine.choose_lanes and docs/performance.md, "Cooperative
-                      kernel". Results of the two kernels agree within the error control, not bit
+                      run, see warpfric.engine.choose_lanes and docs/performance.md, "Session 5:
+                      the cooperative kernel". Results of the two kernels agree within the error control, not bit
                       for bit (sums are taken in another order).
     """
 
