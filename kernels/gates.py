@@ -9,6 +9,7 @@ another law than the stress gate they compile to constants (gate 1, not sliding)
 
 import warp as wp
 
+from .controller import STEP_AT_SWITCH
 from .model_terms import disc_velocity_at
 from .types import G_GATE, G_MARGIN, G_SLIDE, C_PHI, C_TAU, C_V, W_DMARGIN, W_GATE_END, W_MARGIN, IntegratorState, MemberParams, SolverSettings
 
@@ -16,6 +17,10 @@ from .types import G_GATE, G_MARGIN, G_SLIDE, C_PHI, C_TAU, C_V, W_DMARGIN, W_GA
 # curved margin makes the linear crossing estimate creep towards it, like regula falsi) is accepted
 # at the end of the step and counted in unlocated_switches: the cost of one is bounded
 MAX_SWITCH_RETRIES = 8
+# predicted switches (Solver.predict_switches): consecutive predictions that did not happen before
+# predictions stop until the next switch; the "no prediction" value of SwitchTest.next_switch (s)
+MAX_PREDICTION_MISSES = 2
+NO_PREDICTION = 1.0e30
 
 
 def make_gates(ft, model, terms, team):
@@ -32,17 +37,20 @@ def make_gates(ft, model, terms, team):
 
     @wp.struct
     class SwitchTest:
-        """A step's gate-switch test: its error (1 = the tolerance) and the fraction of the step to
-        retry with (1: no retry)."""
+        """A step's gate-switch test: its error (1 = the tolerance), the fraction of the step to
+        retry with (1: no retry), and the predicted end of the next step (s after this step's end;
+        NO_PREDICTION: none): just past the earliest gate switch that the nodes' margins predict."""
 
         error: ft
         retry_fraction: ft
+        next_switch: ft
 
     @wp.func
     def no_switch():
         test = SwitchTest()
         test.error = ft(0.0)
         test.retry_fraction = ft(1.0)
+        test.next_switch = ft(NO_PREDICTION)
         return test
 
     @wp.func
@@ -87,19 +95,28 @@ def make_gates(ft, model, terms, team):
         open_now = ft(0.0)
         if z1 > ft(0.0):
             open_now = ft(1.0)
-        if node_sliding(gates, i, m) == ft(0.0) and open_now != fr.gate:
+        if node_sliding(gates, i, m) == ft(0.0):
             z0 = gates[G_MARGIN, i, m]
-            theta = ft(0.0)
-            if z0 != z1:
-                theta = wp.clamp(z0 / (z0 - z1), ft(0.0), ft(1.0))
+            # the switch error per second of wrong gate
             rate = wp.max(
                 wp.abs(fr.elastic_stress) * relax / (rtol * (c.tau_scale + wp.abs(fr.elastic_stress))),
                 fr.contact_age * relax / (rtol * (c.phi_scale + wp.abs(fr.contact_age))),
             )
-            e = (ft(1.0) - theta) * h * rate
-            test.error = wp.max(test.error, e)
-            if e > ft(1.0):
-                test.retry_fraction = wp.min(test.retry_fraction, theta + ft(0.5) * (ft(1.0) - theta) / e)
+            if open_now != fr.gate:
+                theta = ft(0.0)
+                if z0 != z1:
+                    theta = wp.clamp(z0 / (z0 - z1), ft(0.0), ft(1.0))
+                e = (ft(1.0) - theta) * h * rate
+                test.error = wp.max(test.error, e)
+                if e > ft(1.0):
+                    test.retry_fraction = wp.min(test.retry_fraction, theta + ft(0.5) * (ft(1.0) - theta) / e)
+            elif rate > ft(0.0) and h > ft(0.0) and z0 != z1:
+                # no switch in this step: where the margin's secant over the step reaches 0, the node
+                # will switch; a step that ends 0.5/rate after that (a switch error of 0.5, where a
+                # located retry would end) takes the switch without a rejected step
+                slope = (z1 - z0) / h
+                if (z1 < ft(0.0) and slope > ft(0.0)) or (z1 > ft(0.0) and slope < ft(0.0)):
+                    test.next_switch = wp.min(test.next_switch, -z1 / slope + ft(0.5) / rate)
         return test
 
     @wp.func
@@ -108,6 +125,7 @@ def make_gates(ft, model, terms, team):
         out = SwitchTest()
         out.error = team_max(test.error)
         out.retry_fraction = team_min(test.retry_fraction)
+        out.next_switch = team_min(test.next_switch)
         return out
 
     @wp.func
@@ -120,6 +138,7 @@ def make_gates(ft, model, terms, team):
                 st.steps_rejected = st.steps_rejected + 1
                 st.switch_retries = st.switch_retries + 1
                 st.switch_limit = t + wp.float64(test.retry_fraction) * h
+                st.switch_predicted = 0
                 return st, 1
             st.unlocated_switches = st.unlocated_switches + 1
         return st, 0
@@ -197,12 +216,31 @@ def make_gates(ft, model, terms, team):
         return st
 
     @wp.func
-    def after_accept(st: IntegratorState, switches_before: int, test: SwitchTest, t_new: wp.float64):
-        """Bookkeeping of the switch location after an accepted TR-BDF2 step."""
-        if st.gate_switches != switches_before or test.error > ft(1.0):
+    def after_accept(st: IntegratorState, settings: SolverSettings, switches_before: int, test: SwitchTest,
+                     t_new: wp.float64, clipped: int):
+        """Bookkeeping of the switch location after an accepted TR-BDF2 step (``clipped``: the step's
+        clipping code, kernels/controller.py), and the end of the next step at a predicted switch.
+
+        A prediction that did not happen (the step clipped at it switched nothing) counts a miss;
+        after MAX_PREDICTION_MISSES in a row predictions stop until the next switch, so that a margin
+        that only approaches 0 (e.g. a steady state just below the yield stress) cannot hold the
+        step size down."""
+        switched = st.gate_switches != switches_before
+        if switched or test.error > ft(1.0):
             st.switch_retries = 0  # the located switch happened (or was given up)
+        if switched:
+            st.prediction_misses = 0
+        elif clipped == STEP_AT_SWITCH and st.switch_predicted == 1:
+            st.prediction_misses = st.prediction_misses + 1
         if t_new >= st.switch_limit:
             st.switch_limit = wp.float64(1.0e300)
+            st.switch_predicted = 0
+        if settings.predict_switches == 1 and st.prediction_misses < MAX_PREDICTION_MISSES:
+            if test.next_switch < ft(NO_PREDICTION):
+                limit = t_new + wp.float64(test.next_switch)
+                if limit < st.switch_limit:
+                    st.switch_limit = limit
+                    st.switch_predicted = 1
         return st
 
     return dict(SwitchTest=SwitchTest, no_switch=no_switch, team_switch_test=team_switch_test, node_gate=node_gate, node_sliding=node_sliding,

@@ -159,7 +159,7 @@ def _make_integrator(dtype: str, model, lanes: int, registers=None):
                 switches_before = st.gate_switches
                 st = switch_gates(c, p, st, m, n, state, K, s3, gates, work, t, step.t_new, yield_time)
                 if restart == 0:
-                    st = after_accept(st, switches_before, res.switch_test, step.t_new)
+                    st = after_accept(st, settings, switches_before, res.switch_test, step.t_new, step.clipped)
             delta0 = res.delta0
             tilt = res.tilt
             if restart != 0:

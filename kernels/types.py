@@ -111,7 +111,7 @@ class SolverSettings:
     step_min_factor: wp.float64
     step_max_factor: wp.float64
     failure_factor: wp.float64
-
+    predict_switches: wp.int32  # stress gate: 1: end a step just past the next gate switch predicted from the margins
 
 # how the detachment velocity w is read from the pad velocity u_t (docs/model.md, "Fronts")
 FRONT_AGAINST_DISC = 0  # w = -sign(v_max) * u_t: the pad springing back as the interface lets go
@@ -161,7 +161,9 @@ class IntegratorState:
     front_last: wp.float64  # s, last accepted time with max_x w >= threshold * running maximum (pass 1)
     front_now: wp.float64  # m/s, max over nodes of w at the last accepted step (pass 1)
     front_until: wp.float64  # s, the arrival pass stops here (front_last of pass 1); inf in pass 1
-    switch_limit: wp.float64  # s, steps end at or before this time (a gate switch located in a rejected step)
+    switch_limit: wp.float64  # s, steps end at or before this time (a gate switch located in a rejected step, or predicted)
+    switch_predicted: wp.int32  # 1: switch_limit is a predicted switch (kernels/gates.py, after_accept)
+    prediction_misses: wp.int32  # consecutive steps clipped at a predicted switch that did not happen
     gate_switches: wp.int32  # accepted gate switches (stress gate)
     switch_retries: wp.int32  # consecutive steps rejected to locate a gate switch
     unlocated_switches: wp.int32  # steps accepted with a switch error > 1 after MAX_SWITCH_RETRIES

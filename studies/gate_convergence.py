@@ -4,7 +4,8 @@
 
 For the default scene and e = +-0.2 (1000 N), against a float64 reference at rtol 1e-8 with located
 switches: mu_s, mu_s_time and v_middle errors, accepted/rejected steps and wall time, for rtol
-1e-4..1e-7, with the switches located (switch_tol = 1, the default) and not located (switch_tol =
+1e-4..1e-7, with the switches predicted and located (switch_tol = 1, predict_switches = True: the
+default), located only by rejected steps (predict_switches = False) and not located (switch_tol =
 inf: each switch at the end of the step in which it happens), and the gate-less law for the step
 count it costs. Also the grid: mu_s at N = 25, 50, 100, 200 (rtol 1e-8). Prints a table last.
 """
@@ -21,9 +22,10 @@ import warpfric as wf
 MEMBERS = {"eccentricity": [0.0, 0.2, -0.2]}
 
 
-def run(device, nodes, rtol, switch_tol=1.0, gate="stress"):
+def run(device, nodes, rtol, switch_tol=1.0, gate="stress", predict=True):
     t0 = time.perf_counter()
-    ds = wf.simulate(MEMBERS, model=wf.Model(relaxation_gate=gate), solver=wf.Solver(nodes=nodes, rtol=rtol, switch_tol=switch_tol),
+    ds = wf.simulate(MEMBERS, model=wf.Model(relaxation_gate=gate),
+                     solver=wf.Solver(nodes=nodes, rtol=rtol, switch_tol=switch_tol, predict_switches=predict),
                      device=device, progress=False)
     return ds, time.perf_counter() - t0
 
@@ -35,12 +37,14 @@ def main(argv=None):
     ap.add_argument("--out", default=str(Path(__file__).with_name("results") / "gate_convergence_cpu.json"))
     args = ap.parse_args(argv)
     run(args.device, 10, 1e-4)  # compile outside the timings
-    ref, _ = run(args.device, args.nodes, 1e-8)
+    ref, _ = run(args.device, args.nodes, 1e-8, predict=False)
     assert (ref.status.values == 0).all(), ref.status.values
     rows = []
-    for label, switch_tol, gate in [("located", 1.0, "stress"), ("unlocated", float("inf"), "stress"), ("no gate", 1.0, "none")]:
+    cases = [("predicted", 1.0, "stress", True), ("located", 1.0, "stress", False), ("unlocated", float("inf"), "stress", True),
+             ("no gate", 1.0, "none", True)]
+    for label, switch_tol, gate, predict in cases:
         for rtol in (1e-4, 1e-5, 1e-6, 1e-7):
-            ds, wall = run(args.device, args.nodes, rtol, switch_tol, gate)
+            ds, wall = run(args.device, args.nodes, rtol, switch_tol, gate, predict)
             row = dict(case=label, rtol=rtol, status=ds.status.values.tolist(), wall_s=wall,
                        steps_accepted=ds.steps_accepted.values.tolist(), steps_rejected=ds.steps_rejected.values.tolist())
             if gate == "stress":

@@ -102,6 +102,27 @@ def test_located_switches_converge_with_rtol_and_beat_unlocated_ones():
     assert unlocated > 10 * errors[1]
 
 
+def test_predicted_switches_save_rejected_steps_at_the_same_accuracy():
+    """Predicting the next gate switch from the margins' secants (the default) takes most switches
+    without a rejected step: at N = 100 every node switches once, and the located-only stepping
+    (predict_switches=False) rejects about two steps per switch. Both place the switches by the same
+    error test, so mu_s keeps the located stepping's error against a tight reference."""
+    members = {"eccentricity": [0.0, -0.2, 0.2]}
+    ref = run(members, nodes=100, rtol=1e-8, predict_switches=False)
+    located = run(members, nodes=100, rtol=1e-5, predict_switches=False)
+    predicted = run(members, nodes=100, rtol=1e-5)
+    assert (predicted.gate_switches.values == located.gate_switches.values).all()
+    assert (predicted.gate_switches.values >= 100).all()
+    err_located = np.abs(located.mu_s.values - ref.mu_s.values).max()
+    err_predicted = np.abs(predicted.mu_s.values - ref.mu_s.values).max()
+    print("mu_s errors located, predicted:", err_located, err_predicted)
+    assert err_predicted < 1.5 * err_located and err_predicted < 5e-6
+    attempts = lambda ds: ds.steps_accepted.values + ds.steps_rejected.values  # noqa: E731
+    assert (predicted.steps_rejected.values < located.steps_rejected.values / 1.8).all()
+    assert (attempts(predicted) < attempts(located)).all()
+    assert attempts(predicted).sum() < 0.85 * attempts(located).sum()  # 1,165 against 1,458 (CPU)
+
+
 def test_velocity_gate_tends_to_the_gateless_law():
     """sqrt(s^2 + v0^2) -> |s| as v0 -> 0: the velocity gate with a tiny v0 gives the v1 law's mu_s."""
     none = run(model=wf.Model(relaxation_gate="none"))

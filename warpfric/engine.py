@@ -98,6 +98,7 @@ def solver_settings(solver: Solver):
     s.step_min_factor = solver.step_min_factor
     s.step_max_factor = solver.step_max_factor
     s.failure_factor = solver.failure_factor
+    s.predict_switches = 1 if solver.predict_switches else 0
     return s
 
 

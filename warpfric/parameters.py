@@ -223,6 +223,10 @@ class Solver:
     switch_tol:       stress gate: tolerance of the located gate switches, in units of rtol (docs/model.md,
                       "Gate switches"); 1 holds the error of a switch to the step's local tolerance,
                       inf lets every switch happen at the end of the step in which it occurs (no location).
+    predict_switches: stress gate: True ends a step just past the next gate switch that the nodes' yield
+                      margins predict (their secant over the last step), so that most switches are taken
+                      without the rejected step that locates them; False locates every switch by a
+                      rejected step (docs/model.md, "Gate switches").
     sliding_width:    stress gate: a node held on the yield surface (Filippov sliding) has the gate
                       theta_w(x) = (1 + tanh x)/2, x = (|tau_f|/A - tau_c)/(sliding_width*tau_c), solved
                       implicitly; its limit 0 is the sharp equivalent gate (docs/model.md, "Gate switches").
@@ -260,6 +264,7 @@ class Solver:
     newton_max_iter: int = 8
     newton_tol: float = 0.03
     switch_tol: float = 1.0
+    predict_switches: bool = True
     sliding_width: float = 1e-3
     steps_per_launch: int = 500
     stall_factor: float = 10.0
@@ -300,6 +305,8 @@ class Solver:
         need(isinstance(self.switch_tol, (int, float, np.integer, np.floating)) and not isinstance(self.switch_tol, bool)
              and self.switch_tol > 0 and not math.isnan(self.switch_tol), "switch_tol", self.switch_tol,
              "a number > 0 (inf allowed)")
+        need(isinstance(self.predict_switches, (bool, np.bool_)), "predict_switches", self.predict_switches,
+             "True or False")
         need(is_real(self.sliding_width) and 0 < self.sliding_width <= 0.1, "sliding_width", self.sliding_width,
              "a number in (0, 0.1]")
         need(is_int(self.steps_per_launch) and self.steps_per_launch >= 1, "steps_per_launch",
