@@ -20,7 +20,7 @@ step_max_factor, failure_factor).
 import warp as wp
 
 from .model_terms import next_breakpoint
-from .types import STATUS_MAX_STEPS, STATUS_NON_FINITE, STATUS_STEP_UNDERFLOW, IntegratorState, MemberParams, SolverSettings
+from .types import STATUS_MAX_STEPS, STATUS_NON_FINITE, STATUS_STALLED, STATUS_STEP_UNDERFLOW, IntegratorState, MemberParams, SolverSettings
 
 # the local error of the order-2 solution is O(h^3): h_next ~ err^(-1/3). The exponent is -1/3
 # rounded to float32 (-0.3333333432674408): the kernel has used that value since session 1 (Warp
@@ -106,5 +106,15 @@ def out_of_steps(st: IntegratorState, settings: SolverSettings):
     """Stop the member (status max_steps_reached) once its attempted steps reach max_steps."""
     if st.steps_accepted + st.steps_rejected >= settings.max_steps:
         st.status = STATUS_MAX_STEPS
+        st.done = 1
+    return st
+
+
+@wp.func
+def stalled(st: IntegratorState, attempt_limit: int):
+    """Stop the member (status stalled) once its attempted steps exceed attempt_limit: the straggler
+    limit that the host derives from its peers (warpfric.engine.straggler_limit; 2**31 - 1: none)."""
+    if st.steps_accepted + st.steps_rejected > attempt_limit:
+        st.status = STATUS_STALLED
         st.done = 1
     return st

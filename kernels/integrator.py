@@ -13,7 +13,7 @@ import os
 
 import warp as wp
 
-from .controller import accepted_step_size, out_of_steps, propose_step, reject, step_factor
+from .controller import accepted_step_size, out_of_steps, propose_step, reject, stalled, step_factor
 from .esdirk import make_esdirk
 from .gates import make_gates
 from .model_terms import disc_velocity_at, make_model_terms
@@ -82,6 +82,7 @@ def _make_integrator(dtype: str, model, lanes: int, registers=None):
         settings: SolverSettings,
         outputs: OutputSettings,
         launch_steps: int,
+        stall_limit: wp.array(dtype=wp.int32),
         record_times: wp.array(dtype=wp.float64),
         # state, read and written (persists between launches)
         member_states: wp.array(dtype=IntegratorState),
@@ -96,7 +97,8 @@ def _make_integrator(dtype: str, model, lanes: int, registers=None):
         yield_time: wp.array2d(dtype=wp.float64),
         record: array4,
     ):
-        """Advance each member by at most ``launch_steps`` attempted steps (or to its end).
+        """Advance each member by at most ``launch_steps`` attempted steps (or to its end, or until its
+        attempts exceed stall_limit[0]).
         Shapes and units: kernels/types.py. A team: every lane keeps the same IntegratorState; lane
         0 stores it."""
         lane = int(0)
@@ -117,11 +119,13 @@ def _make_integrator(dtype: str, model, lanes: int, registers=None):
             c.end_node = end_node
         delta0 = ft(st.delta0)
         tilt = ft(st.tilt)
+        attempt_limit = stall_limit[0]
         for _attempt in range(launch_steps):
             if run_finished(p, st, outputs):
                 st.done = 1
                 break
             st = out_of_steps(st, settings)
+            st = stalled(st, attempt_limit)
             if st.done != 0:
                 break
             t = st.t

@@ -157,24 +157,24 @@ def record_slots(record: Record | None, n_members: int) -> np.ndarray:
     return slots
 
 
-def flag_stragglers(st: np.ndarray, solver: Solver, stalled: int) -> bool:
-    """Stop the members that need far more steps than their peers (in place; True if any).
+# no straggler limit (the kernel's int32 attempt counter never exceeds it)
+NO_STALL_LIMIT = 2**31 - 1
 
-    Once at least half of the members have ended ok, a running member whose attempted steps exceed
-    max(stall_min_steps, stall_factor * the median of theirs) gets status ``stalled``: one member
-    can then cost a launch at most about stall_factor times a typical member. A lone member (no
-    peers) is bounded by max_steps only."""
+
+def straggler_limit(st: np.ndarray, solver: Solver) -> int:
+    """The attempted steps after which a running member is stopped as a straggler (status
+    ``stalled``; the integrate kernel applies it), from a snapshot of the member states.
+
+    Once at least half of the members have ended ok, the limit is max(stall_min_steps,
+    stall_factor * the median of their attempted steps): one member can then cost a launch at most
+    about stall_factor times a typical member. Before that, and for a lone member (no peers), there
+    is none (NO_STALL_LIMIT; max_steps still bounds every member)."""
     finished = (st["done"] != 0) & (st["status"] == 0)
-    if finished.sum() * 2 < st.shape[0] or not finished.any():
-        return False
+    if finished.sum() * 2 < st.shape[0] or not finished.any() or not np.isfinite(solver.stall_factor):
+        return NO_STALL_LIMIT
     attempts = st["steps_accepted"].astype(np.int64) + st["steps_rejected"]
     limit = max(solver.stall_min_steps, solver.stall_factor * float(np.median(attempts[finished])))
-    late = (st["done"] == 0) & (attempts > limit)
-    if not late.any():
-        return False
-    st["status"][late] = stalled
-    st["done"][late] = 1
-    return True
+    return int(min(limit, NO_STALL_LIMIT))
 
 
 def real_event(front_max, front_last, values, fronts: Fronts) -> np.ndarray:
@@ -183,6 +183,37 @@ def real_event(front_max, front_last, values, fronts: Fronts) -> np.ndarray:
     never moves: round-off of 1e-22 m/s) there is no front, and every front output is NaN."""
     floor = fronts.min_event_fraction * np.abs(values["disc_velocity"])
     return (front_max > 0) & (front_max >= floor) & np.isfinite(front_last)
+
+
+class StateSnapshots:
+    """Read-back of the member states that does not stall the launch queue: ``take`` queues a copy
+    into one of two host buffers (pinned on a CUDA device) behind the launches queued so far and
+    returns a ticket; ``wait`` blocks until that copy has landed and returns the states (numpy)."""
+
+    def __init__(self, n_members: int, device):
+        import warp as wp
+
+        from warpfric.kernels.types import IntegratorState
+
+        self.cuda = wp.get_device(device).is_cuda
+        self.buffers = [wp.empty(n_members, dtype=IntegratorState, device="cpu", pinned=self.cuda) for _ in range(2)]
+        self.next = 0
+
+    def take(self, member_states):
+        import warp as wp
+
+        buffer = self.buffers[self.next]
+        self.next ^= 1
+        wp.copy(buffer, member_states)
+        return buffer, (wp.record_event() if self.cuda else None)
+
+    def wait(self, ticket) -> np.ndarray:
+        import warp as wp
+
+        buffer, event = ticket
+        if event is not None:
+            wp.synchronize_event(event)
+        return buffer.numpy().copy()
 
 
 class Progress:
@@ -220,7 +251,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     import warp as wp
 
     from warpfric.kernels.integrator import get_integrator
-    from warpfric.kernels.types import C_PHI, STATUS_MEANINGS, IntegratorState, allocate, member_array
+    from warpfric.kernels.types import C_PHI, IntegratorState, allocate, member_array
 
     n_members = values["normal_force"].shape[0]
     n = solver.nodes
@@ -254,6 +285,16 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         n_bytes = sum(a.capacity for a in per_member) + n_members * np.dtype(IntegratorState.numpy_dtype()).itemsize
         device_bytes_per_member = n_bytes / n_members
         front_max = front_last = event = None
+        stall_limit = wp.full(1, NO_STALL_LIMIT, dtype=wp.int32)  # attempts after which a member stalls
+        snapshot = StateSnapshots(n_members, device)
+
+        def launch_integrate(inputs, outputs_):
+            if team:
+                with cpu_blocks(True):
+                    wp.launch_tiled(kern["integrate"], dim=[n_members], inputs=inputs, outputs=outputs_, block_dim=lanes)
+            else:
+                wp.launch(kern["integrate"], dim=n_members, inputs=inputs, outputs=outputs_)
+
         end = params_np["end_time"]
         for pass_index in range(n_passes):
             states_np = initial_states(n_members, solver, slots if pass_index == 0 else np.full(n_members, -1, np.int32))
@@ -272,23 +313,32 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             arrays.yield_time.fill_(np.nan)
             pass_label = " ".join(p for p in (label, f"pass {pass_index + 1}/{n_passes}" if n_passes > 1 else "") if p)
             bar = Progress(show_progress, n_members, pass_label)
+            stall_limit.fill_(NO_STALL_LIMIT)
+            last_limit = NO_STALL_LIMIT
+            inputs = [arrays.params, settings, outputs, solver.steps_per_launch, stall_limit, arrays.record_times,
+                      member_states, arrays.state, arrays.stages, arrays.work, arrays.gates, arrays.record_previous]
+            outputs_ = [arrays.arrival, arrays.arrival_error, arrays.yield_time, arrays.record]
+            # the launches are queued one ahead of the host: while chunk k + 1 runs, the host reads the
+            # member states after chunk k (an asynchronous copy into pinned memory), updates the
+            # progress line and the straggler limit (which chunk k + 2 applies) and stops once every
+            # member was done after chunk k (chunk k + 1 then returned at once for every member)
+            launch_integrate(inputs, outputs_)
+            pending = snapshot.take(member_states)
             while True:
-                inputs = [arrays.params, settings, outputs, solver.steps_per_launch, arrays.record_times,
-                          member_states, arrays.state, arrays.stages, arrays.work, arrays.gates, arrays.record_previous]
-                outputs_ = [arrays.arrival, arrays.arrival_error, arrays.yield_time, arrays.record]
-                if team:
-                    with cpu_blocks(True):
-                        wp.launch_tiled(kern["integrate"], dim=[n_members], inputs=inputs, outputs=outputs_,
-                                        block_dim=lanes)
-                else:
-                    wp.launch(kern["integrate"], dim=n_members, inputs=inputs, outputs=outputs_)
-                st_now = member_states.numpy()
-                if pass_index == 0 and flag_stragglers(st_now, solver, STATUS_MEANINGS.index("stalled")):
-                    member_states = wp.array(st_now, dtype=IntegratorState)
+                launch_integrate(inputs, outputs_)
+                st_now = snapshot.wait(pending)
+                pending = snapshot.take(member_states)
+                if pass_index == 0:
+                    limit = straggler_limit(st_now, solver)
+                    if limit != last_limit:
+                        stall_limit.fill_(limit)
+                        last_limit = limit
                 n_done = int(st_now["done"].sum())
                 bar.update(n_done, float(np.mean(np.minimum(st_now["t"] / end, 1.0))))
                 if n_done == n_members:
                     break
+            snapshot.wait(pending)
+            st_now = member_states.numpy()
             bar.update(n_done, 1.0, final=True)
             if pass_index == 0:
                 st = st_now
