@@ -11,7 +11,7 @@ step_max_factor, failure_factor).
   rejected step (kernels/gates.py).
 - After a step with error norm err (1 = the tolerance): h_next = h * clamp(safety * err^(-1/3),
   min_factor, max_factor) (elementary controller, local error O(h^3) of the order-2 solution);
-  max_factor when err = 0. A step clipped at a breakpoint does not shrink the size for the next
+  max_factor when err = 0. ESDIRK4 (Solver.method): err^(-1/4), its estimate being O(h^4). A step clipped at a breakpoint does not shrink the size for the next
   one. A rejected step shrinks by at least the safety factor; a failed Newton solve by
   failure_factor. Below min_step the member stops (step_size_underflow, or non_finite_state when
   the failure was a non-finite state).
@@ -27,6 +27,8 @@ from .types import STATUS_MAX_STEPS, STATUS_NON_FINITE, STATUS_STALLED, STATUS_S
 # folded the literal division -1.0/3.0 in float32); kept so that outputs stay equal (it changes a
 # step size by at most ~3e-8 relative, far inside the controller's own slack)
 ERROR_EXPONENT = -0.3333333432674408
+# ESDIRK4 (Solver.method = 'esdirk4'): the embedded order-3 estimate is O(h^4): h_next ~ err^(-1/4)
+ERROR_EXPONENT_ESDIRK4 = -0.25
 # clipping codes of a proposed step
 STEP_FREE, STEP_AT_BREAKPOINT, STEP_AT_SWITCH = 0, 1, 2
 
@@ -68,14 +70,32 @@ def propose_step(p: MemberParams, st: IntegratorState, settings: SolverSettings,
 
 
 @wp.func
-def step_factor(error: wp.float64, settings: SolverSettings):
-    """Size factor for the next step after an error norm ``error`` (1 = at the tolerance)."""
+def size_factor(error: wp.float64, settings: SolverSettings, exponent: wp.float64):
+    """Size factor for the next step after an error norm ``error`` (1 = at the tolerance), for a local
+    error estimate O(h^q): h_next = h * clamp(safety * error^exponent), exponent = -1/q."""
     if error > wp.float64(0.0):
         return wp.min(
             settings.step_max_factor,
-            wp.max(settings.step_min_factor, settings.step_safety * wp.pow(error, wp.float64(ERROR_EXPONENT))),
+            wp.max(settings.step_min_factor, settings.step_safety * wp.pow(error, exponent)),
         )
     return settings.step_max_factor
+
+
+@wp.func
+def step_factor(error: wp.float64, settings: SolverSettings):
+    """size_factor for TR-BDF2 (local error estimate O(h^3))."""
+    return size_factor(error, settings, wp.float64(ERROR_EXPONENT))
+
+
+@wp.func
+def step_factor_esdirk4(error: wp.float64, settings: SolverSettings):
+    """size_factor for ESDIRK4 (local error estimate O(h^4): exponent -1/4)."""
+    return size_factor(error, settings, wp.float64(ERROR_EXPONENT_ESDIRK4))
+
+
+def step_factor_for(method: str):
+    """The controller's step_factor function of an integrator method."""
+    return step_factor_esdirk4 if method == "esdirk4" else step_factor
 
 
 @wp.func

@@ -36,6 +36,47 @@ EXTRAPOLATE_STAGE3 = 1.0 / C2  # linear extrapolation of V from t_n and t_n + c2
 ORDER = 2  # of the solution; the error estimate is O(h^3)
 
 
+# ESDIRK4(3)6L[2]SA (Kennedy & Carpenter 2016, NASA/TM-2016-219173; the coefficients as in SUNDIALS
+# ARKODE_ESDIRK436L2SA_6_3_4; studies/esdirk_order.py): 6 stages, the first explicit (FSAL), gamma =
+# 1/4, L-stable, stiffly accurate, order 4, embedded order 3 (estimate O(h^4)), stage order 2;
+# c5 = 26/25 > 1 (kernels/model_terms.py disc_velocity_piece)
+_SQ2 = math.sqrt(2.0)
+E4_GAMMA = 0.25
+E4_C = (0.0, 0.5, (2.0 - _SQ2) / 4.0, 5.0 / 8.0, 26.0 / 25.0, 1.0)
+E4_B = ((1181.0 - 987.0 * _SQ2) / 13782.0, (1181.0 - 987.0 * _SQ2) / 13782.0, 47.0 * (-267.0 + 1783.0 * _SQ2) / 273343.0,
+        -16.0 * (-22922.0 + 3525.0 * _SQ2) / 571953.0, -15625.0 * (97.0 + 376.0 * _SQ2) / 90749876.0, 0.25)
+E4_B_HAT = (-480923228411.0 / 4982971448372.0, -480923228411.0 / 4982971448372.0, 6709447293961.0 / 12833189095359.0,
+            3513175791894.0 / 6748737351361.0, -498863281070.0 / 6042575550617.0, 2077005547802.0 / 8945017530137.0)
+
+
+def _e4_matrix():
+    a = [[0.0] * 6 for _ in range(6)]
+    for i in range(1, 6):
+        a[i][i] = E4_GAMMA
+    a[2][1] = (1.0 - _SQ2) / 8.0
+    a[3][1] = (5.0 - 7.0 * _SQ2) / 64.0
+    a[3][2] = 7.0 * (1.0 + _SQ2) / 32.0
+    a[4][1] = -(13796.0 + 54539.0 * _SQ2) / 125000.0
+    a[4][2] = (506605.0 + 132109.0 * _SQ2) / 437500.0
+    a[4][3] = 166.0 * (-97.0 + 376.0 * _SQ2) / 109375.0
+    a[5] = list(E4_B)
+    for i in range(1, 5):
+        a[i][0] = E4_C[i] - sum(a[i][1:])
+    return a
+
+
+E4_A = _e4_matrix()
+E4_ERR = tuple(b - bh for b, bh in zip(E4_B, E4_B_HAT))
+E4_STAGES = 6
+E4_ORDER = 4  # of the solution; the error estimate is O(h^4)
+# flat names for the kernels (Warp reads module constants by name)
+(E4_A10, E4_A20, E4_A21, E4_A30, E4_A31, E4_A32, E4_A40, E4_A41, E4_A42, E4_A43,
+ E4_B0, E4_B1, E4_B2, E4_B3, E4_B4, E4_B5) = (E4_A[1][0], E4_A[2][0], E4_A[2][1], E4_A[3][0], E4_A[3][1], E4_A[3][2],
+                                              E4_A[4][0], E4_A[4][1], E4_A[4][2], E4_A[4][3], *E4_B)
+E4_D0, E4_D1, E4_D2, E4_D3, E4_D4, E4_D5 = E4_ERR
+E4_C1, E4_C2, E4_C3, E4_C4 = E4_C[1:5]
+
+
 def make_tableau(ft):
     """The tableau's scalar operations for type ``ft``."""
 
@@ -62,7 +103,7 @@ def make_tableau(ft):
     return dict(stage_constant=stage_constant, solution_increment=solution_increment, error_increment=error_increment)
 
 
-def make_esdirk(ft, model, terms, newton, gates, team):
+def make_esdirk(ft, model, terms, newton, gates, team, method="tr_bdf2"):
     inertia = bool(model.inertia)
     team_max = team["team_max"]
     barrier = team["barrier"]
@@ -112,6 +153,26 @@ def make_esdirk(ft, model, terms, newton, gates, team):
         barrier()
 
     @wp.func
+    def fold_error(c: Coeffs, work: array3, comp: int, i: int, m: int, e: ft, y: ft, y_new: ft, g: ft, rtol: ft, err: ft):
+        """Fold the local error estimate e of component comp at node i (from y to y_new; g = gamma*h)
+        into the running maximum err of |e| / (rtol*(scale + max(|y|, |y_new|))), scale the
+        component's natural scale; the velocity's e filtered by min(1, |rho H / (g * diag)|); 1e30
+        where e is not finite."""
+        scale = c.u_scale
+        if comp == C_V:
+            scale = c.v_scale
+            e = e * wp.min(ft(1.0), wp.abs(c.rhoH / (g * work[W_DIAG, i, m])))
+        if comp == C_TAU:
+            scale = c.tau_scale
+        if comp == C_PHI:
+            scale = c.phi_scale
+        wgt = rtol * (scale + wp.max(wp.abs(y), wp.abs(y_new)))
+        err = wp.max(err, wp.abs(e) / wgt)
+        if not wp.isfinite(e):
+            err = ft(1.0e30)
+        return err
+
+    @wp.func
     def error_norm(
         c: Coeffs, s: SolverSettings, m: int, n: int, state: array3, K: array4, work: array3,
         s1: int, s2: int, s3: int, h: ft,
@@ -126,28 +187,13 @@ def make_esdirk(ft, model, terms, newton, gates, team):
         err = ft(0.0)
         for i in range(c.first_node, c.end_node):
             for comp in range(N_COMPONENTS):
-                use = True
-                scale = c.u_scale
-                if comp == C_V:
-                    scale = c.v_scale
-                    use = wp.static(inertia)
-                if comp == C_TAU:
-                    scale = c.tau_scale
-                if comp == C_PHI:
-                    scale = c.phi_scale
-                if use:
+                if comp != C_V or wp.static(inertia):
                     k1 = K[s1, comp, i, m]
                     k2 = K[s2, comp, i, m]
                     k3 = K[s3, comp, i, m]
                     y = state[comp, i, m]
                     y_new = y + solution_increment(h, k1, k2, k3)
-                    e = error_increment(h, k1, k2, k3)
-                    if comp == C_V:
-                        e = e * wp.min(ft(1.0), wp.abs(c.rhoH / (g * work[W_DIAG, i, m])))
-                    wgt = rtol * (scale + wp.max(wp.abs(y), wp.abs(y_new)))
-                    err = wp.max(err, wp.abs(e) / wgt)
-                    if not wp.isfinite(e):
-                        err = ft(1.0e30)
+                    err = fold_error(c, work, comp, i, m, error_increment(h, k1, k2, k3), y, y_new, g, rtol, err)
         return team_max(err)
 
     @wp.func
@@ -221,5 +267,140 @@ def make_esdirk(ft, model, terms, newton, gates, team):
         res.tilt = a
         return res
 
-    return dict(StepResult=StepResult, prepare_stage=prepare_stage, error_norm=error_norm, advance_state=advance_state,
-                backward_euler_step=backward_euler_step, tr_bdf2_step=tr_bdf2_step, **tableau)
+    out = dict(StepResult=StepResult, prepare_stage=prepare_stage, error_norm=error_norm, advance_state=advance_state,
+               backward_euler_step=backward_euler_step, tr_bdf2_step=tr_bdf2_step, **tableau)
+    if method == "esdirk4":
+        out.update(make_esdirk4(ft, model, terms, newton, gates, team, StepResult, fold_error))
+    return out
+
+
+def make_esdirk4(ft, model, terms, newton, gates, team, StepResult, fold_error):
+    """ESDIRK4(3)6L[2]SA's step (Solver.method = 'esdirk4'): the stages in six slots of K, the slot
+    of stage j being (s1 + j) % 6 (s1 = FSAL slot: f(y_n)); the last stage's slot becomes the next
+    step's s1."""
+    inertia = bool(model.inertia)
+    team_max = team["team_max"]
+    barrier = team["barrier"]
+    Coeffs = terms["Coeffs"]
+    newton_solve = newton["newton_solve"]
+    stage_derivatives = newton["stage_derivatives"]
+    array3 = wp.array3d(dtype=ft)
+    array4 = wp.array4d(dtype=ft)
+    vec6 = wp.types.vector(length=6, dtype=ft)
+
+    @wp.func
+    def e4_row(i: int):
+        """Row i (1..5) of A, the explicit part (columns 0..i-1; 0 beyond)."""
+        if i == 1:
+            return vec6(ft(E4_A10), ft(0.0), ft(0.0), ft(0.0), ft(0.0), ft(0.0))
+        if i == 2:
+            return vec6(ft(E4_A20), ft(E4_A21), ft(0.0), ft(0.0), ft(0.0), ft(0.0))
+        if i == 3:
+            return vec6(ft(E4_A30), ft(E4_A31), ft(E4_A32), ft(0.0), ft(0.0), ft(0.0))
+        if i == 4:
+            return vec6(ft(E4_A40), ft(E4_A41), ft(E4_A42), ft(E4_A43), ft(0.0), ft(0.0))
+        return vec6(ft(E4_B0), ft(E4_B1), ft(E4_B2), ft(E4_B3), ft(E4_B4), ft(0.0))
+
+    @wp.func
+    def e4_abscissa(i: int):
+        """c_i of stages 1..4 (stage 5 ends the step: t_new itself)."""
+        if i == 1:
+            return wp.float64(E4_C1)
+        if i == 2:
+            return wp.float64(E4_C2)
+        if i == 3:
+            return wp.float64(E4_C3)
+        return wp.float64(E4_C4)
+
+    @wp.func
+    def prepare_stage4(c: Coeffs, m: int, n: int, state: array3, K: array4, work: array3, h: ft, s1: int, i: int):
+        """Stage constants z = y_n + h*sum_{j<i} a_ij K_j into work[0..3]; Newton start for V: the
+        previous stage's velocity (Y0 = z + gamma*h*K_{i-1})."""
+        row = e4_row(i)
+        for node in range(c.first_node, c.end_node):
+            for comp in range(N_COMPONENTS):
+                z = state[comp, node, m]
+                for j in range(i):
+                    z += h * row[j] * K[(s1 + j) % 6, comp, node, m]
+                work[comp, node, m] = z
+            work[W_V, node, m] = K[(s1 + i - 1) % 6, C_U, node, m]
+        barrier()
+
+    @wp.func
+    def error_norm4(c: Coeffs, s: SolverSettings, m: int, n: int, state: array3, K: array4, work: array3, s1: int, h: ft):
+        """As error_norm (max norm, natural scales, the velocity's estimate filtered by the diagonal of
+        (I - gamma*h*J)^-1) with h*sum (b - b_hat) K over the six stages."""
+        g = ft(E4_GAMMA) * h
+        rtol = ft(s.rtol)
+        b = vec6(ft(E4_B0), ft(E4_B1), ft(E4_B2), ft(E4_B3), ft(E4_B4), ft(E4_B5))
+        d = vec6(ft(E4_D0), ft(E4_D1), ft(E4_D2), ft(E4_D3), ft(E4_D4), ft(E4_D5))
+        err = ft(0.0)
+        for i in range(c.first_node, c.end_node):
+            for comp in range(N_COMPONENTS):
+                if comp != C_V or wp.static(inertia):
+                    inc = ft(0.0)
+                    e = ft(0.0)
+                    for j in range(6):
+                        k = K[(s1 + j) % 6, comp, i, m]
+                        inc += b[j] * k
+                        e += d[j] * k
+                    y = state[comp, i, m]
+                    err = fold_error(c, work, comp, i, m, h * e, y, y + h * inc, g, rtol, err)
+        return team_max(err)
+
+    @wp.func
+    def advance_state4(c: Coeffs, m: int, n: int, state: array3, K: array4, s1: int, h: ft):
+        """y_{n+1} = y_n + h * sum_j b_j K_j; the velocity is the last stage's (stiffly accurate)."""
+        b = vec6(ft(E4_B0), ft(E4_B1), ft(E4_B2), ft(E4_B3), ft(E4_B4), ft(E4_B5))
+        for i in range(c.first_node, c.end_node):
+            for comp in range(N_COMPONENTS):
+                if comp == C_V:
+                    state[comp, i, m] = K[(s1 + 5) % 6, C_U, i, m]
+                else:
+                    inc = ft(0.0)
+                    for j in range(6):
+                        inc += b[j] * K[(s1 + j) % 6, comp, i, m]
+                    state[comp, i, m] = state[comp, i, m] + h * inc
+
+    @wp.func
+    def esdirk4_step(
+        c: Coeffs, p: MemberParams, settings: SolverSettings, m: int, n: int, state: array3, K: array4,
+        work: array3, gates: array3, s1: int, t: wp.float64, h: wp.float64, t_new: wp.float64, delta0: ft, tilt: ft,
+    ):
+        """One ESDIRK4 step of size h from t (ending at t_new): stages 1..5 (implicit, gamma = 1/4)
+        into K[(s1 + i) % 6], the gate-switch test at the end of the last one, and the error norm."""
+        res = StepResult()
+        res.error = wp.float64(0.0)
+        g = ft(wp.float64(E4_GAMMA) * h)
+        hf = ft(h)
+        d0 = delta0
+        a = tilt
+        ok = int(1)
+        bad = int(0)
+        iterations = int(0)
+        for i in range(1, 6):
+            t_stage = t_new
+            end = int(1)
+            if i < 5:
+                t_stage = t + e4_abscissa(i) * h
+                end = 0
+            prepare_stage4(c, m, n, state, K, work, hf, s1, i)
+            ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, gates, g, t_stage, t, d0, a)
+            iterations = iterations + iters
+            if ok != 1:
+                break
+            sums, test = stage_derivatives(c, p, settings, m, n, work, gates, K, (s1 + i) % 6, g, t_stage, t, d0, a, hf, end)
+            if end == 1:
+                res.sums = sums
+                res.switch_test = test
+        if ok == 1:
+            res.error = wp.float64(error_norm4(c, settings, m, n, state, K, work, s1, hf))
+        res.ok = ok
+        res.iterations = iterations
+        res.non_finite = bad
+        res.delta0 = d0
+        res.tilt = a
+        return res
+
+    return dict(esdirk4_step=esdirk4_step, advance_state4=advance_state4, error_norm4=error_norm4,
+                prepare_stage4=prepare_stage4)

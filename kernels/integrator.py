@@ -13,7 +13,7 @@ import os
 
 import warp as wp
 
-from .controller import accepted_step_size, out_of_steps, propose_step, reject, stalled, step_factor
+from .controller import accepted_step_size, out_of_steps, propose_step, reject, stalled, step_factor_for
 from .esdirk import make_esdirk
 from .gates import make_gates
 from .model_terms import disc_velocity_at, make_model_terms
@@ -33,33 +33,41 @@ def team_max_registers():
     return value if value > 0 else None
 
 
-def get_integrator(dtype: str, model, lanes: int = 1) -> dict:
-    """Compiled kernels for one working precision, one set of model switches and one team size
+def get_integrator(dtype: str, model, lanes: int = 1, method: str = "tr_bdf2") -> dict:
+    """Compiled kernels for one working precision, one set of model switches, one team size
     (lanes = 1: one thread per member; > 1: the cooperative kernel, launched with block_dim = lanes,
-    float64 only; kernels/team.py) (cached)."""
+    float64 only; kernels/team.py) and one time integrator (Solver.method: 'tr_bdf2', or 'esdirk4'
+    with lanes = 1) (cached)."""
+    if method not in ("tr_bdf2", "esdirk4"):
+        raise ValueError(f"integrator method {method!r} is invalid; valid: 'tr_bdf2' or 'esdirk4'")
+    if method != "tr_bdf2" and lanes > 1:
+        raise ValueError(f"integrator method {method!r} needs lanes = 1 (the cooperative kernel has TR-BDF2 only)")
     registers = team_max_registers() if lanes > 1 else None
-    key = (dtype, model, lanes, registers)
+    key = (dtype, model, lanes, registers, method)
     if key not in _CACHE:
-        _CACHE[key] = _make_integrator(dtype, model, lanes, registers)
+        _CACHE[key] = _make_integrator(dtype, model, lanes, registers, method)
     return _CACHE[key]
 
 
-def make_stages(ft, model, lanes: int = 1) -> dict:
-    """Every device function of the integrator for scalar type ``ft``, ``model`` and a team of
-    ``lanes`` threads per member, by stage."""
+def make_stages(ft, model, lanes: int = 1, method: str = "tr_bdf2") -> dict:
+    """Every device function of the integrator for scalar type ``ft``, ``model``, a team of
+    ``lanes`` threads per member and an integrator method, by stage."""
     team = make_team(ft, lanes)
     terms = make_model_terms(ft, model)
     gates = make_gates(ft, model, terms, team)
-    newton = make_newton(ft, model, terms, gates, team)
-    esdirk = make_esdirk(ft, model, terms, newton, gates, team)
-    observers = make_observers(ft, model, terms, team)
+    newton = make_newton(ft, model, terms, gates, team, method)
+    esdirk = make_esdirk(ft, model, terms, newton, gates, team, method)
+    observers = make_observers(ft, model, terms, team, method)
     return dict(team=team, terms=terms, gates=gates, newton=newton, esdirk=esdirk, observers=observers)
 
 
-def _make_integrator(dtype: str, model, lanes: int, registers=None):
+def _make_integrator(dtype: str, model, lanes: int, registers=None, method: str = "tr_bdf2"):
     ft = wp.float64 if dtype == "float64" else wp.float32
     team_on = lanes > 1
-    stages = make_stages(ft, model, lanes)
+    esdirk4 = method == "esdirk4"
+    n_slots = 6 if esdirk4 else 3
+    step_factor = step_factor_for(method)
+    stages = make_stages(ft, model, lanes, method)
     terms, gates, esdirk, observers = stages["terms"], stages["gates"], stages["esdirk"], stages["observers"]
     make_coeffs = terms["make_coeffs"]
     state_displacement = observers["state_displacement"]
@@ -67,6 +75,8 @@ def _make_integrator(dtype: str, model, lanes: int, registers=None):
     backward_euler_step = esdirk["backward_euler_step"]
     tr_bdf2_step = esdirk["tr_bdf2_step"]
     advance_state = esdirk["advance_state"]
+    esdirk4_step = esdirk.get("esdirk4_step", tr_bdf2_step)
+    advance_state4 = esdirk.get("advance_state4", advance_state)
     locate_switch = gates["locate_switch"]
     switch_gates = gates["switch_gates"]
     after_accept = gates["after_accept"]
@@ -131,12 +141,14 @@ def _make_integrator(dtype: str, model, lanes: int, registers=None):
             t = st.t
             step = propose_step(p, st, settings, t)
             s1 = st.fsal
-            s2 = (s1 + 1) % 3
-            s3 = (s1 + 2) % 3
+            s2 = (s1 + 1) % n_slots
+            s3 = (s1 + n_slots - 1) % n_slots  # the last stage's slot (TR-BDF2: s1 + 2; ESDIRK4: s1 + 5)
             restart = st.restart
             # ---- stepper ----
             if restart != 0:
                 res = backward_euler_step(c, p, settings, m, n, state, K, work, gates, s1, s3, t, step.h, step.t_new, delta0, tilt)
+            elif wp.static(esdirk4):
+                res = esdirk4_step(c, p, settings, m, n, state, K, work, gates, s1, t, step.h, step.t_new, delta0, tilt)
             else:
                 res = tr_bdf2_step(c, p, settings, m, n, state, K, work, gates, s1, s2, s3, t, step.h, step.t_new, delta0, tilt)
             st.newton_iterations = st.newton_iterations + res.iterations
@@ -158,7 +170,13 @@ def _make_integrator(dtype: str, model, lanes: int, registers=None):
                     break
                 continue
             # ---- accepted: advance, gates, observers ----
-            advance_state(c, m, n, state, K, s1, s2, s3, ft(step.h), restart)
+            if wp.static(esdirk4):
+                if restart != 0:
+                    advance_state(c, m, n, state, K, s1, s2, s3, ft(step.h), restart)
+                else:
+                    advance_state4(c, m, n, state, K, s1, ft(step.h))
+            else:
+                advance_state(c, m, n, state, K, s1, s2, s3, ft(step.h), restart)
             if wp.static(stress_gate):
                 switches_before = st.gate_switches
                 st = switch_gates(c, p, st, m, n, state, K, s3, gates, work, t, step.t_new, yield_time)

@@ -77,6 +77,43 @@ def next_breakpoint(p: MemberParams, t: wp.float64):
     return bp
 
 
+@wp.func
+def normal_force_in_step(p: MemberParams, t: wp.float64, step_start: wp.float64):
+    """normal_force_at(p, t) for a stage time t inside the step from step_start."""
+    return normal_force_at(p, t)
+
+
+@wp.func
+def disc_velocity_piece(p: MemberParams, t: wp.float64, step_start: wp.float64):
+    """disc_velocity_at for a stage of the step from step_start, past the protocol breakpoint that
+    ends the step too (ESDIRK4's stage at c = 26/25 > 1): the smooth continuation of the piece the
+    step lies in, not the next piece."""
+    bp = next_breakpoint(p, step_start)
+    if t <= bp:
+        return disc_velocity_at(p, t, step_start)
+    if step_start >= p.stop_time:
+        return wp.float64(0.0)
+    tm = wp.float64(0.5) * (step_start + bp)
+    if tm <= p.rest_until:
+        return wp.float64(0.0)
+    if tm < p.rest_until + p.velocity_ramp_time:
+        return p.disc_velocity * (t - p.rest_until) / p.velocity_ramp_time
+    return p.disc_velocity
+
+
+@wp.func
+def normal_force_piece(p: MemberParams, t: wp.float64, step_start: wp.float64):
+    """normal_force_at continued smoothly past the breakpoint that ends the step (see
+    disc_velocity_piece)."""
+    bp = next_breakpoint(p, step_start)
+    if t <= bp:
+        return normal_force_at(p, t)
+    tm = wp.float64(0.5) * (step_start + bp)
+    if tm >= p.force_ramp_time:
+        return p.normal_force
+    return p.normal_force * t / p.force_ramp_time
+
+
 def make_model_terms(ft, model):
     """Warp functions of the model for scalar type ``ft`` and switches ``model`` (a Model)."""
     poisson = bool(model.poisson_coupling)

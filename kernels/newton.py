@@ -22,7 +22,7 @@ converged stage.
 
 import warp as wp
 
-from .model_terms import disc_velocity_at, normal_force_at
+from .model_terms import disc_velocity_at, disc_velocity_piece, normal_force_in_step, normal_force_piece
 from .team import vec3d, vec5d, vec6d, vec12d
 from .types import (
     C_PHI,
@@ -298,7 +298,12 @@ def make_team_solver(ft, team):
     return dict(LaneRows=LaneRows, start_rows=start_rows, lane_row=lane_row, team_solve=team_solve)
 
 
-def make_newton(ft, model, terms, gates, team):
+def make_newton(ft, model, terms, gates, team, method="tr_bdf2"):
+    # the load at a stage time: ESDIRK4 has a stage past the step's end (c = 26/25), evaluated on the
+    # smooth continuation of the step's protocol piece; TR-BDF2's stages lie inside the step
+    continued = method != "tr_bdf2"
+    disc_velocity_stage = disc_velocity_piece if continued else disc_velocity_at
+    normal_force_stage = normal_force_piece if continued else normal_force_in_step
     inertia = bool(model.inertia)
     tilt_on = bool(model.tilt)
     Coeffs = terms["Coeffs"]
@@ -353,8 +358,8 @@ def make_newton(ft, model, terms, gates, team):
         """Solve one implicit stage (stage constants z in work[W_ZU..W_ZP], start V in work[W_V], the
         stage coefficient g = gamma*h). Returns (converged, delta0, tilt, iterations, non_finite);
         the solved V is left in work[W_V]."""
-        v_disc = ft(disc_velocity_at(p, t_stage, t_step))
-        force = normal_force_at(p, t_stage)
+        v_disc = ft(disc_velocity_stage(p, t_stage, t_step))
+        force = normal_force_stage(p, t_stage, t_step)
         force_per_depth = ft(force / p.depth)
         moment_per_depth = ft(force * p.eccentricity * wp.float64(0.5) * p.length / p.depth)
         rtol = ft(settings.rtol)
@@ -521,7 +526,7 @@ def make_newton(ft, model, terms, gates, team):
         of a step (end_of_step = 1: the last stage of a step of size h), the gate-switch test of the
         step (kernels/gates.py; the stress gate only), and stores each node's contact and gate for
         the fronts and the gate update."""
-        v_disc = ft(disc_velocity_at(p, t_stage, t_step))
+        v_disc = ft(disc_velocity_stage(p, t_stage, t_step))
         sums = StageSums()
         sums.friction = wp.float64(0.0)
         sums.normal = wp.float64(0.0)

@@ -14,7 +14,13 @@ import warp as wp
 
 from .esdirk import C2
 from .model_terms import disc_travel_at, disc_velocity_at, normal_force_at
-from .reductions import crossing_time, crossing_time_quadratic, detachment_velocity, record_friction_point
+from .reductions import (
+    crossing_time,
+    crossing_time_quadratic,
+    detachment_velocity,
+    record_friction_point,
+    record_friction_point_cubic,
+)
 from .types import C_PHI, C_TAU, C_U, C_V, W_CONTACT, IntegratorState, MemberParams, OutputSettings
 
 # automatic end (end_time None, docs/model.md "End of a run"): mu has fallen this fraction below its
@@ -30,10 +36,11 @@ AUTO_END_MIN_TRAVEL = 0.5
 
 @wp.func
 def friction_point(st: IntegratorState, p: MemberParams, t_new: wp.float64, friction: wp.float64,
-                   normal: wp.float64, min_normal: wp.float64):
+                   normal: wp.float64, min_normal: wp.float64, cubic: int):
     """Count the accepted point at t_new: mu = sign(v_d) * int tau_f dx / int sigma_n^+ dx into the
-    running maximum (reductions.record_friction_point), lift-off (sigma_n < 0 somewhere while loaded),
-    and a restart when the step ended on the sudden stop."""
+    running maximum (reductions.record_friction_point, refined by a parabola; with cubic = 1
+    record_friction_point_cubic, by a cubic: ESDIRK4), lift-off (sigma_n < 0 somewhere while
+    loaded), and a restart when the step ended on the sudden stop."""
     st.t = t_new
     st.steps_accepted = st.steps_accepted + 1
     sign_v = wp.float64(1.0)
@@ -42,7 +49,10 @@ def friction_point(st: IntegratorState, p: MemberParams, t_new: wp.float64, fric
     mu = wp.float64(0.0)
     if normal > wp.float64(0.0):
         mu = sign_v * friction / normal
-    st = record_friction_point(st, t_new, mu)
+    if cubic == 1:
+        st = record_friction_point_cubic(st, t_new, mu)
+    else:
+        st = record_friction_point(st, t_new, mu)
     if min_normal < wp.float64(0.0) and normal_force_at(p, t_new) > wp.float64(0.0):
         st.lift_off = 1
     if t_new == p.stop_time:
@@ -78,7 +88,10 @@ def run_finished(p: MemberParams, st: IntegratorState, outputs: OutputSettings):
     return False
 
 
-def make_observers(ft, model, terms, team):
+def make_observers(ft, model, terms, team, method="tr_bdf2"):
+    # mu_s: TR-BDF2 refines the maximum by a parabola through three accepted points, ESDIRK4 by a
+    # cubic through four (its longer steps)
+    cubic = 1 if method == "esdirk4" else 0
     Coeffs = terms["Coeffs"]
     team_max = team["team_max"]
     barrier = team["barrier"]
@@ -211,7 +224,7 @@ def make_observers(ft, model, terms, team):
             st = record_fields(c, p, st, m, n, state, t_old, t_new, delta0, tilt, record_times, record_previous, record)
         if backward_euler == 1:
             st.npts = 0
-        return friction_point(st, p, t_new, friction, normal, min_normal)
+        return friction_point(st, p, t_new, friction, normal, min_normal, cubic)
 
     return dict(on_accept=on_accept, track_fronts=track_fronts, record_fields=record_fields,
                 state_displacement=state_displacement, state_contact=state_contact)

@@ -29,6 +29,14 @@ def record_friction_point(st: IntegratorState, t: wp.float64, mu: wp.float64):
                 if mu_peak > st.mu_s:
                     st.mu_s = mu_peak
                     st.mu_s_time = t_peak
+    return shift_friction_points(st, t, mu)
+
+
+@wp.func
+def shift_friction_points(st: IntegratorState, t: wp.float64, mu: wp.float64):
+    """The accepted point (t, mu) becomes the newest of the stored points (t1, t2, t3 shift back)."""
+    st.t3 = st.t2
+    st.mu3 = st.mu2
     st.t2 = st.t1
     st.mu2 = st.mu1
     st.t1 = t
@@ -36,6 +44,65 @@ def record_friction_point(st: IntegratorState, t: wp.float64, mu: wp.float64):
     st.mu_final = mu
     st.npts = st.npts + 1
     return st
+
+
+@wp.func
+def record_friction_point_cubic(st: IntegratorState, t: wp.float64, mu: wp.float64):
+    """record_friction_point with a cubic instead of the parabola (ESDIRK4, Solver.method =
+    'esdirk4': its long steps make the parabola's O(h^3) error the largest in mu_s): when the last
+    point t1 is a discrete maximum (mu1 >= mu2, mu1 >= mu), the maximum of the cubic through the
+    last four accepted points (t3, t2, t1, t) on [t2, t]; the parabola while fewer than four."""
+    if st.npts < 3:
+        return record_friction_point(st, t, mu)
+    if mu > st.mu_s:
+        st.mu_s = mu
+        st.mu_s_time = t
+    if st.mu1 >= st.mu2 and st.mu1 >= mu and t > st.t1 and st.t1 > st.t2 and st.t2 > st.t3:
+        # Newton form on s = time - t1 with the nodes s0 = t3 - t1, s1 = t2 - t1, 0, s3 = t - t1
+        s0 = st.t3 - st.t1
+        s1 = st.t2 - st.t1
+        s3 = t - st.t1
+        f01 = (st.mu2 - st.mu3) / (s1 - s0)
+        f12 = (st.mu1 - st.mu2) / (wp.float64(0.0) - s1)
+        f23 = (mu - st.mu1) / s3
+        f012 = (f12 - f01) / (wp.float64(0.0) - s0)
+        f123 = (f23 - f12) / (s3 - s1)
+        f0123 = (f123 - f012) / (s3 - s0)
+        # power form around t1: p(s) = mu1 + a1 s + a2 s^2 + a3 s^3
+        a1 = f01 - f012 * (s0 + s1) + f0123 * s0 * s1
+        a2 = f012 - f0123 * (s0 + s1)
+        a3 = f0123
+        # p'(s) = a1 + 2 a2 s + 3 a3 s^2 = 0, a root in [s1, s3] with p'' < 0
+        best = st.mu_s
+        best_s = wp.float64(0.0)
+        found = int(0)
+        qa = wp.float64(3.0) * a3
+        qb = wp.float64(2.0) * a2
+        disc = qb * qb - wp.float64(4.0) * qa * a1
+        if disc >= wp.float64(0.0):
+            sq = wp.sqrt(disc)
+            qq = wp.float64(-0.5) * (qb + wp.sign(qb) * sq)
+            if qb == wp.float64(0.0):
+                qq = wp.float64(-0.5) * sq
+            for k in range(2):
+                root = wp.float64(0.0)
+                valid = False
+                if k == 0 and qa != wp.float64(0.0):
+                    root = qq / qa
+                    valid = True
+                if k == 1 and qq != wp.float64(0.0):
+                    root = a1 / qq
+                    valid = True
+                if valid and root >= s1 and root <= s3 and qb + wp.float64(2.0) * qa * root < wp.float64(0.0):
+                    val = st.mu1 + root * (a1 + root * (a2 + root * a3))
+                    if val > best:
+                        best = val
+                        best_s = root
+                        found = 1
+        if found == 1:
+            st.mu_s = best
+            st.mu_s_time = st.t1 + best_s
+    return shift_friction_points(st, t, mu)
 
 
 # ------------------------------------------------------------------------------------------------

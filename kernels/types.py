@@ -49,7 +49,13 @@ N_WORK = 18
 # (Pa) at the last accepted point, and the sliding flag (1: solved on the yield surface each stage)
 G_GATE, G_MARGIN, G_SLIDE = 0, 1, 2
 N_GATE = 3
-N_STAGE_SLOTS = 3
+N_STAGE_SLOTS = 3  # TR-BDF2 (3 stages); ESDIRK4 has 6 (stage_slots)
+STAGE_SLOTS = {"tr_bdf2": 3, "esdirk4": 6}
+
+
+def stage_slots(method: str) -> int:
+    """Slots of the stages array K for an integrator method (its number of stages, FSAL included)."""
+    return STAGE_SLOTS[method]
 
 # status codes of a member (netCDF flag_values / flag_meanings)
 STATUS_MAX_STEPS = 1
@@ -146,6 +152,8 @@ class IntegratorState:
     mu1: wp.float64
     t2: wp.float64
     mu2: wp.float64
+    t3: wp.float64  # the accepted point before (t2, mu2), for ESDIRK4's cubic refinement
+    mu3: wp.float64
     mu_final: wp.float64  # friction coefficient at the last accepted step
     npts: wp.int32
     steps_accepted: wp.int32
@@ -214,18 +222,18 @@ def member_zeros(shape, ft, member_major: bool):
 
 
 def allocate(ft, params_np: np.ndarray, n_nodes: int, stress_gate: bool, fronts: bool,
-             record_times, n_recorded: int, member_major: bool = False) -> DeviceArrays:
+             record_times, n_recorded: int, member_major: bool = False, method: str = "tr_bdf2") -> DeviceArrays:
     """Allocate the arrays of a launch on the current Warp device. ``params_np``: MemberParams as a
     numpy structured array (member,); arrays a scene does not need get a (.., 1, 1) placeholder;
     member_major: the state, stages, work and gates arrays hold each member contiguously
-    (:func:`member_array`)."""
+    (:func:`member_array`); method: the integrator, which sets the stage slots of K (:func:`stage_slots`)."""
     n_members = params_np.shape[0]
     times = np.asarray(record_times if n_recorded else [0.0], dtype=np.float64)
     per_node = (n_nodes, n_members)
     return DeviceArrays(
         params=wp.array(params_np, dtype=MemberParams),
         state=member_zeros((N_COMPONENTS, n_nodes, n_members), ft, member_major),
-        stages=member_zeros((N_STAGE_SLOTS, N_COMPONENTS, n_nodes, n_members), ft, member_major),
+        stages=member_zeros((stage_slots(method), N_COMPONENTS, n_nodes, n_members), ft, member_major),
         work=member_zeros((N_WORK, n_nodes, n_members), ft, member_major),
         gates=member_zeros((N_GATE, n_nodes, n_members), ft, member_major) if stress_gate
         else wp.zeros((N_GATE, 1, 1), dtype=ft),

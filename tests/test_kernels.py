@@ -391,12 +391,22 @@ def test_controller_on_scripted_inputs():
 
 @wp.kernel
 def _friction_points(params: wp.array(dtype=types.MemberParams), times: wp.array(dtype=f64),
-                     mu: wp.array(dtype=f64), states: wp.array(dtype=types.IntegratorState)):
+                     mu: wp.array(dtype=f64), cubic: int, states: wp.array(dtype=types.IntegratorState)):
     st = states[0]
     for k in range(times.shape[0]):
         # int tau dx = mu, int sigma dx = 1: the coefficient is mu
-        st = friction_point(st, params[0], times[k], mu[k], f64(1.0), f64(1.0))
+        st = friction_point(st, params[0], times[k], mu[k], f64(1.0), f64(1.0), cubic)
     states[0] = st
+
+
+def _observe_peak(times, mu, cubic):
+    values, _ = resolve_members(None, wf.Parameters())
+    st = np.zeros(1, dtype=types.IntegratorState.numpy_dtype())
+    st["mu_s"] = -np.inf
+    states = wp.array(st, dtype=types.IntegratorState, device=DEVICE)
+    wp.launch(_friction_points, dim=1, inputs=[wp.array(member_params(values), dtype=types.MemberParams, device=DEVICE),
+              wp.array(times, dtype=f64, device=DEVICE), wp.array(mu, dtype=f64, device=DEVICE), cubic, states], device=DEVICE)
+    return states.numpy()[0]
 
 
 def test_mu_s_observer_on_a_synthetic_peak():
@@ -407,16 +417,25 @@ def test_mu_s_observer_on_a_synthetic_peak():
     times = np.sort(rng.uniform(20.0, 20.6, 40))
     times = times[np.abs(times - 20.3) > 0.01]
     mu = 0.5 - 3 * (times - 20.3) ** 2
-    values, _ = resolve_members(None, wf.Parameters())
-    st = np.zeros(1, dtype=types.IntegratorState.numpy_dtype())
-    st["mu_s"] = -np.inf
-    states = wp.array(st, dtype=types.IntegratorState, device=DEVICE)
-    wp.launch(_friction_points, dim=1, inputs=[wp.array(member_params(values), dtype=types.MemberParams, device=DEVICE),
-              wp.array(times, dtype=f64, device=DEVICE), wp.array(mu, dtype=f64, device=DEVICE), states], device=DEVICE)
-    out = states.numpy()[0]
+    out = _observe_peak(times, mu, 0)
     assert mu.max() < 0.5 - 1e-4
     assert abs(out["mu_s"] - 0.5) < 1e-12 and abs(out["mu_s_time"] - 20.3) < 1e-10
     assert out["steps_accepted"] == len(times) and out["lift_off"] == 0 and out["mu_final"] == mu[-1]
+
+
+def test_mu_s_cubic_observer_is_exact_on_a_cubic_peak():
+    """ESDIRK4's refinement (cubic = 1): mu(t) = 0.5 - 3 x^2 + 5 x^3, x = t - 20.3 (a maximum of 0.5
+    at x = 0), sampled at irregular times: the cubic through the last four points is exact; the
+    parabola is not (its error is the cubic term over the bracketing steps)."""
+    rng = np.random.default_rng(2)
+    times = np.sort(rng.uniform(20.0, 20.6, 30))
+    times = times[np.abs(times - 20.3) > 0.01]
+    x = times - 20.3
+    mu = 0.5 - 3 * x**2 + 5 * x**3
+    cubic = _observe_peak(times, mu, 1)
+    parabola = _observe_peak(times, mu, 0)
+    assert abs(cubic["mu_s"] - 0.5) < 1e-12 and abs(cubic["mu_s_time"] - 20.3) < 1e-9
+    assert abs(parabola["mu_s"] - 0.5) > 1e-7
 
 
 # ------------------------------------------------------------------------------------------------

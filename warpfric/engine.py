@@ -55,6 +55,8 @@ def choose_lanes(solver: Solver, device: str) -> int:
     after the other on Warp's fibers, which only costs)."""
     if solver.lanes is not None:
         return solver.lanes
+    if solver.method != "tr_bdf2":
+        return 1  # the cooperative kernel has TR-BDF2 only
     if str(device).startswith("cuda") and solver.dtype == "float64" and solver.nodes >= AUTO_MIN_NODES:
         return 1 << (min(AUTO_LANES, solver.nodes // 2).bit_length() - 1)
     return 1
@@ -262,7 +264,10 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                       "CPU fibers, slowly and for tests only (docs/performance.md, 'Session 5: the cooperative kernel'); "
                       "lanes=1 is the CPU's kernel", stacklevel=3)
     t_build = time.perf_counter()
-    kern = get_integrator(solver.dtype, model, lanes)
+    if team and solver.method != "tr_bdf2":
+        raise ValueError(f"solver setting 'method' = {solver.method!r} needs lanes = 1 (the cooperative kernel has "
+                         "TR-BDF2 only)")
+    kern = get_integrator(solver.dtype, model, lanes, solver.method)
     with cpu_blocks(team):  # compile or load now, so that it is timed apart
         wp.load_module(kern["integrate"].module, device=device, block_dim=lanes if team else None)
         wp.load_module(kern["evaluate_fields"].module, device=device)
@@ -278,7 +283,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     with wp.ScopedDevice(device):
         arrays = allocate(ft, params_np, n, stress_gate, fronts is not None,
                           record.times if record is not None else None, len(record.members) if record is not None else 0,
-                          member_major=team)
+                          member_major=team, method=solver.method)
         per_member = [arrays.params, arrays.state, arrays.stages, arrays.work]  # not the (.., 1, 1) placeholders
         per_member += [arrays.gates, arrays.yield_time] if stress_gate else []
         per_member += [arrays.arrival, arrays.arrival_error] if fronts is not None else []

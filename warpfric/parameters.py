@@ -201,6 +201,7 @@ class Model:
 
 
 _DTYPES = ("float32", "float64")
+_METHODS = ("tr_bdf2", "esdirk4")
 FLOAT32_MIN_RTOL = 1e-5  # docs/performance.md: float32 stalls below this
 MAX_LANES = 256  # threads per block: the cooperative kernel takes 255 registers per thread on the H100, and a block has 65,536
 
@@ -211,6 +212,11 @@ class Solver:
 
     nodes:            N, grid nodes along the pad (>= 3), spacing L/(N-1).
     dtype:            'float64' or 'float32' for the state and the arithmetic (time is always float64).
+    method:           the time integrator (docs/model.md, "Time integration"): 'tr_bdf2' (default; order 2,
+                      3 stages) or 'esdirk4' (ESDIRK4(3)6L[2]SA of Kennedy & Carpenter 2016: order 4,
+                      6 stages, fewer Newton iterations at tight tolerances). 'esdirk4' runs on the
+                      thread-per-member kernel only (lanes None or 1) and without fronts (Fronts: use
+                      'tr_bdf2').
     rtol:             relative local error tolerance of the adaptive step (1e-12 .. 1e-1).
                       The absolute tolerance of each variable kind is rtol times its natural scale
                       (docs/model.md, "Error control").
@@ -256,6 +262,7 @@ class Solver:
 
     nodes: int = 100
     dtype: str = "float64"
+    method: str = "tr_bdf2"
     rtol: float = 1e-5
     initial_step: float = 1e-6
     min_step: float = 1e-14
@@ -289,6 +296,8 @@ class Solver:
 
         need(is_int(self.nodes) and self.nodes >= 3, "nodes", self.nodes, "an integer >= 3")
         need(self.dtype in _DTYPES, "dtype", self.dtype, " or ".join(_DTYPES))
+        need(isinstance(self.method, str) and self.method in _METHODS, "method", self.method,
+             " or ".join(repr(m) for m in _METHODS))
         need(is_real(self.rtol) and 1e-12 <= self.rtol <= 0.1, "rtol", self.rtol, "a number in [1e-12, 0.1]")
         need(self.dtype == "float64" or self.rtol >= FLOAT32_MIN_RTOL, "rtol", self.rtol,
              f"a number in [{FLOAT32_MIN_RTOL:g}, 0.1] with dtype='float32' (float32 round-off stalls "
@@ -329,6 +338,8 @@ class Solver:
              self.lanes, f"None, 1, or an integer in [2, {max_lanes}] (at most nodes // 2 and {MAX_LANES}: a block of 255-register threads)")
         need(self.lanes in (None, 1) or self.dtype == "float64", "lanes", self.lanes,
              "None or 1 with dtype='float32' (the cooperative kernel is float64 only)")
+        need(self.lanes in (None, 1) or self.method == "tr_bdf2", "lanes", self.lanes,
+             "None or 1 with method='esdirk4' (the cooperative kernel has TR-BDF2 only)")
 
 
 _FRONT_DIRECTIONS = ("against_disc", "with_disc", "absolute")

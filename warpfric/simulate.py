@@ -115,6 +115,9 @@ def simulate(
         0 <= member_offset < 2**31 - 2**24
     ):
         raise ValueError(f"member_offset = {member_offset!r} is invalid; valid: an integer in [0, {2**31 - 2**24})")
+    if fronts is not None and solver.method != "tr_bdf2":
+        raise NotImplementedError(f"fronts with solver setting 'method' = {solver.method!r} are not implemented (the "
+                                  "arrival times read TR-BDF2's second stage); pass fronts=None or use method='tr_bdf2'")
     if fronts is not None and fronts.grid_check and solver.nodes < 5:
         raise ValueError(f"fronts setting 'grid_check' needs solver setting 'nodes' >= 5 (got {solver.nodes}): the "
                          "check compares with (nodes + 1)//2 nodes")
