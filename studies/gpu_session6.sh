@@ -6,6 +6,8 @@
 #         then the queued launches on the GPU: chunks of 7 and of 100,000 attempts, outputs compared bit for bit
 # thread: the thread-per-member kernel, the same rows; and the host CPU for 1 / 4 / 16 members
 # more:   the cooperative kernel with fronts (10,000 members) and at 100,000 members
+# profile: where one member's time goes (cooperative kernel, 32 lanes): its attempts and time per
+#         attempt at N = 64..800, and Nsight Compute's warp stall reasons for the one-member launch
 set -u
 OUT=${OUT:-/tmp/out}
 mkdir -p "$OUT"
@@ -33,5 +35,32 @@ thread)
 more)
   timeout 300 $B --device cuda:0 --members 10000 --lanes 32 --fronts --out "$OUT/bench_team_stress_fronts.json" 2>&1 | tail -2
   timeout 250 $B --device cuda:0 --members 100000 --lanes 32 --out "$OUT/bench_team_stress_100k.json" 2>&1 | tail -2
+  ;;
+profile)
+  timeout 300 python -u - <<'PY' 2>&1 | tail -8
+import time, warpfric as wf
+kw = dict(device="cuda:0", progress=False, fronts=None)
+wf.simulate(solver=wf.Solver(nodes=64, lanes=32), **kw)  # compile
+print(f"{'N':>5} {'wall s':>8} {'attempts':>8} {'newton':>7} {'us/attempt':>10} {'us/newton':>9}")
+for n in (64, 128, 200, 400, 800):
+    best = 1e9
+    for _ in range(3):
+        t0 = time.perf_counter(); ds = wf.simulate(solver=wf.Solver(nodes=n, lanes=32), **kw); best = min(best, time.perf_counter() - t0)
+    att = int(ds.steps_accepted[0] + ds.steps_rejected[0]); nw = int(ds.newton_iterations[0])
+    print(f"{n:5d} {best:8.3f} {att:8d} {nw:7d} {1e6 * best / att:10.1f} {1e6 * best / nw:9.1f}")
+PY
+  NCU=$(command -v ncu || ls /usr/local/cuda*/bin/ncu 2>/dev/null | head -1)
+  cat > /tmp/one_member.py <<'PY'
+import warpfric as wf
+for _ in range(2):
+    wf.simulate(solver=wf.Solver(nodes=200, lanes=32), device="cuda:0", progress=False, fronts=None)
+PY
+  timeout 240 "$NCU" -k regex:integrate --launch-skip 2 --launch-count 1 \
+    --section LaunchStats --section Occupancy --section WarpStateStats --section ComputeWorkloadAnalysis \
+    --section MemoryWorkloadAnalysis --section SchedulerStats --section InstructionStats \
+    --metrics regex:smsp__average_warps_issue_stalled_.*_per_issue_active\.ratio,gpu__time_duration.sum,smsp__inst_executed.sum \
+    python /tmp/one_member.py > "$OUT/ncu_one_member_stress_l32.txt" 2>&1
+  grep -E "Duration|Warp Cycles Per Issued|Issued Ipc|stalled_.*ratio|inst_executed.sum|Local Memory|Registers Per|Stack" \
+    "$OUT/ncu_one_member_stress_l32.txt" | awk '$NF+0 > 0.05 || !/stalled/' | head -40
   ;;
 esac
