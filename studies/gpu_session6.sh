@@ -6,6 +6,7 @@
 #         then the queued launches on the GPU: chunks of 7 and of 100,000 attempts, outputs compared bit for bit
 # thread: the thread-per-member kernel, the same rows; and the host CPU for 1 / 4 / 16 members
 # more:   the cooperative kernel with fronts (10,000 members) and at 100,000 members
+# accuracy: the team rows at rtol 1e-4
 # profile: where one member's time goes (cooperative kernel, 32 lanes): its attempts and time per
 #         attempt at N = 64..800, and Nsight Compute's warp stall reasons for the one-member launch
 set -u
@@ -37,7 +38,7 @@ more)
   timeout 250 $B --device cuda:0 --members 100000 --lanes 32 --out "$OUT/bench_team_stress_100k.json" 2>&1 | tail -2
   ;;
 profile)
-  timeout 300 python -u - <<'PY' 2>&1 | tail -8
+  timeout 600 python -u - <<'PY' 2>&1 | tail -8 | tee "$OUT/n_scan.txt"
 import time, warpfric as wf
 kw = dict(device="cuda:0", progress=False, fronts=None)
 wf.simulate(solver=wf.Solver(nodes=64, lanes=32), **kw)  # compile
@@ -62,5 +63,8 @@ PY
     python /tmp/one_member.py > "$OUT/ncu_one_member_stress_l32.txt" 2>&1
   grep -E "Duration|Warp Cycles Per Issued|Issued Ipc|stalled_.*ratio|inst_executed.sum|Local Memory|Registers Per|Stack" \
     "$OUT/ncu_one_member_stress_l32.txt" | awk '$NF+0 > 0.05 || !/stalled/' | head -40
+  ;;
+accuracy)  # the issue's accuracy (mu_s within 1e-4): rtol 1e-4
+  timeout 400 $B --device cuda:0 --members 1 1000 10000 --lanes 32 --rtol 1e-4 --out "$OUT/bench_team_stress_rtol1e-4.json" 2>&1 | tail -4
   ;;
 esac
