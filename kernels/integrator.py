@@ -36,12 +36,10 @@ def team_max_registers():
 def get_integrator(dtype: str, model, lanes: int = 1, method: str = "tr_bdf2") -> dict:
     """Compiled kernels for one working precision, one set of model switches, one team size
     (lanes = 1: one thread per member; > 1: the cooperative kernel, launched with block_dim = lanes,
-    float64 only; kernels/team.py) and one time integrator (Solver.method: 'tr_bdf2', or 'esdirk4'
-    with lanes = 1) (cached)."""
+    float64 only; kernels/team.py) and one time integrator (Solver.method: 'tr_bdf2' or 'esdirk4')
+    (cached)."""
     if method not in ("tr_bdf2", "esdirk4"):
         raise ValueError(f"integrator method {method!r} is invalid; valid: 'tr_bdf2' or 'esdirk4'")
-    if method != "tr_bdf2" and lanes > 1:
-        raise ValueError(f"integrator method {method!r} needs lanes = 1 (the cooperative kernel has TR-BDF2 only)")
     registers = team_max_registers() if lanes > 1 else None
     key = (dtype, model, lanes, registers, method)
     if key not in _CACHE:

@@ -5,7 +5,7 @@ accuracy of mu_s against a converged float64 run of the same members.
     python studies/bench_engine.py [--device cpu|cuda:0] [--members 1 100 1000 10000]
                                    [--dtypes float64 float32] [--rtol 1e-5] [--nodes 200]
                                    [--fronts] [--relaxation-gate stress|none|velocity] [--out bench_engine.json]
-                                   [--lanes 1 32] [--predict-switches on off]
+                                   [--lanes 1 32] [--predict-switches on off] [--methods tr_bdf2 esdirk4]
 
 --fronts adds the front metrics (a second integration pass plus the segmentation kernel); without
 it the engine alone is timed (simulate(fronts=None)).
@@ -16,7 +16,7 @@ largest relative error of mu_s over the first 16 members against a converged flo
 (rtol = 1e-9, same N, same friction law), stored in studies/reference/ and made with --make-reference.
 --lanes: threads per member (Solver.lanes; 1 the thread-per-member kernel, > 1 the cooperative
 kernel, float64 only; default: the automatic choice). --predict-switches: Solver.predict_switches
-values to time (stress gate; default: on). Compilation is excluded (a warm-up run compiles each kernel first). float32 is skipped with the stress
+values to time (stress gate; default: on). --methods: Solver.method values to time. Compilation is excluded (a warm-up run compiles each kernel first). float32 is skipped with the stress
 gate, which refuses it (docs/model.md, "Precision").
 """
 
@@ -60,6 +60,8 @@ def main(argv=None):
     ap.add_argument("--lanes", type=int, nargs="+", default=[None], help="Solver.lanes values to time (default: auto)")
     ap.add_argument("--predict-switches", nargs="+", default=["on"], choices=["on", "off"],
                     help="Solver.predict_switches values to time (the stress gate's predicted switches)")
+    ap.add_argument("--methods", nargs="+", default=["tr_bdf2"], choices=["tr_bdf2", "esdirk4"],
+                    help="Solver.method values to time")
     ap.add_argument("--reference", default=None,
                     help="JSON with mu_s of the first 16 members (float64, rtol 1e-9); made with --make-reference "
                          "(default: studies/reference/bench_members_mu_s[_GATE].json)")
@@ -87,13 +89,15 @@ def main(argv=None):
     ref_mu = np.asarray(reference["mu_s"])
     rows = []
     fronts = wf.Fronts() if args.fronts else None
-    for dtype, lanes, predict in [(d, k, p) for d in args.dtypes for k in args.lanes for p in args.predict_switches]:
+    for dtype, lanes, predict, method in [(d, k, p, me) for d in args.dtypes for k in args.lanes
+                                          for p in args.predict_switches for me in args.methods]:
         if dtype == "float32" and args.relaxation_gate == "stress":
             print("float32 skipped: the stress gate needs float64")
             continue
         if dtype == "float32" and lanes not in (None, 1):
             continue  # the cooperative kernel is float64 only
-        solver = wf.Solver(nodes=args.nodes, dtype=dtype, rtol=args.rtol, lanes=lanes, predict_switches=predict == "on")
+        solver = wf.Solver(nodes=args.nodes, dtype=dtype, rtol=args.rtol, lanes=lanes, predict_switches=predict == "on",
+                           method=method)
         wf.simulate(members(1), scene=wf.Parameters(end_time=20.01), model=model, solver=solver, fronts=fronts,
                     device=device)  # compile
         for m in args.members:
@@ -108,7 +112,8 @@ def main(argv=None):
             steps = ds.steps_accepted.values + ds.steps_rejected.values
             row = dict(
                 members=m, nodes=args.nodes, dtype=dtype, device=device, lanes=int(ds.attrs["lanes"]), rtol=args.rtol, fronts=bool(args.fronts),
-                relaxation_gate=args.relaxation_gate, predict_switches=predict,
+                relaxation_gate=args.relaxation_gate, predict_switches=predict, method=method,
+                mean_newton_iterations=float(ds.newton_iterations.values.mean()),
                 wall_s=best,
                 realisations_per_s=m / best, node_steps_per_s=float(steps.sum()) * args.nodes / best,
                 mean_accepted_steps=float(ds.steps_accepted.values.mean()),
@@ -123,10 +128,10 @@ def main(argv=None):
                 command="python studies/bench_engine.py " + " ".join(argv or []))
     with open(args.out, "w") as f:
         json.dump(dict(meta=meta, rows=rows), f, indent=1)
-    print(f"\n{'M':>6} {'N':>4} {'dtype':>8} {'lanes':>5} {'pred':>4} {'fronts':>6} {'device':>7} {'wall s':>8} {'real/s':>9} {'node-steps/s':>13} "
+    print(f"\n{'M':>6} {'N':>4} {'dtype':>8} {'method':>8} {'lanes':>5} {'pred':>4} {'fronts':>6} {'device':>7} {'wall s':>8} {'real/s':>9} {'node-steps/s':>13} "
           f"{'acc steps':>9} {'rej':>5} {'ok':>6} {'mu_s err':>9}")
     for r in rows:
-        print(f"{r['members']:>6} {r['nodes']:>4} {r['dtype']:>8} {r['lanes']:>5} {r['predict_switches']:>4} {str(r['fronts']):>6} {r['device']:>7} {r['wall_s']:8.3f} "
+        print(f"{r['members']:>6} {r['nodes']:>4} {r['dtype']:>8} {r['method']:>8} {r['lanes']:>5} {r['predict_switches']:>4} {str(r['fronts']):>6} {r['device']:>7} {r['wall_s']:8.3f} "
               f"{r['realisations_per_s']:9.1f} {r['node_steps_per_s']:13.3e} {r['mean_accepted_steps']:9.1f} "
               f"{r['mean_rejected_steps']:5.1f} {r['status_ok']:>6} {r['mu_s_max_rel_error']:9.2e}")
 

@@ -7,6 +7,8 @@
 # thread: the thread-per-member kernel, the same rows; and the host CPU for 1 / 4 / 16 members
 # more:   the cooperative kernel with fronts (10,000 members) and at 100,000 members
 # accuracy: the team rows at rtol 1e-4
+# esdirk4 METHOD: work against error of one integrator (tr_bdf2 or esdirk4) on the cooperative kernel,
+#         gate-less law, rtol 1e-5 / 1e-6 / 1e-7, 1 and 10,000 members
 # profile: where one member's time goes (cooperative kernel, 32 lanes): its attempts and time per
 #         attempt at N = 64..800, and Nsight Compute's warp stall reasons for the one-member launch
 set -u
@@ -66,5 +68,11 @@ PY
   ;;
 accuracy)  # the accuracy (mu_s within 1e-4): rtol 1e-4
   timeout 400 $B --device cuda:0 --members 1 1000 10000 --lanes 32 --rtol 1e-4 --out "$OUT/bench_team_stress_rtol1e-4.json" 2>&1 | tail -4
+  ;;
+esdirk4)
+  for r in 1e-5 1e-6 1e-7; do
+    timeout 500 python -u studies/bench_engine.py --dtypes float64 --relaxation-gate none --device cuda:0 --members 1 10000 \
+      --lanes 32 --methods "$2" --rtol $r --out "$OUT/bench_team_none_$2_$r.json" 2>&1 | tail -2
+  done
   ;;
 esac

@@ -25,19 +25,32 @@ def rel(a, b):
 def test_method_validation():
     with pytest.raises(ValueError, match="'method' = 'rk4'.*'tr_bdf2' or 'esdirk4'"):
         wf.Solver(method="rk4")
-    with pytest.raises(ValueError, match="'lanes'"):
-        wf.Solver(nodes=30, method="esdirk4", lanes=4)
     assert wf.Solver(method="esdirk4", lanes=1).method == "esdirk4"
     assert wf.Solver().method == "tr_bdf2"
     with pytest.raises(NotImplementedError, match="fronts"):
         wf.simulate(solver=wf.Solver(nodes=N, method="esdirk4"), fronts=wf.Fronts(), device=DEVICE, progress=False)
 
 
-def test_choose_lanes_esdirk4():
-    from warpfric.engine import choose_lanes
+@pytest.mark.parametrize("gate", ["none", "stress"])
+def test_cooperative_kernel_agrees_with_the_thread_kernel(gate):
+    """ESDIRK4 on a team of 4 and of 7 lanes (CPU fibers) against one thread per member: the same
+    steps and mu_s to 1e-12 (only the order of the team's sums differs), the members of
+    studies/outputs_equal.py, lift-off at e = 0.6 included."""
+    import warnings
 
-    assert choose_lanes(wf.Solver(nodes=200, method="esdirk4"), "cuda:0") == 1
-    assert choose_lanes(wf.Solver(nodes=200), "cuda:0") > 1
+    members = {"eccentricity": [0.0, -0.2, 0.3, 0.6], "normal_force": [1000.0, 1000.0, 300.0, 3000.0]}
+    runs = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # the CPU-fibers warning of lanes > 1
+        for lanes in (1, 4, 7):
+            runs[lanes] = wf.simulate(members, model=wf.Model(relaxation_gate=gate),
+                                      solver=wf.Solver(nodes=30, rtol=1e-6, method="esdirk4", lanes=lanes),
+                                      fronts=None, device=DEVICE, progress=False)
+    for lanes in (4, 7):
+        assert runs[lanes].attrs["lanes"] == lanes
+        assert (runs[lanes].status.values == 0).all()
+        np.testing.assert_array_equal(runs[lanes].steps_accepted.values, runs[1].steps_accepted.values)
+        np.testing.assert_allclose(runs[lanes].mu_s.values, runs[1].mu_s.values, rtol=0, atol=1e-12)
 
 
 def test_stage_slots():

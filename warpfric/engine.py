@@ -55,8 +55,6 @@ def choose_lanes(solver: Solver, device: str) -> int:
     after the other on Warp's fibers, which only costs)."""
     if solver.lanes is not None:
         return solver.lanes
-    if solver.method != "tr_bdf2":
-        return 1  # the cooperative kernel has TR-BDF2 only
     if str(device).startswith("cuda") and solver.dtype == "float64" and solver.nodes >= AUTO_MIN_NODES:
         return 1 << (min(AUTO_LANES, solver.nodes // 2).bit_length() - 1)
     return 1
@@ -264,9 +262,6 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                       "CPU fibers, slowly and for tests only (docs/performance.md, 'Session 5: the cooperative kernel'); "
                       "lanes=1 is the CPU's kernel", stacklevel=3)
     t_build = time.perf_counter()
-    if team and solver.method != "tr_bdf2":
-        raise ValueError(f"solver setting 'method' = {solver.method!r} needs lanes = 1 (the cooperative kernel has "
-                         "TR-BDF2 only)")
     kern = get_integrator(solver.dtype, model, lanes, solver.method)
     with cpu_blocks(team):  # compile or load now, so that it is timed apart
         wp.load_module(kern["integrate"].module, device=device, block_dim=lanes if team else None)

@@ -214,9 +214,8 @@ class Solver:
     dtype:            'float64' or 'float32' for the state and the arithmetic (time is always float64).
     method:           the time integrator (docs/model.md, "Time integration"): 'tr_bdf2' (default; order 2,
                       3 stages) or 'esdirk4' (ESDIRK4(3)6L[2]SA of Kennedy & Carpenter 2016: order 4,
-                      6 stages, fewer Newton iterations at tight tolerances). 'esdirk4' runs on the
-                      thread-per-member kernel only (lanes None or 1) and without fronts (Fronts: use
-                      'tr_bdf2').
+                      6 stages, fewer Newton iterations at tight tolerances). 'esdirk4' runs
+                      without fronts (Fronts: use 'tr_bdf2').
     rtol:             relative local error tolerance of the adaptive step (1e-12 .. 1e-1).
                       The absolute tolerance of each variable kind is rtol times its natural scale
                       (docs/model.md, "Error control").
@@ -338,8 +337,6 @@ class Solver:
              self.lanes, f"None, 1, or an integer in [2, {max_lanes}] (at most nodes // 2 and {MAX_LANES}: a block of 255-register threads)")
         need(self.lanes in (None, 1) or self.dtype == "float64", "lanes", self.lanes,
              "None or 1 with dtype='float32' (the cooperative kernel is float64 only)")
-        need(self.lanes in (None, 1) or self.method == "tr_bdf2", "lanes", self.lanes,
-             "None or 1 with method='esdirk4' (the cooperative kernel has TR-BDF2 only)")
 
 
 _FRONT_DIRECTIONS = ("against_disc", "with_disc", "absolute")
