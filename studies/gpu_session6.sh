@@ -75,4 +75,20 @@ esdirk4)
       --lanes 32 --methods "$2" --rtol $r --out "$OUT/bench_team_none_$2_$r.json" 2>&1 | tail -2
   done
   ;;
+sources)  # Nsight Compute's stall sampling by source line of the one-member launch (kernels compiled with line info)
+  NCU=$(command -v ncu || ls /usr/local/cuda*/bin/ncu 2>/dev/null | head -1)
+  cat > /tmp/one_member_lines.py <<'PY'
+import warp as wp
+wp.config.lineinfo = True
+import warpfric as wf
+for _ in range(2):
+    wf.simulate(solver=wf.Solver(nodes=200, lanes=32), device="cuda:0", progress=False, fronts=None)
+PY
+  timeout 550 "$NCU" -k regex:integrate --launch-skip 2 --launch-count 1 --section SourceCounters --section WarpStateStats \
+    --import-source yes -o "$OUT/one_member_sources" python /tmp/one_member_lines.py > "$OUT/ncu_sources.log" 2>&1
+  tail -3 "$OUT/ncu_sources.log"
+  "$NCU" -i "$OUT/one_member_sources.ncu-rep" --page source --csv --print-source cuda 2> /dev/null > "$OUT/source_lines.csv"
+  "$NCU" -i "$OUT/one_member_sources.ncu-rep" --page details --section SourceCounters > "$OUT/source_counters.txt" 2>&1
+  ls -la "$OUT"; head -c 3000 "$OUT/source_counters.txt"
+  ;;
 esac
