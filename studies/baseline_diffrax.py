@@ -4,7 +4,7 @@ with jax.vmap over diffrax.diffeqsolve, i.e. what a user would write instead of 
     python studies/baseline_diffrax.py --members 1 100 10000 --nodes 40 --rtols 1e-5 1e-6 \
         --end-time 20.6 --relaxation-gate none --timeout 150 --out OUT.json [--device gpu|cpu] \
         [--root-finders newton verychord] [--warpfric-device cuda:0|cpu] [--warpfric-rtols 1e-4 ... 1e-9]
-        [--reference REF.json] [--chunk-steps 1024]
+        [--reference REF.json] [--chunk-steps 1024] [--warpfric-method tr_bdf2|esdirk4]
     python studies/baseline_diffrax.py --check-rhs      # the JAX right-hand side against PadODE's
 
 Needs jax (+jaxlib, with CUDA for --device gpu) and diffrax; on a host without a package index:
@@ -573,7 +573,7 @@ def run_warpfric(args, model, ref_mu, device):
     scene = wf.Parameters(end_time=args.end_time)
     rows = []
     for rtol in args.warpfric_rtols:
-        solver = wf.Solver(nodes=args.nodes, rtol=rtol, max_steps=10**6)
+        solver = wf.Solver(nodes=args.nodes, rtol=rtol, max_steps=10**6, method=args.warpfric_method)
         wf.simulate(members(1), scene=wf.Parameters(end_time=20.01), model=model, solver=solver, fronts=None,
                     device=device, progress=False)  # compile
         for m in args.members:
@@ -588,7 +588,8 @@ def run_warpfric(args, model, ref_mu, device):
             k = min(m, len(ref_mu))
             err = float(np.max(np.abs(ds.mu_s.values[:k] / np.asarray(ref_mu[:k]) - 1)))
             steps = ds.steps_accepted.values + ds.steps_rejected.values
-            row = dict(solver="warpfric", members=m, rtol=rtol, nodes=args.nodes, device=device, wall_s=best,
+            row = dict(solver="warpfric", method=args.warpfric_method, lanes=int(ds.attrs["lanes"]), members=m, rtol=rtol,
+                       nodes=args.nodes, device=device, wall_s=best,
                        mu_s_error=err, max_steps=int(steps.max()), mean_steps=float(steps.mean()),
                        status_ok=int((ds.status.values == 0).sum()))
             rows.append(row)
@@ -618,6 +619,7 @@ def main(argv=None):
     ap.add_argument("--warpfric-device", default=None, help="default: cuda:0 if Warp sees a GPU, else cpu")
     ap.add_argument("--warpfric-rtols", type=float, nargs="+", default=[1e-4, 1e-5, 1e-6, 1e-7, 1e-8, 1e-9])
     ap.add_argument("--no-warpfric", action="store_true", help="skip timing warpfric")
+    ap.add_argument("--warpfric-method", default="tr_bdf2", choices=["tr_bdf2", "esdirk4"], help="warpfric's Solver.method")
     ap.add_argument("--repeat", type=int, default=1, help="warpfric timed repetitions (best kept)")
     ap.add_argument("--reference", default=None, help="JSON with 'nodes' and 'mu_s' of the first 16 members")
     ap.add_argument("--out", default="baseline_diffrax.json")
