@@ -53,9 +53,10 @@ def propose_step(p: MemberParams, st: IntegratorState, settings: SolverSettings,
         clipped = STEP_AT_BREAKPOINT
     elif h > wp.float64(0.5) * (bp - t):
         h = wp.float64(0.5) * (bp - t)  # two equal steps, not a long one and a sliver
-    if st.switch_limit < t + h:
-        # a gate switch located by a rejected step lies before: end the step there (1e300 unless
-        # the stress gate located one)
+    if st.switch_limit < t + h and st.switch_limit > t:
+        # a gate switch located by a rejected step (or predicted) lies before: end the step there
+        # (1e300 unless the stress gate located or predicted one; a limit at or before t is stale
+        # and never makes a step of zero length)
         h = st.switch_limit - t
         clipped = STEP_AT_SWITCH
     step = Step()
@@ -134,7 +135,7 @@ def out_of_steps(st: IntegratorState, settings: SolverSettings):
 def stalled(st: IntegratorState, attempt_limit: int):
     """Stop the member (status stalled) once its attempted steps exceed attempt_limit: the straggler
     limit that the host derives from its peers (warpfric.engine.straggler_limit; 2**31 - 1: none)."""
-    if st.steps_accepted + st.steps_rejected > attempt_limit:
+    if st.done == 0 and st.steps_accepted + st.steps_rejected > attempt_limit:
         st.status = STATUS_STALLED
         st.done = 1
     return st

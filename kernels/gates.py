@@ -218,13 +218,14 @@ def make_gates(ft, model, terms, team):
     @wp.func
     def after_accept(st: IntegratorState, settings: SolverSettings, switches_before: int, test: SwitchTest,
                      t_new: wp.float64, clipped: int):
-        """Bookkeeping of the switch location after an accepted TR-BDF2 step (``clipped``: the step's
-        clipping code, kernels/controller.py), and the end of the next step at a predicted switch.
+        """Bookkeeping of the switch location after an accepted step with a switch test (not a
+        backward-Euler (re)start; ``clipped``: the step's clipping code, kernels/controller.py), and
+        the end of the next step at a predicted switch.
 
         A prediction that did not happen (the step clipped at it switched nothing) counts a miss;
         after MAX_PREDICTION_MISSES in a row predictions stop until the next switch, so that a margin
         that only approaches 0 (e.g. a steady state just below the yield stress) cannot hold the
-        step size down."""
+        step size down. A predicted limit never replaces a located one (a rejected step's)."""
         switched = st.gate_switches != switches_before
         if switched or test.error > ft(1.0):
             st.switch_retries = 0  # the located switch happened (or was given up)
@@ -235,7 +236,8 @@ def make_gates(ft, model, terms, team):
         if t_new >= st.switch_limit:
             st.switch_limit = wp.float64(1.0e300)
             st.switch_predicted = 0
-        if settings.predict_switches == 1 and st.prediction_misses < MAX_PREDICTION_MISSES:
+        located_pending = st.switch_limit < wp.float64(1.0e300) and st.switch_predicted == 0
+        if settings.predict_switches == 1 and st.prediction_misses < MAX_PREDICTION_MISSES and not located_pending:
             if test.next_switch < ft(NO_PREDICTION):
                 limit = t_new + wp.float64(test.next_switch)
                 if limit < st.switch_limit:
@@ -243,6 +245,17 @@ def make_gates(ft, model, terms, team):
                     st.switch_predicted = 1
         return st
 
-    return dict(SwitchTest=SwitchTest, no_switch=no_switch, team_switch_test=team_switch_test, node_gate=node_gate, node_sliding=node_sliding,
+    @wp.func
+    def drop_stale_limit(st: IntegratorState, t_new: wp.float64):
+        """After every accepted step and its observers: a step limit that the step reached (a
+        backward-Euler (re)start has no after_accept) or any limit when the step ended on the sudden
+        stop (st.restart set: the load jumps, so a prediction made before it says nothing after it)
+        is dropped."""
+        if t_new >= st.switch_limit or st.restart != 0:
+            st.switch_limit = wp.float64(1.0e300)
+            st.switch_predicted = 0
+        return st
+
+    return dict(SwitchTest=SwitchTest, drop_stale_limit=drop_stale_limit, no_switch=no_switch, team_switch_test=team_switch_test, node_gate=node_gate, node_sliding=node_sliding,
                 test_switch=test_switch, locate_switch=locate_switch, switch_gates=switch_gates,
                 after_accept=after_accept)

@@ -78,6 +78,7 @@ def _make_integrator(dtype: str, model, lanes: int, registers=None, method: str 
     locate_switch = gates["locate_switch"]
     switch_gates = gates["switch_gates"]
     after_accept = gates["after_accept"]
+    drop_stale_limit = gates["drop_stale_limit"]
     on_accept = observers["on_accept"]
     stress_gate = model.relaxation_gate == "stress"
     array3 = wp.array3d(dtype=ft)
@@ -191,6 +192,8 @@ def _make_integrator(dtype: str, model, lanes: int, registers=None, method: str 
             st = on_accept(c, p, st, outputs, m, n, state, K, work, s1, s2, s3, t, step.t_new, delta0, tilt,
                            res.sums.friction, res.sums.normal, res.sums.min_normal, restart, arrival, arrival_error,
                            record_times, record_previous, record)
+            if wp.static(stress_gate):
+                st = drop_stale_limit(st, step.t_new)
             if st.restart != 0:
                 st.h = settings.initial_step  # the step ended on the sudden stop: restart
         st.delta0 = wp.float64(delta0)

@@ -123,6 +123,17 @@ def test_predicted_switches_save_rejected_steps_at_the_same_accuracy():
     assert attempts(predicted).sum() < 0.85 * attempts(located).sum()  # 1,165 against 1,458 (CPU)
 
 
+def test_a_sudden_stop_after_a_predicted_switch_ends_ok():
+    """A predicted switch can lie past the sudden stop; the step to the stop restarts the member,
+    and the limit must not survive the load jump (found in review: the restart step ended on the
+    stale limit and the next step had zero length: non_finite_state with NaN outputs, 11 of these
+    120 members). A long initial_step makes the restart steps reach the stale limits."""
+    stops = np.linspace(20.10, 20.30, 120)
+    ds = run({"stop_time": stops}, scene=wf.Parameters(end_time=20.4), nodes=30, rtol=1e-5, initial_step=1e-2)
+    assert (ds.status.values == 0).all(), np.unique(ds.status.values, return_counts=True)
+    assert np.isfinite(ds.mu_s.values).all()
+
+
 def test_velocity_gate_tends_to_the_gateless_law():
     """sqrt(s^2 + v0^2) -> |s| as v0 -> 0: the velocity gate with a tiny v0 gives the v1 law's mu_s."""
     none = run(model=wf.Model(relaxation_gate="none"))
