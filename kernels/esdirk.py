@@ -67,8 +67,6 @@ def _e4_matrix():
 
 E4_A = _e4_matrix()
 E4_ERR = tuple(b - bh for b, bh in zip(E4_B, E4_B_HAT))
-E4_STAGES = 6
-E4_ORDER = 4  # of the solution; the error estimate is O(h^4)
 # flat names for the kernels (Warp reads module constants by name)
 (E4_A10, E4_A20, E4_A21, E4_A30, E4_A31, E4_A32, E4_A40, E4_A41, E4_A42, E4_A43,
  E4_B0, E4_B1, E4_B2, E4_B3, E4_B4, E4_B5) = (E4_A[1][0], E4_A[2][0], E4_A[2][1], E4_A[3][0], E4_A[3][1], E4_A[3][2],

@@ -1,9 +1,11 @@
-"""Batched implicit adaptive time integration of the pad model: one Warp thread per member.
+"""Batched implicit adaptive time integration of the pad model: one Warp thread per member, or a
+team of threads per member (kernels/team.py).
 
 The ``integrate`` kernel is a loop of attempted steps, each: the controller proposes a step
-(kernels/controller.py), the stepper attempts it (kernels/esdirk.py: TR-BDF2, or backward Euler at
-a (re)start; the stages solved by kernels/newton.py on the model terms of kernels/model_terms.py),
-the stress gate may ask to retry it up to a located switch (kernels/gates.py), and an accepted step
+(kernels/controller.py), the stepper attempts it (kernels/esdirk.py: TR-BDF2 or, with
+Solver.method = 'esdirk4', ESDIRK4(3)6L[2]SA; backward Euler at a (re)start; the stages solved by
+kernels/newton.py on the model terms of kernels/model_terms.py), the stress gate may ask to retry it
+up to a located switch (kernels/gates.py), and an accepted step
 advances the state, updates the gates and calls the observers (kernels/observers.py: mu_s, fronts,
 recording). Arrays and structs: kernels/types.py. Scheme and choices: docs/model.md, "Time
 integration" and "Gate switches".
@@ -20,7 +22,7 @@ from .model_terms import disc_velocity_at, make_model_terms
 from .newton import make_newton
 from .observers import make_observers, run_finished
 from .team import make_team, node_range
-from .types import IntegratorState, MemberParams, OutputSettings, SolverSettings
+from .types import IntegratorState, MemberParams, OutputSettings, SolverSettings, stage_slots
 
 _CACHE: dict = {}
 
@@ -63,7 +65,7 @@ def _make_integrator(dtype: str, model, lanes: int, registers=None, method: str 
     ft = wp.float64 if dtype == "float64" else wp.float32
     team_on = lanes > 1
     esdirk4 = method == "esdirk4"
-    n_slots = 6 if esdirk4 else 3
+    n_slots = stage_slots(method)
     step_factor = step_factor_for(method)
     stages = make_stages(ft, model, lanes, method)
     terms, gates, esdirk, observers = stages["terms"], stages["gates"], stages["esdirk"], stages["observers"]

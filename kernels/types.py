@@ -49,7 +49,6 @@ N_WORK = 18
 # (Pa) at the last accepted point, and the sliding flag (1: solved on the yield surface each stage)
 G_GATE, G_MARGIN, G_SLIDE = 0, 1, 2
 N_GATE = 3
-N_STAGE_SLOTS = 3  # TR-BDF2 (3 stages); ESDIRK4 has 6 (stage_slots)
 STAGE_SLOTS = {"tr_bdf2": 3, "esdirk4": 6}
 
 

@@ -19,7 +19,7 @@ case "$1" in
 team)
   timeout 420 $B --device cuda:0 --members 1 1000 10000 --lanes 32 --predict-switches on off \
     --out "$OUT/bench_team_stress.json" 2>&1 | tail -6
-  timeout 120 python -u - <<'PY' 2>&1 | tail -3
+  timeout 120 python -u - <<'PY' 2>&1 | tail -3 | tee "$OUT/queued_launches_check.txt"
 import numpy as np, warpfric as wf
 m = {"eccentricity": np.linspace(-0.2, 0.2, 64), "normal_force": np.geomspace(500, 5000, 64)}
 runs = [wf.simulate(m, solver=wf.Solver(nodes=200, steps_per_launch=k), fronts=wf.Fronts(), device="cuda:0", progress=False)

@@ -1,4 +1,4 @@
-"""Solver(method='esdirk4'): ESDIRK4(3)6L[2]SA in the thread-per-member kernel (docs/model.md, "Time
+"""Solver(method='esdirk4'): ESDIRK4(3)6L[2]SA in both kernels (docs/model.md, "Time
 integration"). mu_s converges to the same float64 reference as TR-BDF2 (a tight TR-BDF2 run) and
 needs fewer Newton iterations at equal error; the new parameter is validated."""
 
@@ -51,12 +51,6 @@ def test_cooperative_kernel_agrees_with_the_thread_kernel(gate):
         assert (runs[lanes].status.values == 0).all()
         np.testing.assert_array_equal(runs[lanes].steps_accepted.values, runs[1].steps_accepted.values)
         np.testing.assert_allclose(runs[lanes].mu_s.values, runs[1].mu_s.values, rtol=0, atol=1e-12)
-
-
-def test_stage_slots():
-    from warpfric.kernels.types import stage_slots
-
-    assert stage_slots("tr_bdf2") == 3 and stage_slots("esdirk4") == 6
 
 
 def test_tableau_order_conditions():

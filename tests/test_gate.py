@@ -104,7 +104,7 @@ def test_located_switches_converge_with_rtol_and_beat_unlocated_ones():
 
 def test_predicted_switches_save_rejected_steps_at_the_same_accuracy():
     """Predicting the next gate switch from the margins' secants (the default) takes most switches
-    without a rejected step: at N = 100 every node switches once, and the located-only stepping
+    without a rejected step: at N = 100 every node switches at least once, and the located-only stepping
     (predict_switches=False) rejects about two steps per switch. Both place the switches by the same
     error test, so mu_s keeps the located stepping's error against a tight reference."""
     members = {"eccentricity": [0.0, -0.2, 0.2]}

@@ -85,15 +85,16 @@ def test_fig11_motion_stops_together(claims):
     assert c["node_quiet_delay_max"] - c["node_quiet_delay_min"] < 0.01 and c["node_quiet_delay_max"] < 0.05
 
 
-def test_fig12_quick_under_the_gate_scatters_by_an_order_of_magnitude_either_way(claims):
+def test_fig12_quick_under_the_gate_scatters_over_two_orders_of_magnitude(claims):
     c = claims["fig12"]
-    # every eccentricity pairs a middle front, and the single eta = 0 / eta ratios scatter by an order
-    # of magnitude either way (located switches 0.035-9.4, predicted switches 0.011-5.5). Their median
+    # every eccentricity pairs a middle front, and the single eta = 0 / eta ratios scatter over more
+    # than two orders of magnitude, on both sides of 1 (located switches 0.035-9.4, predicted
+    # switches 0.011-5.5). Their median
     # is not tested: it is not resolved at this size (studies/README.md, Fig. 12): changing how the
     # gate switches are located, within their tolerance, moved it from 1.24 to 0.11 and paired one
     # left front, and at rtol 1e-6 the eta = 0 members run out of 100,000 steps
     r = np.asarray(c["v_middle_ratio_without_over_with"], float)
-    assert np.all(np.isfinite(r)) and r.min() < 0.2 and r.max() > 5
+    assert np.all(np.isfinite(r)) and r.min() < 1 < r.max() and r.max() / r.min() > 100
 
 
 def test_choices_none_nucleates_at_the_left_edge(claims):
