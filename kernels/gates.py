@@ -216,6 +216,17 @@ def make_gates(ft, model, terms, team):
         return st
 
     @wp.func
+    def drop_stale_limit(st: IntegratorState, t_new: wp.float64):
+        """After every accepted step and its observers: a step limit that the step reached (a
+        backward-Euler (re)start has no after_accept) or any limit when the step ended on the sudden
+        stop (st.restart set: the load jumps, so a prediction made before it says nothing after it)
+        is dropped."""
+        if t_new >= st.switch_limit or st.restart != 0:
+            st.switch_limit = wp.float64(1.0e300)
+            st.switch_predicted = 0
+        return st
+
+    @wp.func
     def after_accept(st: IntegratorState, settings: SolverSettings, switches_before: int, test: SwitchTest,
                      t_new: wp.float64, clipped: int):
         """Bookkeeping of the switch location after an accepted step with a switch test (not a
@@ -233,9 +244,7 @@ def make_gates(ft, model, terms, team):
             st.prediction_misses = 0
         elif clipped == STEP_AT_SWITCH and st.switch_predicted == 1:
             st.prediction_misses = st.prediction_misses + 1
-        if t_new >= st.switch_limit:
-            st.switch_limit = wp.float64(1.0e300)
-            st.switch_predicted = 0
+        st = drop_stale_limit(st, t_new)  # st.restart is 0 here: the limit this step reached
         located_pending = st.switch_limit < wp.float64(1.0e300) and st.switch_predicted == 0
         if settings.predict_switches == 1 and st.prediction_misses < MAX_PREDICTION_MISSES and not located_pending:
             if test.next_switch < ft(NO_PREDICTION):
@@ -243,17 +252,6 @@ def make_gates(ft, model, terms, team):
                 if limit < st.switch_limit:
                     st.switch_limit = limit
                     st.switch_predicted = 1
-        return st
-
-    @wp.func
-    def drop_stale_limit(st: IntegratorState, t_new: wp.float64):
-        """After every accepted step and its observers: a step limit that the step reached (a
-        backward-Euler (re)start has no after_accept) or any limit when the step ended on the sudden
-        stop (st.restart set: the load jumps, so a prediction made before it says nothing after it)
-        is dropped."""
-        if t_new >= st.switch_limit or st.restart != 0:
-            st.switch_limit = wp.float64(1.0e300)
-            st.switch_predicted = 0
         return st
 
     return dict(SwitchTest=SwitchTest, drop_stale_limit=drop_stale_limit, no_switch=no_switch, team_switch_test=team_switch_test, node_gate=node_gate, node_sliding=node_sliding,

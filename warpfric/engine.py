@@ -187,8 +187,9 @@ def real_event(front_max, front_last, values, fronts: Fronts) -> np.ndarray:
 
 class StateSnapshots:
     """Read-back of the member states that does not stall the launch queue: ``take`` queues a copy
-    into one of two host buffers (pinned on a CUDA device) behind the launches queued so far and
-    returns a ticket; ``wait`` blocks until that copy has landed and returns the states (numpy)."""
+    into a host buffer (pinned on a CUDA device) behind the launches queued so far and returns a
+    ticket; ``wait`` blocks until that copy has landed and returns the states (a numpy copy, so that
+    the next ``take`` may reuse the buffer: takes and waits alternate)."""
 
     def __init__(self, n_members: int, device):
         import warp as wp
@@ -196,16 +197,13 @@ class StateSnapshots:
         from warpfric.kernels.types import IntegratorState
 
         self.cuda = wp.get_device(device).is_cuda
-        self.buffers = [wp.empty(n_members, dtype=IntegratorState, device="cpu", pinned=self.cuda) for _ in range(2)]
-        self.next = 0
+        self.buffer = wp.empty(n_members, dtype=IntegratorState, device="cpu", pinned=self.cuda)
 
     def take(self, member_states):
         import warp as wp
 
-        buffer = self.buffers[self.next]
-        self.next ^= 1
-        wp.copy(buffer, member_states)
-        return buffer, (wp.record_event() if self.cuda else None)
+        wp.copy(self.buffer, member_states)
+        return self.buffer, (wp.record_event() if self.cuda else None)
 
     def wait(self, ticket) -> np.ndarray:
         import warp as wp
