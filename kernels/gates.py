@@ -11,7 +11,11 @@ import warp as wp
 
 from .controller import STEP_AT_SWITCH
 from .model_terms import disc_velocity_at
-from .types import G_GATE, G_MARGIN, G_SLIDE, C_PHI, C_TAU, C_V, W_DMARGIN, W_GATE_END, W_MARGIN, IntegratorState, MemberParams, SolverSettings
+from .reductions import crossing_time_quadratic
+from .types import (
+    C_PHI, C_TAU, C_V, EV_CONTACT, G_GATE, G_MARGIN, G_MARGIN_OLD, G_SLIDE, W_DMARGIN, W_GATE_END, W_MARGIN, IntegratorState,
+    MemberParams, OutputSettings, SolverSettings,
+)
 
 # a gate switch that MAX_SWITCH_RETRIES retries could not place within its tolerance (a strongly
 # curved margin makes the linear crossing estimate creep towards it, like regula falsi) is accepted
@@ -153,10 +157,39 @@ def make_gates(ft, model, terms, team):
         return 0
 
     @wp.func
+    def contact_arrival(p: MemberParams, st: IntegratorState, t_old: wp.float64, t_new: wp.float64, z_prev: ft,
+                        z0: ft, z1: ft, backward_euler: int):
+        """The contact front's arrival at a node whose gate first opened in the step (t_old, t_new]
+        after the disc started: (time, error estimate) in s. The yield margin's crossing of 0 on the
+        quadratic through the margins at the last three accepted points (t_prev = st.t2, t_old, t_new),
+        and its distance to the linear crossing (the yield_time rule) as the error; the linear
+        crossing with the whole step as the error after a (re)start, where no earlier point belongs
+        to the same smooth piece. (nan, nan) outside the window from the disc start to the stop."""
+        if t_new <= p.rest_until or t_old >= p.stop_time:
+            return wp.float64(wp.nan), wp.float64(wp.nan)
+        zp = wp.float64(z_prev)
+        za = wp.float64(z0)
+        zb = wp.float64(z1)
+        theta = wp.float64(0.0)
+        if za != zb and zb > wp.float64(0.0):
+            theta = wp.clamp(za / (za - zb), wp.float64(0.0), wp.float64(1.0))
+        t_lin = t_old + theta * (t_new - t_old)
+        t_prev = st.t2
+        if backward_euler == 0 and st.npts >= 2 and t_prev < t_old and za < wp.float64(0.0):
+            # crossing_time_quadratic takes the middle point at a fraction c_mid of its interval:
+            # the interval (t_prev, t_new) with t_old inside
+            c_mid = (t_old - t_prev) / (t_new - t_prev)
+            t_quad, _unused = crossing_time_quadratic(wp.float64(0.0), t_prev, zp, c_mid, za, t_new, zb)
+            if t_quad >= t_old and t_quad <= t_new:
+                return t_quad, wp.abs(t_quad - t_lin)
+        return t_lin, t_new - t_old
+
+    @wp.func
     def switch_gates(
-        c: Coeffs, p: MemberParams, st: IntegratorState, m: int, n: int, state: array3, K: array4,
-        slot: int, gates: array3, work: array3, t_old: wp.float64, t_new: wp.float64,
-        yield_time: wp.array2d(dtype=wp.float64),
+        c: Coeffs, p: MemberParams, st: IntegratorState, outputs: OutputSettings, m: int, n: int, state: array3,
+        K: array4, slot: int, gates: array3, work: array3, t_old: wp.float64, t_new: wp.float64,
+        backward_euler: int, yield_time: wp.array2d(dtype=wp.float64), arrival: wp.array3d(dtype=wp.float64),
+        arrival_error: wp.array3d(dtype=wp.float64),
     ):
         """After an accepted step (state advanced): choose each node's gate regime for the next step
         from its end-of-step yield margin z1, store the margin, correct the FSAL derivatives K[slot] of
@@ -169,8 +202,10 @@ def make_gates(ft, model, terms, team):
         at its end (work[W_DMARGIN]); with dr < 0 and the far side's rate of opposite sign the node
         slides. A sliding node's gate is solved in every stage from |tau_f| = tau_c*A
         (interface_friction), pinned at 1 or 0 where that cannot hold; the node keeps that implicit
-        regime for the rest of the run. The lane's nodes; the switches are counted over the team
-        (which is also the barrier before the next step reads the halo's gates)."""
+        regime for the rest of the run. With the contact front (outputs.contact_front), a node whose
+        gate leaves the closed regime after the disc started, for the first time in that window,
+        records its arrival (contact_arrival). The lane's nodes; the switches are counted over the
+        team (which is also the barrier before the next step reads the halo's gates)."""
         v_disc = ft(disc_velocity_at(p, t_new, t_old))
         h = ft(t_new - t_old)
         switches = int(0)
@@ -209,8 +244,15 @@ def make_gates(ft, model, terms, team):
                 if z0 != z1 and z1 > ft(0.0):
                     theta = wp.clamp(wp.float64(z0) / wp.float64(z0 - z1), wp.float64(0.0), wp.float64(1.0))
                 yield_time[i, m] = t_old + theta * (t_new - t_old)
+            if outputs.contact_front == 1 and new_gate > ft(0.0) and gate_regime(gate, sliding) == 0:
+                if not wp.isfinite(arrival[EV_CONTACT, i, m]):
+                    t_cross, t_err = contact_arrival(p, st, t_old, t_new, gates[G_MARGIN_OLD, i, m], z0, z1,
+                                                     backward_euler)
+                    arrival[EV_CONTACT, i, m] = t_cross
+                    arrival_error[EV_CONTACT, i, m] = t_err
             gates[G_GATE, i, m] = new_gate
             gates[G_SLIDE, i, m] = new_sliding
+            gates[G_MARGIN_OLD, i, m] = z0
             gates[G_MARGIN, i, m] = z1
         st.gate_switches = st.gate_switches + team_count(switches)
         return st

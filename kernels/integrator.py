@@ -103,8 +103,9 @@ def _make_integrator(dtype: str, model, lanes: int, registers=None, method: str 
         gates: array3,
         record_previous: array3,
         # outputs
-        arrival: wp.array2d(dtype=wp.float64),
-        arrival_error: wp.array2d(dtype=wp.float64),
+        arrival: wp.array3d(dtype=wp.float64),
+        arrival_error: wp.array3d(dtype=wp.float64),
+        strength: wp.array3d(dtype=wp.float64),
         yield_time: wp.array2d(dtype=wp.float64),
         record: array4,
     ):
@@ -180,7 +181,8 @@ def _make_integrator(dtype: str, model, lanes: int, registers=None, method: str 
                 advance_state(c, m, n, state, K, s1, s2, s3, ft(step.h), restart)
             if wp.static(stress_gate):
                 switches_before = st.gate_switches
-                st = switch_gates(c, p, st, m, n, state, K, s3, gates, work, t, step.t_new, yield_time)
+                st = switch_gates(c, p, st, outputs, m, n, state, K, s3, gates, work, t, step.t_new, restart, yield_time,
+                                  arrival, arrival_error)
                 if restart == 0:
                     st = after_accept(st, settings, switches_before, res.switch_test, step.t_new, step.clipped)
             delta0 = res.delta0
@@ -193,7 +195,7 @@ def _make_integrator(dtype: str, model, lanes: int, registers=None, method: str 
             st.fsal = s3
             st = on_accept(c, p, st, outputs, m, n, state, K, work, s1, s2, s3, t, step.t_new, delta0, tilt,
                            res.sums.friction, res.sums.normal, res.sums.min_normal, restart, arrival, arrival_error,
-                           record_times, record_previous, record)
+                           strength, record_times, record_previous, record)
             if wp.static(stress_gate):
                 st = drop_stale_limit(st, step.t_new)
             if st.restart != 0:

@@ -4,7 +4,8 @@ arrival times) and the recorded fields; and the automatic end of a run, which is
 
 ``on_accept`` is the one hook the integrator calls after each accepted step (the state already
 advanced); the front and recording observers are compiled in always but run only when the launch
-asks for them (OutputSettings.fronts, IntegratorState.record_slot).
+asks for them (OutputSettings.velocity_front / strength_front, IntegratorState.record_slot); the
+contact front is recorded with the gate switches (kernels/gates.py).
 
 ``make_observers(ft, model, terms)`` builds the functions for one working precision and model (the
 model's switches reach them through ``terms``).
@@ -21,7 +22,10 @@ from .reductions import (
     record_friction_point,
     record_friction_point_cubic,
 )
-from .types import C_PHI, C_TAU, C_U, C_V, W_CONTACT, IntegratorState, MemberParams, OutputSettings
+from .types import (
+    C_PHI, C_TAU, C_U, C_V, EV_STRENGTH, EV_VELOCITY, S_MAX, S_RATIO1, S_RATIO2, W_CONTACT, IntegratorState, MemberParams,
+    OutputSettings,
+)
 
 # automatic end (end_time None, docs/model.md "End of a run"): mu has fallen this fraction below its
 # maximum, and (front metrics on) every node's detachment velocity is below this fraction of the
@@ -32,6 +36,10 @@ AUTO_END_FRONT_FRACTION = 0.5
 # slip of order D (the measured peaks: 2.7-3.6 D from 1e-6 to 1e-4 m/s); earlier wiggles of mu(t)
 # (the start of the disc, 1e-8 in mu) are not the peak
 AUTO_END_MIN_TRAVEL = 0.5
+# strength front: a node's peak of tau_f/sigma_n counts once the ratio has fallen this fraction below
+# it (the measured drop after the peak is ~20 %: N = 100, e = -0.2..0.2, stress gate); the automatic
+# end waits for every node in contact to pass its peak
+STRENGTH_PEAK_DROP = 0.01
 
 
 @wp.func
@@ -63,17 +71,20 @@ def friction_point(st: IntegratorState, p: MemberParams, t_new: wp.float64, fric
 @wp.func
 def detachment_over(p: MemberParams, st: IntegratorState, outputs: OutputSettings):
     """The automatic end: mu has passed a maximum reached after the disc slid AUTO_END_MIN_TRAVEL*D
-    and fallen AUTO_END_PEAK_DROP below it, and (fronts on) no node is above
-    AUTO_END_FRONT_FRACTION of the arrival level."""
+    and fallen AUTO_END_PEAK_DROP below it, (velocity front) no node is above AUTO_END_FRONT_FRACTION
+    of the arrival level, and (strength front) every node in contact has passed its peak of
+    tau_f/sigma_n by STRENGTH_PEAK_DROP."""
     if st.t <= p.rest_until or st.npts < 3 or st.mu_s <= wp.float64(0.0):
         return False
     if disc_travel_at(p, st.mu_s_time) < wp.float64(AUTO_END_MIN_TRAVEL) * p.memory_length:
         return False  # the maximum must come from the sliding disc
     if st.mu_final > (wp.float64(1.0) - wp.float64(AUTO_END_PEAK_DROP)) * st.mu_s:
         return False
-    if outputs.fronts == 1 and st.front_max > wp.float64(0.0):
+    if outputs.velocity_front == 1 and st.front_max > wp.float64(0.0):
         if st.front_now >= wp.float64(AUTO_END_FRONT_FRACTION) * outputs.front_threshold * st.front_max:
             return False
+    if outputs.strength_front == 1 and st.strength_rising > 0:
+        return False
     return True
 
 
@@ -94,6 +105,7 @@ def make_observers(ft, model, terms, team, method="tr_bdf2"):
     cubic = 1 if method == "esdirk4" else 0
     Coeffs = terms["Coeffs"]
     team_max = team["team_max"]
+    team_count = team["team_count"]
     barrier = team["barrier"]
     contact_terms = terms["contact_terms"]
     array3 = wp.array3d(dtype=ft)
@@ -107,6 +119,14 @@ def make_observers(ft, model, terms, team, method="tr_bdf2"):
         return state[C_U, i, m]
 
     @wp.func
+    def lane_stencil_start(c: Coeffs, state: array3, n: int, m: int):
+        """(u of the node left of the lane's first node (0 at the pad's left end), u of its first node)."""
+        u_l = ft(0.0)
+        if c.first_node > 0:
+            u_l = state_displacement(state, c.first_node - 1, n, m)
+        return u_l, state_displacement(state, c.first_node, n, m)
+
+    @wp.func
     def state_contact(c: Coeffs, state: array3, i: int, n: int, m: int, u_l: ft, u_c: ft, u_r: ft, delta0: ft, tilt: ft,
                       v_disc: ft):
         """The interface at node i of the state itself (the friction law at the state: g = 0)."""
@@ -116,8 +136,8 @@ def make_observers(ft, model, terms, team, method="tr_bdf2"):
     @wp.func
     def track_fronts(
         c: Coeffs, p: MemberParams, st: IntegratorState, m: int, n: int, K: array4, work: array3, s1: int, s2: int, s3: int,
-        t_old: wp.float64, t_new: wp.float64, arrival: wp.array2d(dtype=wp.float64),
-        arrival_error: wp.array2d(dtype=wp.float64), direction: int,
+        t_old: wp.float64, t_new: wp.float64, arrival: wp.array3d(dtype=wp.float64),
+        arrival_error: wp.array3d(dtype=wp.float64), direction: int,
         threshold: wp.float64, use_stage2: int,
     ):
         """Fold an accepted step into the front tracking (the pad velocity at t_old is the FSAL
@@ -141,7 +161,7 @@ def make_observers(ft, model, terms, team, method="tr_bdf2"):
             w_old = detachment_velocity(wp.float64(K[s1, C_U, i, m]), disc_sign, direction)
             w_new = detachment_velocity(wp.float64(K[s3, C_U, i, m]), disc_sign, direction)
             w_step = wp.max(w_step, w_new)
-            if not wp.isfinite(arrival[i, m]):
+            if not wp.isfinite(arrival[EV_VELOCITY, i, m]):
                 if use_stage2 == 1:
                     # quadratic through the step's ends and its second stage (at c2*h): a sharper
                     # crossing time, and its distance to the linear one as the error estimate
@@ -150,17 +170,77 @@ def make_observers(ft, model, terms, team, method="tr_bdf2"):
                         t_cross, t_err = crossing_time_quadratic(
                             st.front_level, t_old, w_old, wp.float64(C2), w_mid, t_new, w_new
                         )
-                        arrival[i, m] = t_cross
-                        arrival_error[i, m] = t_err
+                        arrival[EV_VELOCITY, i, m] = t_cross
+                        arrival_error[EV_VELOCITY, i, m] = t_err
                 elif w_new >= st.front_level:
-                    arrival[i, m] = crossing_time(st.front_level, t_old, w_old, t_new, w_new)
-                    arrival_error[i, m] = t_new - t_old  # backward-Euler step: no inner point
+                    arrival[EV_VELOCITY, i, m] = crossing_time(st.front_level, t_old, w_old, t_new, w_new)
+                    arrival_error[EV_VELOCITY, i, m] = t_new - t_old  # backward-Euler step: no inner point
         w_step = team_max(w_step)  # over the team's nodes (max is exact: the same in any order)
         if w_step > wp.float64(-1.0e300):  # some node in contact (front_max stays -inf before)
             st.front_max = wp.max(st.front_max, w_step)
         if w_step > wp.float64(0.0) and w_step >= threshold * st.front_max:
             st.front_last = t_new
         st.front_now = w_step
+        return st
+
+    @wp.func
+    def track_strength(
+        c: Coeffs, p: MemberParams, st: IntegratorState, m: int, n: int, state: array3, t_old: wp.float64,
+        t_new: wp.float64, delta0: ft, tilt: ft, backward_euler: int, strength: wp.array3d(dtype=wp.float64),
+        arrival: wp.array3d(dtype=wp.float64), arrival_error: wp.array3d(dtype=wp.float64),
+    ):
+        """The strength front: each node's running maximum of r = sign(v_max)*tau_f/sigma_n (its own
+        static friction; nodes in contact, window from the disc start to the sudden stop) and its time
+        in arrival[EV_STRENGTH], refined like mu_s by the parabola through the last three accepted
+        points when the middle one is a discrete maximum (arrival_error: the refinement's shift, or
+        the step for an unrefined maximum). st.strength_rising counts the team's nodes in contact
+        whose r is still within STRENGTH_PEAK_DROP of its maximum. The lane's nodes (after a
+        barrier: the stencil reads the halo's displacement, just advanced by the neighbour)."""
+        barrier()
+        v_disc = ft(disc_velocity_at(p, t_new, t_old))
+        sign_v = wp.float64(1.0)
+        if p.disc_velocity < wp.float64(0.0):
+            sign_v = wp.float64(-1.0)
+        in_window = t_new > p.rest_until and t_old < p.stop_time
+        refine = backward_euler == 0 and st.npts >= 2 and t_old > st.t2 and st.t2 >= p.rest_until
+        rising = int(0)
+        u_l, u_c = lane_stencil_start(c, state, n, m)
+        for i in range(c.first_node, c.end_node):
+            u_r = state_displacement(state, i + 1, n, m)
+            ns, fr = state_contact(c, state, i, n, m, u_l, u_c, u_r, delta0, tilt, v_disc)
+            u_l = u_c
+            u_c = u_r
+            sigma = wp.float64(fr.contact * ns.value)
+            r_new = wp.float64(wp.nan)
+            if sigma > wp.float64(0.0):
+                r_new = sign_v * wp.float64(fr.stress) / sigma
+            r1 = strength[S_RATIO1, i, m]
+            r2 = strength[S_RATIO2, i, m]
+            strength[S_RATIO2, i, m] = r1
+            strength[S_RATIO1, i, m] = r_new
+            if not (in_window and wp.isfinite(r_new)):
+                continue
+            r_max = strength[S_MAX, i, m]
+            if not wp.isfinite(r_max) or r_new > r_max:
+                r_max = r_new
+                arrival[EV_STRENGTH, i, m] = t_new
+                arrival_error[EV_STRENGTH, i, m] = t_new - t_old
+            if refine and wp.isfinite(r1) and wp.isfinite(r2) and r1 >= r2 and r1 >= r_new:
+                d1 = (r1 - r2) / (t_old - st.t2)
+                d2 = (r_new - r1) / (t_new - t_old)
+                curv = (d2 - d1) / (t_new - st.t2)
+                if curv < wp.float64(0.0):
+                    t_peak = wp.float64(0.5) * (t_old + st.t2) - d1 / (wp.float64(2.0) * curv)
+                    if t_peak >= st.t2 and t_peak <= t_new:
+                        r_peak = r2 + d1 * (t_peak - st.t2) + curv * (t_peak - st.t2) * (t_peak - t_old)
+                        if r_peak >= r_max:
+                            r_max = r_peak
+                            arrival[EV_STRENGTH, i, m] = t_peak
+                            arrival_error[EV_STRENGTH, i, m] = wp.abs(t_peak - t_old)
+            strength[S_MAX, i, m] = r_max
+            if r_new > (wp.float64(1.0) - wp.float64(STRENGTH_PEAK_DROP)) * r_max:
+                rising += 1
+        st.strength_rising = team_count(rising)
         return st
 
     @wp.func
@@ -183,10 +263,7 @@ def make_observers(ft, model, terms, team, method="tr_bdf2"):
             k_end += 1
         v_disc = ft(disc_velocity_at(p, t_new, t_old))
         span = t_new - t_old
-        u_l = ft(0.0)
-        if c.first_node > 0:
-            u_l = state_displacement(state, c.first_node - 1, n, m)
-        u_c = state_displacement(state, c.first_node, n, m)
+        u_l, u_c = lane_stencil_start(c, state, n, m)
         for i in range(c.first_node, c.end_node):
             u_r = state_displacement(state, i + 1, n, m)
             vel = state[C_V, i, m]
@@ -211,20 +288,24 @@ def make_observers(ft, model, terms, team, method="tr_bdf2"):
         c: Coeffs, p: MemberParams, st: IntegratorState, outputs: OutputSettings, m: int, n: int, state: array3,
         K: array4, work: array3, s1: int, s2: int, s3: int, t_old: wp.float64, t_new: wp.float64, delta0: ft,
         tilt: ft, friction: wp.float64, normal: wp.float64, min_normal: wp.float64, backward_euler: int,
-        arrival: wp.array2d(dtype=wp.float64), arrival_error: wp.array2d(dtype=wp.float64),
+        arrival: wp.array3d(dtype=wp.float64), arrival_error: wp.array3d(dtype=wp.float64),
+        strength: wp.array3d(dtype=wp.float64),
         record_times: wp.array(dtype=wp.float64), record_previous: array3, record: array4,
     ):
         """After an accepted step from t_old to t_new (state advanced, K[s1] still f(y_old)): fronts,
         recording, then the friction point (mu(t) may jump across a backward-Euler restart: no
         parabola through it)."""
-        if outputs.fronts == 1:
+        if outputs.velocity_front == 1:
             st = track_fronts(c, p, st, m, n, K, work, s1, s2, s3, t_old, t_new, arrival, arrival_error,
                               outputs.front_direction, outputs.front_threshold, 1 - backward_euler)
+        if outputs.strength_front == 1:
+            st = track_strength(c, p, st, m, n, state, t_old, t_new, delta0, tilt, backward_euler, strength, arrival,
+                                arrival_error)
         if st.record_slot >= 0:
             st = record_fields(c, p, st, m, n, state, t_old, t_new, delta0, tilt, record_times, record_previous, record)
         if backward_euler == 1:
             st.npts = 0
         return friction_point(st, p, t_new, friction, normal, min_normal, cubic)
 
-    return dict(on_accept=on_accept, track_fronts=track_fronts, record_fields=record_fields,
+    return dict(on_accept=on_accept, track_fronts=track_fronts, track_strength=track_strength, record_fields=record_fields,
                 state_displacement=state_displacement, state_contact=state_contact)

@@ -254,7 +254,9 @@ def segment_fronts(
 ):
     """Front metrics of each member from its arrival times t_a (s, nodes x members; NaN = never).
 
-    Works on the intervals between neighbouring nodes from the first to the last arrived node, each
+    The front is the run of arrived nodes around the nucleation node (the earliest arrival); nodes
+    beyond an unreached node are not part of it (detached_fraction still counts every arrived node).
+    Works on the intervals between neighbouring nodes of that run, each
     with its local speed c_j = dx / |t_a(x_{j+1}) - t_a(x_j)|. v_fast is the plateau (mode within
     10 %) of the local speeds among the fastest fast_fraction of the intervals: the sustained speed
     of the fast front, not the unbounded local speed at an interior nucleation point. An interval is slow when its local speed,
@@ -268,26 +270,34 @@ def segment_fronts(
         out[r, m] = wp.float64(wp.nan)
     L = length[m]
     dx = L / wp.float64(n - 1)
-    lo = int(-1)
-    hi = int(-1)
     t0 = wp.float64(1.0e300)
-    t_last = wp.float64(-1.0e300)
-    i_first = int(0)
+    i_first = int(-1)
     arrived = int(0)
     for i in range(n):
         ta = arrival[i, m]
         if wp.isfinite(ta):
-            if lo < 0:
-                lo = i
-            hi = i
             arrived += 1
             if ta < t0:
                 t0 = ta
                 i_first = i
-            t_last = wp.max(t_last, ta)
     out[FM_ARRIVED_FRACTION, m] = wp.float64(arrived) / wp.float64(n)
-    if lo < 0:
+    if i_first < 0:
         return
+    # the front: the run of arrived nodes around the nucleation node; a node beyond a node that the
+    # front never reached is not part of it (no segment spans an unreached node)
+    lo = i_first
+    while lo > 0:
+        if not wp.isfinite(arrival[lo - 1, m]):
+            break
+        lo -= 1
+    hi = i_first
+    while hi < n - 1:
+        if not wp.isfinite(arrival[hi + 1, m]):
+            break
+        hi += 1
+    t_last = wp.float64(-1.0e300)
+    for i in range(lo, hi + 1):
+        t_last = wp.max(t_last, arrival[i, m])
     x_first = -wp.float64(0.5) * L + wp.float64(i_first) * dx
     out[FM_NUCLEATION_POSITION, m] = x_first
     edge = wp.float64(0.0)

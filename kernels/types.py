@@ -19,9 +19,12 @@ work               (work_slot, node, member)           ft     stage constants, N
 gates              (gate_slot, node, member)           ft     stress gate: gate (1), margin (Pa), sliding (1);
                                                               (gate_slot, 1, 1) for the other laws
 yield_time         (node, member)                      f64    first gate opening (s); (1, 1) unless stress gate
-arrival            (node, member)                      f64    front arrival time t_a (s), NaN: none; (1, 1)
-                                                              without fronts
-arrival_error      (node, member)                      f64    its error estimate (s)
+arrival            (front_event, node, member)         f64    front arrival time t_a of each event (FRONT_EVENTS)
+                                                              (s), NaN: none; (N_EVENTS, 1, 1) without fronts
+arrival_error      (front_event, node, member)         f64    its error estimate (s)
+strength           (strength_slot, node, member)       f64    strength event: tau_f/sigma_n at the last two
+                                                              accepted points and its running maximum (1);
+                                                              (N_STRENGTH, 1, 1) without that event
 record_times       (time,)                             f64    recording grid (s)
 record_previous    (record_field, node, recorded)      ft     recorded fields at the last accepted point
 record             (record_field, time, node, recorded) ft    sampled fields (RECORD_FIELDS; NaN: not reached)
@@ -46,9 +49,20 @@ W_RL, W_RR = 16, 17
 N_WORK = 18
 # gate slots (stress gate, first index of ``gates``): the gate held over the next step (0 closed,
 # 1 open; for a sliding node the start of its implicit solve), the yield margin |tau_f| - tau_c*A
-# (Pa) at the last accepted point, and the sliding flag (1: solved on the yield surface each stage)
-G_GATE, G_MARGIN, G_SLIDE = 0, 1, 2
-N_GATE = 3
+# (Pa) at the last accepted point, the sliding flag (1: solved on the yield surface each stage), and
+# the margin at the accepted point before (Pa; the contact front's quadratic crossing)
+G_GATE, G_MARGIN, G_SLIDE, G_MARGIN_OLD = 0, 1, 2, 3
+N_GATE = 4
+# front events (first index of ``arrival``; docs/model.md, "Fronts"): each node's stick-to-slip
+# transition (its first gate opening after the disc starts; stress gate only), its peak of
+# tau_f/sigma_n (its own static friction), and the threshold crossing of the pad velocity
+EV_CONTACT, EV_STRENGTH, EV_VELOCITY = 0, 1, 2
+FRONT_EVENTS = ("contact", "strength", "velocity")
+N_EVENTS = 3
+# strength slots (first index of ``strength``): tau_f/sigma_n at the last accepted point and at the
+# one before, and its running maximum over the window
+S_RATIO1, S_RATIO2, S_MAX = 0, 1, 2
+N_STRENGTH = 3
 STAGE_SLOTS = {"tr_bdf2": 3, "esdirk4": 6}
 
 
@@ -133,8 +147,10 @@ class OutputSettings:
     """What the integrator records besides mu_s."""
 
     front_direction: wp.int32  # FRONT_* code
-    fronts: wp.int32  # 1: track the detachment velocity (event maximum and arrival times)
+    velocity_front: wp.int32  # 1: track the detachment velocity (event maximum and arrival times)
     front_threshold: wp.float64  # arrival level as a fraction of the event maximum
+    contact_front: wp.int32  # 1: record each node's first gate opening after the disc starts (stress gate)
+    strength_front: wp.int32  # 1: track each node's peak of tau_f/sigma_n
 
 
 @wp.struct
@@ -176,6 +192,7 @@ class IntegratorState:
     unlocated_switches: wp.int32  # steps accepted with a switch error > 1 after MAX_SWITCH_RETRIES
     record_slot: wp.int32  # index among the recorded members, -1: not recorded
     record_next: wp.int32  # next index of the recording time grid
+    strength_rising: wp.int32  # nodes in contact whose tau_f/sigma_n is within STRENGTH_PEAK_DROP of its maximum (strength front)
 
 
 @dataclasses.dataclass
@@ -190,6 +207,7 @@ class DeviceArrays:
     yield_time: wp.array
     arrival: wp.array
     arrival_error: wp.array
+    strength: wp.array
     record_times: wp.array
     record_previous: wp.array
     record: wp.array
@@ -221,11 +239,13 @@ def member_zeros(shape, ft, member_major: bool):
 
 
 def allocate(ft, params_np: np.ndarray, n_nodes: int, stress_gate: bool, fronts: bool,
-             record_times, n_recorded: int, member_major: bool = False, method: str = "tr_bdf2") -> DeviceArrays:
+             record_times, n_recorded: int, member_major: bool = False, method: str = "tr_bdf2",
+             strength: bool = False) -> DeviceArrays:
     """Allocate the arrays of a launch on the current Warp device. ``params_np``: MemberParams as a
     numpy structured array (member,); arrays a scene does not need get a (.., 1, 1) placeholder;
     member_major: the state, stages, work and gates arrays hold each member contiguously
-    (:func:`member_array`); method: the integrator, which sets the stage slots of K (:func:`stage_slots`)."""
+    (:func:`member_array`); method: the integrator, which sets the stage slots of K (:func:`stage_slots`);
+    strength: the strength front's per-node reductions."""
     n_members = params_np.shape[0]
     times = np.asarray(record_times if n_recorded else [0.0], dtype=np.float64)
     per_node = (n_nodes, n_members)
@@ -238,8 +258,9 @@ def allocate(ft, params_np: np.ndarray, n_nodes: int, stress_gate: bool, fronts:
         else wp.zeros((N_GATE, 1, 1), dtype=ft),
         # NaN: not set yet (the kernels test isfinite)
         yield_time=wp.full(per_node if stress_gate else (1, 1), np.nan, dtype=wp.float64),
-        arrival=wp.full(per_node if fronts else (1, 1), np.nan, dtype=wp.float64),
-        arrival_error=wp.full(per_node if fronts else (1, 1), np.nan, dtype=wp.float64),
+        arrival=wp.full((N_EVENTS,) + (per_node if fronts else (1, 1)), np.nan, dtype=wp.float64),
+        arrival_error=wp.full((N_EVENTS,) + (per_node if fronts else (1, 1)), np.nan, dtype=wp.float64),
+        strength=wp.full((N_STRENGTH,) + (per_node if strength else (1, 1)), np.nan, dtype=wp.float64),
         record_times=wp.array(times, dtype=wp.float64),
         record_previous=wp.zeros((len(RECORD_FIELDS), n_nodes, max(n_recorded, 1)), dtype=ft),
         # NaN: a time after the end of the run is never sampled

@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import subprocess
 import time
 from pathlib import Path
 
@@ -53,7 +54,9 @@ def main(argv=None):
     ap.add_argument("--dtypes", nargs="+", default=["float64", "float32"])
     ap.add_argument("--rtol", type=float, default=1e-5)
     ap.add_argument("--nodes", type=int, default=200)
-    ap.add_argument("--fronts", action="store_true", help="time with the front metrics (two passes)")
+    ap.add_argument("--fronts", action="store_true", help="front metrics on (the default event, contact); same as --front-events contact")
+    ap.add_argument("--front-events", nargs="+", default=None, choices=["off", "contact", "strength", "velocity"],
+                    help="time each of these front settings (off: fronts=None; velocity costs a second pass)")
     ap.add_argument("--repeat", type=int, default=1, help="timed repetitions (the best is kept)")
     ap.add_argument("--out", default="bench_engine.json")
     ap.add_argument("--relaxation-gate", default="stress", choices=["stress", "none", "velocity"])
@@ -65,6 +68,7 @@ def main(argv=None):
     ap.add_argument("--reference", default=None,
                     help="JSON with mu_s of the first 16 members (float64, rtol 1e-9); made with --make-reference "
                          "(default: studies/reference/bench_members_mu_s[_GATE].json)")
+    ap.add_argument("--jsonl", default=None, help="also append each timing as a JSON line to this file")
     ap.add_argument("--make-reference", action="store_true", help="compute the reference (on --device) and exit")
     args = ap.parse_args(argv)
     device = args.device or wf.default_device()
@@ -88,9 +92,13 @@ def main(argv=None):
         raise SystemExit(f"--reference was made with nodes={reference['nodes']}, not {args.nodes}")
     ref_mu = np.asarray(reference["mu_s"])
     rows = []
-    fronts = wf.Fronts() if args.fronts else None
-    for dtype, lanes, predict, method in [(d, k, p, me) for d in args.dtypes for k in args.lanes
-                                          for p in args.predict_switches for me in args.methods]:
+    front_events = args.front_events or (["contact"] if args.fronts else ["off"])
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
+                            cwd=Path(__file__).parent).stdout.strip() or "unknown"
+    for dtype, lanes, predict, method, event in [(d, k, p, me, ev) for d in args.dtypes for k in args.lanes
+                                                 for p in args.predict_switches for me in args.methods
+                                                 for ev in front_events]:
+        fronts = None if event == "off" else wf.Fronts(event=event)
         if dtype == "float32" and args.relaxation_gate == "stress":
             print("float32 skipped: the stress gate needs float64")
             continue
@@ -111,7 +119,8 @@ def main(argv=None):
             err = float(np.max(np.abs(ds.mu_s.values[:k] / ref_mu[:k] - 1)))
             steps = ds.steps_accepted.values + ds.steps_rejected.values
             row = dict(
-                members=m, nodes=args.nodes, dtype=dtype, device=device, lanes=int(ds.attrs["lanes"]), rtol=args.rtol, fronts=bool(args.fronts),
+                members=m, nodes=args.nodes, dtype=dtype, device=device, lanes=int(ds.attrs["lanes"]), rtol=args.rtol, fronts=event,
+                integration_passes=int(ds.attrs.get("integration_passes", 1)), commit=commit, mu_s_error=err,
                 relaxation_gate=args.relaxation_gate, predict_switches=predict, method=method,
                 mean_newton_iterations=float(ds.newton_iterations.values.mean()),
                 wall_s=best,
@@ -124,14 +133,17 @@ def main(argv=None):
             )
             rows.append(row)
             print(json.dumps(row), flush=True)
+            if args.jsonl:
+                with open(args.jsonl, "a") as f:
+                    f.write(json.dumps(row) + "\n")
     meta = dict(platform=platform.platform(), processor=platform.processor(), warpfric=wf.__version__,
                 command="python studies/bench_engine.py " + " ".join(argv or []))
     with open(args.out, "w") as f:
         json.dump(dict(meta=meta, rows=rows), f, indent=1)
-    print(f"\n{'M':>6} {'N':>4} {'dtype':>8} {'method':>8} {'lanes':>5} {'pred':>4} {'fronts':>6} {'device':>7} {'wall s':>8} {'real/s':>9} {'node-steps/s':>13} "
+    print(f"\n{'M':>6} {'N':>4} {'dtype':>8} {'method':>8} {'lanes':>5} {'pred':>4} {'fronts':>8} {'device':>7} {'wall s':>8} {'real/s':>9} {'node-steps/s':>13} "
           f"{'acc steps':>9} {'rej':>5} {'ok':>6} {'mu_s err':>9}")
     for r in rows:
-        print(f"{r['members']:>6} {r['nodes']:>4} {r['dtype']:>8} {r['method']:>8} {r['lanes']:>5} {r['predict_switches']:>4} {str(r['fronts']):>6} {r['device']:>7} {r['wall_s']:8.3f} "
+        print(f"{r['members']:>6} {r['nodes']:>4} {r['dtype']:>8} {r['method']:>8} {r['lanes']:>5} {r['predict_switches']:>4} {str(r['fronts']):>8} {r['device']:>7} {r['wall_s']:8.3f} "
               f"{r['realisations_per_s']:9.1f} {r['node_steps_per_s']:13.3e} {r['mean_accepted_steps']:9.1f} "
               f"{r['mean_rejected_steps']:5.1f} {r['status_ok']:>6} {r['mu_s_max_rel_error']:9.2e}")
 

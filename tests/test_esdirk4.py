@@ -27,8 +27,9 @@ def test_method_validation():
         wf.Solver(method="rk4")
     assert wf.Solver(method="esdirk4", lanes=1).method == "esdirk4"
     assert wf.Solver().method == "tr_bdf2"
-    with pytest.raises(NotImplementedError, match="fronts"):
-        wf.simulate(solver=wf.Solver(nodes=N, method="esdirk4"), fronts=wf.Fronts(), device=DEVICE, progress=False)
+    with pytest.raises(NotImplementedError, match="velocity front"):
+        wf.simulate(solver=wf.Solver(nodes=N, method="esdirk4"), fronts=wf.Fronts(event="velocity"), device=DEVICE,
+                    progress=False)
 
 
 @pytest.mark.parametrize("gate", ["none", "stress"])

@@ -463,9 +463,13 @@ def test_kernel_structs_stay_in_step_with_the_public_parameters():
         assert getattr(settings, name) == pytest.approx(expected), name
     from warpfric.engine import output_settings
 
-    out = output_settings(wf.Fronts(threshold=0.3, direction="absolute"))
-    assert (out.fronts, out.front_direction, out.front_threshold) == (1, types.FRONT_DIRECTIONS.index("absolute"), 0.3)
-    assert output_settings(None).fronts == 0
+    out = output_settings(wf.Fronts(event=("strength", "velocity"), threshold=0.3, direction="absolute"))
+    assert (out.velocity_front, out.front_direction, out.front_threshold) == (1, types.FRONT_DIRECTIONS.index("absolute"), 0.3)
+    assert (out.contact_front, out.strength_front) == (0, 1)
+    assert output_settings(wf.Fronts(), stress_gate=True).contact_front == 1
+    assert output_settings(wf.Fronts(), stress_gate=False).contact_front == 0  # no gate to open
+    none = output_settings(None)
+    assert (none.velocity_front, none.contact_front, none.strength_front) == (0, 0, 0)
 
 
 def _fronts_kernel():
@@ -477,7 +481,7 @@ def _fronts_kernel():
     def sweep(params: wp.array(dtype=types.MemberParams), states: wp.array(dtype=types.IntegratorState),
               crossing: wp.array(dtype=f64), slope: wp.array(dtype=f64), curvature: f64, contact: wp.array(dtype=f64),
               h: f64, steps: int, use_stage2: int, K: wp.array4d(dtype=f64), work: wp.array3d(dtype=f64),
-              arrival: wp.array2d(dtype=f64), arrival_error: wp.array2d(dtype=f64)):
+              arrival: wp.array3d(dtype=f64), arrival_error: wp.array3d(dtype=f64)):
         """Steps of size h from t = 20.5 through a field whose detachment velocity at node i is
         w_i(t) = level + slope_i (t - crossing_i) + curvature (t - crossing_i)^2 (pad velocity -w: the
         disc moves in +x), fed to track_fronts as the FSAL, second-stage and last-stage slots."""
@@ -522,16 +526,16 @@ def test_front_observer_on_a_synthetic_field(use_stage2):
     st["front_max"] = -np.inf
     arrays = dict(K=wp.zeros((3, types.N_COMPONENTS, n, 1), dtype=f64, device=DEVICE),
                   work=wp.zeros((types.N_WORK, n, 1), dtype=f64, device=DEVICE),
-                  arrival=wp.full((n, 1), np.nan, dtype=f64, device=DEVICE),
-                  arrival_error=wp.full((n, 1), np.nan, dtype=f64, device=DEVICE))
+                  arrival=wp.full((types.N_EVENTS, n, 1), np.nan, dtype=f64, device=DEVICE),
+                  arrival_error=wp.full((types.N_EVENTS, n, 1), np.nan, dtype=f64, device=DEVICE))
     states = wp.array(st, dtype=types.IntegratorState, device=DEVICE)
     wp.launch(_fronts_kernel(), dim=1, device=DEVICE, inputs=[
         wp.array(member_params(values), dtype=types.MemberParams, device=DEVICE), states,
         wp.array(crossing, dtype=f64, device=DEVICE), wp.array(slope, dtype=f64, device=DEVICE), curvature,
         wp.array(contact, dtype=f64, device=DEVICE), h, steps, use_stage2,
         arrays["K"], arrays["work"], arrays["arrival"], arrays["arrival_error"]])
-    arrival = arrays["arrival"].numpy()[:, 0]
-    error = arrays["arrival_error"].numpy()[:, 0]
+    arrival = arrays["arrival"].numpy()[types.EV_VELOCITY, :, 0]
+    error = arrays["arrival_error"].numpy()[types.EV_VELOCITY, :, 0]
     assert np.isnan(arrival[5]) and np.isnan(error[5])  # lifted off
     if use_stage2:
         np.testing.assert_allclose(arrival[:5], crossing[:5], rtol=0, atol=1e-12)
@@ -595,15 +599,17 @@ def test_newton_flags_a_non_finite_update():
 @pytest.mark.parametrize("dtype, gate, fronts", [("float64", "stress", True), ("float32", "none", False)])
 def test_device_memory_per_member_is_reported(dtype, gate, fronts):
     """device_bytes_per_member counts the integration arrays of kernels/types.py: state (4 N),
-    stages (12 N), work (N_WORK N = 18 N) in the working precision, the stress gate's gates (3 N, working
-    precision) and yield times (N, float64), the fronts' arrival times and errors (2 N, float64),
-    and the member's parameter and state structs; kernel builds are timed apart from the run."""
+    stages (12 N), work (N_WORK N = 18 N) in the working precision, the stress gate's gates (N_GATE N,
+    working precision) and yield times (N, float64), the fronts' arrival times and errors of the three
+    events (6 N, float64; the contact front's, the default), and the member's parameter and state
+    structs; kernel builds are timed apart from the run."""
     n = 24
     ds = wf.simulate({"eccentricity": [0.0, 0.1, 0.2]}, model=wf.Model(relaxation_gate=gate),
                      solver=wf.Solver(nodes=n, dtype=dtype), fronts=wf.Fronts() if fronts else None, device=DEVICE,
                      progress=False)
     size = 8 if dtype == "float64" else 4
-    expected = size * n * (4 + 12 + types.N_WORK) + (size * 3 * n + 8 * n if gate == "stress" else 0) + (16 * n if fronts else 0)
+    expected = (size * n * (4 + 12 + types.N_WORK) + (size * types.N_GATE * n + 8 * n if gate == "stress" else 0)
+                + (2 * types.N_EVENTS * 8 * n if fronts else 0))
     expected += np.dtype(types.MemberParams.numpy_dtype()).itemsize + np.dtype(types.IntegratorState.numpy_dtype()).itemsize
     assert ds.attrs["device_bytes_per_member"] == expected
     assert ds.attrs["kernel_build_time_s"] >= 0 and ds.attrs["wall_time_s"] > 0

@@ -33,8 +33,9 @@ def test_launch_chunks_do_not_change_results():
     import warpfric as wf
 
     members = {"eccentricity": [0.0, 0.3], "normal_force": [1000.0, 300.0]}
-    one = run(members, nodes=20, rtol=1e-5, fronts=wf.Fronts(), steps_per_launch=100_000)
-    many = run(members, nodes=20, rtol=1e-5, fronts=wf.Fronts(), steps_per_launch=7)
+    every_event = wf.Fronts(event=("contact", "strength", "velocity"))
+    one = run(members, nodes=20, rtol=1e-5, fronts=every_event, steps_per_launch=100_000)
+    many = run(members, nodes=20, rtol=1e-5, fronts=every_event, steps_per_launch=7)
     assert (one.steps_accepted.values > 7 * 10).all()
     for name in ("mu_s", "mu_s_time", "steps_accepted", "steps_rejected", "displacement", "arrival_time", "v_middle"):
         np.testing.assert_array_equal(many[name].values, one[name].values, err_msg=name)
@@ -65,7 +66,7 @@ def test_a_disc_that_never_moves_has_no_peak_and_no_front():
     disc would start, and its 'event' of ~1e-22 m/s is no event: status no_peak, NaN mu_s, no front."""
     import warpfric as wf
 
-    ds = run({"disc_velocity": [0.0, 1e-4]}, nodes=20, rtol=1e-5, fronts=wf.Fronts())
+    ds = run({"disc_velocity": [0.0, 1e-4]}, nodes=20, rtol=1e-5, fronts=wf.Fronts(event=("velocity", "contact", "strength")))
     meanings = ds.status.attrs["flag_meanings"].split()
     assert meanings[ds.status.values[0]] == "no_peak" and np.isnan(ds.mu_s.values[0])
     assert np.isnan(ds.event_max_velocity.values[0]) and np.isnan(ds.v_middle.values[0])

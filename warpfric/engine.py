@@ -1,10 +1,12 @@
 """The engine behind ``simulate``: kernel-visible settings from the public ones, the device arrays,
 the integration passes (launch, straggler rule, progress) and the read-back to NumPy.
 
-Two passes when front metrics are asked for (docs/model.md, "Fronts"): pass 1 integrates the whole
-protocol (every output but the arrival times, and the event maximum of the detachment velocity);
-pass 2 repeats the same deterministic trajectory up to the last possible crossing (front_last of
-pass 1) and records the arrival times at the level that pass 1 found.
+One pass, unless the velocity front is asked for (docs/model.md, "Fronts"): the contact and strength
+fronts are located inside the steps of the one pass; the velocity front needs the event maximum of
+the detachment velocity before its arrival times are taken, so pass 1 integrates the whole protocol
+(every other output, and that maximum) and pass 2 repeats the same deterministic trajectory up to the
+last possible crossing (front_last of pass 1) and records the arrival times at the level that pass 1
+found.
 """
 
 from __future__ import annotations
@@ -22,8 +24,11 @@ from .parameters import Fronts, Model, Record, Solver
 @dataclasses.dataclass
 class EngineResult:
     """What the passes produced, on the host. Shapes: member_states (member,); fields (component, node,
-    member); normal_stress, friction_stress, yield_time, yield_gate, arrival, arrival_error (node,
-    member); record (record_field, time, node, recorded); event (member,) bool."""
+    member); normal_stress, friction_stress, yield_time, yield_gate (node, member); arrival,
+    arrival_error (front_event, node, member), NaN where a node never arrived (a strength peak not
+    confirmed by the end of the run included); strength_peak (node, member): each node's peak of
+    tau_f/sigma_n; record (record_field, time, node, recorded); event (member,) bool: the velocity
+    front's event was real."""
 
     member_states: np.ndarray
     fields: np.ndarray
@@ -33,12 +38,14 @@ class EngineResult:
     yield_gate: np.ndarray | None
     arrival: np.ndarray | None
     arrival_error: np.ndarray | None
+    strength_peak: np.ndarray | None
     event: np.ndarray | None
     record: np.ndarray | None
     kernel_build_s: float  # compiling (or loading from Warp's cache) the integrator's modules, s
     device_bytes_per_member: float  # device memory of the integration arrays per member, bytes (recorded
     # fields, the front segmentation and the read-back copies not included)
     lanes: int  # threads per member (1: the thread-per-member kernel; > 1: the cooperative kernel)
+    passes: int  # integration passes (2 with the velocity front, else 1)
 
 
 # the cooperative kernel's largest team when Solver.lanes is None (docs/performance.md, "Session 5:
@@ -102,15 +109,53 @@ def solver_settings(solver: Solver):
     return s
 
 
-def output_settings(fronts: Fronts | None):
-    """warpfric.Fronts (or None) -> the kernels' OutputSettings."""
+def output_settings(fronts: Fronts | None, stress_gate: bool = True):
+    """warpfric.Fronts (or None) -> the kernels' OutputSettings (the contact front only under the
+    stress gate: the other laws have no gate to open)."""
     from warpfric.kernels.types import FRONT_DIRECTIONS, OutputSettings
 
+    events = fronts.events if fronts is not None else ()
     out = OutputSettings()
-    out.fronts = 1 if fronts is not None else 0
+    out.velocity_front = 1 if "velocity" in events else 0
     out.front_direction = FRONT_DIRECTIONS.index(fronts.direction) if fronts is not None else 0
     out.front_threshold = fronts.threshold if fronts is not None else 1.0
+    out.contact_front = 1 if "contact" in events and stress_gate else 0
+    out.strength_front = 1 if "strength" in events else 0
     return out
+
+
+def arrival_pass_settings(outputs):
+    """OutputSettings of the velocity front's arrival pass (pass 2): the velocity front alone; the
+    contact and strength fronts of pass 1 stay as they are."""
+    from warpfric.kernels.types import OutputSettings
+
+    out = OutputSettings()
+    out.velocity_front = outputs.velocity_front
+    out.front_direction = outputs.front_direction
+    out.front_threshold = outputs.front_threshold
+    out.contact_front = 0
+    out.strength_front = 0
+    return out
+
+
+def confirmed_strength_peaks(strength: np.ndarray, arrival: np.ndarray, arrival_error: np.ndarray,
+                             final_time: np.ndarray) -> np.ndarray:
+    """The strength front's peaks that the run confirmed: a node's maximum of tau_f/sigma_n counts
+    when the ratio at the last accepted point has fallen STRENGTH_PEAK_DROP below it and the maximum
+    came before the end; elsewhere (still rising at the end: the peak lies beyond the run) the
+    arrival and its error become NaN, in place. Returns the peaks (node, member), NaN where not
+    confirmed. strength: (strength_slot, node, member); arrival, arrival_error: (front_event, node,
+    member) s; final_time: (member,) s."""
+    from warpfric.kernels.observers import STRENGTH_PEAK_DROP
+    from warpfric.kernels.types import EV_STRENGTH, S_MAX, S_RATIO1
+
+    peak, last = strength[S_MAX], strength[S_RATIO1]
+    with np.errstate(invalid="ignore"):
+        confirmed = (np.isfinite(peak) & (peak > 0) & (arrival[EV_STRENGTH] < final_time[None, :])
+                     & ~(last > (1.0 - STRENGTH_PEAK_DROP) * peak))
+    arrival[EV_STRENGTH] = np.where(confirmed, arrival[EV_STRENGTH], np.nan)
+    arrival_error[EV_STRENGTH] = np.where(confirmed, arrival_error[EV_STRENGTH], np.nan)
+    return np.where(confirmed, peak, np.nan)
 
 
 def member_params(values: dict) -> np.ndarray:
@@ -269,17 +314,19 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     np_dtype = np.float64 if solver.dtype == "float64" else np.float32
     params_np = member_params(values)
     settings = solver_settings(solver)
-    outputs = output_settings(fronts)
-    slots = record_slots(record, n_members)
     stress_gate = model.relaxation_gate == "stress"
-    n_passes = 2 if fronts is not None else 1
+    outputs = output_settings(fronts, stress_gate)
+    slots = record_slots(record, n_members)
+    strength = outputs.strength_front == 1
+    n_passes = 2 if outputs.velocity_front == 1 else 1
     with wp.ScopedDevice(device):
         arrays = allocate(ft, params_np, n, stress_gate, fronts is not None,
                           record.times if record is not None else None, len(record.members) if record is not None else 0,
-                          member_major=team, method=solver.method)
+                          member_major=team, method=solver.method, strength=strength)
         per_member = [arrays.params, arrays.state, arrays.stages, arrays.work]  # not the (.., 1, 1) placeholders
         per_member += [arrays.gates, arrays.yield_time] if stress_gate else []
         per_member += [arrays.arrival, arrays.arrival_error] if fronts is not None else []
+        per_member += [arrays.strength] if strength else []
         n_bytes = sum(a.capacity for a in per_member) + n_members * np.dtype(IntegratorState.numpy_dtype()).itemsize
         device_bytes_per_member = n_bytes / n_members
         front_max = front_last = event = None
@@ -297,6 +344,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         for pass_index in range(n_passes):
             states_np = initial_states(n_members, solver, slots if pass_index == 0 else np.full(n_members, -1, np.int32))
             if pass_index == 1:
+                # the velocity front's arrival pass: the contact and strength fronts (pass 1's) are kept
                 states_np["front_level"] = np.where(event, fronts.threshold * front_max, np.inf)
                 states_np["front_until"] = np.where(event, front_last, -np.inf)  # no event: nothing to redo
                 end = np.where(event, np.minimum(front_last, params_np["end_time"]), 1.0)
@@ -305,17 +353,20 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             member_states = wp.array(states_np, dtype=IntegratorState)
             arrays.state = member_array(state_np, ft, team)
             arrays.stages.zero_()  # K[fsal] holds f(y) of the state: zero for the state at rest
-            arrays.arrival.fill_(np.nan)
-            arrays.arrival_error.fill_(np.nan)
             arrays.gates.zero_()  # every gate closed: no friction stress at the start
-            arrays.yield_time.fill_(np.nan)
+            if pass_index == 0:
+                arrays.arrival.fill_(np.nan)
+                arrays.arrival_error.fill_(np.nan)
+                arrays.strength.fill_(np.nan)
+                arrays.yield_time.fill_(np.nan)
             pass_label = " ".join(p for p in (label, f"pass {pass_index + 1}/{n_passes}" if n_passes > 1 else "") if p)
             bar = Progress(show_progress, n_members, pass_label)
             stall_limit.fill_(NO_STALL_LIMIT)
             last_limit = NO_STALL_LIMIT
-            inputs = [arrays.params, settings, outputs, solver.steps_per_launch, stall_limit, arrays.record_times,
+            inputs = [arrays.params, settings, outputs if pass_index == 0 else arrival_pass_settings(outputs),
+                      solver.steps_per_launch, stall_limit, arrays.record_times,
                       member_states, arrays.state, arrays.stages, arrays.work, arrays.gates, arrays.record_previous]
-            outputs_ = [arrays.arrival, arrays.arrival_error, arrays.yield_time, arrays.record]
+            outputs_ = [arrays.arrival, arrays.arrival_error, arrays.strength, arrays.yield_time, arrays.record]
             # the launches are queued one ahead of the host: while chunk k + 1 runs, the host reads the
             # member states after chunk k (an asynchronous copy into pinned memory), updates the
             # progress line and the straggler limit (which chunk k + 2 applies) and stops once every
@@ -351,12 +402,17 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                 tau = tau_out.numpy()
                 yield_np = arrays.yield_time.numpy() if stress_gate else None
                 gate_np = arrays.gates.numpy()[0] if stress_gate else None
+        arrival = arrival_error = strength_peak = None
+        if fronts is not None:
+            arrival, arrival_error = arrays.arrival.numpy(), arrays.arrival_error.numpy()
+            if strength:
+                strength_peak = confirmed_strength_peaks(arrays.strength.numpy(), arrival, arrival_error, st["t"])
         result = EngineResult(
             member_states=st, fields=fields, normal_stress=sigma, friction_stress=tau, yield_time=yield_np, yield_gate=gate_np,
-            arrival=arrays.arrival.numpy() if fronts is not None else None,
-            arrival_error=arrays.arrival_error.numpy() if fronts is not None else None,
+            arrival=arrival, arrival_error=arrival_error, strength_peak=strength_peak,
             event=event, record=arrays.record.numpy() if record is not None else None,
             kernel_build_s=kernel_build_s, device_bytes_per_member=device_bytes_per_member, lanes=lanes,
+            passes=n_passes,
         )
         wp.synchronize_device(device)
     return result

@@ -20,6 +20,31 @@ FRONT_METRIC_NAMES = (
     "middle_front_start", "middle_front_end", "middle_front_length", "v_middle",
     "right_front_start", "right_front_end", "right_front_length", "v_right",
 )
+POSITION_SEGMENTS = ("left", "middle", "right")
+# the segments named from where the front starts (nucleation_edge -1: left, +1: right)
+START_SEGMENTS = ("precursor", "main", "far")
+SEGMENT_NAMES = POSITION_SEGMENTS + START_SEGMENTS
+
+
+def _segment_fields(seg: str) -> tuple:
+    return (f"{seg}_front_start", f"{seg}_front_end", f"{seg}_front_length", f"v_{seg}")
+
+
+def name_from_start(metrics: dict) -> dict:
+    """The segments named from where the front starts, from the positional ones: the precursor is
+    the slow segment at the nucleation edge, the main front the middle one, the far segment the slow
+    one at the other edge (left/right swap with the nucleation edge). A front that nucleates inside
+    the pad has no precursor and no far segment (NaN); its main front is the middle one.
+    Returns {name: (members,) array} for the start/end/length/speed of each (positions in m)."""
+    edge = np.asarray(metrics["nucleation_edge"], dtype=np.float64)
+    out = {}
+    for name, at_left, at_right in (("precursor", "left", "right"), ("far", "right", "left")):
+        for field_new, field_left, field_right in zip(_segment_fields(name), _segment_fields(at_left),
+                                                      _segment_fields(at_right)):
+            out[field_new] = np.where(edge == -1, metrics[field_left], np.where(edge == 1, metrics[field_right], np.nan))
+    for field_new, field_mid in zip(_segment_fields("main"), _segment_fields("middle")):
+        out[field_new] = np.asarray(metrics[field_mid], dtype=np.float64).copy()
+    return out
 
 
 def _warp():
@@ -45,8 +70,9 @@ def segment(arrival_time, length, fronts: Fronts = Fronts(), device: str | None 
     arrival_time: (members, nodes) s, NaN where the front never arrived; nodes evenly spaced over
                   the pad from -L/2 to +L/2.
     length:       pad length L in m, scalar or (members,).
-    Returns {name: (members,) float64 array} for FRONT_METRIC_NAMES (positions and lengths in m,
-    times in s, speeds in m/s; nucleation_edge -1 left, 0 interior, +1 right, NaN none).
+    Returns {name: (members,) float64 array} for FRONT_METRIC_NAMES and the segments named from the
+    start (:func:`name_from_start`; positions and lengths in m, times in s, speeds in m/s;
+    nucleation_edge -1 left, 0 interior, +1 right, NaN none).
     """
     wp = _warp()
     from warpfric.kernels.reductions import N_FRONT_METRICS, SegmentSettings, segment_fronts
@@ -69,7 +95,9 @@ def segment(arrival_time, length, fronts: Fronts = Fronts(), device: str | None 
         out = wp.zeros((N_FRONT_METRICS, n_members), dtype=wp.float64)
         wp.launch(segment_fronts, dim=n_members, inputs=[wp.array(length, dtype=wp.float64), arrival, seg, sums, out])
         rows = out.numpy()
-    return {name: rows[i] for i, name in enumerate(FRONT_METRIC_NAMES)}
+    metrics = {name: rows[i] for i, name in enumerate(FRONT_METRIC_NAMES)}
+    metrics.update(name_from_start(metrics))
+    return metrics
 
 
 def arrival_times_from_history(times, velocity, disc_velocity=1.0, fronts: Fronts = Fronts(),
@@ -122,7 +150,7 @@ def speed_errors(metrics: dict, arrival_time, arrival_error, length) -> dict:
     dx = length / (n - 1)
     out = {"arrival_time_error": dt}
     nuc = np.rint((metrics["nucleation_position"] + 0.5 * length) / np.where(dx > 0, dx, 1.0))
-    for seg in ("left", "middle", "right"):
+    for seg in POSITION_SEGMENTS:
         error = np.full(n_members, np.nan)
         start, end, v = metrics[f"{seg}_front_start"], metrics[f"{seg}_front_end"], metrics[f"v_{seg}"]
         for m in np.flatnonzero(np.isfinite(v) & np.isfinite(start) & np.isfinite(end)):
@@ -139,4 +167,8 @@ def speed_errors(metrics: dict, arrival_time, arrival_error, length) -> dict:
                 slack += 2 * dt[m, k]
             error[m] = v[m] * slack / (spent - slack) if spent > slack else np.inf
         out[f"v_{seg}_error"] = error
+    edge = np.asarray(metrics["nucleation_edge"], dtype=np.float64)
+    out["v_precursor_error"] = np.where(edge == -1, out["v_left_error"], np.where(edge == 1, out["v_right_error"], np.nan))
+    out["v_far_error"] = np.where(edge == -1, out["v_right_error"], np.where(edge == 1, out["v_left_error"], np.nan))
+    out["v_main_error"] = out["v_middle_error"].copy()
     return out

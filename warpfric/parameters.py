@@ -340,18 +340,36 @@ class Solver:
 
 
 _FRONT_DIRECTIONS = ("against_disc", "with_disc", "absolute")
+# front events, in the order of the kernels' arrival array (kernels/types.py FRONT_EVENTS)
+FRONT_EVENTS = ("contact", "strength", "velocity")
 
 
 @dataclass(frozen=True)
 class Fronts:
-    """How the detachment front is read from the pad velocity (docs/model.md, "Fronts").
+    """Which detachment front is read, and how it is segmented (docs/model.md, "Fronts").
 
-    threshold:             a node has detached once its detachment velocity w reaches
-                           threshold * (the event maximum of w over nodes and time); 0.4 in the paper.
-    direction:             w = -sign(v_max)*u_t ('against_disc', default: the pad springs back as the
-                           interface lets go), sign(v_max)*u_t ('with_disc') or |u_t| ('absolute').
-    min_segment_fraction:  shortest left/middle/right segment, as a fraction of the pad length
-                           (at least 3 node intervals).
+    event:                 the event that marks a node as detached; a name or a tuple of names (the
+                           first gives the unprefixed outputs ``arrival_time``, ``v_main``, ...; each
+                           other one the same outputs prefixed with its name, e.g.
+                           ``strength_arrival_time``), from:
+                           'contact' (default): each node's stick-to-slip transition, its first gate
+                           opening after the disc starts, when its real contact area starts to fall
+                           (relaxation_gate='stress' only: the other laws have no yield threshold, and
+                           every output of this event is NaN there, with a warning);
+                           'strength': each node's peak of tau_f/sigma_n (its own static friction),
+                           under every law;
+                           'velocity': the pad velocity against the disc reaches threshold * its event
+                           maximum (the paper's 40 % rule); it follows the pad springing back after
+                           the mu_s peak, and costs a second integration pass.
+                           'contact' and 'strength' are located inside the step, in one pass.
+    threshold:             velocity event: a node has detached once its detachment velocity w
+                           reaches threshold * (the event maximum of w over nodes and time); 0.4 in
+                           the paper.
+    direction:             velocity event: w = -sign(v_max)*u_t ('against_disc', default: the pad
+                           springs back as the interface lets go), sign(v_max)*u_t ('with_disc') or
+                           |u_t| ('absolute').
+    min_segment_fraction:  shortest segment, as a fraction of the pad length (at least 3 node
+                           intervals).
     fast_fraction:         v_fast, the front's fast reference speed, is the plateau (the most
                            populated 10 % band) of the local speeds dx/|dt_a| among this fastest
                            fraction of the node intervals: the sustained speed of the fast front,
@@ -361,20 +379,22 @@ class Fronts:
                            it is at least min_segment_fraction long and v_middle >= speed_ratio *
                            its mean speed; else it is merged into the middle.
     edge_zone_fraction:    nucleation within this fraction of L of an edge is nucleation at that edge.
-    min_event_fraction:    a detachment event needs a maximum detachment velocity of at least this
-                           fraction of |disc_velocity|; below it there is no front (all front
-                           outputs NaN). Measured events: 1e-4 .. 3e-3 of |v_max| for 1e-6 .. 1e-2 m/s.
+    min_event_fraction:    velocity event: a detachment event needs a maximum detachment velocity of
+                           at least this fraction of |disc_velocity|; below it there is no front (all
+                           front outputs NaN). Measured events: 1e-4 .. 3e-3 of |v_max| for 1e-6 ..
+                           1e-2 m/s.
     grid_check:            also run the ensemble on a grid of about half the nodes ((N+1)//2) and
-                           report the change as ``v_*_grid_error`` and ``mu_s_grid_error``: the
-                           front speeds' error is mostly spatial (a fast middle front at e = -0.2
-                           changes by a factor 5 from N = 50 to 400; docs/performance.md, "Front
-                           speeds against the grid"), which ``v_*_error`` (time only) does not see.
-                           Costs a third run on the coarse grid (about +50 %); off by default.
+                           report the change as ``v_*_grid_error`` and ``mu_s_grid_error``, the
+                           speeds' spatial error, which ``v_*_error`` (time only) does not see.
+                           Costs a run on the coarse grid (about +50 %); off by default.
 
-    Front metrics cost a second pass of the integrator (the event maximum must be known before the
-    arrival times are taken); ``simulate(fronts=None)`` skips them.
+    Segments: ``left``, ``middle``, ``right`` by position, and the same segments named from where
+    the front starts: ``precursor`` (the slow segment at the nucleation edge), ``main`` (the middle
+    one) and ``far`` (the slow segment at the other edge); precursor and far are NaN when the front
+    nucleates inside the pad. A segment never spans a node that the front did not reach.
     """
 
+    event: str | tuple = "contact"
     threshold: float = 0.4
     direction: str = "against_disc"
     min_segment_fraction: float = 0.05
@@ -392,6 +412,12 @@ class Fronts:
         def real(v):
             return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(v)
 
+        if isinstance(self.event, list):
+            object.__setattr__(self, "event", tuple(self.event))  # hashable, like every other setting
+        events = (self.event,) if isinstance(self.event, str) else self.event
+        need(isinstance(events, tuple) and len(events) >= 1 and all(isinstance(e, str) and e in FRONT_EVENTS for e in events)
+             and len(set(events)) == len(events), "event", self.event,
+             f"one of {', '.join(map(repr, FRONT_EVENTS))}, or a tuple of distinct ones")
         need(real(self.threshold) and 0 < self.threshold < 1, "threshold", self.threshold, "a number in (0, 1)")
         need(self.direction in _FRONT_DIRECTIONS, "direction", self.direction, " or ".join(_FRONT_DIRECTIONS))
         need(isinstance(self.grid_check, (bool, np.bool_)), "grid_check", self.grid_check, "True or False")
@@ -404,6 +430,11 @@ class Fronts:
              self.edge_zone_fraction, "a number in [0, 0.5]")
         need(real(self.min_event_fraction) and 0 <= self.min_event_fraction < 1, "min_event_fraction",
              self.min_event_fraction, "a number in [0, 1)")
+
+    @property
+    def events(self) -> tuple:
+        """The requested front events as a tuple, the primary (unprefixed outputs) first."""
+        return (self.event,) if isinstance(self.event, str) else tuple(self.event)
 
 
 @dataclass(frozen=True)

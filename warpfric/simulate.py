@@ -5,6 +5,7 @@ from __future__ import annotations
 import dataclasses
 import sys
 import time
+import warnings
 from typing import Any
 
 import numpy as np
@@ -12,6 +13,7 @@ import xarray as xr
 
 from . import __version__
 from .members import resolve_members
+from .fronts import SEGMENT_NAMES
 from .parameters import Fronts, Model, Parameters, Record, Solver, parameter_long_name, parameter_units
 
 
@@ -115,9 +117,10 @@ def simulate(
         0 <= member_offset < 2**31 - 2**24
     ):
         raise ValueError(f"member_offset = {member_offset!r} is invalid; valid: an integer in [0, {2**31 - 2**24})")
-    if fronts is not None and solver.method != "tr_bdf2":
-        raise NotImplementedError(f"fronts with solver setting 'method' = {solver.method!r} are not implemented (the "
-                                  "arrival times read TR-BDF2's second stage); pass fronts=None or use method='tr_bdf2'")
+    if fronts is not None and "velocity" in fronts.events and solver.method != "tr_bdf2":
+        raise NotImplementedError(f"the velocity front with solver setting 'method' = {solver.method!r} is not implemented "
+                                  "(its arrival times read TR-BDF2's second stage); use the contact or strength front, "
+                                  "or method='tr_bdf2'")
     if fronts is not None and fronts.grid_check and solver.nodes < 5:
         raise ValueError(f"fronts setting 'grid_check' needs solver setting 'nodes' >= 5 (got {solver.nodes}): the "
                          "check compares with (nodes + 1)//2 nodes")
@@ -133,8 +136,7 @@ def simulate(
     result = engine.run(values, model, solver, fronts, record, device, show, progress if isinstance(progress, str) else "")
     front = None
     if fronts is not None:
-        front = _front_metrics(fronts, values, result.arrival, result.arrival_error, device)
-        front["event_max_velocity"] = np.where(result.event, result.member_states["front_max"], np.nan)
+        front = _front_metrics(fronts, model, values, result, device)
     wall = time.perf_counter() - t_start - result.kernel_build_s
     st, yield_np, gate_np = result.member_states, result.yield_time, result.yield_gate
     ds = _to_dataset(values, varying, st, result.fields, result.normal_stress, result.friction_stress, model, solver,
@@ -142,6 +144,7 @@ def simulate(
     ds.attrs["kernel_build_time_s"] = result.kernel_build_s
     ds.attrs["device_bytes_per_member"] = result.device_bytes_per_member
     ds.attrs["lanes"] = result.lanes
+    ds.attrs["integration_passes"] = result.passes
     if yield_np is not None:
         broken = (ds.status.values != 0) & (ds.status.values != STATUS_MEANINGS.index("no_peak"))
         yt = np.where(broken[:, None], np.nan, yield_np.T)  # a run cut short still has real opening times
@@ -173,7 +176,7 @@ def _add_grid_check(ds, values, scene, model, solver, fronts, device, progress) 
                       fronts=dataclasses.replace(fronts, grid_check=False), device=device,
                       progress=label.strip() if progress else progress)
     usable = (ds.status.values == 0) & (coarse.status.values == 0)
-    for name, units, what in [("mu_s", "1", "mu_s")] + [(f"v_{seg}", "m s-1", f"v_{seg}") for seg in ("left", "middle", "right")]:
+    for name, units, what in [("mu_s", "1", "mu_s")] + [(f"v_{seg}", "m s-1", f"v_{seg}") for seg in SEGMENT_NAMES]:
         fine_v, coarse_v = ds[name].values, coarse[name].values
         change = np.abs(fine_v - coarse_v)
         change = np.where(np.isfinite(fine_v) != np.isfinite(coarse_v), np.inf, change)
@@ -231,32 +234,59 @@ def _rerun_failed_in_float64(ds, values, scene, model, solver, fronts, record, d
     ds.attrs["wall_time_s"] = ds.attrs["wall_time_s"] + sub.attrs["wall_time_s"]
 
 
-def _front_metrics(fronts: Fronts, values, arrival: np.ndarray, arrival_error: np.ndarray, device: str) -> dict:
-    """Segment the arrival times (node, member; kernel launched on the simulation's device); return {name: array}."""
+def _front_metrics(fronts: Fronts, model: Model, values, result, device: str) -> dict:
+    """Segment the arrival times of each requested front event (kernel launched on the simulation's
+    device); return {output name: array}, the first event's names unprefixed, the others prefixed
+    with the event's name (e.g. ``strength_v_main``)."""
+    from warpfric.kernels.types import FRONT_EVENTS
+
     from .fronts import segment, speed_errors
 
-    arrival_time = arrival.T.copy()
-    metrics = segment(arrival_time, values["length"], fronts, device=device)
-    metrics["arrival_time"] = arrival_time
-    metrics.update(speed_errors(metrics, arrival_time, arrival_error.T, values["length"]))
-    return metrics
+    out = {}
+    for k, event in enumerate(fronts.events):
+        prefix = "" if k == 0 else f"{event}_"
+        if event == "contact" and model.relaxation_gate != "stress":
+            warnings.warn(f"fronts event 'contact' with relaxation_gate={model.relaxation_gate!r}: this law has no yield "
+                          "threshold, so the contact area falls everywhere as soon as the disc moves and there is no "
+                          "stick-to-slip front; its outputs are NaN (event='strength' exists under every law)",
+                          stacklevel=3)
+        row = FRONT_EVENTS.index(event)
+        arrival_time = result.arrival[row].T.copy()
+        metrics = segment(arrival_time, values["length"], fronts, device=device)
+        metrics["arrival_time"] = arrival_time
+        metrics.update(speed_errors(metrics, arrival_time, result.arrival_error[row].T, values["length"]))
+        if event == "velocity":
+            metrics["event_max_velocity"] = np.where(result.event, result.member_states["front_max"], np.nan)
+        if event == "strength":
+            metrics["strength_peak"] = result.strength_peak.T.copy()
+        out.update({prefix + name: value for name, value in metrics.items()})
+    return out
 
 
-_FRONT_ATTRS = {
-    "arrival_time": ("s", "arrival time t_a of the detachment front (first time w >= threshold * event maximum)"),
-    "arrival_time_error": ("s", "estimated time-discretisation error of t_a: quadratic against linear "
-                                "interpolation inside the accepted step that holds the crossing"),
-    "event_max_velocity": ("m s-1", "maximum of the detachment velocity w over the pad and the event window"),
-    "nucleation_position": ("m", "position of the node that detaches first"),
-    "front_start_time": ("s", "first arrival time of the detachment front"),
-    "front_end_time": ("s", "last arrival time of the detachment front"),
-    "detached_fraction": ("1", "fraction of the nodes the detachment front reached"),
+_EVENT_WORDS = {
+    "contact": "contact front (each node's first gate opening after the disc starts: its stick-to-slip transition)",
+    "strength": "strength front (each node's peak of tau_f/sigma_n)",
+    "velocity": "velocity front (the pad velocity against the disc reaches threshold times its event maximum)",
 }
-for _seg in ("left", "middle", "right"):
-    _FRONT_ATTRS[f"{_seg}_front_start"] = ("m", f"start (smaller x) of the {_seg} front segment")
-    _FRONT_ATTRS[f"{_seg}_front_end"] = ("m", f"end (larger x) of the {_seg} front segment")
-    _FRONT_ATTRS[f"{_seg}_front_length"] = ("m", f"length of the {_seg} front segment")
-    _FRONT_ATTRS[f"v_{_seg}"] = ("m s-1", f"mean speed of the {_seg} front segment (1/|slope| of t_a(x))")
+_FRONT_ATTRS = {
+    "arrival_time": ("s", "arrival time t_a of the {front} at each node (NaN: never reached)"),
+    "arrival_time_error": ("s", "estimated time-discretisation error of t_a"),
+    "event_max_velocity": ("m s-1", "maximum of the detachment velocity w over the pad and the event window"),
+    "strength_peak": ("1", "peak of tau_f/sigma_n at each node: its own static friction coefficient (NaN: no "
+                           "confirmed peak in the run)"),
+    "nucleation_position": ("m", "position of the node that the {front} reaches first"),
+    "front_start_time": ("s", "first arrival time of the {front}"),
+    "front_end_time": ("s", "last arrival time of the {front} (over the nodes it reached)"),
+    "detached_fraction": ("1", "fraction of the nodes the {front} reached"),
+}
+_SEGMENT_WORDS = {"left": "left (smaller x)", "middle": "middle", "right": "right (larger x)",
+                  "precursor": "precursor (the slow segment at the nucleation edge)", "main": "main (middle)",
+                  "far": "far (the slow segment at the edge opposite the nucleation edge)"}
+for _seg, _words in _SEGMENT_WORDS.items():
+    _FRONT_ATTRS[f"{_seg}_front_start"] = ("m", f"start (smaller x) of the {_words} segment of the {{front}}")
+    _FRONT_ATTRS[f"{_seg}_front_end"] = ("m", f"end (larger x) of the {_words} segment of the {{front}}")
+    _FRONT_ATTRS[f"{_seg}_front_length"] = ("m", f"length of the {_words} segment of the {{front}}")
+    _FRONT_ATTRS[f"v_{_seg}"] = ("m s-1", f"mean speed of the {_words} segment of the {{front}} (1/|slope| of t_a(x))")
     _FRONT_ATTRS[f"v_{_seg}_error"] = ("m s-1", f"estimated time-discretisation error of v_{_seg}, from the "
                                        "arrival_time_error of its end (and nucleation) nodes; inf: not resolved")
 
@@ -265,19 +295,24 @@ def _add_fronts(ds: xr.Dataset, front: dict, fronts: Fronts) -> None:
     failed = ds.status.values != 0
     for name, arr in front.items():
         arr = np.where(failed[:, None] if arr.ndim == 2 else failed, np.nan, arr)
-        if name == "nucleation_edge":
+        event = next((e for e in fronts.events[1:] if name.startswith(e + "_")), fronts.events[0])
+        base = name[len(event) + 1:] if event != fronts.events[0] else name
+        words = _EVENT_WORDS[event]
+        if base == "nucleation_edge":
             edge = np.where(np.isfinite(arr), arr, -2).astype(np.int8)
             ds[name] = xr.DataArray(edge, dims=("member",), attrs={
-                "long_name": "edge where the detachment front nucleates",
+                "long_name": f"edge where the {words} nucleates",
                 "flag_values": np.array([-2, -1, 0, 1], dtype=np.int8),
                 "flag_meanings": "none left interior right",
             })
             continue
-        units, long_name = _FRONT_ATTRS[name]
+        units, long_name = _FRONT_ATTRS[base]
         dims = ("member", "x") if arr.ndim == 2 else ("member",)
-        ds[name] = xr.DataArray(arr, dims=dims, attrs={"units": units, "long_name": long_name})
+        ds[name] = xr.DataArray(arr, dims=dims, attrs={"units": units, "long_name": long_name.format(front=words)})
     for f in dataclasses.fields(fronts):
         value = getattr(fronts, f.name)
+        if f.name == "event":
+            value = " ".join(fronts.events)  # netCDF: one string, the primary event first
         ds.attrs[f"fronts_{f.name}"] = int(value) if isinstance(value, bool) else value  # netCDF has no bool
 
 
