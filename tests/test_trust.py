@@ -48,17 +48,24 @@ def test_every_accepted_eccentricity_runs_up_to_heavy_lift_off():
     from conftest import DEVICE  # noqa: F401  (the run helper uses it)
     import warpfric as wf
 
-    ds = run({"eccentricity": [-0.6, 0.6], "normal_force": [300.0, 3000.0]}, nodes=40, rtol=1e-5, fronts=wf.Fronts())
+    ds = run({"eccentricity": [-0.6, 0.6], "normal_force": [300.0, 3000.0]}, nodes=40, rtol=1e-5,
+             fronts=wf.Fronts(event=("velocity", "contact")))
     assert (ds.status.values == 0).all() and (ds.lift_off.values == 1).all()
     in_contact = ds.normal_stress.values > 0
     assert 0.3 < in_contact.mean() < 0.8
+    # the velocity front's arrived nodes lie inside the final contact zone (a node without contact at
+    # the end of a step never arrives)
     arrived = np.isfinite(ds.arrival_time.values)
     assert arrived.any(axis=1).all()
-    # the arrived nodes lie inside the final contact zone (its extent grows with contact, never past it)
     for m in range(2):
         x_contact = ds.x.values[in_contact[m]]
         x_arrived = ds.x.values[arrived[m]]
         assert x_contact.min() - 1e-12 <= x_arrived.min() and x_arrived.max() <= x_contact.max() + 1e-12
+    # the contact front's nodes opened their gates (which needs contact: A > 0) after the disc started;
+    # the contact zone shrinks while the tilted pad slides, so some of them lifted off later
+    opened = np.isfinite(ds.contact_arrival_time.values)
+    assert opened.any(axis=1).all() and (np.isfinite(ds.yield_time.values) >= opened).all()
+    assert (ds.contact_arrival_time.values[opened] > 20.0).all()
 
 
 def test_a_disc_that_never_moves_has_no_peak_and_no_front():

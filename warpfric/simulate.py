@@ -77,8 +77,9 @@ def simulate(
     solver:   :class:`Solver` settings (grid, precision, tolerances, step bounds).
     device:   Warp device ('cpu', 'cuda:0', ...); None: the CPU for up to 16 members (faster there than
               on a GPU), else the first CUDA device if any, else 'cpu'.
-    fronts:   :class:`Fronts` settings of the detachment-front metrics (default on; they cost a
-              second pass of the integrator); None skips them.
+    fronts:   :class:`Fronts`: which detachment front (default: the contact front, each node's
+              stick-to-slip transition, in the one integration pass; event='velocity' costs a
+              second pass) and how it is segmented; None skips the front metrics.
     record:   :class:`Record`: fields of chosen members on a time grid; None (default) records nothing.
     progress: progress line on stderr; None: only when stderr is a terminal; a string: on, with
               that label.
@@ -90,11 +91,14 @@ def simulate(
     attrs), ``lift_off``, ``steps_accepted``, ``steps_rejected``, ``newton_iterations``,
     ``final_time`` (s), ``plate_compression`` (m), ``plate_tilt`` (rad), ``mu_final``, and the final
     state along (member, x): ``displacement`` (m), ``velocity`` (m/s), ``elastic_stress`` (Pa),
-    ``contact_age`` (s), ``normal_stress`` (Pa), ``friction_stress`` (Pa). With fronts:
-    ``arrival_time`` (member, x; s), ``event_max_velocity``, ``nucleation_position``,
-    ``nucleation_edge``, ``front_start_time``, ``front_end_time``, ``detached_fraction`` and per
-    segment (left, middle, right) ``*_front_start``, ``*_front_end``, ``*_front_length`` (m) and
-    ``v_left``, ``v_middle``, ``v_right`` (m/s; NaN where a segment is absent). With record:
+    ``contact_age`` (s), ``normal_stress`` (Pa), ``friction_stress`` (Pa). With fronts, for the
+    first event (others prefixed with the event's name, e.g. ``strength_v_main``):
+    ``arrival_time`` and ``arrival_time_error`` (member, x; s), ``nucleation_position`` (m),
+    ``nucleation_edge``, ``front_start_time``, ``front_end_time`` (s), ``detached_fraction`` and per
+    segment (left, middle, right by position; precursor, main, far from where the front starts)
+    ``*_front_start``, ``*_front_end``, ``*_front_length`` (m), ``v_*`` and ``v_*_error`` (m/s; NaN
+    where a segment is absent); the velocity event adds ``event_max_velocity`` (m/s), the strength
+    event ``strength_peak`` (member, x). With record:
     ``velocity_history``, ``slip_rate_history``, ``normal_stress_history``,
     ``friction_stress_history`` along (recorded, time, x), coordinates ``recorded_member`` and
     ``time``. Raises ValueError on invalid input before any kernel runs.
