@@ -56,7 +56,9 @@ def test_workers_default_splits_where_it_pays(monkeypatch):
     monkeypatch.setattr(pool, "cpu_cores", lambda: 4)
     small, big = wf.Solver(nodes=21), wf.Solver(nodes=100)
     assert pool.plan(None, "cpu", 12, small, wf.Fronts(), None) == 1  # ~0.1 s on one core: not worth a start
-    assert pool.plan(None, "cpu", 400, big, wf.Fronts(), None) == 4  # ~9 s: all cores
+    assert pool.plan(None, "cpu", 400, big, wf.Fronts(), None) == 4  # ~14 s: all cores
+    assert pool.plan(None, "cpu", 50, big, wf.Fronts(), None) == 1  # ~1.8 s: less than 2 new workers cost here
+    assert pool.plan(None, "cpu", 100, big, wf.Fronts(), None) == 4
     assert pool.plan(None, "cpu", 3, wf.Solver(nodes=2000), None, None) == 3  # never more workers than members
     assert pool.plan(None, "cuda:0", 400, big, wf.Fronts(), None) == 1
     assert pool.plan(1, "cpu", 400, big, wf.Fronts(), None) == 1

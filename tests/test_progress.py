@@ -142,10 +142,10 @@ def test_cpu_launches_last_about_a_tenth_of_a_second():
 
 
 def test_a_run_far_beyond_the_usual_size_warns_with_time_and_memory():
-    with pytest.warns(progress.SizeWarning, match=r"1 member x 100000 nodes .* roughly 1\.\d h on 1 CPU core .* "
+    with pytest.warns(progress.SizeWarning, match=r"1 member x 100000 nodes .* roughly 2\.\d h on 1 CPU core .* "
                                                   r"MB of memory"):
         progress.size_warning(1, wf.Solver(nodes=100_000), 2, "cpu")
-    with pytest.warns(progress.SizeWarning, match=r"roughly 5\d min on 2 CPU cores"):  # 1e7 node-members
+    with pytest.warns(progress.SizeWarning, match=r"roughly 7\d min on 2 CPU cores"):  # 1e7 node-members
         progress.size_warning(20_000, wf.Solver(nodes=1000), 1, "cpu", workers=2)
     with pytest.warns(progress.SizeWarning, match=r"200000 members x 100 nodes .* GB of device memory"):
         progress.size_warning(200_000, wf.Solver(nodes=100), 1, "cuda:0")

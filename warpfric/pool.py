@@ -15,9 +15,9 @@ together). Records (``record``) and ``member_offset`` work as in one process.
 
 The pool: 'spawn' worker processes (a fork would copy Warp's runtime, and CUDA's where there is
 one, from a process that may be using it), started with the first ensemble that needs them and
-kept for the next ones. A worker's start (~1 s on this project's 2-core machine: numpy, xarray and
-Warp imported, Warp initialised, the kernels loaded from Warp's cache) is paid once per process; a
-warm pool costs ~20 ms a chunk. The workers do not run the parent's ``__main__`` script (a script
+kept for the next ones. A worker's start (~1.5 s on this project's 2-core machine: numpy, xarray
+and Warp imported, Warp initialised, the kernels loaded from Warp's cache, xarray's first Dataset)
+is paid once per process; a warm pool costs ~20 ms a chunk. The workers do not run the parent's ``__main__`` script (a script
 without ``if __name__ == "__main__":`` works) and see no CUDA device. Ctrl-C stops them at once.
 
 Attributes of a split run: ``workers``, ``worker_chunks``, ``worker_start_time_s`` (starting the
@@ -46,9 +46,12 @@ import numpy as np
 
 from . import progress as progress_module
 
-# split when one core would take at least this long (s, by progress.cpu_seconds): a cold pool starts
-# in ~1 s here, so on 2 cores the split pays from ~2 s of work on
-MIN_CPU_SECONDS = 2.0
+# split when one core would take at least this long (s, by progress.cpu_seconds). Measured on this
+# project's 2-core machine (studies/bench_cpu_workers.py, fronts on, N = 100, fresh processes): 100
+# members (3.6 s by the estimate) 4.3 s in one process, 3.5 s on 2 new workers (they start in ~0.6 s,
+# and their first run pays ~1 s more: xarray's first Dataset imports dask where it is installed,
+# the kernels' modules are built), 2.3 s on a warm pool; 400 members 15.9 s, 9.5 s and 7.8 s
+MIN_CPU_SECONDS = 2.5
 # chunks per worker (so that a worker whose chunks run faster takes more of them) and the fewest
 # members in a chunk
 CHUNKS_PER_WORKER = 4
@@ -86,7 +89,7 @@ def plan(workers, device, n_members: int, solver, fronts, record) -> int:
         raise ValueError(f"workers = {workers} is invalid with device {device!r}; valid there: None or 1 (worker "
                          "processes serve the CPU, where Warp runs a launch on one core)")
     record_slots(record, n_members)  # a recorded member beyond the ensemble: the same error as in one process
-    passes = 1.0 if fronts is None else (3.0 if fronts.grid_check else 2.0)  # the grid check: half the nodes again
+    passes = 1.0 if fronts is None else progress_module.FRONTS_PASSES * (1.5 if fronts.grid_check else 1.0)
     if workers is None:
         pays = progress_module.cpu_seconds(n_members, solver, passes) >= MIN_CPU_SECONDS
         n = min(cpu_cores(), n_members) if cpu and n_members > 1 and pays and _top_level() else 1

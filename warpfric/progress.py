@@ -26,12 +26,15 @@ import warnings
 import numpy as np
 
 # --- cost model: one member of the default scene through one pass, on one core of this project's
-# CPU (measured with fronts off, rtol 1e-5, the stress gate: median 315 attempts at N = 100 over 200
-# members of eccentricity in [-0.2, 0.2] and F in [500, 5000] N; 337 at N = 41; 540, 880, 1550 and
-# 2990 at N = 400, 800, 1600 and 3200; 0.29 .. 0.36 us per node and attempt from N = 100 to 3200;
-# 11x more attempts at rtol 1e-7) ---
-CPU_SECONDS_PER_NODE_ATTEMPT = 0.32e-6
+# CPU (fronts off, rtol 1e-5, the stress gate: median 315 attempts at N = 100 over 200 members of
+# eccentricity in [-0.2, 0.2] and F in [500, 5000] N; 337 at N = 41; 540, 880, 1550 and 2990 at
+# N = 400, 800, 1600 and 3200; 11x more attempts at rtol 1e-7; 0.29 .. 0.36 us per node and attempt
+# for 1 or 2 members from N = 100 to 3200, 0.42 us for 100 members at N = 100: 1.45 s). The front
+# metrics cost FRONTS_PASSES passes (3.6 s for those 100 members: pass 1 takes ~30 % more steps,
+# then pass 2) ---
+CPU_SECONDS_PER_NODE_ATTEMPT = 0.42e-6
 FEW_NODES_ATTEMPTS = 330.0
+FRONTS_PASSES = 2.5
 
 
 def expected_attempts(nodes: int, rtol: float = 1e-5, method: str = "tr_bdf2") -> float:
@@ -41,9 +44,9 @@ def expected_attempts(nodes: int, rtol: float = 1e-5, method: str = "tr_bdf2") -
     return math.hypot(FEW_NODES_ATTEMPTS, 0.95 * nodes) * (1e-5 / rtol) ** (1.0 / order)
 
 
-def cpu_seconds(n_members: int, solver, passes: int = 1) -> float:
+def cpu_seconds(n_members: int, solver, passes: float = 1.0) -> float:
     """Rough time of an ensemble on one CPU core (s): members x passes x expected attempts x nodes x
-    CPU_SECONDS_PER_NODE_ATTEMPT."""
+    CPU_SECONDS_PER_NODE_ATTEMPT (passes: 1 without fronts, FRONTS_PASSES with)."""
     attempts = expected_attempts(solver.nodes, solver.rtol, solver.method)
     return n_members * passes * attempts * solver.nodes * CPU_SECONDS_PER_NODE_ATTEMPT
 
@@ -95,7 +98,7 @@ def _size(n_bytes: float) -> str:
     return f"{n_bytes / 1e3:.0f} kB"
 
 
-def size_warning(n_members: int, solver, passes: int, device, workers: int = 1) -> str | None:
+def size_warning(n_members: int, solver, passes: float, device, workers: int = 1) -> str | None:
     """Warn (SizeWarning) before a run of more than USUAL_NODES nodes or USUAL_NODE_MEMBERS
     node-members, with its rough time (on the CPU) and memory; return the message, or None."""
     nodes = solver.nodes
