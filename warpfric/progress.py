@@ -169,11 +169,14 @@ class Line:
 
             self.bar = _Bar(total=self.n, desc=self.label, unit=" members", file=self.stream, mininterval=0,
                             miniters=0, smoothing=0.1, ncols=_columns(self.stream), leave=True,
-                            bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}, {rate_fmt}{postfix}]")
+                            bar_format="{desc}: {percentage:5.1f}%|{bar}| [{elapsed}<{remaining}{postfix}]")
             self.bar.set_postfix_str(self._postfix(), refresh=True)
 
     def _postfix(self) -> str:
-        return f"{self.done}/{self.n} done" + (f", {self.note}" if self.note else "")
+        rate = self.fraction * self.n / max(self.clock() - self.t0, 1e-9)  # members (or their fractions) per second
+        pace = ("? members/s" if rate == 0 else f"{rate:.3g} members/s" if rate >= 0.1 else
+                f"{_duration(1 / rate)} per member")
+        return f"{pace}, {self.done}/{self.n} done" + (f", {self.note}" if self.note else "")
 
     def show(self, fraction: float, done: int, note: str | None = None, force: bool = False) -> bool:
         """Take the latest fraction (0..1) and members done; redraw when ``interval`` s have passed
