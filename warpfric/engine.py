@@ -12,13 +12,13 @@ found.
 from __future__ import annotations
 
 import dataclasses
-import sys
 import time
 import warnings
 
 import numpy as np
 
 from .parameters import Fronts, Model, Record, Solver
+from .progress import Progress, launch_steps
 
 
 @dataclasses.dataclass
@@ -259,34 +259,6 @@ class StateSnapshots:
         return buffer.numpy().copy()
 
 
-class Progress:
-    """One-line progress on stderr: members done and mean simulated-time fraction."""
-
-    def __init__(self, enabled: bool, n_members: int, label: str = ""):
-        self.enabled = enabled
-        self.label = (label + " ") if label else ""
-        self.n = n_members
-        self.tty = sys.stderr.isatty()  # in a log, "\r" does not overwrite: only the final line
-        self.t0 = time.perf_counter()
-        self.last = 0.0
-
-    def update(self, done: int, fraction: float, final: bool = False):
-        if not self.enabled:
-            return
-        now = time.perf_counter()
-        if not final and (not self.tty or now - self.last < 0.5):
-            return
-        self.last = now
-        bar = "#" * int(30 * fraction) + "-" * (30 - int(30 * fraction))
-        sys.stderr.write(
-            ("\r" if self.tty else "") + f"warpfric {self.label}[{bar}] {100 * fraction:5.1f}% simulated time, "
-            f"{done}/{self.n} members done, {now - self.t0:7.1f} s"
-        )
-        if final:
-            sys.stderr.write("\n")
-        sys.stderr.flush()
-
-
 def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, record: Record | None, device: str,
         show_progress: bool = False, label: str = "") -> EngineResult:
     """Allocate, integrate every member through its passes, read back. ``values``: resolved
@@ -340,14 +312,13 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             else:
                 wp.launch(kern["integrate"], dim=n_members, inputs=inputs, outputs=outputs_)
 
-        end = params_np["end_time"]
+        bar = Progress(show_progress, n_members, label, n_passes, solver)  # warpfric/progress.py
         for pass_index in range(n_passes):
             states_np = initial_states(n_members, solver, slots if pass_index == 0 else np.full(n_members, -1, np.int32))
             if pass_index == 1:
                 # the velocity front's arrival pass: the contact and strength fronts (pass 1's) are kept
                 states_np["front_level"] = np.where(event, fronts.threshold * front_max, np.inf)
                 states_np["front_until"] = np.where(event, front_last, -np.inf)  # no event: nothing to redo
-                end = np.where(event, np.minimum(front_last, params_np["end_time"]), 1.0)
             state_np = np.zeros(arrays.state.shape, dtype=np_dtype)
             state_np[C_PHI] = values["initial_age"][None, :]
             member_states = wp.array(states_np, dtype=IntegratorState)
@@ -359,12 +330,11 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                 arrays.arrival_error.fill_(np.nan)
                 arrays.strength.fill_(np.nan)
                 arrays.yield_time.fill_(np.nan)
-            pass_label = " ".join(p for p in (label, f"pass {pass_index + 1}/{n_passes}" if n_passes > 1 else "") if p)
-            bar = Progress(show_progress, n_members, pass_label)
+            bar.start_pass(pass_index)
             stall_limit.fill_(NO_STALL_LIMIT)
             last_limit = NO_STALL_LIMIT
             inputs = [arrays.params, settings, outputs if pass_index == 0 else arrival_pass_settings(outputs),
-                      solver.steps_per_launch, stall_limit, arrays.record_times,
+                      launch_steps(solver, n_members, device), stall_limit, arrays.record_times,
                       member_states, arrays.state, arrays.stages, arrays.work, arrays.gates, arrays.record_previous]
             outputs_ = [arrays.arrival, arrays.arrival_error, arrays.strength, arrays.yield_time, arrays.record]
             # the launches are queued one ahead of the host: while chunk k + 1 runs, the host reads the
@@ -383,12 +353,12 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                         stall_limit.fill_(limit)
                         last_limit = limit
                 n_done = int(st_now["done"].sum())
-                bar.update(n_done, float(np.mean(np.minimum(st_now["t"] / end, 1.0))))
+                bar.update(st_now)
                 if n_done == n_members:
                     break
             snapshot.wait(pending)
             st_now = member_states.numpy()
-            bar.update(n_done, 1.0, final=True)
+            bar.end_pass(st_now)
             if pass_index == 0:
                 st = st_now
                 front_max, front_last = st["front_max"], st["front_last"]

@@ -1,10 +1,24 @@
-"""warpfric.plots: quick-look figures of an ensemble (matplotlib, no display needed)."""
+"""warpfric.plots: quick-look figures of an ensemble (matplotlib, no display needed).
+
+Against each swept parameter: mu_s, and the front speeds in one panel per segment; a second swept
+parameter is the colour (a legend where it takes at most MAX_LEGEND values, each value's members
+joined along the x axis, else a colour bar). An axis is logarithmic where its positive values span
+a decade or more. Arrival-time curves of up to MAX_CURVES members spread over the ensemble, each
+labelled with its swept values; the space-time map of every recorded member.
+"""
 
 from __future__ import annotations
 
 from pathlib import Path
 
 import numpy as np
+
+MAX_LEGEND = 8  # values of a colour parameter shown in a legend; more: a colour bar
+MAX_CURVES = 8  # arrival-time curves in one figure
+# symbols of the parameters most often swept (legend entries "F = 1000 N"; axis labels)
+_SYMBOLS = {"normal_force": "F", "eccentricity": "2e/L", "disc_velocity": "v", "shear_strength": "tau_c",
+            "length": "L", "height": "h", "stop_time": "t_stop"}
+_UNITS = {"1": "", "m s-1": "m/s", "s-1": "1/s", "m2": "m^2"}
 
 
 def _plt():
@@ -16,76 +30,266 @@ def _plt():
     return plt
 
 
-def _axis_scale(values: np.ndarray) -> str:
-    v = values[np.isfinite(values)]
-    return "log" if v.size and v.min() > 0 and v.max() / v.min() > 100 else "linear"
+def _axis_scale(values) -> str:
+    """'log' where the positive finite values span a decade or more, else 'linear'."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    return "log" if v.size and v.min() > 0 and v.max() / v.min() >= 10 else "linear"
+
+
+def _units(ds, name: str) -> str:
+    units = ds[name].attrs.get("units", "")
+    return _UNITS.get(units, units)
 
 
 def _label(ds, name: str) -> str:
-    units = ds[name].attrs.get("units", "")
-    return f"{name} ({units})" if units and units != "1" else name
+    """Axis label: 'normal force F (N)'."""
+    words = name.replace("_", " ")
+    symbol = _SYMBOLS.get(name)
+    units = _units(ds, name)
+    return f"{words}{' ' + symbol if symbol else ''}{f' ({units})' if units else ''}"
 
 
-def quick_look(ds, outdir, max_curves: int = 12) -> list:
-    """Write PNGs into ``outdir``: mu_s and front speeds against each swept parameter, arrival-time
-    curves, and the space-time map of every recorded member. Returns the paths written."""
+def _number(value: float) -> str:
+    """10000 as '10000' (not '1e+04'), 1698.3 as '1698', 0.02901 as '0.029', 3e-7 as '3e-07'."""
+    value = float(value)
+    if abs(value) < 1e7 and (value.is_integer() or abs(value) >= 100):
+        return f"{value:.0f}"
+    return f"{value:.2g}" if abs(value) < 1 else f"{value:.3g}"
+
+
+def _log_ticks(axis, values) -> None:
+    """Plain-number ticks on a log axis (ax.xaxis, ax.yaxis, a colour bar's): 1, 2 and 5 x 10^k over
+    up to 1.5 decades, 1 and 3 x 10^k up to 3, 10^k beyond; no minor labels (they overlap)."""
+    from matplotlib import ticker
+
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v) & (v > 0)]
+    decades = np.log10(v.max() / v.min()) if v.size else 0.0
+    subs = (1.0, 2.0, 5.0) if decades <= 1.5 else (1.0, 3.0) if decades <= 3.0 else (1.0,)
+    axis.set_major_locator(ticker.LogLocator(base=10, subs=subs))
+    axis.set_major_formatter(ticker.FuncFormatter(lambda tick, _: _number(tick)))
+    axis.set_minor_formatter(ticker.NullFormatter())
+
+
+def _scale(ax, which: str, values) -> str:
+    """Axis ``which`` ('x' or 'y') of ``ax``: log where ``values`` span a decade or more (with
+    _log_ticks), else linear. Returns the scale."""
+    scale = _axis_scale(values)
+    getattr(ax, f"set_{which}scale")(scale)
+    if scale == "log":
+        _log_ticks(getattr(ax, f"{which}axis"), values)
+    return scale
+
+
+def _value(ds, name: str, value: float) -> str:
+    """Legend entry: 'F = 1000 N'."""
+    units = _units(ds, name)
+    return f"{_SYMBOLS.get(name, name)} = {_number(value)}{' ' + units if units else ''}"
+
+
+def _per_member(ds, name: str) -> np.ndarray:
+    return np.broadcast_to(np.asarray(ds[name].values, dtype=float), (ds.sizes["member"],))
+
+
+class _Colours:
+    """A second swept parameter as colour: per member ``colour``; ``discrete`` (at most MAX_LEGEND
+    values): one colour per value for a legend, else a colour map for a colour bar; viridis, log
+    scaled where the values span a decade or more."""
+
+    def __init__(self, ds, name: str, sel: np.ndarray):
+        import matplotlib
+        from matplotlib import cm, colors
+
+        self.ds, self.name = ds, name
+        self.values = _per_member(ds, name)
+        finite = self.values[sel & np.isfinite(self.values)]
+        self.levels = np.unique(finite)
+        self.discrete = self.levels.size <= MAX_LEGEND
+        lo, hi = (self.levels.min(), self.levels.max()) if self.levels.size else (0.0, 1.0)
+        if hi == lo:
+            lo, hi = lo - 1.0, hi + 1.0
+        self.norm = colors.LogNorm(lo, hi) if _axis_scale(self.levels) == "log" else colors.Normalize(lo, hi)
+        self.cmap = matplotlib.colormaps["viridis"]
+        self.mappable = cm.ScalarMappable(norm=self.norm, cmap=self.cmap)
+
+    def colour(self, value: float):
+        if self.discrete:  # evenly spaced by rank (0 .. 0.9 of viridis: the last yellow is hard to see)
+            rank = int(np.searchsorted(self.levels, value))
+            return self.cmap(0.9 * rank / max(self.levels.size - 1, 1))
+        return self.cmap(self.norm(value))
+
+    def groups(self, sel: np.ndarray):
+        """(value, members) for each value (discrete)."""
+        for value in self.levels:
+            yield value, sel & (self.values == value)
+
+    def explain(self, fig, axes) -> None:
+        """The legend (discrete; on the last axes, outside on the right) or the colour bar."""
+        from matplotlib import colors
+
+        if self.discrete:  # every value, also one that the last panel lacks
+            from matplotlib.lines import Line2D
+
+            handles = [Line2D([], [], color=self.colour(value), marker="o", ms=4, lw=1.2,
+                              label=_value(self.ds, self.name, value)) for value in self.levels]
+            axes[-1].legend(handles=handles, title=_label(self.ds, self.name), fontsize=8, title_fontsize=8,
+                            loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, frameon=False)
+        else:
+            bar = fig.colorbar(self.mappable, ax=list(axes), label=_label(self.ds, self.name), pad=0.02)
+            if isinstance(self.norm, colors.LogNorm):
+                _log_ticks(bar.ax.yaxis, self.levels)
+
+
+def _series(ax, x: np.ndarray, y: np.ndarray, sel: np.ndarray, marker: str = "o", **kw) -> None:
+    """Members ``sel`` as markers, joined by a line where their x values are distinct (a grid)."""
+    sel = sel & np.isfinite(x) & np.isfinite(y)
+    xs, ys = x[sel], y[sel]
+    order = np.argsort(xs, kind="stable")
+    joined = xs.size > 1 and np.unique(xs).size == xs.size
+    ax.plot(xs[order], ys[order], marker=marker, ms=4, lw=1.2 if joined else 0, ls="-" if joined else "none", **kw)
+
+
+def _plot_by(ax, x, y, sel, colours: _Colours | None, ds, marker="o", label=None, colour=None) -> None:
+    """y against x for the members ``sel``: one series per colour value, or a coloured scatter."""
+    if colours is None:
+        _series(ax, x, y, sel, marker, color=colour, label=label)
+    elif colours.discrete:
+        for value, members in colours.groups(sel):
+            _series(ax, x, y, members, marker, color=colours.colour(value), label=_value(ds, colours.name, value))
+    else:
+        use = sel & np.isfinite(x) & np.isfinite(y)
+        ax.scatter(x[use], y[use], c=colours.values[use], cmap=colours.cmap, norm=colours.norm, s=14, marker=marker)
+
+
+def _finish(fig, path, written: list) -> None:
+    fig.savefig(path, dpi=130, bbox_inches="tight")
+    _plt().close(fig)
+    written.append(Path(path))
+
+
+def mu_s_figure(ds, pname: str, colour_by: str | None = None):
+    """mu_s against ``pname`` (ok members), coloured by ``colour_by``."""
+    plt = _plt()
+    ok = ds.status.values == 0
+    x, mu = _per_member(ds, pname), np.asarray(ds.mu_s.values, dtype=float)
+    colours = _Colours(ds, colour_by, ok) if colour_by else None
+    fig, ax = plt.subplots(figsize=(5.6, 3.8))
+    _plot_by(ax, x, mu, ok, colours, ds, label=f"{ok.sum()} ok members", colour="C0")
+    _scale(ax, "x", x[ok])
+    _scale(ax, "y", mu[ok])
+    ax.set_xlabel(_label(ds, pname))
+    ax.set_ylabel("static friction coefficient mu_s")
+    ax.set_title(f"mu_s against {pname.replace('_', ' ')} ({ok.sum()} of {ok.size} members ok)", fontsize=10)
+    ax.grid(alpha=0.3, which="both" if ax.get_xscale() == "log" else "major")
+    if colours is not None:
+        colours.explain(fig, [ax])
+    else:
+        ax.legend(fontsize=8)
+    return fig
+
+
+_SEGMENTS = (("left", "v"), ("middle", "o"), ("right", "^"))
+
+
+def front_speeds_figure(ds, pname: str, colour_by: str | None = None):
+    """v_left, v_middle, v_right against ``pname``: one panel, the segments as markers; with
+    ``colour_by``, one panel per segment, coloured by it."""
+    plt = _plt()
+    ok = ds.status.values == 0
+    x = _per_member(ds, pname)
+    speeds = {seg: np.asarray(ds[f"v_{seg}"].values, dtype=float) for seg, _ in _SEGMENTS}
+    every = np.concatenate([v[ok] for v in speeds.values()])
+    if colour_by is None:
+        fig, ax = plt.subplots(figsize=(5.6, 3.8))
+        for k, (seg, marker) in enumerate(_SEGMENTS):
+            present = ok & np.isfinite(speeds[seg])
+            _plot_by(ax, x, speeds[seg], present, None, ds, marker, label=f"v_{seg} ({present.sum()} members)",
+                     colour=f"C{k}")
+        axes = [ax]
+        ax.legend(fontsize=8)
+        ax.set_ylabel("front speed (m/s)")
+        ax.set_title(f"detachment front speeds ({ok.sum()} ok members)", fontsize=10)
+    else:
+        colours = _Colours(ds, colour_by, ok)
+        fig, axes = plt.subplots(1, 3, figsize=(11.5, 3.6), sharex=True, sharey=True)
+        for ax, (seg, marker) in zip(axes, _SEGMENTS):
+            present = ok & np.isfinite(speeds[seg])
+            _plot_by(ax, x, speeds[seg], present, colours, ds, marker)
+            ax.set_title(f"{seg} segment, {present.sum()} members", fontsize=10)
+        axes[0].set_ylabel("front speed (m/s)")
+        colours.explain(fig, axes)
+    for ax in axes:
+        _scale(ax, "x", x[ok])
+        _scale(ax, "y", every)
+        ax.set_xlabel(_label(ds, pname))
+        ax.grid(alpha=0.3, which="both")
+    return fig
+
+
+def arrival_times_figure(ds, max_curves: int = MAX_CURVES):
+    """Arrival time minus the first arrival against x for up to ``max_curves`` ok members spread
+    over the ensemble, coloured by the first swept parameter, dashed or dotted by the second (where
+    it takes at most 4 values among them) and labelled with every swept value."""
+    plt = _plt()
+    swept = ds.attrs.get("varying_parameters", "").split()
+    ok = ds.status.values == 0
+    arrived = np.isfinite(ds.arrival_time.values).any(axis=1)
+    candidates = np.flatnonzero(ok & arrived)
+    if candidates.size > max_curves:
+        candidates = candidates[np.unique(np.linspace(0, candidates.size - 1, max_curves).round().astype(int))]
+    colours = _Colours(ds, swept[0], np.isin(np.arange(ok.size), candidates)) if swept else None
+    styles = {}
+    if len(swept) > 1:
+        second = _per_member(ds, swept[1])
+        levels = np.unique(second[candidates])
+        styles = {value: style for value, style in zip(levels, ("-", "--", ":", "-."))} if levels.size <= 4 else {}
+    metres = ds.x.attrs.get("units") == "m"
+    x = ds.x.values * (1e3 if metres else 1.0)
+    fig, ax = plt.subplots(figsize=(7.4, 3.8))
+    for k, m in enumerate(candidates):
+        ta = ds.arrival_time.values[m]
+        label = ", ".join(_value(ds, name, _per_member(ds, name)[m]) for name in swept) or f"member {int(ds.member[m])}"
+        colour = colours.colour(colours.values[m]) if colours is not None else f"C{k % 10}"
+        style = styles.get(second[m], "-") if styles else "-"
+        ax.plot(x, (ta - np.nanmin(ta)) * 1e3, lw=1.4, color=colour, ls=style, label=label)
+    ax.set_xlabel("x (mm)" if metres else "x / L")
+    ax.set_ylabel("t_a - first arrival (ms)")
+    shown = f"{candidates.size} of {int((ok & arrived).sum())} members" if candidates.size else "no member with a front"
+    ax.set_title(f"detachment front arrival times ({shown})", fontsize=10)
+    ax.grid(alpha=0.3)
+    if candidates.size:
+        ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, frameon=False)
+    return fig
+
+
+def quick_look(ds, outdir, max_curves: int = MAX_CURVES) -> list:
+    """Write PNGs into ``outdir``: mu_s and front speeds against each swept parameter (coloured by
+    another swept parameter), arrival-time curves, and the space-time map of every recorded member.
+    Returns the paths written."""
     plt = _plt()
     outdir = Path(outdir)
+    outdir.mkdir(parents=True, exist_ok=True)
     written = []
     swept = ds.attrs.get("varying_parameters", "").split()
     ok = ds.status.values == 0
     for pname in swept:
-        x = np.broadcast_to(ds[pname].values, ok.shape)
-        fig, ax = plt.subplots(figsize=(5, 3.6))
-        ax.plot(x[ok], ds.mu_s.values[ok], ".", ms=4)
-        ax.set_xscale(_axis_scale(x))
-        ax.set_xlabel(_label(ds, pname))
-        ax.set_ylabel("mu_s")
-        ax.set_title(f"static friction coefficient ({ok.sum()} ok members)")
-        fig.tight_layout()
-        written.append(outdir / f"mu_s_vs_{pname}.png")
-        fig.savefig(written[-1], dpi=120)
-        plt.close(fig)
+        others = [name for name in swept if name != pname]
+        colour_by = others[0] if others else None
+        _finish(mu_s_figure(ds, pname, colour_by), outdir / f"mu_s_vs_{pname}.png", written)
         if "v_middle" in ds:
-            fig, ax = plt.subplots(figsize=(5, 3.6))
-            for seg, marker in (("left", "v"), ("middle", "o"), ("right", "^")):
-                v = ds[f"v_{seg}"].values
-                sel = ok & np.isfinite(v)
-                ax.plot(x[sel], v[sel], marker, ms=3, ls="none", label=f"v_{seg} ({sel.sum()})")
-            ax.set_xscale(_axis_scale(x))
-            ax.set_yscale("log")
-            ax.set_xlabel(_label(ds, pname))
-            ax.set_ylabel("front speed (m/s)")
-            ax.legend(fontsize=8)
-            fig.tight_layout()
-            written.append(outdir / f"front_speeds_vs_{pname}.png")
-            fig.savefig(written[-1], dpi=120)
-            plt.close(fig)
+            _finish(front_speeds_figure(ds, pname, colour_by), outdir / f"front_speeds_vs_{pname}.png", written)
     if not swept and ds.sizes["member"] > 1:
-        fig, ax = plt.subplots(figsize=(5, 3.6))
-        ax.hist(ds.mu_s.values[ok & np.isfinite(ds.mu_s.values)], bins=40)
-        ax.set_xlabel("mu_s")
+        fig, ax = plt.subplots(figsize=(5.6, 3.8))
+        mu = ds.mu_s.values[ok & np.isfinite(ds.mu_s.values)]
+        edges = np.histogram_bin_edges(mu, bins="auto") if mu.size > 1 else 10
+        ax.hist(mu, bins=edges if np.size(edges) <= 41 else 40, label=f"{mu.size} ok members")
+        ax.set_xlabel("static friction coefficient mu_s")
         ax.set_ylabel("members")
-        fig.tight_layout()
-        written.append(outdir / "mu_s_histogram.png")
-        fig.savefig(written[-1], dpi=120)
-        plt.close(fig)
+        ax.legend(fontsize=8)
+        _finish(fig, outdir / "mu_s_histogram.png", written)
     if "arrival_time" in ds:
-        fig, ax = plt.subplots(figsize=(5.5, 3.8))
-        members = np.flatnonzero(ok)[: max_curves]
-        for m in members:
-            ta = ds.arrival_time.values[m]
-            x = ds.x.values * (1e3 if ds.x.attrs.get("units") == "m" else 1.0)
-            ax.plot(x, (ta - np.nanmin(ta)) * 1e3 if np.isfinite(ta).any() else ta, lw=1, label=f"member {int(ds.member[m])}")
-        ax.set_xlabel("x (mm)" if ds.x.attrs.get("units") == "m" else "x / L")
-        ax.set_ylabel("t_a - first arrival (ms)")
-        ax.set_title("detachment front arrival times")
-        if len(members) <= 8:
-            ax.legend(fontsize=7)
-        fig.tight_layout()
-        written.append(outdir / "arrival_times.png")
-        fig.savefig(written[-1], dpi=120)
-        plt.close(fig)
+        _finish(arrival_times_figure(ds, max_curves), outdir / "arrival_times.png", written)
     if "velocity_history" in ds:
         for r, member in enumerate(ds.recorded_member.values):
             written.append(space_time_map(ds, r, outdir / f"space_time_member{int(member)}.png"))
@@ -95,8 +299,11 @@ def quick_look(ds, outdir, max_curves: int = 12) -> list:
 def space_time_map(ds, recorded_index: int, path) -> Path:
     """Pad velocity over (x, t) of one recorded member, with the front's threshold contour when the
     dataset has front metrics (the paper's Fig. 3 style)."""
+    from matplotlib.lines import Line2D
+
     plt = _plt()
     member = int(ds.recorded_member.values[recorded_index])
+    position = int(np.flatnonzero(ds.member.values == member)[0])  # member numbers may start past 0
     v = ds.velocity_history.values[recorded_index]
     t = ds.time.values
     x = ds.x.values * (1e3 if ds.x.attrs.get("units") == "m" else 1.0)
@@ -104,18 +311,21 @@ def space_time_map(ds, recorded_index: int, path) -> Path:
     scale = np.nanmax(np.abs(v)) or 1.0
     mesh = ax.pcolormesh(x, t, v * 1e9, cmap="RdBu_r", vmin=-scale * 1e9, vmax=scale * 1e9, shading="nearest")
     fig.colorbar(mesh, ax=ax, label="pad velocity (nm/s)")
-    if "event_max_velocity" in ds and np.isfinite(float(ds.event_max_velocity[member])):
-        sign = -np.sign(float(ds.disc_velocity[member] if ds.disc_velocity.ndim else ds.disc_velocity))
-        level = float(ds.attrs.get("fronts_threshold", 0.4)) * float(ds.event_max_velocity[member])
+    if "event_max_velocity" in ds and np.isfinite(float(ds.event_max_velocity[position])):
+        sign = -np.sign(float(ds.disc_velocity[position] if ds.disc_velocity.ndim else ds.disc_velocity))
+        threshold = float(ds.attrs.get("fronts_threshold", 0.4))
+        level = threshold * float(ds.event_max_velocity[position])
+        handles = []
         if ds.attrs.get("fronts_direction", "against_disc") == "against_disc" and np.nanmax(sign * v) >= level:
             ax.contour(x, t, sign * v, levels=[level], colors="k", linewidths=1)
-        ta = ds.arrival_time.values[member]
-        ax.plot(x, ta, "k:", lw=1, label="arrival time t_a")
-        ax.legend(fontsize=7, loc="upper right")
+            handles.append(Line2D([], [], color="k", lw=1, label=f"{threshold:g} x event maximum (recorded)"))
+        ta = ds.arrival_time.values[position]
+        handles += ax.plot(x, ta, color="w", ls=":", lw=1.5, label="arrival time t_a")
+        ax.legend(handles=handles, fontsize=7, loc="upper right", framealpha=0.8)
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("t (s)")
     ax.set_title(f"member {member}: pad velocity")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=130)
     plt.close(fig)
     return Path(path)

@@ -66,6 +66,7 @@ def simulate(
     device: str | None = None,
     progress: bool | str | None = None,
     member_offset: int = 0,
+    workers: int | None = None,
 ) -> xr.Dataset:
     """Simulate an ensemble of pads through the load protocol; return the results as a Dataset.
 
@@ -85,6 +86,10 @@ def simulate(
               that label.
     member_offset: number of the first member (coordinate ``member`` = offset, offset + 1, ...), so
               that the files of separate runs combine without repeated member numbers.
+    workers:  worker processes on the CPU (Warp runs a CPU launch on one core). None: all cores for
+              an ensemble large enough to pay (one core: >= 2 s), else this process; 1: this process;
+              an integer: that many. Outputs equal one process's bit for bit, except which members the
+              straggler rule stops (warpfric/pool.py).
 
     Returns an ``xarray.Dataset`` with dims ``member`` and ``x`` (node position, m): every input
     parameter along ``member``; ``mu_s``, ``mu_s_time`` (s), ``status`` (flag values, see its
@@ -130,6 +135,12 @@ def simulate(
                          "check compares with (nodes + 1)//2 nodes")
     values, varying = resolve_members(members, scene)
     device = _check_device(device, values["normal_force"].shape[0])
+    from . import pool  # a CPU ensemble large enough to pay: its members split over worker processes
+
+    n_workers = pool.plan(workers, device, values["normal_force"].shape[0], solver, fronts, record)
+    if n_workers > 1:
+        return pool.run(n_workers, values, varying, scene=scene, model=model, solver=solver, fronts=fronts,
+                        record=record, device=device, progress=progress, member_offset=member_offset)
     from warpfric.kernels.types import STATUS_MEANINGS
 
     from . import engine
@@ -178,7 +189,7 @@ def _add_grid_check(ds, values, scene, model, solver, fronts, device, progress) 
     coarse = simulate({name: values[name] for name in values}, scene=scene, model=model,
                       solver=dataclasses.replace(solver, nodes=coarse_nodes),
                       fronts=dataclasses.replace(fronts, grid_check=False), device=device,
-                      progress=label.strip() if progress else progress)
+                      progress=label.strip() if progress else progress, workers=1)
     usable = (ds.status.values == 0) & (coarse.status.values == 0)
     for name, units, what in [("mu_s", "1", "mu_s")] + [(f"v_{seg}", "m s-1", f"v_{seg}") for seg in SEGMENT_NAMES]:
         fine_v, coarse_v = ds[name].values, coarse[name].values
@@ -219,7 +230,7 @@ def _rerun_failed_in_float64(ds, values, scene, model, solver, fronts, record, d
             recorded_pos = chosen
     sub_fronts = dataclasses.replace(fronts, grid_check=False) if fronts is not None else None
     sub = simulate(sub_members, scene=scene, model=model, solver=dataclasses.replace(solver, dtype="float64"),
-                   fronts=sub_fronts, record=sub_record, device=device, progress=False)
+                   fronts=sub_fronts, record=sub_record, device=device, progress=False, workers=1)
     for name, var in sub.data_vars.items():
         if name not in ds.data_vars:
             continue
@@ -366,6 +377,19 @@ _OUTPUT_ATTRS = {
 }
 
 
+def _x_coordinate(length, n: int) -> xr.DataArray:
+    """Node positions (m) where every member has the same length, else positions / length."""
+    x_rel = np.linspace(-0.5, 0.5, n)
+    same = bool(np.all(length == length[0]))
+    return xr.DataArray(x_rel * float(length[0]) if same else x_rel, dims=("x",), attrs={
+        "units": "m" if same else "1",
+        "long_name": "node position along the pad" if same else "node position / length (members differ in length)"})
+
+
+def _varying_parameters(values, varying) -> str:
+    return " ".join(v for v in varying if np.unique(values[v]).size > 1)
+
+
 def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, wall, meanings, member_offset=0):
     from warpfric.kernels.types import C_PHI, C_TAU, C_U, C_V
 
@@ -376,7 +400,6 @@ def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, 
         attrs={"long_name": "ensemble member number", "units": "1"},
     )
     length = values["length"]
-    x_rel = np.linspace(-0.5, 0.5, n)
     data = {}
     for name, arr in values.items():
         attrs = {"units": parameter_units(name), "long_name": parameter_long_name(name)}
@@ -435,16 +458,7 @@ def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, 
     for name, arr in per_node.items():
         units, long_name = _OUTPUT_ATTRS[name]
         data[name] = (("member", "x"), np.ascontiguousarray(arr.T), {"units": units, "long_name": long_name})
-    coords = {
-        "member": member,
-        "x": xr.DataArray(
-            x_rel * float(length[0]) if np.all(length == length[0]) else x_rel,
-            dims=("x",),
-            attrs={"units": "m" if np.all(length == length[0]) else "1",
-                   "long_name": "node position along the pad" if np.all(length == length[0])
-                   else "node position / length (members differ in length)"},
-        ),
-    }
+    coords = {"member": member, "x": _x_coordinate(length, n)}
     attrs = {
         "title": "warpfric ensemble",
         "Conventions": "CF-1.8",
@@ -452,7 +466,7 @@ def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, 
         "device": device,
         "wall_time_s": wall,  # the run: allocation, integration, read-back, fronts; not kernel builds
         # parameters given per member that take more than one value
-        "varying_parameters": " ".join(v for v in varying if np.unique(values[v]).size > 1),
+        "varying_parameters": _varying_parameters(values, varying),
     }
     for f in dataclasses.fields(model):
         value = getattr(model, f.name)

@@ -1,0 +1,127 @@
+"""All cores of a CPU: an ensemble split over worker processes equals one process's bit for bit
+(records, member_offset, fronts, a swept length included), the split is chosen where it pays, and
+the workers neither run the user's script again nor outlive a Ctrl-C."""
+
+import os
+import subprocess
+import sys
+import textwrap
+import threading
+import time
+
+import numpy as np
+import pytest
+
+import warpfric as wf
+from warpfric import pool
+from warpfric.progress import SizeWarning
+
+TIMING = {"wall_time_s", "kernel_build_time_s", "workers", "worker_chunks", "worker_start_time_s"}
+
+
+def assert_same(one, split):
+    assert list(one.data_vars) == list(split.data_vars) and set(one.coords) == set(split.coords)
+    for name, var in one.variables.items():
+        other = split[name].variable
+        assert var.dims == other.dims and var.dtype == other.dtype, name
+        np.testing.assert_array_equal(var.values, other.values, err_msg=name)  # NaN == NaN here, bit for bit
+        assert str(var.attrs) == str(other.attrs), name
+    assert {k: v for k, v in one.attrs.items() if k not in TIMING} == \
+        {k: v for k, v in split.attrs.items() if k not in TIMING}
+
+
+def test_split_equals_one_process_bit_for_bit():
+    """13 members in 3 chunks of 4, 4 and 5 on 2 workers: fronts (two passes) and the stress gate,
+    recorded members in an order of their own, a member offset, and a length that is one value in
+    the first chunks (x in m there) but two in the ensemble (x / length). No member comes near the
+    straggler limit (max(2000, 10 x the median) attempts), the one output that depends on peers."""
+    n = 13
+    members = {"eccentricity": np.linspace(-0.2, 0.2, n), "normal_force": np.geomspace(300.0, 3000.0, n),
+               "length": np.where(np.arange(n) < 10, 0.1, 0.12)}
+    kw = dict(solver=wf.Solver(nodes=21, rtol=1e-5), fronts=wf.Fronts(), device="cpu", progress=False,
+              record=wf.Record.window(20.2, 20.3, 11, members=(12, 0, 5)), member_offset=3)
+    one = wf.simulate(members, workers=1, **kw)
+    split = wf.simulate(members, workers=2, **kw)
+    assert split.attrs["workers"] == 2 and split.attrs["worker_chunks"] == 3 and "workers" not in one.attrs
+    assert (one.status.values == 0).all() and (one.steps_accepted + one.steps_rejected).values.max() < 2000
+    assert one.x.attrs["units"] == "1" and list(split.recorded_member.values) == [15, 3, 8]
+    assert set(split.attrs["varying_parameters"].split()) == {"length", "normal_force", "eccentricity"}
+    assert_same(one, split)
+    again = wf.simulate(members, workers=2, **kw)  # the pool is kept: no start the second time
+    assert again.attrs["worker_start_time_s"] == 0.0
+    assert_same(one, again)
+
+
+def test_workers_default_splits_where_it_pays(monkeypatch):
+    monkeypatch.setattr(pool, "cpu_cores", lambda: 4)
+    small, big = wf.Solver(nodes=21), wf.Solver(nodes=100)
+    assert pool.plan(None, "cpu", 12, small, wf.Fronts(), None) == 1  # ~0.1 s on one core: not worth a start
+    assert pool.plan(None, "cpu", 400, big, wf.Fronts(), None) == 4  # ~14 s: all cores
+    assert pool.plan(None, "cpu", 50, big, wf.Fronts(), None) == 1  # ~1.8 s: less than 2 new workers cost here
+    assert pool.plan(None, "cpu", 100, big, wf.Fronts(), None) == 4
+    assert pool.plan(None, "cpu", 3, wf.Solver(nodes=2000), None, None) == 3  # never more workers than members
+    assert pool.plan(None, "cuda:0", 400, big, wf.Fronts(), None) == 1
+    assert pool.plan(1, "cpu", 400, big, wf.Fronts(), None) == 1
+    assert pool.plan(3, "cpu", 400, big, wf.Fronts(), None) == 3
+    seen = []
+    thread = threading.Thread(target=lambda: seen.append(pool.plan(None, "cpu", 400, big, wf.Fronts(), None)))
+    thread.start()
+    thread.join()
+    assert seen == [1]  # a thread (e.g. a Dask worker's) runs in its process
+    for bad in (0, -1, True, 2.0, "4"):
+        with pytest.raises(ValueError, match="workers"):
+            pool.plan(bad, "cpu", 400, big, None, None)
+    with pytest.raises(ValueError, match="workers = 2 is invalid with device 'cuda:0'"):
+        pool.plan(2, "cuda:0", 400, big, None, None)
+    with pytest.raises(ValueError, match="record setting 'members' contains 400"):
+        pool.plan(2, "cpu", 400, big, None, wf.Record.window(20.0, 20.1, 3, members=(400,)))
+    with pytest.warns(SizeWarning):
+        pool.plan(None, "cpu", 1, wf.Solver(nodes=6000), None, None)
+
+
+def test_chunks_are_contiguous_and_balanced():
+    assert pool.chunk_bounds(13, 2) == [(0, 4), (4, 8), (8, 13)]
+    assert pool.chunk_bounds(400, 2) == [(k * 50, k * 50 + 50) for k in range(8)]
+    assert pool.chunk_bounds(3, 4) == [(0, 1), (1, 2), (2, 3)]
+
+
+def test_workers_do_not_run_the_users_script_again(tmp_path):
+    """A script without ``if __name__ == "__main__":`` (spawn would run its top level in each worker)."""
+    script = tmp_path / "no_guard.py"
+    script.write_text(textwrap.dedent("""
+        import warpfric as wf
+        print("top level", flush=True)
+        ds = wf.simulate({"eccentricity": [0.0, 0.1, 0.2]}, solver=wf.Solver(nodes=11, rtol=1e-4), fronts=None,
+                         device="cpu", progress=False, workers=2)
+        print("members", ds.sizes["member"], ds.attrs["workers"], flush=True)
+    """))
+    res = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "PYTHONWARNINGS": "ignore"})
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.splitlines() == ["top level", "members 3 2"]
+
+
+def test_ctrl_c_stops_the_workers_at_once(monkeypatch):
+    members = {"eccentricity": np.linspace(-0.2, 0.2, 4)}
+    kw = dict(solver=wf.Solver(nodes=11, rtol=1e-4), fronts=None, device="cpu", progress=False)
+    wf.simulate(members, workers=2, **kw)
+    processes = list(pool._POOL.executor._processes.values())
+    assert len(processes) == 2 and all(p.is_alive() for p in processes)
+
+    def interrupt(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pool, "_read_inbox", interrupt)
+    t0 = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        wf.simulate(members, workers=2, **kw)
+    assert pool._POOL is None and time.monotonic() - t0 < 5
+
+    def exists(pid):  # is_alive can be stale here: the executor's thread may have reaped the process
+        try:
+            os.kill(pid, 0)
+        except ProcessLookupError:
+            return False
+        return True
+
+    assert not any(exists(p.pid) for p in processes)

@@ -1,0 +1,163 @@
+"""The progress line a person reads: it moves steadily and never back, shows members/s and the time
+left, redraws at least every ~2 s in a terminal and stays quiet elsewhere; the warning before a run
+far beyond the usual size; launches short enough on the CPU to keep the line moving."""
+
+import io
+import re
+import sys
+import warnings
+
+import numpy as np
+import pytest
+
+import warpfric as wf
+from warpfric import progress
+from warpfric.kernels.types import IntegratorState
+
+
+class FakeTerminal(io.StringIO):
+    def isatty(self):
+        return True
+
+
+class FakeClock:
+    def __init__(self):
+        self.now = 1000.0
+
+    def __call__(self):
+        return self.now
+
+
+@pytest.fixture
+def clock(monkeypatch):
+    """One fake clock for the line's throttle and for tqdm's rate and time left."""
+    import tqdm.std
+
+    fake = FakeClock()
+    monkeypatch.setattr(tqdm.std, "time", fake)
+    return fake
+
+
+def drawn(stream):
+    """The redrawn states of a bar: (percentage, text) per carriage return."""
+    frames = [f for f in stream.getvalue().split("\r") if f.strip()]
+    return [(float(re.search(r"([\d.]+)%\|", f).group(1)), f) for f in frames]
+
+
+def states(attempts, done):
+    st = np.zeros(len(attempts), dtype=IntegratorState.numpy_dtype())
+    st["steps_accepted"] = attempts
+    st["done"] = done
+    return st
+
+
+def test_terminal_line_redraws_every_half_second_with_rate_and_time_left(clock):
+    out = FakeTerminal()
+    line = progress.Line(200, "sweep", stream=out, clock=clock)
+    times = []
+    for k in range(1, 101):  # updates every 0.1 s of (fake) time for 10 s
+        clock.now += 0.1
+        if line.show(k / 100, 2 * k):
+            times.append(clock.now)
+    line.close()
+    assert np.diff(times).max() <= 2.0 and len(times) >= 15  # at least every 2 s; throttled to ~0.5 s
+    frames = drawn(out)
+    percentages = [p for p, _ in frames]
+    assert percentages == sorted(percentages) and percentages[-1] == 100
+    middle = frames[len(frames) // 2][1]
+    # 2 members per 0.1 s: 20 members/s; half done after 5 s: ~5 s left
+    assert "warpfric sweep" in middle and re.search(r" (19|20|21)(\.\d+)? members/s", middle), middle
+    assert re.search(r"<00:0[4-6]", middle) and "done" in middle, middle
+    assert out.getvalue().endswith("\n")
+
+
+def test_line_never_goes_back(clock):
+    out = FakeTerminal()
+    line = progress.Line(10, stream=out, clock=clock)
+    for fraction in (0.2, 0.5, 0.3, 0.6, 0.1):
+        clock.now += 1.0
+        line.show(fraction, 0)
+    percentages = [p for p, _ in drawn(out)]
+    assert percentages == sorted(percentages) and max(percentages) == 60
+
+
+def test_quiet_where_stderr_is_no_terminal(clock):
+    out = io.StringIO()
+    line = progress.Line(50, "chunk 2/2", stream=out, clock=clock)
+    for k in range(100):
+        clock.now += 0.5
+        line.show(k / 100, k // 2)
+    assert out.getvalue() == ""
+    line.close()
+    lines = out.getvalue().splitlines()
+    assert len(lines) == 1 and "\r" not in out.getvalue()
+    assert lines[0].startswith("warpfric chunk 2/2: 50 members in 50.0 s (1 members/s)")
+
+
+def test_percentage_moves_steadily_through_both_passes():
+    """Members in lockstep (each launch advances every running member by the same attempts) with a
+    spread of needed attempts: the fraction rises in small steps through pass 1 (to 1/2) and pass 2
+    (each member expects its attempts of pass 1) and reaches 1 only at the end."""
+    needed = np.random.default_rng(0).integers(250, 620, 200)
+    bar = progress.Progress(True, 200, n_passes=2, solver=wf.Solver(nodes=100))
+    seen = []
+    bar.sink = lambda fraction, done, final: seen.append((fraction, done, final))
+    for pass_index, scale in ((0, 1.0), (1, 0.9)):
+        bar.start_pass(pass_index)
+        total = np.round(needed * scale)
+        for level in range(0, int(total.max()) + 25, 25):
+            bar.update(states(np.minimum(level, total), level >= total))
+        bar.end_pass(states(needed, np.ones(200)))
+    fractions = np.array([f for f, _, _ in seen])
+    assert np.all(np.diff(fractions) >= 0) and np.diff(fractions).max() < 0.05
+    assert all(fraction < 1.0 for fraction, done, _ in seen if done < 200) and seen[-1] == (1.0, 200, True)
+    assert all(done == 0 for fraction, done, _ in seen if fraction <= 0.5)  # done: after the last pass
+
+
+def test_simulate_draws_the_line_in_a_terminal_and_one_summary_elsewhere(monkeypatch):
+    members = {"eccentricity": [0.0, 0.1]}
+    solver = wf.Solver(nodes=21, rtol=1e-4)
+    terminal = FakeTerminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    wf.simulate(members, solver=solver, fronts=None, device="cpu", progress="tiny")
+    frames = drawn(terminal)
+    assert frames[-1][0] == 100 and "warpfric tiny" in frames[-1][1] and "2/2 done" in frames[-1][1]
+    log = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", log)
+    wf.simulate(members, solver=solver, fronts=None, device="cpu", progress="tiny")
+    assert re.fullmatch(r"warpfric tiny: 2 members in [\d.]+ s \([\d.e+]+ members/s\)\n", log.getvalue())
+    log = io.StringIO()
+    monkeypatch.setattr(sys, "stderr", log)
+    wf.simulate(members, solver=solver, fronts=None, device="cpu")  # progress None: only in a terminal
+    assert log.getvalue() == ""
+
+
+def test_cpu_launches_last_about_a_tenth_of_a_second():
+    solver = wf.Solver(nodes=100)
+    assert progress.launch_steps(solver, 1000, "cuda:0") == 500  # a GPU: Solver.steps_per_launch
+    assert progress.launch_steps(solver, 2, "cpu") == 500
+    assert progress.launch_steps(solver, 1000, "cpu") == 3  # 3e5 node-attempts: ~0.1 s of a core
+    assert progress.launch_steps(wf.Solver(nodes=100_000), 1, "cpu") == 3
+    assert progress.launch_steps(wf.Solver(nodes=100_000), 100, "cpu") == 1
+
+
+def test_a_run_far_beyond_the_usual_size_warns_with_time_and_memory():
+    with pytest.warns(progress.SizeWarning, match=r"1 member x 100000 nodes .* roughly 2\.\d h on 1 CPU core .* "
+                                                  r"MB of memory"):
+        progress.size_warning(1, wf.Solver(nodes=100_000), 2, "cpu")
+    with pytest.warns(progress.SizeWarning, match=r"roughly 7\d min on 2 CPU cores"):  # 1e7 node-members
+        progress.size_warning(20_000, wf.Solver(nodes=1000), 1, "cpu", workers=2)
+    with pytest.warns(progress.SizeWarning, match=r"200000 members x 100 nodes .* GB of device memory"):
+        progress.size_warning(200_000, wf.Solver(nodes=100), 1, "cuda:0")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert progress.size_warning(10_000, wf.Solver(nodes=200), 2, "cpu") is None  # usual: no warning
+
+
+def test_a_slow_single_member_shows_its_pace_and_tenths_of_a_percent(clock):
+    out = FakeTerminal()
+    line = progress.Line(1, stream=out, clock=clock)
+    clock.now += 10.0
+    line.show(0.001, 0)
+    percentage, text = drawn(out)[-1]
+    assert percentage == 0.1 and "2.8 h per member" in text and "0/1 done" in text, text

@@ -1,0 +1,340 @@
+"""warpfric.pool: all cores of a CPU for one ensemble.
+
+Warp runs a launch on the CPU on one core. ``simulate(..., workers=None)`` (the default) therefore
+splits a CPU ensemble that is large enough to pay (one core would take at least MIN_CPU_SECONDS by
+warpfric.progress.cpu_seconds) into contiguous chunks of members, runs the chunks in worker
+processes, one per core, and joins their Datasets in member order. ``workers=1`` runs in this
+process, an integer runs that many workers. Only the process that the user started splits (not a
+worker of this pool or of a Dask cluster, nor a thread other than the main one).
+
+Each member's integration is independent of the others, so the outputs equal one process's bit for
+bit, with one exception: the straggler rule (Solver.stall_factor) compares a member with the other
+members of its chunk, not of the whole ensemble, so a member far slower than its peers may stop as
+``stalled`` in one and not in the other (and the float32 fallback reruns a chunk's failed members
+together). Records (``record``) and ``member_offset`` work as in one process.
+
+The pool: 'spawn' worker processes (a fork would copy Warp's runtime, and CUDA's where there is
+one, from a process that may be using it), started with the first ensemble that needs them and
+kept for the next ones. A worker's start (~1.5 s on this project's 2-core machine: numpy, xarray
+and Warp imported, Warp initialised, the kernels loaded from Warp's cache, xarray's first Dataset)
+is paid once per process; a warm pool costs ~20 ms a chunk. The workers do not run the parent's ``__main__`` script (a script
+without ``if __name__ == "__main__":`` works) and see no CUDA device. Ctrl-C stops them at once.
+
+Attributes of a split run: ``workers``, ``worker_chunks``, ``worker_start_time_s`` (starting the
+processes in this call; 0 when they were running), ``wall_time_s`` (the parent's time from the split
+to the joined Dataset, worker start included, the slowest worker's kernel loads not) and
+``kernel_build_time_s`` (the slowest worker's).
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import contextlib
+import dataclasses
+import itertools
+import multiprocessing as mp
+import multiprocessing.context as mpc
+import os
+import queue as queue_module
+import signal
+import sys
+import threading
+import time
+import types
+
+import numpy as np
+
+from . import progress as progress_module
+
+# split when one core would take at least this long (s, by progress.cpu_seconds). Measured on this
+# project's 2-core machine (studies/bench_cpu_workers.py, fronts on, N = 100, fresh processes): 100
+# members (3.6 s by the estimate) 4.3 s in one process, 3.5 s on 2 new workers (they start in ~0.6 s,
+# and their first run pays ~1 s more: xarray's first Dataset imports dask where it is installed,
+# the kernels' modules are built), 2.3 s on a warm pool; 400 members 15.9 s, 9.5 s and 7.8 s
+MIN_CPU_SECONDS = 2.5
+# chunks per worker (so that a worker whose chunks run faster takes more of them) and the fewest
+# members in a chunk
+CHUNKS_PER_WORKER = 4
+MIN_CHUNK_MEMBERS = 4
+
+
+def cpu_cores() -> int:
+    """The cores this process may run on."""
+    if hasattr(os, "process_cpu_count"):  # Python >= 3.13
+        n = os.process_cpu_count()
+    elif hasattr(os, "sched_getaffinity"):
+        n = len(os.sched_getaffinity(0))
+    else:  # pragma: no cover
+        n = os.cpu_count()
+    return max(1, n or 1)
+
+
+_IN_WORKER = False  # True in a worker process of this pool
+
+
+def _top_level() -> bool:
+    return not _IN_WORKER and mp.parent_process() is None and threading.current_thread() is threading.main_thread()
+
+
+def plan(workers, device, n_members: int, solver, fronts, record) -> int:
+    """How many worker processes run the ensemble (1: this process). Validates ``workers`` and
+    ``record``'s members, and warns (progress.SizeWarning) before a run far beyond the usual size."""
+    from .engine import record_slots
+
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
+        raise ValueError(f"workers = {workers!r} is invalid; valid: None (all cores of a CPU for an ensemble large "
+                         "enough to pay) or an integer >= 1 (1: this process)")
+    cpu = str(device).startswith("cpu")
+    if workers is not None and workers > 1 and not cpu:
+        raise ValueError(f"workers = {workers} is invalid with device {device!r}; valid there: None or 1 (worker "
+                         "processes serve the CPU, where Warp runs a launch on one core)")
+    record_slots(record, n_members)  # a recorded member beyond the ensemble: the same error as in one process
+    passes = 1.0 if fronts is None else progress_module.FRONTS_PASSES * (1.5 if fronts.grid_check else 1.0)
+    if workers is None:
+        pays = progress_module.cpu_seconds(n_members, solver, passes) >= MIN_CPU_SECONDS
+        n = min(cpu_cores(), n_members) if cpu and n_members > 1 and pays and _top_level() else 1
+    else:
+        n = min(int(workers), n_members)
+    if not _IN_WORKER:
+        progress_module.size_warning(n_members, solver, passes, device, n)
+    return n
+
+
+def chunk_bounds(n_members: int, n_workers: int) -> list[tuple[int, int]]:
+    """Contiguous (start, stop) member ranges: CHUNKS_PER_WORKER per worker, of at least
+    MIN_CHUNK_MEMBERS members (at least one chunk per worker), sizes differing by at most one."""
+    n_chunks = max(n_workers, min(n_workers * CHUNKS_PER_WORKER, n_members // MIN_CHUNK_MEMBERS))
+    n_chunks = min(n_chunks, n_members)
+    edges = [k * n_members // n_chunks for k in range(n_chunks + 1)]
+    return list(zip(edges[:-1], edges[1:]))
+
+
+# --- the worker side ---
+_INBOX = None  # the parent's message queue (progress and readiness), in a worker
+
+
+def _init_worker(inbox) -> None:
+    """A worker's start: Ctrl-C is the parent's to handle, no CUDA device, Warp initialised
+    (its "no CUDA driver" notice, which the parent has printed, not repeated)."""
+    global _IN_WORKER, _INBOX
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    os.environ["CUDA_VISIBLE_DEVICES"] = ""
+    _IN_WORKER, _INBOX = True, inbox
+    from .simulate import _warp
+
+    saved = os.dup(2)
+    try:
+        with open(os.devnull, "w") as devnull:
+            os.dup2(devnull.fileno(), 2)
+            _warp()
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+    inbox.put(("ready", os.getpid()))
+
+
+class _Sink:
+    """Where a worker's engine reports progress (warpfric.progress.SINK): to the parent, at most every
+    0.2 s, and at the end."""
+
+    def __init__(self, run_id: int, chunk: int):
+        self.run_id, self.chunk, self.last = run_id, chunk, -1.0
+
+    def __call__(self, fraction: float, done: int, final: bool) -> None:
+        now = time.monotonic()
+        if final or now - self.last >= 0.2:
+            self.last = now
+            _INBOX.put(("progress", self.run_id, self.chunk, float(fraction), int(done)))
+
+
+def _run_chunk(run_id: int, chunk: int, members: dict, record, member_offset: int, show: bool, common: dict):
+    from .simulate import simulate
+
+    progress_module.SINK = _Sink(run_id, chunk) if show else None
+    try:
+        return simulate(members, record=record, member_offset=member_offset, progress=show, workers=1, **common)
+    finally:
+        progress_module.SINK = None
+
+
+# --- the parent side ---
+@contextlib.contextmanager
+def _main_hidden():
+    """While a worker process starts: a bare ``__main__``, so that the worker does not import the
+    parent's script again (spawn would, and run its top level where it has no __main__ guard)."""
+    main = sys.modules.get("__main__")
+    sys.modules["__main__"] = types.ModuleType("__main__")
+    try:
+        yield
+    finally:
+        if main is not None:
+            sys.modules["__main__"] = main
+
+
+class _Process(mpc.SpawnProcess):
+    @staticmethod
+    def _Popen(process_obj):
+        with _main_hidden():
+            return mpc.SpawnProcess._Popen(process_obj)
+
+
+class _Context(mpc.SpawnContext):
+    Process = _Process
+
+
+@dataclasses.dataclass
+class _Pool:
+    workers: int
+    executor: cf.ProcessPoolExecutor
+    inbox: object
+    created: float
+    ready: int = 0
+    ready_at: float | None = None
+
+
+_POOL: _Pool | None = None
+_RUN_IDS = itertools.count()
+
+
+def _get_pool(n_workers: int) -> _Pool:
+    global _POOL
+    if _POOL is not None and _POOL.workers != n_workers:
+        shutdown()
+    if _POOL is None:
+        ctx = _Context()
+        inbox = ctx.Queue()
+        executor = cf.ProcessPoolExecutor(n_workers, mp_context=ctx, initializer=_init_worker, initargs=(inbox,))
+        _POOL = _Pool(n_workers, executor, inbox, time.perf_counter())
+    return _POOL
+
+
+def shutdown(terminate: bool = False) -> None:
+    """Stop the worker processes (they start again with the next ensemble that needs them);
+    ``terminate``: at once, dropping what they run."""
+    global _POOL
+    pool, _POOL = _POOL, None
+    if pool is None:
+        return
+    processes = list(getattr(pool.executor, "_processes", {}).values())  # CPython keeps its workers here
+    if terminate:
+        for process in processes:
+            process.terminate()
+    pool.executor.shutdown(wait=not terminate, cancel_futures=True)
+    for process in processes:
+        process.join(5)
+
+
+def _chunk_record(record, start: int, stop: int):
+    """(the Record of the members of [start, stop) at their positions in the chunk, or None; their
+    indices in record.members)."""
+    if record is None:
+        return None, []
+    chosen = [k for k, member in enumerate(record.members) if start <= member < stop]
+    if not chosen:
+        return None, []
+    return dataclasses.replace(record, members=tuple(int(record.members[k]) - start for k in chosen)), chosen
+
+
+def run(n_workers: int, values: dict, varying, *, scene, model, solver, fronts, record, device, progress,
+        member_offset: int):
+    """simulate()'s run of the resolved members ``values`` on ``n_workers`` worker processes: one
+    Dataset, as one process would return it (see the module's docstring)."""
+    t0 = time.perf_counter()
+    n = values["normal_force"].shape[0]
+    bounds = chunk_bounds(n, n_workers)
+    sizes = np.array([stop - start for start, stop in bounds])
+    show = sys.stderr.isatty() if progress is None else bool(progress)
+    line = progress_module.Line(n, progress if isinstance(progress, str) else "") if show else None
+    pool = _get_pool(n_workers)
+    started_here = pool.ready < n_workers
+    run_id = next(_RUN_IDS)
+    common = dict(scene=scene, model=model, solver=solver, fronts=fronts, device=device)
+    records = [_chunk_record(record, start, stop) for start, stop in bounds]
+    fractions, done = np.zeros(len(bounds)), np.zeros(len(bounds), dtype=np.int64)
+    try:
+        futures = [pool.executor.submit(_run_chunk, run_id, k, {name: v[start:stop] for name, v in values.items()},
+                                        records[k][0], member_offset + start, show, common)
+                   for k, (start, stop) in enumerate(bounds)]
+        while True:
+            _read_inbox(pool, run_id, fractions, done, timeout=0.25)
+            finished = 0
+            for k, future in enumerate(futures):
+                if future.done():
+                    future.result()  # a chunk that raised: raise here
+                    fractions[k], done[k] = 1.0, sizes[k]
+                    finished += 1
+            if line is not None:
+                line.show(float(fractions @ sizes) / n, int(done.sum()),
+                          f"{n_workers} workers, {finished}/{len(bounds)} chunks")
+            if finished == len(futures):
+                break
+        parts = [future.result() for future in futures]
+    except BaseException:
+        if line is not None:
+            line.stop()
+        shutdown(terminate=True)
+        raise
+    ds = join(parts, [chosen for _, chosen in records], values, varying, solver.nodes)
+    build = max(float(p.attrs.get("kernel_build_time_s", 0.0)) for p in parts)
+    ds.attrs["kernel_build_time_s"] = build
+    ds.attrs["wall_time_s"] = max(time.perf_counter() - t0 - build, 0.0)
+    ds.attrs["workers"] = n_workers
+    ds.attrs["worker_chunks"] = len(bounds)
+    ds.attrs["worker_start_time_s"] = (pool.ready_at - t0) if started_here and pool.ready_at is not None else 0.0
+    if line is not None:
+        line.close(f"{n_workers} workers")
+    return ds
+
+
+def _read_inbox(pool: _Pool, run_id: int, fractions: np.ndarray, done: np.ndarray, timeout: float) -> None:
+    """Take the workers' messages (waiting up to ``timeout`` s for the first): readiness, and this
+    run's progress per chunk (never backwards; a chunk's later engine runs, e.g. its grid check,
+    restart at 0)."""
+    block = True
+    while True:
+        try:
+            message = pool.inbox.get(block, timeout)
+        except queue_module.Empty:
+            return
+        block = False
+        if message[0] == "ready":
+            pool.ready += 1
+            if pool.ready == pool.workers:
+                pool.ready_at = time.perf_counter()
+        elif message[1] == run_id:
+            _, _, chunk, fraction, members_done = message
+            fractions[chunk] = max(fractions[chunk], fraction)
+            done[chunk] = max(done[chunk], members_done)
+
+
+def join(parts: list, chosen: list, values: dict, varying, nodes: int):
+    """The chunks' Datasets as one: every variable along ``member`` concatenated in member order, the
+    recorded members in the order of record.members (``chosen``: each chunk's indices there), the
+    ensemble's x coordinate and varying_parameters (a chunk may hold one length, or one value of a
+    swept parameter)."""
+    import xarray as xr
+
+    from .simulate import _varying_parameters, _x_coordinate
+
+    recorded = [name for p in parts for name, var in p.variables.items() if "recorded" in var.dims or name == "time"]
+    recorded = list(dict.fromkeys(recorded))
+    ds = xr.concat([p.drop_vars([name for name in recorded if name in p.variables]) for p in parts], dim="member",
+                   data_vars="minimal", coords="minimal", compat="override", join="override",
+                   combine_attrs="override")
+    ds = ds.assign_coords(x=_x_coordinate(values["length"], nodes))
+    with_record = [(p, c) for p, c in zip(parts, chosen) if c]
+    if with_record:
+        order = np.argsort([k for _, c in with_record for k in c], kind="stable")
+        first = with_record[0][0]
+        for name in recorded:
+            var = first.variables[name]
+            if "recorded" in var.dims:
+                data = np.concatenate([p.variables[name].values for p, _ in with_record], axis=0)[order]
+                var = xr.Variable(var.dims, data, var.attrs)
+            if name in first.coords:
+                ds = ds.assign_coords({name: var})
+            else:
+                ds[name] = var
+        ds = ds[list(first.data_vars)]  # the variables in one process's order
+    ds.attrs["varying_parameters"] = _varying_parameters(values, varying)
+    return ds

@@ -1,0 +1,290 @@
+"""warpfric.progress: the progress line of a run, the launch size that keeps it moving on the CPU,
+and the warning before a run far beyond the usual size.
+
+The line (stderr; drawn by tqdm in a terminal) shows a percentage, members done, members per
+second and the time left; it is redrawn at most every ``Line.interval`` s and at least after every
+launch, which on the CPU lasts ~0.1 s (``launch_steps``). Where stderr is no terminal (a log, a
+pipe) nothing is drawn while the run goes; a run with progress on writes one summary line at its
+end.
+
+The percentage: a member that is done counts 1; a running member counts its attempted steps over
+the steps a member is expected to need (``expected_attempts``; in the second pass of the front
+metrics: the member's own steps of the first pass), at most ``RUNNING_CAP``, so that a member
+needing more than expected holds the line below 100 % instead of taking it past; each pass is an
+equal share. The shown percentage never goes back.
+"""
+
+from __future__ import annotations
+
+import io
+import math
+import os
+import sys
+import time
+import warnings
+
+import numpy as np
+
+# --- cost model: one member of the default scene through one pass, on one core of this project's
+# CPU (fronts off, rtol 1e-5, the stress gate: median 315 attempts at N = 100 over 200 members of
+# eccentricity in [-0.2, 0.2] and F in [500, 5000] N; 337 at N = 41; 540, 880, 1550 and 2990 at
+# N = 400, 800, 1600 and 3200; 11x more attempts at rtol 1e-7; 0.29 .. 0.36 us per node and attempt
+# for 1 or 2 members from N = 100 to 3200, 0.42 us for 100 members at N = 100: 1.45 s). The front
+# metrics cost FRONTS_PASSES passes (3.6 s for those 100 members: pass 1 takes ~30 % more steps,
+# then pass 2) ---
+CPU_SECONDS_PER_NODE_ATTEMPT = 0.42e-6
+FEW_NODES_ATTEMPTS = 330.0
+FRONTS_PASSES = 2.5
+
+
+def expected_attempts(nodes: int, rtol: float = 1e-5, method: str = "tr_bdf2") -> float:
+    """Attempted steps one member is expected to need for one pass of the protocol (automatic
+    end): ~330 on a coarse grid, ~0.95 N on a fine one, times (1e-5/rtol)^(1/order)."""
+    order = 4 if method == "esdirk4" else 2
+    return math.hypot(FEW_NODES_ATTEMPTS, 0.95 * nodes) * (1e-5 / rtol) ** (1.0 / order)
+
+
+def cpu_seconds(n_members: int, solver, passes: float = 1.0) -> float:
+    """Rough time of an ensemble on one CPU core (s): members x passes x expected attempts x nodes x
+    CPU_SECONDS_PER_NODE_ATTEMPT (passes: 1 without fronts, FRONTS_PASSES with)."""
+    attempts = expected_attempts(solver.nodes, solver.rtol, solver.method)
+    return n_members * passes * attempts * solver.nodes * CPU_SECONDS_PER_NODE_ATTEMPT
+
+
+# member-node-attempts per launch on the CPU: ~0.1 s of one core. A launch there costs next to
+# nothing beyond its steps (400 members, N = 100: 12.0 s with 500 attempts per launch, 12.2 s with
+# 1), so short launches keep the line and Ctrl-C responsive at no measurable cost
+CPU_LAUNCH_WORK = 3e5
+
+
+def launch_steps(solver, n_members: int, device) -> int:
+    """Attempted steps per launch: Solver.steps_per_launch on a GPU; on the CPU at most that, and
+    fewer for a big ensemble or grid, so that a launch lasts ~0.1 s. Outputs do not depend on it
+    (the kernel resumes each member where the last launch left it); only the straggler rule is
+    applied between launches, so it can catch a straggler earlier."""
+    if not str(device).startswith("cpu"):
+        return solver.steps_per_launch
+    return int(max(1, min(solver.steps_per_launch, CPU_LAUNCH_WORK // (n_members * solver.nodes))))
+
+
+# --- size warning ---
+USUAL_NODES = 5000
+USUAL_NODE_MEMBERS = 1e7
+# bytes per node and member: the device arrays (device_bytes_per_member / N: 272 .. 324 in float64,
+# by friction law and fronts) and the outputs on the host (the read-back and the Dataset's
+# per-node variables)
+DEVICE_BYTES_PER_NODE = 330.0
+HOST_BYTES_PER_NODE = 200.0
+
+
+class SizeWarning(UserWarning):
+    """A run far beyond the usual size (it says how long and how much memory it will roughly take)."""
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    if seconds < 2 * 86400:
+        return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 86400:.1f} days"
+
+
+def _size(n_bytes: float) -> str:
+    for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6)):
+        if n_bytes >= scale:
+            return f"{n_bytes / scale:.1f} {unit}"
+    return f"{n_bytes / 1e3:.0f} kB"
+
+
+def size_warning(n_members: int, solver, passes: float, device, workers: int = 1) -> str | None:
+    """Warn (SizeWarning) before a run of more than USUAL_NODES nodes or USUAL_NODE_MEMBERS
+    node-members, with its rough time (on the CPU) and memory; return the message, or None."""
+    nodes = solver.nodes
+    if nodes <= USUAL_NODES and n_members * nodes <= USUAL_NODE_MEMBERS:
+        return None
+    scale = 1.0 if solver.dtype == "float64" else 0.5
+    device_bytes = n_members * nodes * DEVICE_BYTES_PER_NODE * scale
+    host_bytes = n_members * nodes * HOST_BYTES_PER_NODE * scale
+    what = f"{n_members} member{'s' if n_members != 1 else ''} x {nodes} nodes"
+    usual = f"usual: up to {USUAL_NODES} nodes and {USUAL_NODE_MEMBERS:.0e} node-members"
+    if str(device).startswith("cpu"):
+        seconds = cpu_seconds(n_members, solver, passes) / max(1, workers)
+        cores = f"{workers} CPU core{'s' if workers != 1 else ''}"
+        when = (f"roughly {_duration(seconds)} on {cores} (~{expected_attempts(nodes, solver.rtol, solver.method):.0f} "
+                f"steps per member and pass, {CPU_SECONDS_PER_NODE_ATTEMPT * 1e6:.2f} us per node and step on this "
+                f"project's CPU) and {_size(device_bytes + host_bytes)} of memory")
+    else:
+        when = f"{_size(device_bytes)} of device memory and {_size(host_bytes)} on the host (GPU time not estimated)"
+    message = (f"{what} is far beyond the usual size ({usual}): expect {when}. Fewer nodes or members give a "
+               "quick first look; the fronts' grid check (Fronts(grid_check=True)) says whether a finer grid changes "
+               "the result")
+    warnings.warn(message, SizeWarning, stacklevel=4)
+    return message
+
+
+# --- the line ---
+def _isatty(stream) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
+def _columns(stream) -> int:
+    """The terminal's width (at most 120), or 100 where it reads as 0 or cannot be read."""
+    try:
+        columns = os.get_terminal_size(stream.fileno()).columns
+    except (AttributeError, ValueError, OSError, io.UnsupportedOperation):
+        columns = 0
+    return min(columns, 120) if columns > 0 else 100
+
+
+class Line:
+    """One progress line for n members on ``stream`` (default stderr). In a terminal: a tqdm bar
+    (percentage, members done, members/s, time left), redrawn by ``show`` at most every
+    ``interval`` s. Elsewhere nothing until ``close``, which writes one summary line. The
+    fraction shown never decreases. ``clock``: seconds (tests pass a fake one)."""
+
+    interval = 0.5
+
+    def __init__(self, n_members: int, label: str = "", stream=None, clock=time.monotonic):
+        self.stream = stream if stream is not None else sys.stderr
+        self.n = int(n_members)
+        self.label = f"warpfric {label}".strip()
+        self.clock = clock
+        self.t0 = clock()
+        self.last = self.t0  # drawn below: the next redraw after ``interval`` (a rate needs a span of time)
+        self.fraction = 0.0
+        self.done = 0
+        self.note = ""
+        self.closed = False
+        self.bar = None
+        if _isatty(self.stream):
+            from tqdm import tqdm
+
+            class _Bar(tqdm):
+                monitor_interval = 0  # no monitor thread: this class throttles the redraws itself
+
+            self.bar = _Bar(total=self.n, desc=self.label, unit=" members", file=self.stream, mininterval=0,
+                            miniters=0, smoothing=0.1, ncols=_columns(self.stream), leave=True,
+                            bar_format="{desc}: {percentage:5.1f}%|{bar}| [{elapsed}<{remaining}{postfix}]")
+            self.bar.set_postfix_str(self._postfix(), refresh=True)
+
+    def _postfix(self) -> str:
+        rate = self.fraction * self.n / max(self.clock() - self.t0, 1e-9)  # members (or their fractions) per second
+        pace = ("? members/s" if rate == 0 else f"{rate:.3g} members/s" if rate >= 0.1 else
+                f"{_duration(1 / rate)} per member")
+        return f"{pace}, {self.done}/{self.n} done" + (f", {self.note}" if self.note else "")
+
+    def show(self, fraction: float, done: int, note: str | None = None, force: bool = False) -> bool:
+        """Take the latest fraction (0..1) and members done; redraw when ``interval`` s have passed
+        since the last redraw (or ``force``). Returns whether it redrew."""
+        self.fraction = max(self.fraction, min(float(fraction), 1.0))
+        self.done = max(self.done, int(done))
+        if note is not None:
+            self.note = note
+        now = self.clock()
+        if self.bar is None or self.closed or (not force and now - self.last < self.interval):
+            return False
+        self.last = now
+        self.bar.set_postfix_str(self._postfix(), refresh=False)
+        self.bar.update(self.fraction * self.n - self.bar.n)
+        return True
+
+    def stop(self) -> None:
+        """An interrupted run: end the bar's line where it stands (nothing elsewhere)."""
+        if self.bar is not None and not self.closed:
+            self.closed = True
+            self.bar.close()
+
+    def close(self, summary: str = "") -> None:
+        """The final state: the full bar in a terminal, else one summary line (members, seconds,
+        members/s and ``summary``)."""
+        if self.closed:
+            return
+        self.closed = True
+        self.fraction, self.done = 1.0, self.n
+        if self.bar is not None:
+            self.note = summary or self.note
+            self.bar.set_postfix_str(self._postfix(), refresh=False)
+            self.bar.update(self.n - self.bar.n)
+            self.bar.close()
+            return
+        elapsed = max(self.clock() - self.t0, 1e-9)
+        self.stream.write(f"{self.label}: {self.n} member{'s' if self.n != 1 else ''} in {elapsed:.1f} s "
+                          f"({self.n / elapsed:.3g} members/s){', ' + summary if summary else ''}\n")
+        self.stream.flush()
+
+
+RUNNING_CAP = 0.8  # the most a running member counts (see the module's docstring)
+
+
+def pass_fraction(states: np.ndarray, expected) -> tuple[float, int]:
+    """(fraction of the pass, members done) from a snapshot of the member states: a member that is
+    done counts 1, a running one min(attempts / expected, RUNNING_CAP); ``expected``: a number or
+    one per member."""
+    done = states["done"] != 0
+    attempts = states["steps_accepted"].astype(np.float64) + states["steps_rejected"]
+    running = np.minimum(attempts / np.maximum(expected, 1.0), RUNNING_CAP)
+    return float(np.mean(np.where(done, 1.0, running))), int(done.sum())
+
+
+# in a worker process of warpfric.pool: where a run's progress goes instead of a line,
+# sink(fraction, done, final)
+SINK = None
+
+
+class Progress:
+    """The progress of one engine run (all its passes), as warpfric.engine reports it: ``start_pass``
+    before each pass, ``update`` with a snapshot of the member states after each launch,
+    ``end_pass`` with the final states. Draws a Line, or reports to SINK where one is set (a pool
+    worker: the parent draws one line for all)."""
+
+    def __init__(self, enabled: bool, n_members: int, label: str = "", n_passes: int = 1, solver=None,
+                 stream=None, clock=time.monotonic):
+        self.enabled = bool(enabled)
+        self.n = n_members
+        self.label = label
+        self.n_passes = n_passes
+        self.prior = (expected_attempts(solver.nodes, solver.rtol, solver.method) if solver is not None
+                      else expected_attempts(100))
+        self.expected = self.prior
+        self.pass_index = 0
+        self.sink = SINK if self.enabled else None
+        self.stream, self.clock = stream, clock
+        self.line = None
+
+    def start_pass(self, index: int) -> None:
+        self.pass_index = index
+        if self.enabled and self.sink is None and self.line is None:  # shown before the first launch
+            self.line = Line(self.n, self.label, self.stream, self.clock)
+
+    def _report(self, states, final: bool = False) -> None:
+        if not self.enabled:
+            return
+        fraction, done = pass_fraction(states, self.expected)
+        if final:
+            fraction = 1.0
+        overall = (self.pass_index + fraction) / self.n_passes
+        last = self.pass_index == self.n_passes - 1
+        members_done = done if last else 0
+        if self.sink is not None:
+            self.sink(overall, members_done, final and last)
+            return
+        if self.line is None:
+            self.line = Line(self.n, self.label, self.stream, self.clock)
+        note = f"pass {self.pass_index + 1}/{self.n_passes}" if self.n_passes > 1 else ""
+        self.line.show(overall, members_done, note, force=final)
+        if final and last:
+            self.line.close()
+
+    def update(self, states: np.ndarray) -> None:
+        self._report(states)
+
+    def end_pass(self, states: np.ndarray) -> None:
+        """The pass is over: the next one (the front metrics' second pass, which repeats each member's
+        trajectory up to its event) expects each member's attempts of this one."""
+        self._report(states, final=True)
+        self.expected = np.maximum(states["steps_accepted"].astype(np.float64) + states["steps_rejected"], 1.0)
