@@ -1,7 +1,7 @@
 """Studies: the paper's Figures 3-14, the open model choices, and ensembles beyond the paper.
 
     python studies/figures.py NAME [--quick] [--device cpu|cuda:0] [--outdir studies/figures]
-                              [--relaxation-gate stress|none|velocity]
+                              [--relaxation-gate stress|none|velocity] [--front-event contact|strength|velocity]
     python studies/figures.py all --quick
 
 NAME: fig3 fig4 fig5 fig10 fig11 fig12 choices map uncertainty (Figs. 6, 7 come with fig4, Figs.
@@ -66,16 +66,23 @@ def peak_check(ds) -> dict:
                 status_counts=counts, max_final_time=float(np.nanmax(ds.final_time.values)))
 
 
-# The committed figures and their README numbers were made with the velocity front (the 40 % rule,
-# the default before the contact front); it stays the figures' front until they are re-run and
-# re-read under the contact front (studies/README.md, "Front events")
-FIGURE_FRONTS = wf.Fronts(event="velocity")
+# The detachment front the figures read (--front-event): the contact front under the stress gate
+# (the engine's default, each node's stick-to-slip transition); the gate-less laws have no contact
+# front, so their figures read the velocity front (the paper's 40 % rule). Another event writes
+# NAME[_gate]_<event>front[_quick].*: the velocity front's figures of the stress gate
+# (*_velocityfront*) are the numbers of the releases before the contact front.
+FRONT_EVENT = {"stress": "contact", "none": "velocity", "velocity": "velocity"}
+_front = {"event": "contact", "direction": "against_disc"}
+
+
+def figure_fronts(direction: str | None = None) -> wf.Fronts:
+    return wf.Fronts(event=_front["event"], direction=direction or _front["direction"])
 
 
 def simulate(members, quick, device, scene=None, record=None, nodes=None, model=None, **solver_kw):
     scene = scene or wf.Parameters()  # end_time=None: the engine's automatic end (module docstring)
     solver = wf.Solver(nodes=nodes or (100 if quick else 200), rtol=1e-5, **solver_kw)
-    return wf.simulate(members, scene=scene, model=model or wf.Model(), solver=solver, fronts=FIGURE_FRONTS,
+    return wf.simulate(members, scene=scene, model=model or wf.Model(), solver=solver, fronts=figure_fronts(),
                        record=record, device=device, progress=sys.stderr.isatty())
 
 
@@ -306,7 +313,9 @@ def choices(quick, device, model=None):
     rows = {}
     datasets = []
     for label, change in list(CHOICES.items()) + [("poisson_coupling=off", None)]:
-        fronts = wf.Fronts(event="velocity", direction=change) if isinstance(change, str) else FIGURE_FRONTS
+        if isinstance(change, str) and _front["event"] != "velocity":
+            continue  # the direction is a setting of the velocity front only
+        fronts = figure_fronts(direction=change) if isinstance(change, str) else figure_fronts()
         scene = wf.Parameters(**(change if isinstance(change, dict) else {}))
         base = model or wf.Model()
         m = dataclasses.replace(base, poisson_coupling=False) if change is None else base
@@ -434,10 +443,13 @@ STUDIES = {
 }
 
 
-def run_study(name, quick, device, outdir, relaxation_gate="stress") -> dict:
+def run_study(name, quick, device, outdir, relaxation_gate="stress", front_event=None) -> dict:
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
-    stem = name + GATE_SUFFIX[relaxation_gate] + ("_quick" if quick else "")
+    front_event = front_event or FRONT_EVENT[relaxation_gate]
+    _front["event"] = front_event
+    front_suffix = "" if front_event == FRONT_EVENT[relaxation_gate] else f"_{front_event}front"
+    stem = name + GATE_SUFFIX[relaxation_gate] + front_suffix + ("_quick" if quick else "")
     t0 = time.perf_counter()
     ds, claims, draw = STUDIES[name](quick, device, wf.Model(relaxation_gate=relaxation_gate))
     wall = time.perf_counter() - t0
@@ -464,9 +476,9 @@ def run_study(name, quick, device, outdir, relaxation_gate="stress") -> dict:
         write_ensemble(ds.drop_vars([v for v in final_fields if v in ds]), outdir / f"{stem}.nc")
     draw(outdir / f"{stem}.png")
     meta = dict(study=name, quick=quick, device=str(device), wall_s=wall, warpfric=wf.__version__,
-                relaxation_gate=relaxation_gate,
+                relaxation_gate=relaxation_gate, front_event=front_event,
                 command=f"python studies/figures.py {name}" + (" --quick" if quick else "") + f" --device {device}"
-                + f" --relaxation-gate {relaxation_gate}")
+                + f" --relaxation-gate {relaxation_gate} --front-event {front_event}")
     (outdir / f"{stem}.json").write_text(json.dumps(dict(meta=meta, claims=claims), indent=1, default=float))
     print(f"{stem}: {wall:.1f} s -> {outdir / stem}.nc/.png/.json")
     return claims
@@ -480,11 +492,14 @@ def main(argv=None):
     ap.add_argument("--outdir", default=str(Path(__file__).with_name("figures")))
     ap.add_argument("--relaxation-gate", choices=sorted(GATE_SUFFIX), default="stress",
                     help="the friction law's yield gate (default stress; none = SPEC v1)")
+    ap.add_argument("--front-event", choices=("contact", "strength", "velocity"), default=None,
+                    help="the detachment front the figures read (default: contact under the stress gate, "
+                         "velocity under the gate-less laws)")
     args = ap.parse_args(argv)
     device = args.device or wf.default_device()
     names = sorted(STUDIES) if args.name == "all" else [args.name]
     for name in names:
-        run_study(name, args.quick, device, args.outdir, args.relaxation_gate)
+        run_study(name, args.quick, device, args.outdir, args.relaxation_gate, args.front_event)
 
 
 if __name__ == "__main__":

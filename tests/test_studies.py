@@ -30,25 +30,28 @@ def test_every_study_writes_its_files_and_every_member_ends_ok_after_its_peak(cl
         pc = claims[name]["peak_check"]
         assert pc["members_without_peak"] == 0 and pc["failed_members"] == 0, (name, pc)
         assert set(pc["status_counts"]) == {"ok"}, (name, pc)
-    # the engine's automatic end: the default scenes end near 20.48 s (not the old fixed 22 s), the
-    # 1e-6 m/s members run past 22 s to their peak (~22.3-22.8 s) and end well before max_end_time
-    assert 20.3 < claims["choices"]["peak_check"]["max_final_time"] < 21.0
-    assert 20.3 < claims["fig4"]["peak_check"]["max_final_time"] < 21.0
+    # the engine's automatic end: the default scenes end 1 % past the peak, near 20.27-20.30 s (the
+    # contact front does not wait for the pad to spring back), the 1e-6 m/s members run past 22 s to
+    # their peak and end well before max_end_time
+    assert 20.25 < claims["choices"]["peak_check"]["max_final_time"] < 21.0
+    assert 20.25 < claims["fig4"]["peak_check"]["max_final_time"] < 21.0
     for name in ("fig10", "map"):
-        assert 23.0 < claims[name]["peak_check"]["max_final_time"] < 30.0, name
+        assert 22.0 < claims[name]["peak_check"]["max_final_time"] < 30.0, name
     # fig3 and fig11 keep their explicit end times (recorded time grids)
     assert claims["fig3"]["peak_check"]["max_final_time"] == pytest.approx(20.6)
     assert claims["fig11"]["peak_check"]["max_final_time"] == pytest.approx(20.4)
 
 
-def test_fig3_front_nucleates_inside_and_after_the_peak(claims):
+def test_fig3_contact_front_starts_at_the_trailing_edge_before_the_peak(claims):
+    """The contact front (default) at e = 0: it nucleates at the trailing edge +L/2 (the paper: the left
+    edge, so the paper's left is our trailing edge, or torque_arm 0: test_choices...), crosses the
+    pad at 20.126-20.136 s, before the mu_s peak (20.232 s; the paper: 20.14-20.18 s), with a slow
+    precursor at the nucleation edge (12.3 m/s) and a main front of 24.4 m/s."""
     c = claims["fig3"]
-    assert c["v_left"] < c["v_middle"] / 1.5 and c["v_right"] < c["v_middle"] / 1.5
-    assert -0.06 < c["left_front_end"] < -0.04  # paper: -45 mm
-    assert 0.0 < c["right_front_start"] < 0.03  # paper: +55 mm; the stress gate moves it to +11 mm (+9.5 mm at N = 200)
-    assert 45 < c["v_middle"] < 60  # 52.6 m/s quick, 54.8 at N = 200 (the linear interpolation gave 44.2 there)
-    assert c["nucleation_edge"] == 0 and -0.05 < c["nucleation_position"] < 0.0  # not the paper's left edge
-    assert c["front_start_time"] > c["mu_s_time"] and 20.24 < c["front_start_time"] < 20.30  # paper: 20.14-20.18 s
+    assert c["nucleation_edge"] == 1 and c["nucleation_position"] == pytest.approx(0.1)
+    assert 20.12 < c["front_start_time"] < c["front_end_time"] < 20.14 < c["mu_s_time"]
+    assert 20 < c["v_middle"] < 30 and 10 < c["v_right"] < 15 and np.isnan(c["v_left"])
+    assert 0.07 < c["right_front_start"] < 0.1  # the precursor: the last ~15 mm at the trailing edge
 
 
 def test_fig4_variation_and_sign_and_figs6_7(claims):
@@ -59,21 +62,27 @@ def test_fig4_variation_and_sign_and_figs6_7(claims):
     assert c["fig6_mu_s_vs_v_left"]["r2"] < 0.7
 
 
-def test_fig5_no_saturation_and_figs8_9_no_slowing(claims):
+def test_fig5_no_saturation_and_figs8_9_the_left_precursor_appears_with_force(claims):
+    """mu_s does not saturate with force; the contact front's left segment is absent from 178 to
+    1000 N and present above (the paper: absent at 500 N, present at 1000-5000 N), slows down with
+    force, and 1/v_left grows linearly in F (the paper's Fig. 9; the velocity rule's fell)."""
     c = claims["fig5"]
     assert c["increase_last_decade"] > c["increase_first_decade"] > 0
-    assert c["left_present"] == len(c["normal_force"])
+    # a left segment at 100 N (the far end of a front from the trailing edge), none at 178-1000 N, one
+    # at 1778-10,000 N (the front nucleates at the left edge from 3162 N on)
+    assert c["highest_force_without_left_precursor"] == pytest.approx(1000.0) and c["left_present"] == 5
     assert c["v_middle_median"] < c["shear_wave_speed"] / 10
-    assert c["fig8_log_v_left_vs_log_force"]["slope"] > 0 and c["fig8_log_v_middle_vs_log_force"]["slope"] > 0
-    assert abs(c["fig8_log_v_right_vs_log_force"]["slope"]) < 0.1
-    assert c["fig9_inverse_v_left_vs_force"]["slope"] < 0  # the paper's 1/v_left grows with F
+    assert c["fig8_log_v_left_vs_log_force"]["slope"] < -0.1 and c["fig8_log_v_middle_vs_log_force"]["slope"] < -0.1
+    assert c["fig8_log_v_right_vs_log_force"]["slope"] < -0.1  # the paper: the right one does not slow down
+    f9 = c["fig9_inverse_v_left_vs_force"]
+    assert f9["slope"] > 0 and f9["r2"] > 0.95
 
 
 def test_fig10_power_laws_and_figs13_14(claims):
     c = claims["fig10"]
     for seg in ("left", "middle", "right"):
         fit = c[f"log_v_{seg}_vs_log_vd"]
-        assert 0.2 < fit["slope"] < 1.0 and fit["r2"] > (0.7 if seg == "middle" else 0.95), (seg, fit)
+        assert 0.2 < fit["slope"] < 1.0 and fit["r2"] > (0.85 if seg == "middle" else 0.99), (seg, fit)
     f13 = c["fig13_mu_s_vs_log_vd_with_strengthening"]
     assert f13["slope"] > 0 and f13["r2"] > 0.95
     assert 0 <= c["fig14_drop_second_half"] < c["fig14_drop_first_half"] / 3
@@ -85,24 +94,26 @@ def test_fig11_motion_stops_together(claims):
     assert c["node_quiet_delay_max"] - c["node_quiet_delay_min"] < 0.01 and c["node_quiet_delay_max"] < 0.05
 
 
-def test_fig12_quick_under_the_gate_scatters_over_two_orders_of_magnitude(claims):
+def test_fig12_contact_fronts_are_nearly_insensitive_to_eta0(claims):
+    """Fig. 12 with the contact front: the eta = 0 / eta speed ratios have medians within 15 % of 1 for
+    every segment (the paper's claim; the velocity rule's single ratios scattered over 0.03-9.4); two
+    eccentricities' middle ratios are outliers (e = -0.1: 2.6, e = 0: 209), not resolved at this size."""
     c = claims["fig12"]
-    # every eccentricity pairs a middle front, and the single eta = 0 / eta ratios scatter over more
-    # than two orders of magnitude, on both sides of 1 (located switches 0.035-9.4, predicted
-    # switches 0.011-5.5). Their median
-    # is not tested: it is not resolved at this size (studies/README.md, Fig. 12): changing how the
-    # gate switches are located, within their tolerance, moved it from 1.24 to 0.11 and paired one
-    # left front, and at rtol 1e-6 the eta = 0 members run out of 100,000 steps
+    for seg in ("left", "middle", "right"):
+        assert abs(c[f"v_{seg}_ratio_median"] - 1) < 0.15, seg
     r = np.asarray(c["v_middle_ratio_without_over_with"], float)
-    assert np.all(np.isfinite(r)) and r.min() < 1 < r.max() and r.max() / r.min() > 100
+    assert np.all(np.isfinite(r)) and np.sum(np.abs(r - 1) < 0.3) >= 4
 
 
-def test_choices_none_nucleates_at_the_left_edge(claims):
+def test_choices_torque_arm_0_nucleates_at_the_left_edge(claims):
+    """Which edge the contact front starts from: the trailing edge with the plate's friction torque at
+    H or 2H, the leading (left) edge with torque_arm 0 (the paper's Fig. 3) and with the
+    counterfactual -H; mu_s falls with e in every physical reading."""
     rows = {k: v for k, v in claims["choices"].items() if k != "peak_check"}
     physical = {k: r for k, r in rows.items() if "counterfactual" not in k}
-    assert all(r["nucleation_edge_e0"] != -1 for r in physical.values())
+    assert rows["torque_arm=0"]["nucleation_edge_e0"] == -1
+    assert all(r["nucleation_edge_e0"] == 1 for k, r in physical.items() if k != "torque_arm=0")
     assert all(r["dmu_de"] < 0 for r in physical.values())
-    assert rows["torque_arm=2H"]["nucleation_edge_e0"] == 1
     assert rows["torque_arm=-H (counterfactual)"]["dmu_de"] > 0  # only the reversed torque flips the sign
 
 
