@@ -141,6 +141,7 @@ def make_gates(ft, model, terms, team):
             if wp.float64(test.retry_fraction) * h > settings.min_step and st.switch_retries < MAX_SWITCH_RETRIES:
                 st.steps_rejected = st.steps_rejected + 1
                 st.switch_retries = st.switch_retries + 1
+                st.rejected_switch = st.rejected_switch + 1
                 st.switch_limit = t + wp.float64(test.retry_fraction) * h
                 st.switch_predicted = 0
                 return st, 1
@@ -286,6 +287,7 @@ def make_gates(ft, model, terms, team):
             st.prediction_misses = 0
         elif clipped == STEP_AT_SWITCH and st.switch_predicted == 1:
             st.prediction_misses = st.prediction_misses + 1
+            st.missed_predictions = st.missed_predictions + 1
         st = drop_stale_limit(st, t_new)  # st.restart is 0 here: the limit this step reached
         located_pending = st.switch_limit < wp.float64(1.0e300) and st.switch_predicted == 0
         if settings.predict_switches == 1 and st.prediction_misses < MAX_PREDICTION_MISSES and not located_pending:

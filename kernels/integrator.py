@@ -156,6 +156,7 @@ def _make_integrator(dtype: str, model, lanes: int, registers=None, method: str 
             st.newton_iterations = st.newton_iterations + res.iterations
             # ---- controller ----
             if res.ok != 1:
+                st.rejected_solve = st.rejected_solve + 1
                 st = reject(st, settings, step.h * settings.failure_factor, res.non_finite)
                 if st.done != 0:
                     break
@@ -167,6 +168,7 @@ def _make_integrator(dtype: str, model, lanes: int, registers=None, method: str 
                     if retry == 1:
                         continue
             if res.error > wp.float64(1.0):
+                st.rejected_error = st.rejected_error + 1
                 st = reject(st, settings, step.h * wp.min(factor, settings.step_safety), 0)
                 if st.done != 0:
                     break

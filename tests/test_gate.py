@@ -121,6 +121,15 @@ def test_predicted_switches_save_rejected_steps_at_the_same_accuracy():
     assert (predicted.steps_rejected.values < located.steps_rejected.values / 1.8).all()
     assert (attempts(predicted) < attempts(located)).all()
     assert attempts(predicted).sum() < 0.85 * attempts(located).sum()  # 1,165 against 1,458 (CPU)
+    # the rejections by cause add up, and the saving is in the switch retries: located-only stepping
+    # retries at least once per switch, a prediction replaces most retries (and a missed one costs an
+    # accepted step, not a rejection)
+    for ds in (located, predicted):
+        causes = ds.rejected_error_test.values + ds.rejected_newton.values + ds.rejected_switch.values
+        assert (causes == ds.steps_rejected.values).all()
+    assert (located.rejected_switch.values >= located.gate_switches.values).all()
+    assert (located.missed_predictions.values == 0).all()
+    assert (predicted.rejected_switch.values < located.rejected_switch.values / 2).all()
 
 
 def test_a_sudden_stop_after_a_predicted_switch_ends_ok():
@@ -132,6 +141,15 @@ def test_a_sudden_stop_after_a_predicted_switch_ends_ok():
     ds = run({"stop_time": stops}, scene=wf.Parameters(end_time=20.4), nodes=30, rtol=1e-5, initial_step=1e-2)
     assert (ds.status.values == 0).all(), np.unique(ds.status.values, return_counts=True)
     assert np.isfinite(ds.mu_s.values).all()
+
+
+def test_gateless_law_rejects_no_step_for_a_switch():
+    """Without the stress gate there are no gate switches: every rejection is the error test's or
+    Newton's, and nothing is predicted."""
+    ds = run({"eccentricity": [0.0, -0.2]}, model=wf.Model(relaxation_gate="none"))
+    assert (ds.steps_rejected.values > 0).all()
+    assert (ds.rejected_switch.values == 0).all() and (ds.missed_predictions.values == 0).all()
+    assert (ds.rejected_error_test.values + ds.rejected_newton.values == ds.steps_rejected.values).all()
 
 
 def test_velocity_gate_tends_to_the_gateless_law():

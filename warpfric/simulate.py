@@ -93,7 +93,8 @@ def simulate(
 
     Returns an ``xarray.Dataset`` with dims ``member`` and ``x`` (node position, m): every input
     parameter along ``member``; ``mu_s``, ``mu_s_time`` (s), ``status`` (flag values, see its
-    attrs), ``lift_off``, ``steps_accepted``, ``steps_rejected``, ``newton_iterations``,
+    attrs), ``lift_off``, ``steps_accepted``, ``steps_rejected`` (by cause: ``rejected_error_test``,
+    ``rejected_newton``, ``rejected_switch``; and ``missed_predictions``), ``newton_iterations``,
     ``final_time`` (s), ``plate_compression`` (m), ``plate_tilt`` (rad), ``mu_final``, and the final
     state along (member, x): ``displacement`` (m), ``velocity`` (m/s), ``elastic_stress`` (Pa),
     ``contact_age`` (s), ``normal_stress`` (Pa), ``friction_stress`` (Pa). With fronts, for the
@@ -361,7 +362,11 @@ _OUTPUT_ATTRS = {
     "mu_final": ("1", "friction coefficient at the end of the run"),
     "lift_off": ("1", "1 where the interface lifted off somewhere (sigma_n < 0) while loaded"),
     "steps_accepted": ("1", "accepted time steps"),
-    "steps_rejected": ("1", "rejected time steps (error test or Newton failure)"),
+    "steps_rejected": ("1", "rejected time steps: the sum of rejected_error_test, rejected_newton and rejected_switch"),
+    "rejected_error_test": ("1", "steps rejected by the error test (error norm > 1)"),
+    "rejected_newton": ("1", "steps rejected because a stage's Newton solve failed (no convergence or a non-finite value)"),
+    "rejected_switch": ("1", "steps rejected to locate a gate switch (retried up to just past it; relaxation_gate='stress')"),
+    "missed_predictions": ("1", "accepted steps that ended at a predicted gate switch that did not happen (relaxation_gate='stress')"),
     "newton_iterations": ("1", "Newton iterations over all stages"),
     "gate_switches": ("1", "accepted switches of the nodes' yield gates (relaxation_gate='stress')"),
     "unlocated_switches": ("1", "steps accepted with a gate switch the retries could not place within its tolerance"),
@@ -431,6 +436,10 @@ def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, 
         "lift_off": st["lift_off"].astype(np.int8),
         "steps_accepted": st["steps_accepted"],
         "steps_rejected": st["steps_rejected"],
+        "rejected_error_test": st["rejected_error"],
+        "rejected_newton": st["rejected_solve"],
+        "rejected_switch": st["rejected_switch"],
+        "missed_predictions": st["missed_predictions"],
         "newton_iterations": st["newton_iterations"],
         "gate_switches": st["gate_switches"],
         "unlocated_switches": st["unlocated_switches"],
