@@ -6,6 +6,7 @@ accuracy of mu_s against a converged float64 run of the same members.
                                    [--dtypes float64 float32] [--rtol 1e-5] [--nodes 200]
                                    [--fronts] [--relaxation-gate stress|none|velocity] [--out bench_engine.json]
                                    [--lanes 1 32] [--predict-switches on off] [--methods tr_bdf2 esdirk4]
+                                   [--steps-per-launch 500 100] [--launch-log FILE.jsonl] [--cuda-profile-range]
 
 --fronts adds the front metrics (a second integration pass plus the segmentation kernel); without
 it the engine alone is timed (simulate(fronts=None)).
@@ -16,7 +17,9 @@ largest relative error of mu_s over the first 16 members against a converged flo
 (rtol = 1e-9, same N, same friction law), stored in studies/reference/ and made with --make-reference.
 --lanes: threads per member (Solver.lanes; 1 the thread-per-member kernel, > 1 the cooperative
 kernel, float64 only; default: the automatic choice). --predict-switches: Solver.predict_switches
-values to time (stress gate; default: on). --methods: Solver.method values to time. Compilation is excluded (a warm-up run compiles each kernel first). float32 is skipped with the stress
+values to time (stress gate; default: on). --methods: Solver.method values to time. --steps-per-launch: Solver.steps_per_launch values.
+--launch-log: where the kernel time goes, launch by launch (one more, synchronised run per timing).
+--cuda-profile-range: only the timed runs are profiled by `ncu --profile-from-start off`. Compilation is excluded (a warm-up run compiles each kernel first). float32 is skipped with the stress
 gate, which refuses it (docs/model.md, "Precision").
 """
 
@@ -47,6 +50,49 @@ def members(m: int, seed: int = 0) -> dict:
     }
 
 
+def profiler(on: bool, what: str):
+    """cuProfilerStart / cuProfilerStop of the CUDA driver (the current context), when ``on``."""
+    if on:
+        import ctypes
+
+        import warp as wp
+
+        wp.synchronize()
+        getattr(ctypes.CDLL("libcuda.so.1"), "cuProfilerStart" if what == "start" else "cuProfilerStop")()
+
+
+def write_launch_log(path: str, row: dict, values: dict, model, solver, fronts, device: str):
+    """Where the kernel time goes, launch by launch: one more run of the ensemble with every
+    integrate launch synchronised and timed (warpfric.engine.LAUNCH_LOG), appended to ``path`` as
+    JSON lines (the timed row's settings, then per launch: kernel_s, running_members, attempts,
+    max_member_attempts, newton_iterations), and a one-line summary: the kernel time, and the share
+    of it spent in launches where fewer members ran than the GPU holds at once (tail)."""
+    import dataclasses
+
+    from warpfric import engine
+
+    engine.LAUNCH_LOG = []
+    try:
+        wf.simulate(values, model=model, solver=solver, fronts=fronts, device=device, progress=False)
+        log = [dataclasses.asdict(r) for r in engine.LAUNCH_LOG]
+    finally:
+        engine.LAUNCH_LOG = None
+    resident = None
+    if str(device).startswith("cuda"):
+        import warp as wp
+
+        # one-warp blocks, register-limited to 8 per SM (255 registers per thread; ncu)
+        resident = wp.get_device(device).sm_count * 8
+    keys = ("members", "nodes", "lanes", "relaxation_gate", "fronts", "steps_per_launch", "device", "commit")
+    with open(path, "a") as f:
+        for r in log:
+            f.write(json.dumps({**{k: row[k] for k in keys}, **r}) + "\n")
+    total = sum(r["kernel_s"] for r in log)
+    tail = sum(r["kernel_s"] for r in log if resident is not None and r["running_members"] < resident)
+    print(f"launch log: {len(log)} launches, kernel {total:.3f} s, in launches with fewer running members than "
+          f"the {resident} the GPU holds: {tail:.3f} s", flush=True)
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--device", default=None)
@@ -70,6 +116,17 @@ def main(argv=None):
                          "(default: studies/reference/bench_members_mu_s[_GATE].json)")
     ap.add_argument("--jsonl", default=None, help="also append each timing as a JSON line to this file")
     ap.add_argument("--make-reference", action="store_true", help="compute the reference (on --device) and exit")
+    ap.add_argument("--steps-per-launch", type=int, nargs="+", default=[None],
+                    help="Solver.steps_per_launch values to time (default: the Solver's)")
+    ap.add_argument("--cuda-profile-range", action="store_true",
+                    help="wrap each timed run in cuProfilerStart/Stop, for `ncu --profile-from-start off` "
+                         "(the warm-up's compile run is then not profiled)")
+    ap.add_argument("--host-profile", action="store_true",
+                    help="after each timing, profile one more run with cProfile and print its 20 costliest calls "
+                         "(cumulative): where the host time around the kernels goes")
+    ap.add_argument("--launch-log", default=None,
+                    help="after each timing, run the same ensemble once more with every launch synchronised and "
+                         "timed (warpfric.engine.LAUNCH_LOG) and append its launches as JSON lines to this file")
     args = ap.parse_args(argv)
     device = args.device or wf.default_device()
     n_check = 16
@@ -95,9 +152,9 @@ def main(argv=None):
     front_events = args.front_events or (["contact"] if args.fronts else ["off"])
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                             cwd=Path(__file__).parent).stdout.strip() or "unknown"
-    for dtype, lanes, predict, method, event in [(d, k, p, me, ev) for d in args.dtypes for k in args.lanes
-                                                 for p in args.predict_switches for me in args.methods
-                                                 for ev in front_events]:
+    for dtype, lanes, predict, method, event, spl in [(d, k, p, me, ev, sp) for d in args.dtypes for k in args.lanes
+                                                      for p in args.predict_switches for me in args.methods
+                                                      for ev in front_events for sp in args.steps_per_launch]:
         fronts = None if event == "off" else wf.Fronts(event=event)
         if dtype == "float32" and args.relaxation_gate == "stress":
             print("float32 skipped: the stress gate needs float64")
@@ -105,15 +162,17 @@ def main(argv=None):
         if dtype == "float32" and lanes not in (None, 1):
             continue  # the cooperative kernel is float64 only
         solver = wf.Solver(nodes=args.nodes, dtype=dtype, rtol=args.rtol, lanes=lanes, predict_switches=predict == "on",
-                           method=method)
+                           method=method, **({} if spl is None else dict(steps_per_launch=spl)))
         wf.simulate(members(1), scene=wf.Parameters(end_time=20.01), model=model, solver=solver, fronts=fronts,
                     device=device)  # compile
         for m in args.members:
             best = None
             for _ in range(args.repeat):
+                profiler(args.cuda_profile_range, "start")
                 t0 = time.perf_counter()
                 ds = wf.simulate(members(m), model=model, solver=solver, fronts=fronts, device=device, progress=False)
                 wall = time.perf_counter() - t0
+                profiler(args.cuda_profile_range, "stop")
                 best = wall if best is None else min(best, wall)
             k = min(m, n_check)
             err = float(np.max(np.abs(ds.mu_s.values[:k] / ref_mu[:k] - 1)))
@@ -129,10 +188,25 @@ def main(argv=None):
                 mean_rejected_steps=float(ds.steps_rejected.values.mean()),
                 mean_newton_per_step=float(ds.newton_iterations.values.sum() / max(steps.sum(), 1)),
                 status_ok=int((ds.status.values == 0).sum()), mu_s_max_rel_error=err,
+                steps_per_launch=solver.steps_per_launch,
+                mean_rejected_error_test=float(ds.rejected_error_test.values.mean()),
+                mean_rejected_newton=float(ds.rejected_newton.values.mean()),
+                mean_rejected_switch=float(ds.rejected_switch.values.mean()),
+                mean_missed_predictions=float(ds.missed_predictions.values.mean()),
+                max_attempts=int(steps.max()), median_attempts=float(np.median(steps)),
                 rerun_in_float64=int((ds.working_precision.values == 64).sum()) if dtype == "float32" else 0,
             )
             rows.append(row)
             print(json.dumps(row), flush=True)
+            if args.host_profile:
+                import cProfile
+                import pstats
+
+                with cProfile.Profile() as prof:
+                    wf.simulate(members(m), model=model, solver=solver, fronts=fronts, device=device, progress=False)
+                pstats.Stats(prof).sort_stats("cumulative").print_stats(20)
+            if args.launch_log:
+                write_launch_log(args.launch_log, row, members(m), model, solver, fronts, device)
             if args.jsonl:
                 with open(args.jsonl, "a") as f:
                     f.write(json.dumps(row) + "\n")

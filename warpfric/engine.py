@@ -202,6 +202,26 @@ def record_slots(record: Record | None, n_members: int) -> np.ndarray:
     return slots
 
 
+# Diagnostics for benchmarks (studies/bench_engine.py --launch-log): when a list, every integrate
+# launch appends a LaunchRecord. Off (None) by default: recording costs a synchronisation per launch.
+LAUNCH_LOG: list | None = None
+
+
+@dataclasses.dataclass
+class LaunchRecord:
+    """One integrate launch of a pass: its kernel time (CUDA events; on the CPU the wall time of the
+    launch call), the members that were running when it started, and the attempted steps and Newton
+    iterations those members made in it (sum and the largest of one member)."""
+
+    pass_index: int
+    launch: int
+    kernel_s: float
+    running_members: int
+    attempts: int
+    max_member_attempts: int
+    newton_iterations: int
+
+
 # no straggler limit (the kernel's int32 attempt counter never exceeds it)
 NO_STALL_LIMIT = 2**31 - 1
 
@@ -257,6 +277,42 @@ class StateSnapshots:
         if event is not None:
             wp.synchronize_event(event)
         return buffer.numpy().copy()
+
+
+def log_launches(log: list, pass_index: int, member_states, launch, device, stall_limit, solver: Solver):
+    """Diagnostic integration of a pass (LAUNCH_LOG): launch after launch, synchronised, timing each
+    and appending a LaunchRecord, until every member is done; the straggler rule is applied as in
+    the pipelined loop. The member states are left done, so that the loop after it ends at once."""
+    import warp as wp
+
+    cuda = wp.get_device(device).is_cuda
+    before = member_states.numpy().copy()
+    last_limit = NO_STALL_LIMIT
+    for k in range(10**7):
+        if cuda:
+            start, end = wp.Event(enable_timing=True), wp.Event(enable_timing=True)
+            wp.record_event(start)
+            launch()
+            wp.record_event(end)
+            kernel_s = wp.get_event_elapsed_time(start, end) / 1000.0
+        else:
+            t0 = time.perf_counter()
+            launch()
+            wp.synchronize_device(device)
+            kernel_s = time.perf_counter() - t0
+        after = member_states.numpy().copy()
+        attempts = (after["steps_accepted"].astype(np.int64) + after["steps_rejected"]
+                    - before["steps_accepted"] - before["steps_rejected"])
+        log.append(LaunchRecord(pass_index, k, kernel_s, int((before["done"] == 0).sum()), int(attempts.sum()),
+                                int(attempts.max()), int((after["newton_iterations"] - before["newton_iterations"]).sum())))
+        before = after
+        if (after["done"] != 0).all():
+            return
+        if pass_index == 0:
+            limit = straggler_limit(after, solver)
+            if limit != last_limit:
+                stall_limit.fill_(limit)
+                last_limit = limit
 
 
 def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, record: Record | None, device: str,
@@ -341,6 +397,9 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             # member states after chunk k (an asynchronous copy into pinned memory), updates the
             # progress line and the straggler limit (which chunk k + 2 applies) and stops once every
             # member was done after chunk k (chunk k + 1 then returned at once for every member)
+            if LAUNCH_LOG is not None:
+                log_launches(LAUNCH_LOG, pass_index, member_states, lambda: launch_integrate(inputs, outputs_),
+                             device, stall_limit, solver)
             launch_integrate(inputs, outputs_)
             pending = snapshot.take(member_states)
             while True:
