@@ -1,4 +1,4 @@
-"""Front speeds against the grid (issue 11): v_left, v_middle, v_right and their time-discretisation
+"""Front speeds against the grid: v_left, v_middle, v_right and their time-discretisation
 error estimates for the default scene and e = +-0.2, at N = 50, 100, 200, 400 and rtol 1e-5, 1e-7.
 
     python studies/front_grid.py [--relaxation-gate stress] [--device cpu]
