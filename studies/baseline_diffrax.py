@@ -1,4 +1,4 @@
-"""The peer baseline of issue 13: the same semi-discrete equations as warpfric in JAX + diffrax, batched
+"""The peer baseline: the same semi-discrete equations as warpfric in JAX + diffrax, batched
 with jax.vmap over diffrax.diffeqsolve, i.e. what a user would write instead of warpfric.
 
     python studies/baseline_diffrax.py --members 1 100 10000 --nodes 40 --rtols 1e-5 1e-6 \

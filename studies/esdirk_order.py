@@ -1,4 +1,4 @@
-"""Does a higher-order ESDIRK pay on this model? (issue 13, item 4): a float64 NumPy prototype.
+"""Does a higher-order ESDIRK pay on this model? A float64 NumPy prototype (it chose ESDIRK4 for kernels/esdirk.py).
 
     python studies/esdirk_order.py [--nodes 40] [--eccentricity 0.0] [--end-time 20.6]
                                    [--rtols 1e-3 1e-4 1e-5 1e-6 1e-7 1e-8 1e-9] [--ref-rtol 1e-11]

@@ -1,7 +1,7 @@
-"""Front speeds against the grid (issue 11): v_left, v_middle, v_right and their time-discretisation
+"""Front speeds against the grid: v_left, v_middle, v_right and their time-discretisation
 error estimates for the default scene and e = +-0.2, at N = 50, 100, 200, 400 and rtol 1e-5, 1e-7.
 
-    python studies/front_grid.py [--relaxation-gate stress] [--device cpu]
+    python studies/front_grid.py [--relaxation-gate stress] [--device cpu] [--front-event velocity]
                                  [--out studies/results/front_grid_cpu_GATE.json]
 
 What it shows (docs/performance.md, "Front speeds against the grid"): at a fixed grid the speeds
@@ -26,6 +26,9 @@ def main(argv=None):
     ap.add_argument("--relaxation-gate", default="stress", choices=("stress", "none", "velocity"))
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--out", default=None)
+    ap.add_argument("--front-event", default="velocity", choices=("contact", "strength", "velocity"),
+                    help="the front event (default velocity: the event of the committed rows, "
+                         "studies/results/front_grid_cpu_*.json)")
     args = ap.parse_args(argv)
     out = Path(args.out or Path(__file__).with_name("results") / f"front_grid_cpu_{args.relaxation_gate}.json")
     rows = []
@@ -33,7 +36,8 @@ def main(argv=None):
         for rtol in (1e-5, 1e-7):
             t0 = time.perf_counter()
             ds = wf.simulate(MEMBERS, model=wf.Model(relaxation_gate=args.relaxation_gate),
-                             solver=wf.Solver(nodes=nodes, rtol=rtol), device=args.device, progress=False)
+                             solver=wf.Solver(nodes=nodes, rtol=rtol), fronts=wf.Fronts(event=args.front_event),
+                             device=args.device, progress=False)
             row = dict(nodes=nodes, rtol=rtol, wall_s=time.perf_counter() - t0)
             row.update({k: ds[k].values.tolist() for k in OUTPUTS})
             rows.append(row)

@@ -1,4 +1,4 @@
-"""Converged float64 reference for a fixed set of scenes (issue 4): e = -0.2, 0, 0.2;
+"""Converged float64 reference for a fixed set of scenes: e = -0.2, 0, 0.2;
 F = 500, 1000, 5000 N; viscous_coefficient 2.7e13 Pa s/m (27 MPa s/um) and 0: 18 scenes.
 
     python studies/reference_scenes.py [--nodes 100 200 400] [--rtols 1e-6 1e-7 1e-8]

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# Issue 6 study on the lent H100 (Warp installed per shared/device/README.md; SALib, multiprocess
-# and dill carried in .salib/ and copied to /tmp/salib, since the machine has no package index).
-# Results under $OUT.
+# The Sobol study of studies/README.md ("Sensitivity") on a GPU host: a 163,840-member Saltelli
+# design (studies/sweeps/sensitivity_gpu.toml), then the indices of mu_s, mu_s_time and the front
+# speeds. Needs warpfric and SALib importable (here from /tmp/site and /tmp/salib, for a host
+# without a package index). Results under $OUT.
+#   bash studies/sensitivity_study.sh
 set -uo pipefail
 export PYTHONPATH=/tmp/site:$PWD:/tmp/salib PYTHONUNBUFFERED=1
 OUT=${OUT:-out}; mkdir -p "$OUT"

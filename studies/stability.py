@@ -1,4 +1,4 @@
-"""Hard-case stability map (issue 4): a grid over viscous_coefficient, normal_force,
+"""Hard-case stability map: a grid over viscous_coefficient, normal_force,
 eccentricity, disc_velocity and damping, in float64 and float32; status counts, non-finite
 results, rejected-step fraction and where lift-off happens.
 

@@ -1,4 +1,4 @@
-"""Work-precision study (issue 4): error of mu_s, mu_s_time and the middle front speed against the
+"""Work-precision study: error of mu_s, mu_s_time and the middle front speed against the
 converged reference (studies/reference/reference_scenes.nc) versus wall time, over tolerances,
 grids and precisions.
 

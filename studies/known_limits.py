@@ -1,9 +1,9 @@
-"""Spot checks quoted in docs/performance.md and docs/model.md, each reproducible (CPU, float64
-unless stated):
+"""The measurements behind docs/performance.md, "Known limits" (CPU, float64 unless stated):
 
-    python studies/spot_checks.py vibration     # inviscid pad vibration: steps against rtol and damping
-    python studies/spot_checks.py float32       # float32 at low disc velocity against float64
-    python studies/spot_checks.py all
+    python studies/known_limits.py vibration     # inviscid pad vibration: steps against rtol and damping
+    python studies/known_limits.py float32       # float32 at low disc velocity against float64
+    python studies/known_limits.py all
+    (also: python studies/bench.py limits vibration|float32|all)
 """
 
 from __future__ import annotations
@@ -42,7 +42,8 @@ def float32():
 
 
 def main(argv=None):
-    name = (argv or sys.argv[1:] or ["all"])[0]
+    argv = sys.argv[1:] if argv is None else argv
+    name = (argv or ["all"])[0]
     checks = {"vibration": vibration, "float32": float32}
     for key in (checks if name == "all" else [name]):
         print(f"== {key}: {checks[key].__doc__.split(chr(10))[0]}")

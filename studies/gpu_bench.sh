@@ -1,0 +1,150 @@
+#!/usr/bin/env bash
+# The GPU measurements of docs/performance.md, on a host with an NVIDIA GPU and Warp installed
+# (warpfric importable: `pip install -e .`, or PYTHONPATH pointing at a site folder and this tree).
+#
+#   bash studies/gpu_bench.sh MODE [extra options for studies/bench.py]
+#
+# Every mode runs `python studies/bench.py ...` (or, for the test suite, the figures and the
+# 2-GPU sweep, the project's own commands) and leaves its logs and JSON under $OUT (default out/);
+# the JSON lines of every call go to $JSONL (default $OUT/bench.jsonl): copy what you keep into
+# studies/results/. Compilation is excluded from every timing (a warm-up run compiles first).
+#
+# modes (default settings of the tables: N = 200, rtol 1e-5, float64, the bench_engine members):
+#   tests          the test suite on cuda:0
+#   engine         stress gate: team of 32 lanes and thread per member, predicted switches on and off,
+#                  1 / 1,000 / 10,000 members
+#   gateless       the same for relaxation_gate="none" (predictions do not apply)
+#   fronts         10,000 members: fronts off, contact, strength, velocity
+#   large          100,000 members (team of 32)
+#   rtol           stress gate at rtol 1e-4 (mu_s within 1e-4)
+#   methods        TR-BDF2 against ESDIRK4, gate-less, rtol 1e-5 / 1e-6 / 1e-7, 1 and 10,000 members
+#   float32        gate-less, float64 against float32 (with the float64 re-run), 10,000 members
+#   hostcpu        the GPU host's own CPU: 1 / 4 / 16 members, thread kernel
+#   work-precision 10,000 realisations per (dtype, N, rtol)
+#   stability      the hard-case map: stress gate in float64; gate-less in float64 and float32
+#   peers          JAX + diffrax (needs jax and the wheels of studies/diffrax_wheels.sh) and scipy BDF
+#   profile        one member: time per attempt against N (team of 32)
+#   launch-chunks  launches of 7 attempts against one launch: outputs equal bit for bit
+#   ncu            Nsight Compute on the 10,000-member launch (occupancy, rooflines); GATE, LANES
+#   ncu-one        Nsight Compute's warp stall reasons of the one-member launch
+#   ncu-sources    Nsight Compute's source counters of the one-member launch (line info on)
+#   dask [SWEEP]   2 GPUs: one process against a local Dask cluster of 1 and 2 workers
+#   figures [ARGS] every figure study at full size (ARGS e.g. --relaxation-gate none)
+set -uo pipefail
+cd "$(dirname "$0")/.."
+export PYTHONPATH=/tmp/site:$PWD${PYTHONPATH:+:$PYTHONPATH} PYTHONUNBUFFERED=1
+OUT=${OUT:-out}; mkdir -p "$OUT"
+JSONL=${JSONL:-$OUT/bench.jsonl}
+mode=${1:-}; shift || true
+B="python3 studies/bench.py --jsonl $JSONL"
+E="$B engine --device cuda:0 --dtypes float64"
+python3 -c "import warp as wp; wp.config.quiet = True; wp.init(); print('warp', wp.__version__, wp.get_cuda_devices())"
+ncu_bin() { command -v ncu || ls /usr/local/cuda*/bin/ncu /opt/nvidia/nsight-compute/*/ncu 2>/dev/null | head -1; }
+case "$mode" in
+  tests)
+    WARPFRIC_TEST_DEVICE=cuda:0 python3 -m pytest -q -p no:cacheprovider tests "$@" 2>&1 | tee "$OUT/tests_cuda.log" | tail -15 ;;
+  engine)
+    $E --members 1 1000 10000 --relaxation-gate stress --lanes 32 1 --predict-switches on off \
+      --out "$OUT/bench_engine_stress.json" "$@" 2>&1 | tee "$OUT/engine.log" | tail -14 ;;
+  gateless)
+    $E --members 1 1000 10000 --relaxation-gate none --lanes 32 1 --out "$OUT/bench_engine_none.json" "$@" 2>&1 \
+      | tee "$OUT/gateless.log" | tail -8 ;;
+  fronts)
+    $E --members 10000 --relaxation-gate stress --front-events off contact strength velocity \
+      --out "$OUT/bench_fronts.json" "$@" 2>&1 | tee "$OUT/fronts.log" | tail -6 ;;
+  large)
+    $E --members 100000 --relaxation-gate stress --lanes 32 --out "$OUT/bench_engine_100k.json" "$@" 2>&1 | tail -3 ;;
+  rtol)
+    $E --members 1 1000 10000 --relaxation-gate stress --lanes 32 --rtol 1e-4 --out "$OUT/bench_engine_rtol1e-4.json" "$@" \
+      2>&1 | tail -5 ;;
+  methods)
+    for method in tr_bdf2 esdirk4; do
+      for r in 1e-5 1e-6 1e-7; do
+        $E --members 1 10000 --relaxation-gate none --lanes 32 --methods $method --rtol $r \
+          --out "$OUT/bench_none_${method}_$r.json" "$@" 2>&1 | tail -3
+      done
+    done ;;
+  float32)
+    $B engine --device cuda:0 --members 10000 --dtypes float64 float32 --repeat 2 --relaxation-gate none \
+      --out "$OUT/bench_engine_none_f32.json" "$@" 2>&1 | tail -4 ;;
+  hostcpu)
+    $B engine --device cpu --members 1 4 16 --dtypes float64 --relaxation-gate stress --lanes 1 \
+      --out "$OUT/bench_hostcpu_stress.json" "$@" 2>&1 | tail -5 ;;
+  work-precision)
+    $B work-precision run --device cuda:0 --members 10000 --nodes 25 40 50 100 200 --rtols 1e-3 1e-4 1e-5 1e-6 \
+      --dtypes float64 float32 --out "$OUT/work_precision_h100.nc" "$@" 2>&1 | tee "$OUT/work_precision_h100.log" | tail -45 ;;
+  stability)
+    $B stability --device cuda:0 --dtypes float64 --out "$OUT/stability_stress.nc" "$@" 2>&1 \
+      | grep -v "pass [12]/2" | tee "$OUT/stability_stress.log" | tail -25
+    $B stability --device cuda:0 --dtypes float64 float32 --relaxation-gate none --stall-factor 10 \
+      --out "$OUT/stability_none.nc" "$@" 2>&1 | grep -v "pass [12]/2" | tee "$OUT/stability_none.log" | tail -25 ;;
+  peers)
+    for method in esdirk4 tr_bdf2; do
+      $B peers diffrax --members 1 100 --nodes 40 --rtols 1e-5 --end-time 20.6 --relaxation-gate none --timeout 60 \
+        --kill-factor 1.2 --device gpu --warpfric-device cuda:0 --root-finders newton --warpfric-method $method \
+        --warpfric-rtols 1e-4 1e-5 1e-6 1e-7 --out "$OUT/baseline_diffrax_$method.json" "$@" 2>&1 | tail -6
+    done
+    $B peers scipy --gpu-json studies/results/work_precision_h100.json --out "$OUT/baseline_scipy_gpuhost.json" 2>&1 | tail -8 ;;
+  profile)
+    $B profile --device cuda:0 --lanes 32 "$@" 2>&1 | tee "$OUT/profile.txt" | tail -8 ;;
+  launch-chunks)
+    $B launch-chunks --device cuda:0 "$@" 2>&1 | tail -3 | tee "$OUT/launch_chunks.txt" ;;
+  ncu)
+    GATE=${GATE:-none}; LANES=${LANES:-32}; NCU=$(ncu_bin); echo "ncu: $NCU"
+    python3 studies/bench_engine.py --device cuda:0 --members 1 --dtypes float64 --relaxation-gate "$GATE" --lanes "$LANES" \
+      --out "$OUT/ncu_warm.json" > /dev/null 2>&1  # compile outside the profiler
+    "$NCU" -k regex:integrate --launch-skip 1 --launch-count 1 \
+      --section LaunchStats --section Occupancy --section SpeedOfLight --section MemoryWorkloadAnalysis \
+      --section SpeedOfLight_HierarchicalDoubleRooflineChart --section ComputeWorkloadAnalysis \
+      --metrics sm__sass_thread_inst_executed_op_dadd_pred_on.sum,sm__sass_thread_inst_executed_op_dmul_pred_on.sum,sm__sass_thread_inst_executed_op_dfma_pred_on.sum,gpu__time_duration.sum,dram__bytes.sum \
+      python3 studies/bench_engine.py --device cuda:0 --members 10000 --dtypes float64 --relaxation-gate "$GATE" \
+      --lanes "$LANES" --out "$OUT/ncu_bench.json" > "$OUT/ncu_${GATE}_l${LANES}.txt" 2>&1
+    grep -E "Block Size|Grid Size|Registers Per|Theoretical Occupancy|Achieved Occupancy|Compute \(SM\) Throughput|Memory Throughput|DRAM Throughput|Duration|dfma|dmul|dadd|dram__bytes|Local Memory|Waves Per SM|Stack Size|Block Limit" \
+      "$OUT/ncu_${GATE}_l${LANES}.txt" | head -40 ;;
+  ncu-one)
+    NCU=$(ncu_bin); echo "ncu: $NCU"
+    "$NCU" -k regex:integrate --launch-skip 2 --launch-count 1 \
+      --section LaunchStats --section Occupancy --section WarpStateStats --section ComputeWorkloadAnalysis \
+      --section MemoryWorkloadAnalysis --section SchedulerStats --section InstructionStats \
+      --metrics regex:smsp__average_warps_issue_stalled_.*_per_issue_active\.ratio,gpu__time_duration.sum,smsp__inst_executed.sum \
+      python3 studies/bench.py --jsonl "$JSONL" one-member --times 2 > "$OUT/ncu_one_member_stress_l32.txt" 2>&1
+    grep -E "Duration|Warp Cycles Per Issued|Issued Ipc|stalled_.*ratio|inst_executed.sum|Local Memory|Registers Per|Stack" \
+      "$OUT/ncu_one_member_stress_l32.txt" | awk '$NF+0 > 0.05 || !/stalled/' | head -40 ;;
+  ncu-sources)
+    NCU=$(ncu_bin); echo "ncu: $NCU"
+    "$NCU" -k regex:integrate --launch-skip 2 --launch-count 1 --section SourceCounters --section WarpStateStats \
+      --import-source yes -o "$OUT/one_member_sources" python3 studies/bench.py --jsonl "$JSONL" one-member --times 2 --lineinfo \
+      > "$OUT/ncu_sources.log" 2>&1
+    "$NCU" -i "$OUT/one_member_sources.ncu-rep" --page details --section SourceCounters > "$OUT/source_counters.txt" 2>&1
+    head -c 3000 "$OUT/source_counters.txt" ;;
+  dask)
+    # 2 GPUs: the same sweep file in one process on cuda:0, then on a local Dask cluster with 1 and 2
+    # workers; the combined files are compared with the one-process file bit for bit
+    SWEEP=${1:-studies/sweeps/bench_200k.toml}
+    python3 -c "import distributed, warp as wp; wp.config.quiet = True; wp.init(); print('distributed', distributed.__version__, 'gpus', wp.get_cuda_device_count())"
+    run() {  # label, extra options
+      local label=$1; shift
+      local t0=$(date +%s.%N)
+      python3 -m warpfric run "$SWEEP" -o "$OUT/$label.nc" "$@" 2>&1 | tee "$OUT/$label.log" | grep -v "^Warp\|^   " | grep -v "chunks done" | tail -4
+      echo "$label: $(python3 -c "print(f'{$(date +%s.%N) - $t0:.1f}')") s wall (process start to exit)" | tee -a "$OUT/times.txt"
+    }
+    run plain --device cuda:0
+    run dask1 --local-cluster --workers 1
+    run dask2 --local-cluster --workers 2
+    python3 - "$OUT" <<'PY'
+import sys, numpy as np, xarray as xr
+out = sys.argv[1]
+ref = xr.open_dataset(f"{out}/plain.nc").load()
+for label in ("dask1", "dask2"):
+    ds = xr.open_dataset(f"{out}/{label}.nc").load()
+    same = all(np.array_equal(ref[v].values, ds[v].values, equal_nan=ref[v].dtype.kind == "f") for v in ref.variables)
+    print(f"{label}: outputs equal to the single-process run bit for bit: {same}; members {ds.sizes['member']}, "
+          f"ok {int((ds.status.values == 0).sum())}")
+PY
+    rm -f "$OUT"/plain.nc "$OUT"/dask1.nc "$OUT"/dask2.nc
+    cat "$OUT/times.txt" ;;
+  figures)
+    python3 studies/figures.py all --device cuda:0 --outdir "$OUT/figures" "$@" 2>&1 | tee "$OUT/figures_gpu.log" | tail -12 ;;
+  *)
+    sed -n '2,34p' "$0"; exit 2 ;;
+esac
