@@ -48,15 +48,15 @@ def name_from_start(metrics: dict) -> dict:
 
 
 def _warp():
-    from .simulate import _warp as init
+    from .device import init_warp
 
-    return init()
+    return init_warp()
 
 
 def _device(device):
-    from .simulate import _check_device
+    from .device import check_device
 
-    return _check_device(device)
+    return check_device(device)
 
 
 def min_segment_intervals(fronts: Fronts, nodes: int) -> int:

@@ -120,7 +120,7 @@ def _init_worker(inbox) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     os.environ["CUDA_VISIBLE_DEVICES"] = ""
     _IN_WORKER, _INBOX = True, inbox
-    from .simulate import _warp
+    from .device import init_warp as _warp
 
     saved = os.dup(2)
     try:

@@ -12,47 +12,15 @@ import numpy as np
 import xarray as xr
 
 from . import __version__
+from .device import SMALL_ENSEMBLE, check_device, default_device, init_warp  # noqa: F401
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
 from .parameters import Fronts, Model, Parameters, Record, Solver, parameter_long_name, parameter_units
 
 
-def _warp():
-    import warp as wp
-
-    wp.config.quiet = True
-    if wp.config.log_level < wp.LOG_WARNING:  # no per-kernel "Module ... load" lines
-        wp.config.log_level = wp.LOG_WARNING
-    wp.init()
-    return wp
-
-
-# device=None runs ensembles up to this size on the CPU: one member is a serial chain of dependent
-# steps, which one CPU core runs ~30x faster than one GPU thread (H100: 0.58 s against 0.018 s, N =
-# 200; docs/performance.md), and the GPU's time barely grows with the ensemble up to ~1,000 members,
-# so the break-even lies near 30 members; 16 keeps the CPU side of it
-SMALL_ENSEMBLE = 16
-
-
-def default_device(n_members: int | None = None) -> str:
-    """The device for ``device=None``: 'cpu' for an ensemble of at most SMALL_ENSEMBLE (16) members,
-    else 'cuda:0' when Warp sees a CUDA device, else 'cpu'. Pass a device to force either."""
-    wp = _warp()
-    if n_members is not None and n_members <= SMALL_ENSEMBLE:
-        return "cpu"
-    return "cuda:0" if wp.get_cuda_device_count() > 0 else "cpu"
-
-
-def _check_device(device: str | None, n_members: int | None = None) -> str:
-    wp = _warp()
-    if device is None:
-        return default_device(n_members)
-    names = [str(d) for d in wp.get_devices()]
-    if str(device) == "cuda" and wp.get_cuda_device_count() > 0:
-        return "cuda:0"
-    if str(device) not in names:
-        raise ValueError(f"device {device!r} is not available; valid: {', '.join(names)} (or None)")
-    return str(device)
+# the device helpers live in warpfric/device.py; the old private names stay for callers
+_warp = init_warp
+_check_device = check_device
 
 
 def simulate(
