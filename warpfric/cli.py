@@ -77,7 +77,7 @@ def _check_output(path: Path, resume: bool, overwrite: bool) -> None:
 def _run_default(args) -> int:
     from .io import write_ensemble
     from .simulate import simulate
-    from .sweep import check_member_offset
+    from .sweep_file import check_member_offset
 
     scene = Parameters(normal_force=args.normal_force, eccentricity=args.eccentricity, disc_velocity=args.disc_velocity,
                        end_time=args.end_time)

@@ -80,7 +80,7 @@ def run_chunk(job: ChunkJob) -> dict:
     index, members, failed members, device, wall time, process id)."""
     from .io import write_ensemble
     from .simulate import simulate
-    from .sweep import parse_sweep
+    from .sweep_file import parse_sweep
 
     t0 = time.perf_counter()
     sweep = parse_sweep(job.sweep_text, job.sweep_name)
@@ -125,7 +125,7 @@ def prepare_worker(sweep_text: str, sweep_name: str, device: str | None) -> dict
     import dataclasses as dc
 
     from .simulate import simulate
-    from .sweep import parse_sweep
+    from .sweep_file import parse_sweep
 
     t0 = time.perf_counter()
     sweep = parse_sweep(sweep_text, sweep_name)
@@ -283,7 +283,7 @@ def run_sweep(sweep_file, output=None, *, chunk: int | None = None, member_offse
     and ``resume=True`` finishes the run). Raises RunError/SweepError (ValueError) before running."""
     from .io import ChunkStore, parts_dir, sweep_digest
     from .simulate import _check_device
-    from .sweep import check_member_offset, load_sweep
+    from .sweep_file import check_member_offset, load_sweep
 
     sweep = load_sweep(sweep_file)
     out = Path(output) if output else Path(sweep_file).with_suffix(".nc")
