@@ -21,18 +21,27 @@ Combining files: :func:`open_ensembles` (refuses repeated member numbers), or
 
 Completeness: a file written by :func:`write_ensemble` has the global attribute
 ``warpfric_complete = 1`` and is written under a temporary name and renamed, so a killed run never
-leaves a file that looks complete. A chunked run (:class:`ChunkStore`) keeps its finished chunks
-in ``OUT.nc.parts/`` until all are done, then combines them into ``OUT.nc``.
+leaves a file that looks complete; a write that fails (a full disk) or is interrupted removes its
+temporary file and raises :class:`OutputWriteError`. A chunked run (:class:`ChunkStore`) keeps its
+finished chunks in ``OUT.nc.parts/`` until all are done, then combines them into ``OUT.nc``.
+
+Before a run: :func:`lock_output` takes ``OUT.nc.lock`` (created with O_EXCL: the first proof that
+the folder is writable, and the refusal of a second run on the same output, :class:`OutputBusy`),
+:func:`check_free_space` compares the folder's free space with :func:`estimate_bytes`, and
+:func:`remove_stale_temporaries` removes what an earlier killed run left.
 """
 
 from __future__ import annotations
 
 import contextlib
 import datetime
+import errno
 import hashlib
 import json
 import os
 import shutil
+import socket
+import time
 import uuid
 from pathlib import Path
 
@@ -52,6 +61,193 @@ RECORDED_MEMBER_ATTRS = {"long_name": "member number (value of coordinate member
 COMBINE_KWARGS = {"combine": "nested", "concat_dim": "member", "data_vars": "minimal", "coords": "minimal",
                   "compat": "no_conflicts", "join": "outer"}
 INT32_MAX = 2**31 - 1
+LOCK_SUFFIX = ".lock"
+FULL_DISK_BYTES = 1 << 20  # a netCDF write that fails with less than this free: the disk is full
+NO_SPACE_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
+
+
+class OutputUnwritable(ValueError):
+    """The output's folder cannot be written (checked before anything runs; exit code 2)."""
+
+
+class OutputWriteError(Exception):
+    """Writing an output failed during a run: a full disk, or another I/O error (exit code 3). Its
+    temporary file has been removed."""
+
+    def __init__(self, message: str, disk_full: bool = False):
+        super().__init__(message)
+        self.disk_full = disk_full
+
+
+class OutputBusy(Exception):
+    """Another run is writing the same output: its lock file exists (exit code 4)."""
+
+
+def _size(n: float) -> str:
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB"):
+        if n < 1024 or unit == "TiB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1024
+    return ""  # pragma: no cover
+
+
+def free_bytes(folder) -> int | None:
+    """Free bytes in ``folder`` for this user, None where the file system does not say."""
+    try:
+        return shutil.disk_usage(folder).free
+    except OSError:
+        return None
+
+
+def estimate_bytes(n_members: int, nodes: int, *, final_fields: bool = True, front_events: int = 1,
+                   recorded: int = 0, times: int = 0) -> int:
+    """Bytes of an ensemble file before compression (zlib gains ~10 % on the fields): per member
+    ~100 scalars, each front event's arrival times and the final-state fields (8 per node); per
+    recorded member 4 fields at every recording time and node."""
+    per_member = 8 * (100 + nodes * (front_events + (8 if final_fields else 0)))
+    return int(n_members * per_member + 4 * 8 * recorded * times * nodes)
+
+
+def check_free_space(path, need: int, what: str) -> None:
+    """OutputWriteError (disk full) when the folder of ``path`` has less than half of ``need``
+    bytes free: the file cannot fit even if compression halved it."""
+    folder = Path(path).parent
+    free = free_bytes(folder)
+    if free is not None and free < need // 2:
+        raise OutputWriteError(f"output {str(path)!r}: disk full: {_size(free)} free in {str(folder)!r}, {what} needs "
+                               f"about {_size(need)}; free some space or choose another -o", disk_full=True)
+
+
+def lock_path(path) -> Path:
+    path = Path(path)
+    return path.with_name(path.name + LOCK_SUFFIX)
+
+
+def _create_exclusive(path: Path) -> int:
+    return os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+
+
+def _unwritable(path: Path, folder: Path, err: OSError) -> OutputUnwritable:
+    reason = "read-only file system" if err.errno == errno.EROFS else (err.strerror or str(err)).lower()
+    return OutputUnwritable(f"output {str(path)!r}: cannot write in folder {str(folder)!r} ({reason}); choose "
+                            "another -o or make the folder writable")
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, ValueError):
+        return True
+    return True
+
+
+def _stale(lock: Path) -> bool:
+    """True for a lock that no living run holds: its process is gone (same host), or it is empty
+    (its writer died before writing it) and older than 10 s."""
+    try:
+        holder = json.loads(lock.read_text() or "{}")
+    except (OSError, ValueError):
+        holder = {}
+    if not holder:
+        try:
+            return time.time() - lock.stat().st_mtime > 10
+        except OSError:
+            return True
+    return holder.get("host") == socket.gethostname() and not _pid_alive(int(holder.get("pid", -1)))
+
+
+def _holder(lock: Path) -> str:
+    try:
+        h = json.loads(lock.read_text())
+        return f"pid {h['pid']} on {h['host']}, since {h['started']}"
+    except (OSError, ValueError, KeyError, TypeError):
+        return "unknown process"
+
+
+def lock_output(path, command: str | None = None) -> Path:
+    """Take ``OUT.nc.lock`` beside ``path`` (O_EXCL) and return it; release with
+    :func:`unlock_output`. A lock whose process is gone (same host) is taken over. Raises
+    OutputBusy when a living run holds it, OutputUnwritable when the folder cannot be written."""
+    path = Path(path)
+    lock = lock_path(path)
+    for _ in range(3):
+        try:
+            fd = _create_exclusive(lock)
+        except FileExistsError:
+            if _stale(lock):
+                with contextlib.suppress(FileNotFoundError):
+                    lock.unlink()
+                continue
+            raise OutputBusy(f"output {str(path)!r} is being written by another warpfric run ({_holder(lock)}); wait "
+                             f"for it to end, or remove {str(lock)!r} if that run is gone") from None
+        except OSError as err:
+            raise _unwritable(path, path.parent, err) from None
+        now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        with os.fdopen(fd, "w") as f:
+            json.dump({"pid": os.getpid(), "host": socket.gethostname(), "started": now, "command": command}, f)
+        return lock
+    raise OutputBusy(f"output {str(path)!r}: lock {str(lock)!r} keeps coming back; is another run starting?")
+
+
+def unlock_output(lock: Path) -> None:
+    """Remove a lock taken by :func:`lock_output` in this process (not one another run took over)."""
+    with contextlib.suppress(OSError, ValueError):
+        if json.loads(Path(lock).read_text()).get("pid") == os.getpid():
+            Path(lock).unlink()
+
+
+@contextlib.contextmanager
+def output_lock(path, command: str | None = None):
+    """``with output_lock(path):`` holds ``OUT.nc.lock`` for the block (see :func:`lock_output`)."""
+    lock = lock_output(path, command)
+    try:
+        yield lock
+    finally:
+        unlock_output(lock)
+
+
+def probe_writable(folder, path) -> None:
+    """OutputUnwritable unless a file can be created in ``folder`` (created and removed at once)."""
+    folder = Path(folder)
+    probe = folder / f".warpfric-probe-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    try:
+        os.close(_create_exclusive(probe))
+    except OSError as err:
+        raise _unwritable(Path(path), folder, err) from None
+    probe.unlink()
+
+
+def _temporaries(folder: Path, prefix: str) -> list:
+    return sorted(folder.glob(f"{prefix}*.tmp")) if folder.is_dir() else []
+
+
+def remove_stale_temporaries(path) -> list:
+    """Remove the temporary files that killed writers of ``path`` left (``OUT.nc.<pid>.<hex>.tmp``
+    beside it and ``*.tmp`` in its parts folder); call it holding the output's lock, so that no
+    living writer of this process's run owns them. Returns the removed paths."""
+    path = Path(path)
+    removed = []
+    for tmp in _temporaries(path.parent, path.name + ".") + _temporaries(parts_dir(path), ""):
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+            removed.append(tmp)
+    return removed
+
+
+def write_failure(path, err: BaseException, free: int | None) -> OutputWriteError:
+    """The OutputWriteError of a failed write. 'disk full' for ENOSPC/EDQUOT, and for any other
+    I/O error when less than 1 MiB was left free: HDF5 reports a full disk as netCDF's generic
+    'NetCDF: HDF error' (RuntimeError) while writing, or as EACCES when it creates a file."""
+    path = Path(path)
+    code = getattr(err, "errno", None)
+    reason = " ".join(str(getattr(err, "strerror", None) or err).split())
+    if code in NO_SPACE_ERRNOS or (free is not None and free < FULL_DISK_BYTES):
+        where = f"{_size(free)} free" if free is not None else "no space left"
+        return OutputWriteError(f"disk full while writing {str(path)!r} ({where}; its partial file removed)",
+                                disk_full=True)
+    return OutputWriteError(f"could not write {str(path)!r} ({type(err).__name__}: {reason}; its partial file removed)")
 
 
 def _encoding(ds: xr.Dataset, complevel: int) -> dict:
@@ -156,9 +352,17 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
     out = _to_file_layout(out)
     # a name of its own per writer: two writers of one chunk (a task run twice) never share a file
     tmp = path.with_name(f"{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    with _in_process_locks():
-        out.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=_encoding(out, complevel))
-    os.replace(tmp, path)
+    try:
+        with _in_process_locks():
+            out.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=_encoding(out, complevel))
+        os.replace(tmp, path)
+    except BaseException as err:  # a full disk, an I/O error, Ctrl-C: no temporary file stays behind
+        free = free_bytes(path.parent)
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        if isinstance(err, (OSError, RuntimeError)):  # netCDF4 reports HDF5's failures as RuntimeError
+            raise write_failure(path, err, free) from err
+        raise
     return path
 
 
