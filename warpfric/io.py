@@ -7,17 +7,35 @@ the model switches, solver and front settings, package and Warp versions and the
 global attributes.
 
 Layout on disk (what ``xr.open_dataset``/``xr.open_mfdataset`` show) differs from the in-memory
-layout of :func:`warpfric.simulate` only for recorded fields: their dims are
-(``recorded_member``, ``record_time``, ``x``), where ``recorded_member`` is a coordinate variable
-holding the member numbers (values of ``member``) and ``record_time`` is the recording time (not
-named ``time``: CF reserves that name for calendar time with ``units = "s since <epoch>"``).
-:func:`open_ensemble` gives back the layout of ``simulate()``: (``recorded``, ``time``, ``x``).
-Coordinates carry no ``_FillValue``; integers are int32 or int8 (netCDF classic types, CF-1.8);
-the global attribute ``history`` says when and by which command the file was written.
+layout of :func:`warpfric.simulate` in two ways, both so that the files of separate runs combine
+however a user opens them:
 
-Combining files: :func:`open_ensembles` (refuses repeated member numbers), or
-``xr.open_mfdataset(files, **COMBINE_KWARGS)`` (needs dask): members concatenate along
-``member`` and recorded fields are aligned on ``recorded_member``.
+- Member identity: coordinate ``member`` holds each member's label ``<run id>:<number>`` (run id:
+  the run's UTC start time to the millisecond and 6 random hex digits; number: 10 digits,
+  e.g. ``20261125T193512123-3f2a9c:0000000004``), unique across runs and sorted within a file;
+  ``member_number`` (int32) holds the member numbers. The chunks of one sweep share its run id
+  (kept in the manifest, also by ``--resume``). Two runs made without ``--member-offset`` number
+  their members alike, but their labels differ, so xarray's default ``xr.open_mfdataset(files)``
+  (combine="by_coords") concatenates them along ``member``, every member once, runs in the order
+  they started (before the labels it kept 2 of 5 members, or padded mu_s to recorded_member x
+  member with NaN). :func:`open_ensemble` gives back simulate()'s layout: ``member`` the numbers,
+  ``member_id`` the labels (which :func:`write_ensemble` keeps).
+- Recorded fields live in the netCDF4 group ``recorded`` (``xr.open_dataset(path,
+  group="recorded")``): dims (``recorded_member``, ``record_time``, ``x``), ``recorded_member``
+  the labels of the recorded members, ``recorded_member_number`` their numbers, ``record_time``
+  the recording time (not named ``time``: CF reserves that name for calendar time with
+  ``units = "s since <epoch>"``). In the root group they made by_coords concatenate along a second
+  dimension. :func:`open_ensemble` gives back (``recorded``, ``time``, ``x``) with
+  ``recorded_member`` the numbers.
+
+Files written before the labels (numbers as ``member``, recorded fields in the root) still open.
+Coordinates carry no ``_FillValue``; integers are int32 or int8 (netCDF classic types, CF-1.8);
+labels are zlib-compressed char arrays; the global attribute ``history`` says when and by which
+command the file was written.
+
+Combining files: :func:`open_ensembles` (refuses repeated member numbers, saying what to do), or
+lazily (needs dask) ``xr.open_mfdataset(files)`` at xarray's defaults or with
+``**COMBINE_KWARGS``, and ``xr.open_mfdataset(files, group="recorded")`` for the recorded fields.
 
 Completeness: a file written by :func:`write_ensemble` has the global attribute
 ``warpfric_complete = 1`` and is written under a temporary name and renamed, so a killed run never
@@ -54,10 +72,19 @@ COMPLETE_ATTR = "warpfric_complete"
 PARTS_SUFFIX = ".parts"
 MANIFEST = "manifest.json"
 FILE_TIME = "record_time"  # on-disk name of the recording-time coordinate (``time`` in memory)
-RECORDED_MEMBER_ATTRS = {"long_name": "member number (value of coordinate member) of each recorded member",
-                         "units": "1"}
-# xr.open_mfdataset(files, **COMBINE_KWARGS) combines warpfric files of distinct member numbers,
-# recorded fields included, under both xarray's current and its announced combine defaults
+RECORDED_GROUP = "recorded"  # netCDF4 group of the recorded fields
+MEMBER_NUMBER = "member_number"  # on disk: the member numbers, beside the member labels
+MEMBER_ID = "member_id"  # in memory: the member labels, beside the member numbers
+RECORDED_NUMBER = "recorded_member_number"
+MEMBER_LABEL_ATTRS = {"long_name": "member label: the id of the run that simulated the member (its UTC start time "
+                      "and a random suffix) and its member number; unique across runs", "units": "1"}
+RECORDED_MEMBER_ATTRS = {"long_name": "member label (value of coordinate member of the root group) of each recorded "
+                         "member", "units": "1"}
+RECORDED_NUMBER_ATTRS = {"long_name": "member number of each recorded member", "units": "1"}
+NUMBER_DIGITS = 10  # member numbers are int32: at most 10 digits, zero-padded so that labels sort as numbers
+# xr.open_mfdataset(files, **COMBINE_KWARGS) concatenates warpfric files along member in the order
+# given (xarray's default, by_coords, orders them by their labels, i.e. by the runs' start), under
+# both xarray's current and its announced combine defaults; recorded fields: group="recorded"
 COMBINE_KWARGS = {"combine": "nested", "concat_dim": "member", "data_vars": "minimal", "coords": "minimal",
                   "compat": "no_conflicts", "join": "outer"}
 INT32_MAX = 2**31 - 1
@@ -255,6 +282,8 @@ def _encoding(ds: xr.Dataset, complevel: int) -> dict:
     for name, var in ds.variables.items():
         if name in ds.coords:
             enc[name] = {"_FillValue": None}  # CF: coordinate variables have no missing values
+        if var.dtype.kind == "U":  # member labels: a compressed char array (a vlen string cannot be compressed)
+            enc[name].update({"dtype": "S1", "char_dim_name": "label_length", "zlib": True, "complevel": complevel})
         if var.ndim == 0 or var.dtype.kind not in "biuf":
             continue
         enc.setdefault(name, {}).update({"zlib": True, "complevel": complevel, "shuffle": True})
@@ -272,15 +301,30 @@ def _int32(value, where: str):
     return out if isinstance(value, np.ndarray) else out[()]
 
 
-def _to_file_layout(ds: xr.Dataset) -> xr.Dataset:
-    """The in-memory layout of simulate() -> the on-disk layout (see the module docstring)."""
+def new_run_id() -> str:
+    """A run's id: its UTC start time to the millisecond (so that runs sort by it) and 6 random hex
+    digits (two runs of one millisecond differ), e.g. '20261125T193512123-3f2a9c'."""
+    now = datetime.datetime.now(datetime.timezone.utc)
+    return f"{now:%Y%m%dT%H%M%S}{now.microsecond // 1000:03d}-{uuid.uuid4().hex[:6]}"
+
+
+def member_labels(run_id: str, numbers) -> np.ndarray:
+    """The labels ``<run id>:<number, 10 digits>`` of members ``numbers`` of run ``run_id``."""
+    return np.array([f"{run_id}:{int(n):0{NUMBER_DIGITS}d}" for n in np.asarray(numbers).reshape(-1)], dtype=str)
+
+
+def _labels(ds: xr.Dataset, run_id: str | None) -> np.ndarray:
+    """The member labels to write: those ``ds`` carries (read from a file) where they are strictly
+    increasing, as a file's coordinate must be; else new ones of run ``run_id`` (a new id if None)."""
+    if MEMBER_ID in ds.coords and run_id is None:
+        labels = np.asarray(ds[MEMBER_ID].values).astype(str)
+        if labels.size < 2 or bool(np.all(labels[1:] > labels[:-1])):
+            return labels
+    return member_labels(run_id or new_run_id(), ds.member.values)
+
+
+def _file_variables(ds: xr.Dataset) -> xr.Dataset:
     out = ds.copy()
-    if "recorded" in out.dims:
-        numbers = np.asarray(out.recorded_member.values)
-        out = out.assign_coords(recorded_member=("recorded", _int32(numbers, "recorded_member"),
-                                                 RECORDED_MEMBER_ATTRS)).swap_dims(recorded="recorded_member")
-    if "time" in out.dims:
-        out = out.rename(time=FILE_TIME)
     for name, var in list(out.variables.items()):
         if var.dtype == np.int64:
             out[name] = out[name].copy(data=_int32(var.values, name))
@@ -289,8 +333,44 @@ def _to_file_layout(ds: xr.Dataset) -> xr.Dataset:
     return out
 
 
-def _from_file_layout(ds: xr.Dataset) -> xr.Dataset:
-    """The on-disk layout -> the in-memory layout of simulate()."""
+def _to_file_layout(ds: xr.Dataset, run_id: str | None = None) -> tuple[xr.Dataset, xr.Dataset | None]:
+    """The in-memory layout of simulate() -> the on-disk layout: (root group, recorded group or None),
+    see the module docstring."""
+    labels = _labels(ds, run_id)
+    numbers = _int32(np.asarray(ds.member.values), "member")
+    rec_vars = [v for v in ds.data_vars if "recorded" in ds[v].dims]
+    root = ds.drop_vars(rec_vars + [c for c in ("recorded_member", "time", MEMBER_ID) if c in ds.coords])
+    root = root.drop_vars("member").assign_coords(member=("member", labels, MEMBER_LABEL_ATTRS),
+                                                  **{MEMBER_NUMBER: ("member", numbers, dict(ds.member.attrs))})
+    recorded = None
+    if rec_vars:
+        rec = ds[rec_vars].drop_vars([c for c in ("member", MEMBER_ID) if c in ds[rec_vars].coords])
+        rec_numbers = _int32(np.asarray(ds.recorded_member.values), "recorded_member")
+        where = {int(n): i for i, n in enumerate(ds.member.values)}
+        rec = rec.drop_vars("recorded_member").assign_coords(
+            recorded_member=("recorded", labels[[where[int(n)] for n in rec_numbers]], RECORDED_MEMBER_ATTRS),
+            **{RECORDED_NUMBER: ("recorded", rec_numbers, RECORDED_NUMBER_ATTRS)}).swap_dims(recorded="recorded_member")
+        rec = rec.rename(time=FILE_TIME)
+        rec.attrs = {"Conventions": ds.attrs.get("Conventions", "CF-1.8"),
+                     "title": "recorded fields of chosen members (the ensemble is in the root group)"}
+        recorded = _file_variables(rec)
+    return _file_variables(root), recorded
+
+
+def _from_file_layout(ds: xr.Dataset, recorded: xr.Dataset | None = None) -> xr.Dataset:
+    """The on-disk layout (root group, recorded group) -> the in-memory layout of simulate(). Reads
+    the layout before member labels too (numbers as the member coordinate, recorded fields in the root)."""
+    if MEMBER_NUMBER in ds.coords:
+        labels, numbers = ds.member.values.astype(str), ds[MEMBER_NUMBER]
+        ds = ds.drop_vars(["member", MEMBER_NUMBER]).assign_coords(
+            member=("member", numbers.values, dict(numbers.attrs)), **{MEMBER_ID: ("member", labels, MEMBER_LABEL_ATTRS)})
+    if recorded is not None:
+        numbers = recorded[RECORDED_NUMBER]
+        recorded = recorded.drop_vars(["recorded_member", RECORDED_NUMBER, "x"]).rename(
+            {FILE_TIME: "time", "recorded_member": "recorded"}).assign_coords(
+            recorded_member=("recorded", numbers.values, dict(numbers.attrs)))
+        recorded.attrs = {}
+        ds = ds.assign(recorded.data_vars).assign_coords(recorded_member=recorded.recorded_member, time=recorded.time)
     if FILE_TIME in ds.dims:
         ds = ds.rename({FILE_TIME: "time"})
     if "recorded_member" in ds.dims:
@@ -303,6 +383,14 @@ def _history_line(command: str | None) -> str:
 
     now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
     return f"{now}: {command or 'warpfric.io.write_ensemble (Python)'} (warpfric {__version__})"
+
+
+def parameters_along_member(ds: xr.Dataset) -> xr.Dataset:
+    """Every parameter along ``member``, the constant ones too: how files store them, so that runs of
+    different constants combine under any xarray settings (a scalar that differs between files is
+    kept from the first file under xarray's announced defaults, compat="override")."""
+    return ds.assign({name: ds[name].broadcast_like(ds.member) for name in PARAMETER_NAMES
+                      if name in ds and "member" not in ds[name].dims})
 
 
 def collapse_constants(ds: xr.Dataset, varying) -> xr.Dataset:
@@ -328,15 +416,22 @@ def _in_process_locks():
     return dask.config.set(scheduler="synchronous")
 
 
-def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, command: str | None = None) -> Path:
+def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, command: str | None = None,
+                   run_id: str | None = None) -> Path:
     """Write ``ds`` (from :func:`warpfric.simulate`) to netCDF4 at ``path``, atomically.
 
-    varying:   names of the parameters to keep along ``member`` (default: those that vary in ds,
-               ``ds.attrs['varying_parameters']``); the others are stored as scalars.
+    varying:   names of the swept parameters (default: those that vary in ds,
+               ``ds.attrs['varying_parameters']``), the file's ``varying_parameters``. Every
+               parameter is stored along ``member``; :func:`open_ensemble` gives back the others,
+               where constant, as scalars.
     complevel: zlib level (1..9) of every numeric variable.
     command:   what produced the file, for the ``history`` attribute (a line
                "<UTC time>: <command> (warpfric <version>)" put before any earlier history).
+    run_id:    the id in the member labels (coordinate ``member`` of the file, ``<run id>:<number>``;
+               the chunks of one sweep share it). None: the labels ``ds`` was read with
+               (``member_id``), else a new id (:func:`new_run_id`).
     ``recorded_member`` must hold member numbers (values of ``member``).
+    Raises OutputWriteError when the file cannot be written (its temporary file removed).
     """
     path = Path(path)
     if varying is None:
@@ -344,17 +439,20 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
     if "recorded_member" in ds.coords and not np.isin(ds.recorded_member.values, ds.member.values).all():
         raise ValueError(f"recorded_member {ds.recorded_member.values.tolist()}: not among the member numbers "
                          f"{ds.member.values.min()}..{ds.member.values.max()} of the ensemble")
-    out = collapse_constants(ds, set(varying))
+    out = parameters_along_member(ds)
     out.attrs["varying_parameters"] = " ".join(v for v in PARAMETER_NAMES if v in set(varying))
     out.attrs[COMPLETE_ATTR] = np.int8(1)
     earlier = out.attrs.get("history", "")
     out.attrs["history"] = _history_line(command) + ("\n" + earlier if earlier else "")
-    out = _to_file_layout(out)
+    root, recorded = _to_file_layout(out, run_id)
     # a name of its own per writer: two writers of one chunk (a task run twice) never share a file
     tmp = path.with_name(f"{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
     try:
         with _in_process_locks():
-            out.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=_encoding(out, complevel))
+            root.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=_encoding(root, complevel))
+            if recorded is not None:
+                recorded.to_netcdf(tmp, mode="a", group=RECORDED_GROUP, format="NETCDF4", engine="netcdf4",
+                                   encoding=_encoding(recorded, complevel))
         os.replace(tmp, path)
     except BaseException as err:  # a full disk, an I/O error, Ctrl-C: no temporary file stays behind
         free = free_bytes(path.parent)
@@ -366,11 +464,24 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
     return path
 
 
+def _has_group(path, group: str) -> bool:
+    import netCDF4
+
+    with netCDF4.Dataset(path, "r") as nc:
+        return group in nc.groups
+
+
 def _read(path) -> xr.Dataset:
     """A netCDF file, loaded, in the in-memory layout; ValueError (one line) if it is not netCDF."""
     try:
         with xr.open_dataset(path, engine="netcdf4") as ds:
-            return _from_file_layout(ds.load())
+            ds = ds.load()
+        recorded = None
+        if _has_group(path, RECORDED_GROUP):
+            with xr.open_dataset(path, engine="netcdf4", group=RECORDED_GROUP) as rec:
+                recorded = rec.load()
+        ds = _from_file_layout(ds, recorded)
+        return collapse_constants(ds, set(ds.attrs.get("varying_parameters", "").split()))
     except (OSError, ValueError, RuntimeError) as err:
         reason = " ".join(str(err).split())
         raise ValueError(f"{path}: not a readable netCDF file ({reason})") from None
@@ -470,8 +581,9 @@ class ChunkStore:
         sl = self.members(index)
         try:
             with xr.open_dataset(path, engine="netcdf4") as ds:
+                numbers = ds[MEMBER_NUMBER] if MEMBER_NUMBER in ds else ds.member
                 return int(ds.attrs.get(COMPLETE_ATTR, 0)) == 1 and np.array_equal(
-                    ds.member.values, np.arange(sl.start, sl.stop) + self.member_offset)
+                    numbers.values, np.arange(sl.start, sl.stop) + self.member_offset)
         except Exception:  # noqa: BLE001 - a damaged chunk is simply redone
             return False
 
@@ -485,7 +597,7 @@ class ChunkStore:
         combined.attrs.pop("chunk_index", None)
         combined.attrs.pop("history", None)
         combined.attrs["chunks"] = self.n_chunks
-        write_ensemble(combined, path, command=command)
+        write_ensemble(combined, path, command=command, run_id=self.manifest.get("run_id"))
         shutil.rmtree(self.directory)
         return Path(path)
 
@@ -502,7 +614,8 @@ def duplicate_members(datasets, names=None) -> str:
     where = [n for n, ds in zip(names, datasets) if np.isin(ds.member.values, repeated).any()]
     shown = ", ".join(map(str, repeated[:5].tolist())) + (f", ... ({repeated.size} in all)" if repeated.size > 5 else "")
     return (f"member numbers {shown} occur more than once (in {', '.join(where)}); give separate runs distinct "
-            "numbers with `warpfric run --member-offset K` (or [run] member_offset, or simulate(member_offset=K))")
+            "numbers with `warpfric run --member-offset K` (or [run] member_offset, or simulate(member_offset=K)), "
+            "or open these files with xr.open_mfdataset(files), which keeps them apart by their member labels")
 
 
 def concat_members(datasets, names=None) -> xr.Dataset:
@@ -534,6 +647,8 @@ def concat_members(datasets, names=None) -> xr.Dataset:
             along_member.add(pname)
     datasets = [ds.assign({p: ds[p].broadcast_like(ds.member) for p in along_member
                            if p in ds and "member" not in ds[p].dims}) for ds in datasets]
+    if not all(MEMBER_ID in ds.coords for ds in datasets):  # labels only where every part has them
+        datasets = [ds.drop_vars(MEMBER_ID, errors="ignore") for ds in datasets]
     first = datasets[0]
     member_vars = [v for v in first.data_vars if "member" in first[v].dims]
     parts = [ds[member_vars] for ds in datasets]
@@ -545,7 +660,15 @@ def concat_members(datasets, names=None) -> xr.Dataset:
             if name in ds and not var.equals(ds[name]):
                 raise ValueError(f"{names[0]} and {other} differ in {name}: not one ensemble")
         out[name] = var
-    recorded = [ds for ds in datasets if "recorded" in ds.dims]
+    recorded = [(name, ds) for name, ds in zip(names, datasets) if "recorded" in ds.dims]
+    for name, ds in recorded[1:]:
+        times, first_times = ds.time.values, recorded[0][1].time.values
+        if times.shape != first_times.shape or not np.array_equal(times, first_times):
+            raise ValueError(f"{recorded[0][0]} and {name} recorded their fields at different times ({first_times.size} "
+                             f"and {times.size} times in [{first_times.min():g}, {first_times.max():g}] and "
+                             f"[{times.min():g}, {times.max():g}] s): open_ensembles needs one recording grid; open "
+                             "the recorded groups with xr.open_mfdataset(files, group='recorded') (times joined)")
+    recorded = [ds for _, ds in recorded]
     if recorded:
         rec_vars = [v for v in recorded[0].data_vars if "recorded" in recorded[0][v].dims]
         rec = xr.concat([ds[rec_vars] for ds in recorded], dim="recorded", data_vars="all", coords="different",

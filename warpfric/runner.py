@@ -48,6 +48,7 @@ class ChunkJob:
     command: str | None
     progress: bool
     cpu_workers: int | None = None  # simulate(workers=...): CPU worker processes for this chunk
+    run_id: str | None = None  # the run's id in the member labels (warpfric.io.member_labels)
 
 
 def worker_device(worker=None) -> str:
@@ -114,7 +115,7 @@ def run_chunk(job: ChunkJob) -> dict:
     failed = int((ds.status.values != 0).sum())
     if not sweep.run.get("final_fields", True):
         ds = ds.drop_vars([v for v in FINAL_FIELDS if v in ds])
-    write_ensemble(ds, job.path, varying=sweep.varying, command=job.command)
+    write_ensemble(ds, job.path, varying=sweep.varying, command=job.command, run_id=job.run_id)
     return dict(index=job.index, members=job.stop - job.start, failed=failed, device=device,
                 wall_s=time.perf_counter() - t0, pid=os.getpid())
 
@@ -342,7 +343,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
                 workers, quiet, command, check_space, cpu_workers) -> RunReport:
     import shutil
 
-    from .io import ChunkStore, OutputWriteError, free_bytes, parts_dir, sweep_digest, write_failure
+    from .io import ChunkStore, OutputWriteError, free_bytes, new_run_id, parts_dir, sweep_digest, write_failure
     from .simulate import _check_device
     from .sweep_file import check_member_offset
 
@@ -385,7 +386,8 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         if store is None:
             try:
                 store = ChunkStore.create(parts, digest, sweep.n_members, chunk, member_offset=offset,
-                                          sweep_file=str(Path(sweep_file).resolve()), device=device)
+                                          sweep_file=str(Path(sweep_file).resolve()), device=device,
+                                          run_id=new_run_id())
             except OSError as err:
                 shutil.rmtree(parts, ignore_errors=True)
                 raise write_failure(parts, err, free_bytes(out.parent)) from None
@@ -461,7 +463,8 @@ def _run_chunks(sweep, sweep_file, store, chunk, offset, device, client, quiet, 
     jobs = [ChunkJob(sweep_text=sweep.text, sweep_name=str(sweep_file), index=i, n_chunks=store.n_chunks,
                      start=store.members(i).start, stop=store.members(i).stop, member_offset=offset,
                      path=str(store.chunk_path(i).resolve()), device=device, command=command,
-                     progress=not quiet and client is None, cpu_workers=cpu_workers)
+                     progress=not quiet and client is None, cpu_workers=cpu_workers,
+                     run_id=store.manifest.get("run_id"))
             for i in todo]
     reports, errors = run_local(jobs) if client is None else run_on_client(jobs, client, quiet)
     return reports, errors, time.perf_counter() - t0
