@@ -373,9 +373,13 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
     if previous is not None and previous.digest != digest:
         raise RunError(f"{str(parts)!r} belongs to a different sweep, chunk size ({previous.chunk}) or member "
                        f"offset ({previous.member_offset}); run with --overwrite to start again")
-    # the chunk files and the combined file exist side by side until the parts are removed
-    check_space(out, 2 * sweep_bytes(sweep, sweep.n_members), f"this run ({sweep.n_members} members of "
-                f"{sweep.solver.nodes} nodes, chunks and combined file)")
+    # the chunk files and the combined file exist side by side until the parts are removed; a resumed
+    # run's finished chunks are on the disk already
+    done = sum(previous.members(i).stop - previous.members(i).start for i in range(previous.n_chunks)
+               if previous.is_done(i)) if previous is not None else 0
+    check_space(out, sweep_bytes(sweep, sweep.n_members - done) + sweep_bytes(sweep, sweep.n_members),
+                f"this run ({sweep.n_members - done} members of {sweep.solver.nodes} nodes to run, chunks and "
+                "combined file)")
     own_client = None
     if use_cluster and client is None:  # before any file: an unreachable scheduler leaves nothing behind
         own_client = local_cluster(workers) if (local or where == "local") else connect(where)
