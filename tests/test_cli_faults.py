@@ -128,6 +128,38 @@ def test_a_really_unwritable_folder_exits_2(tmp_path, sweep, capsys, no_simulati
             folder.chmod(0o755)
 
 
+def test_a_folder_without_write_permission_as_a_normal_user():
+    """The issue's case (mkdir ro && chmod 555 ro && warpfric run -o ro/out.nc) as a normal user: as
+    root, the command runs as user nobody (setpriv); exit 2, one line, nothing written."""
+    import tempfile
+
+    command = [sys.executable, "-m", "warpfric", "run", "--nodes", "11", "--device", "cpu"]
+    if os.geteuid() == 0:
+        if shutil.which("setpriv") is None:
+            pytest.skip("root without setpriv: no normal user to run as")
+        command = ["setpriv", "--reuid", "65534", "--regid", "65534", "--clear-groups", *command]
+    home = Path(tempfile.mkdtemp(prefix="warpfric-ro-"))  # not pytest's tmp_path: nobody cannot enter it
+    try:
+        home.chmod(0o755)
+        folder = home / "ro"
+        folder.mkdir()
+        folder.chmod(0o555)
+        if os.geteuid() == 0 and subprocess.run(["setpriv", "--reuid", "65534", "--regid", "65534", "--clear-groups",
+                                                 sys.executable, "-c", "import warpfric"], capture_output=True,
+                                                cwd=home).returncode != 0:
+            pytest.skip("user nobody cannot import warpfric from this environment")
+        env = {**os.environ, "HOME": str(home), "PYTHONWARNINGS": "ignore"}
+        res = subprocess.run([*command, "-o", str(folder / "out.nc")], capture_output=True, text=True, timeout=120,
+                             env=env, cwd=home)
+        errors = [line for line in res.stderr.splitlines() if line.startswith("warpfric:")]
+        assert res.returncode == 2 and errors == [
+            f"warpfric: error: output '{folder / 'out.nc'}': cannot write in folder '{folder}' (permission denied); "
+            "choose another -o or make the folder writable"], res.stderr
+        assert res.stdout == "" and _files(folder) == []
+    finally:
+        shutil.rmtree(home, ignore_errors=True)
+
+
 def _interrupted_run(tmp_path, sweep, capsys, monkeypatch, out, interrupt_at=2):
     """Run the sweep in chunks of one member, Ctrl-C in chunk ``interrupt_at`` (1-based)."""
     real = SIMULATE_MODULE.simulate

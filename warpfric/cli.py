@@ -333,7 +333,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, set]:
     add(dask, "--workers", type=int, default=None, metavar="N",
         help="workers of --local-cluster (default: the GPU count, else the core count)")
     scene = run.add_argument_group("default scene (without a sweep file; a sweep file sets these itself)")
-    add(scene, "--normal-force", type=float, default=None, metavar="N",
+    add(scene, "--normal-force", type=float, default=None, metavar="F",
         help=f"normal force, N (default {Parameters.normal_force:g})")
     add(scene, "--eccentricity", type=float, default=None, metavar="E",
         help=f"normalised eccentricity 2e/L, dimensionless, in [-0.6, 0.6] (default {Parameters.eccentricity:g})")
