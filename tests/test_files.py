@@ -79,15 +79,17 @@ def test_written_files_pass_the_cf_checker(tmp_path, capsys):
         with netCDF4.Dataset(tmp_path / name) as nc:
             assert nc.Conventions == "CF-1.8"
             assert "warpfric" in nc.history and nc.history[:4].isdigit()
-            for vname, var in nc.variables.items():
+            recorded = nc.groups["recorded"]  # the recorded fields: a group of their own
+            for vname, var in [*nc.variables.items(), *recorded.variables.items()]:
                 assert var.dtype not in (np.int64, np.uint64), (name, vname)
                 assert "long_name" in var.ncattrs(), (name, vname)
                 assert "units" in var.ncattrs() or "flag_values" in var.ncattrs(), (name, vname)
                 if "flag_values" in var.ncattrs():
                     assert np.asarray(var.flag_values).dtype == var.dtype, (name, vname)
                     assert len(var.flag_values) == len(var.flag_meanings.split()), (name, vname)
-            for coord in ("member", "x", "record_time", "recorded_member"):
-                assert "_FillValue" not in nc.variables[coord].ncattrs(), (name, coord)
+            for group, coord in ((nc, "member"), (nc, "x"), (recorded, "record_time"), (recorded, "recorded_member"),
+                                 (recorded, "x")):
+                assert "_FillValue" not in group.variables[coord].ncattrs(), (name, coord)
     with netCDF4.Dataset(tmp_path / "cli.nc") as nc:
         assert nc.history.split(": ", 1)[1].startswith(f"warpfric run {sweep} -o ")
 
@@ -126,14 +128,17 @@ def test_runs_with_member_offsets_combine_with_open_mfdataset(tmp_path, capsys, 
                   compat="no_conflicts", join="outer")
     assert kwargs == COMBINE_KWARGS
     with xr.set_options(use_new_combine_kwarg_defaults=new_defaults), xr.open_mfdataset([a, b], **kwargs) as both:
-        np.testing.assert_array_equal(both.member.values, [0, 1, 2, 3, 4, 5])
+        np.testing.assert_array_equal(both.member_number.values, [0, 1, 2, 3, 4, 5])  # member: their labels
         np.testing.assert_array_equal(both.eccentricity.values, [-0.2, 0.0, 0.2] * 2)
         np.testing.assert_array_equal(both.mu_s.values, np.concatenate([first.mu_s.values, second.mu_s.values]))
-        np.testing.assert_array_equal(both.recorded_member.values, [1, 2, 4, 5])
-        assert both.velocity_history.dims == ("recorded_member", "record_time", "x")
-        for number, ds, index in ((1, first, 0), (2, first, 1), (4, second, 0), (5, second, 1)):
-            np.testing.assert_array_equal(both.velocity_history.sel(recorded_member=number).values,
-                                          ds.velocity_history.values[index])
+        assert "velocity_history" not in both  # the recorded fields are a group of their own
+    # the recorded fields (netCDF4 group "recorded"), at xarray's defaults
+    with xr.set_options(use_new_combine_kwarg_defaults=new_defaults), \
+            xr.open_mfdataset([a, b], group="recorded") as recorded:
+        np.testing.assert_array_equal(recorded.recorded_member_number.values, [1, 2, 4, 5])
+        assert recorded.velocity_history.dims == ("recorded_member", "record_time", "x")
+        np.testing.assert_array_equal(recorded.velocity_history.values, np.concatenate(
+            [first.velocity_history.values, second.velocity_history.values]))
     combined = open_ensembles([a, b])  # the helper: the same ensemble, in simulate()'s layout
     np.testing.assert_array_equal(combined.member.values, [0, 1, 2, 3, 4, 5])
     np.testing.assert_array_equal(combined.recorded_member.values, [1, 2, 4, 5])
@@ -151,8 +156,9 @@ def test_repeated_member_numbers_are_kept_or_refused_never_dropped(tmp_path, cap
     for s, out in ((sweep, a), (other, b)):  # both numbered 0..2: the user forgot --member-offset
         code, _, err = _main(capsys, "run", s, "-o", out, "--device", DEVICE, "--quiet")
         assert code == 0, err
-    with xr.open_mfdataset([a, b], **COMBINE_KWARGS) as both:  # xarray keeps all six
-        np.testing.assert_array_equal(both.member.values, [0, 1, 2, 0, 1, 2])
+    with xr.open_mfdataset([a, b], **COMBINE_KWARGS) as both:  # xarray keeps all six, apart by their labels
+        np.testing.assert_array_equal(both.member_number.values, [0, 1, 2, 0, 1, 2])
+        assert np.unique(both.member.values).size == 6
         np.testing.assert_array_equal(both.eccentricity.values, [-0.2, 0.0, 0.2, 0.1, 0.3, 0.4])
     with pytest.raises(ValueError, match="member numbers 0, 1, 2 occur more than once.*--member-offset"):
         open_ensembles([a, b])
@@ -162,14 +168,20 @@ def test_repeated_member_numbers_are_kept_or_refused_never_dropped(tmp_path, cap
 
 
 def test_recorded_fields_with_repeated_numbers_do_not_merge_silently(tmp_path, capsys):
+    """Same member numbers in two runs: their recorded fields stay apart under their members' labels."""
     pytest.importorskip("dask")
     sweep, other = tmp_path / "s.toml", tmp_path / "o.toml"
     sweep.write_text(SWEEP)
     other.write_text(SWEEP.replace("[-0.2, 0.0, 0.2]", "[0.1, 0.3, 0.4]"))
     for s, out in ((sweep, "a.nc"), (other, "b.nc")):
         assert _main(capsys, "run", s, "-o", tmp_path / out, "--device", DEVICE, "--quiet")[0] == 0
-    with pytest.raises(xr.MergeError):
-        xr.open_mfdataset([tmp_path / "a.nc", tmp_path / "b.nc"], **COMBINE_KWARGS).load()
+    paths = [tmp_path / "a.nc", tmp_path / "b.nc"]
+    with xr.open_mfdataset(paths, group="recorded") as recorded:
+        np.testing.assert_array_equal(recorded.recorded_member_number.values, [1, 2, 1, 2])
+        np.testing.assert_array_equal(recorded.velocity_history.values, np.concatenate(
+            [open_ensemble(p).velocity_history.values for p in paths]))
+        with xr.open_mfdataset(paths) as both:
+            assert set(recorded.recorded_member.values) <= set(both.member.values)  # labels of members
 
 
 def test_combining_runs_of_different_constant_parameters_makes_them_vary(tmp_path):

@@ -68,7 +68,7 @@ def test_open_mfdataset_combines_two_runs(tmp_path, new_defaults):
     write_ensemble(b, tmp_path / "b.nc")
     with xr.set_options(use_new_combine_kwarg_defaults=new_defaults), \
             xr.open_mfdataset([tmp_path / "a.nc", tmp_path / "b.nc"], combine="nested", concat_dim="member") as both:
-        np.testing.assert_array_equal(both.member.values, [0, 1, 2, 3])
+        np.testing.assert_array_equal(both.member_number.values, [0, 1, 2, 3])  # member: their labels
         np.testing.assert_array_equal(both.eccentricity.values, [0.0, 0.1, 0.2, 0.3])
         np.testing.assert_array_equal(both.mu_s.values, np.concatenate([a.mu_s.values, b.mu_s.values]))
         np.testing.assert_array_equal(both.arrival_time.values, np.concatenate([a.arrival_time.values, b.arrival_time.values]))

@@ -6,30 +6,63 @@
   warpfric sensitivity OUT.nc [--output mu_s --output v_middle ...] [--on-failure refuse|fill-mean]
 
 Without a sweep file, ``run`` simulates the paper's default scene (one member, F = 1000 N, e = 0,
-changeable with --normal-force, --eccentricity, --disc-velocity) and prints mu_s and the front
-speeds. Exit codes: 0 success, 1 some members failed (or ``info`` on an incomplete run), 2 bad
-input (nothing is written).
+changeable with --normal-force, --eccentricity, --disc-velocity, ...) and prints mu_s and the front
+speeds. Negative values may follow their option: --disc-velocity -1e-4.
+
+Exit codes (one line on stderr for each fault):
+  0    success
+  1    some members failed (status not ok), or `info` on an incomplete run
+  2    bad input, or an output folder that cannot be written (checked before anything runs;
+       nothing is written)
+  3    an output could not be written during the run: disk full or another I/O error (no partial
+       file stays; a sweep's finished chunks are kept for --resume)
+  4    another run is writing the same output (its OUT.nc.lock exists)
+  130  interrupted (Ctrl-C)
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import re
 import shlex
 import sys
 from pathlib import Path
 
 import numpy as np
 
-from .parameters import RELAXATION_GATES, Fronts, Model, Parameters, Solver
+from .parameters import RELAXATION_GATES, Fronts, Model, Parameters, Solver, units_text
+
+
+EXIT_FAILED_MEMBERS = 1
+EXIT_BAD_INPUT = 2
+EXIT_WRITE_FAILED = 3
+EXIT_OUTPUT_BUSY = 4
+EXIT_INTERRUPTED = 130
+
+# options of the default scene -> where a sweep file sets them (refused together with a sweep file)
+SCENE_OPTIONS = {
+    "normal_force": ("--normal-force", "[scene] normal_force"),
+    "eccentricity": ("--eccentricity", "[scene] eccentricity"),
+    "disc_velocity": ("--disc-velocity", "[scene] disc_velocity"),
+    "end_time": ("--end-time", "[scene] end_time"),
+    "nodes": ("--nodes", "[solver] nodes"),
+    "dtype": ("--dtype", "[solver] dtype"),
+    "rtol": ("--rtol", "[solver] rtol"),
+    "relaxation_gate": ("--relaxation-gate", "[model] relaxation_gate"),
+    "grid_check": ("--grid-check", "[fronts] grid_check"),
+}
+# a negative number as an option's value: argparse takes "-1e-4" for an option (it knows only -1 and -1.5)
+NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-inf(inity)?$", re.IGNORECASE)
 
 
 class UsageError(ValueError):
     pass
 
 
-def _fail(message: str) -> int:
+def _fail(message: str, code: int = EXIT_BAD_INPUT) -> int:
     print(f"warpfric: error: {message}", file=sys.stderr)
-    return 2
+    return code
 
 
 def _status_name(ds, code: int) -> str:
@@ -68,32 +101,44 @@ def _print_member(ds, solver: Solver) -> None:
           f"{ds.attrs.get('device_bytes_per_member', 0.0) / 1024:.1f} KiB device memory per member)")
 
 
-def _check_output(path: Path, resume: bool, overwrite: bool) -> None:
-    from .runner import check_output
-
-    check_output(path, resume, overwrite)
+def _toml_value(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return repr(value) if isinstance(value, str) else f"{value:g}" if isinstance(value, float) else str(value)
 
 
 def _run_default(args) -> int:
-    from .io import write_ensemble
+    from .io import check_free_space, estimate_bytes, output_lock, remove_stale_temporaries, write_ensemble
+    from .runner import check_output, check_output_name
     from .simulate import simulate
-    from .sweep import check_member_offset
+    from .sweep_file import check_member_offset
 
-    scene = Parameters(normal_force=args.normal_force, eccentricity=args.eccentricity, disc_velocity=args.disc_velocity,
-                       end_time=args.end_time)
-    model = Model(relaxation_gate=args.relaxation_gate)
-    solver = Solver(nodes=args.nodes, dtype=args.dtype, rtol=args.rtol)
-    if args.output:
-        _check_output(Path(args.output), args.resume, args.overwrite)
+    given = {name: getattr(args, name) for name in SCENE_OPTIONS}
+    scene = Parameters(**{k: given[k] for k in ("normal_force", "eccentricity", "disc_velocity", "end_time")
+                          if given[k] is not None})
+    model = Model(**({"relaxation_gate": given["relaxation_gate"]} if given["relaxation_gate"] else {}))
+    solver = Solver(**{k: given[k] for k in ("nodes", "dtype", "rtol") if given[k] is not None})
+    fronts = Fronts(grid_check=bool(args.grid_check))
     offset = args.member_offset or 0
     check_member_offset(offset, 1, "--member-offset")
-    ds = simulate(scene=scene, model=model, solver=solver, fronts=Fronts(grid_check=args.grid_check), device=args.device,
-                  progress=not args.quiet, member_offset=offset)
-    _print_member(ds, solver)
-    if args.output:
-        write_ensemble(ds, args.output, command=args.command_line)
-        print(f"wrote {args.output}")
-    return 0 if int(ds.status[0]) == 0 else 1
+    output = Path(args.output) if args.output else None
+    with contextlib.ExitStack() as stack:
+        if output is not None:  # before the run: the folder takes the file, and no other run writes it
+            check_output_name(output)
+            stack.enter_context(output_lock(output, args.command_line))
+            check_output(output, False, args.overwrite)
+            check_free_space(output, estimate_bytes(1, solver.nodes), "the file")
+            remove_stale_temporaries(output)
+        try:
+            ds = simulate(scene=scene, model=model, solver=solver, fronts=fronts, device=args.device,
+                          progress=not args.quiet, member_offset=offset, workers=args.cpu_workers)
+            _print_member(ds, solver)
+            if output is not None:
+                write_ensemble(ds, output, command=args.command_line)
+                print(f"wrote {output}")
+        except KeyboardInterrupt:  # one scene: no chunks to keep, nothing to resume
+            raise KeyboardInterrupt("interrupted" + ("; nothing was written" if output is not None else "")) from None
+    return 0 if int(ds.status[0]) == 0 else EXIT_FAILED_MEMBERS
 
 
 def _run_sweep(args) -> int:
@@ -102,8 +147,8 @@ def _run_sweep(args) -> int:
     report = run_sweep(args.sweep, args.output, chunk=args.chunk, member_offset=args.member_offset, device=args.device,
                        resume=args.resume, overwrite=args.overwrite, scheduler=args.scheduler,
                        local=True if args.local_cluster else None, workers=args.workers, quiet=args.quiet,
-                       command=args.command_line)
-    return 0 if report.output is not None and report.failed_members == 0 else 1
+                       command=args.command_line, cpu_workers=args.cpu_workers)
+    return 0 if report.output is not None and report.failed_members == 0 else EXIT_FAILED_MEMBERS
 
 
 def _run(args) -> int:
@@ -111,16 +156,32 @@ def _run(args) -> int:
         raise UsageError(f"--chunk {args.chunk}: expected an integer >= 1 (members per chunk file)")
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers {args.workers}: expected an integer >= 1")
+    if args.cpu_workers is not None and args.cpu_workers < 1:
+        raise UsageError(f"--cpu-workers {args.cpu_workers}: expected an integer >= 1 (1: this process only)")
     if args.scheduler and args.local_cluster:
         raise UsageError("--scheduler and --local-cluster exclude each other (an existing cluster, or a new one)")
+    if args.resume and args.overwrite:
+        raise UsageError("--resume and --overwrite exclude each other")
     if args.sweep is None:
         for flag, given in (("--scheduler", args.scheduler), ("--local-cluster", args.local_cluster),
-                            ("--workers", args.workers is not None)):
+                            ("--workers", args.workers is not None), ("--chunk", args.chunk is not None),
+                            ("--resume", args.resume)):
             if given:
-                raise UsageError(f"{flag} runs the chunks of a sweep file; give one (warpfric run SWEEP.toml ...)")
+                raise UsageError(f"{flag} applies to the chunks of a sweep file; give one (warpfric run SWEEP.toml "
+                                 f"{flag} ...), the default scene runs as one member")
+        if args.overwrite and not args.output:
+            raise UsageError("--overwrite replaces the file of -o; give -o OUT.nc (without it nothing is written)")
         return _run_default(args)
-    if args.grid_check:
-        raise UsageError("--grid-check is for the default scene; in a sweep file write [fronts] grid_check = true")
+    given = [(flag, key, getattr(args, name)) for name, (flag, key) in SCENE_OPTIONS.items()
+             if getattr(args, name) not in (None, False)]
+    if given:
+        flags = ", ".join(flag for flag, _, _ in given)
+        keys = ", ".join(f"{key} = {_toml_value(value)}" for _, key, value in given)
+        raise UsageError(f"{flags}: for the default scene only; a sweep file sets its own (write {keys} in "
+                         f"{args.sweep}), so that the file it writes can be run again from its sweep_toml")
+    if args.cpu_workers is not None and (args.scheduler or args.local_cluster):
+        raise UsageError("--cpu-workers splits a run in this process; on a Dask cluster (--scheduler, "
+                         "--local-cluster) each worker runs its chunk in one process: leave it out")
     return _run_sweep(args)
 
 
@@ -164,8 +225,9 @@ def summary(ds, name: str) -> str:
     lines.append("  swept parameters:" + ("" if swept else " none"))
     for pname in swept:
         v = ds[pname].values
-        lines.append(f"    {pname:<22} {np.unique(v).size:>6} values in [{v.min():.6g}, {v.max():.6g}] "
-                     f"{ds[pname].attrs.get('units', '')}")
+        units = units_text(ds[pname].attrs.get("units", ""))
+        lines.append(f"    {pname:<22} {np.unique(v).size:>6} values in [{v.min():.6g}, {v.max():.6g}]"
+                     + (f" {units}" if units else " (dimensionless)"))
     meanings = ds.status.attrs["flag_meanings"].split()
     counts = {meanings[int(k)]: int((ds.status.values == k).sum()) for k in np.unique(ds.status.values)}
     lines.append("  status: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
@@ -230,64 +292,113 @@ def _sensitivity(args) -> int:
     return 0
 
 
-def main(argv=None) -> int:
+def build_parser() -> tuple[argparse.ArgumentParser, set]:
+    """The argument parser, and the option strings that take a value (for negative numbers)."""
+    value_options: set = set()
+
+    def add(group, *names, **kwargs):
+        action = group.add_argument(*names, **kwargs)
+        if action.option_strings and action.nargs != 0:
+            value_options.update(action.option_strings)
+        return action
+
     parser = argparse.ArgumentParser(prog="warpfric", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
-    sub = parser.add_subparsers(dest="command", required=True)
-    run = sub.add_parser("run", help="run a sweep file, or the paper's default scene without one")
-    run.add_argument("sweep", nargs="?", help="sweep file (TOML, see docs/sweeps.md); none: the default scene")
-    run.add_argument("-o", "--output", help="netCDF file to write (sweeps: default SWEEP.nc)")
-    run.add_argument("--device", default=None, help="Warp device: cpu, cuda:0, ... (default: first GPU, else cpu)")
-    run.add_argument("--chunk", type=int, default=None,
-                     help="members per chunk file (default: all in one; with --resume: the interrupted run's)")
-    run.add_argument("--member-offset", type=int, default=None, metavar="K",
-                     help="number of the first member (default 0): give runs to be combined distinct numbers")
-    run.add_argument("--resume", action="store_true", help="finish an interrupted run of the same sweep")
-    run.add_argument("--overwrite", action="store_true", help="replace an existing output (and interrupted parts)")
-    run.add_argument("--quiet", action="store_true", help="no progress line")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
+                                help="run, info, plot or sensitivity (warpfric COMMAND --help)")
+    run = sub.add_parser("run", help="run a sweep file, or the paper's default scene without one",
+                         description="Run a sweep file in resumable chunks, or the paper's default scene without "
+                                     "one. Exit codes: 0 ok, 1 members failed, 2 bad input (nothing written), "
+                                     "3 output not written (disk full), 4 output busy, 130 interrupted.")
+    add(run, "sweep", nargs="?", metavar="SWEEP.toml",
+        help="sweep file (TOML, see docs/sweeps.md); none: the default scene")
+    add(run, "-o", "--output", metavar="OUT.nc", help="netCDF file to write (sweeps: default SWEEP.nc; "
+        "the default scene writes one only with -o)")
+    add(run, "--device", default=None, help="Warp device: cpu, cuda:0, ... (default: first GPU, else cpu)")
+    add(run, "--cpu-workers", type=int, default=None, metavar="N",
+        help="worker processes on the CPU (default: all cores for an ensemble that pays, else 1; 1: this process)")
+    add(run, "--member-offset", type=int, default=None, metavar="K",
+        help="number of the first member (default 0): give runs to be combined distinct numbers")
+    add(run, "--overwrite", action="store_true", help="replace an existing output (and interrupted parts)")
+    add(run, "--quiet", action="store_true", help="no progress line")
+    chunks = run.add_argument_group("sweeps (with a sweep file only)")
+    add(chunks, "--chunk", type=int, default=None, metavar="M",
+        help="members per chunk file (default: all in one; with --resume: the interrupted run's)")
+    add(chunks, "--resume", action="store_true", help="finish an interrupted run of the same sweep")
     dask = run.add_argument_group("Dask (sweeps; pip install 'warpfric[distributed]', docs/sweeps.md)")
-    dask.add_argument("--scheduler", default=None, metavar="ADDRESS",
-                      help="run the chunks on the Dask scheduler at ADDRESS (e.g. tcp://host:8786), one task each")
-    dask.add_argument("--local-cluster", action="store_true",
-                      help="start a local Dask cluster: one worker per GPU (dask-cuda if installed), else CPU processes")
-    dask.add_argument("--workers", type=int, default=None, metavar="N",
-                      help="workers of --local-cluster (default: the GPU count, else the core count)")
-    scene = run.add_argument_group("default scene (without a sweep file)")
-    scene.add_argument("--normal-force", type=float, default=Parameters.normal_force, help="N (default 1000)")
-    scene.add_argument("--eccentricity", type=float, default=Parameters.eccentricity, help="2e/L (default 0)")
-    scene.add_argument("--disc-velocity", type=float, default=Parameters.disc_velocity, help="m/s (default 1e-4)")
-    scene.add_argument("--nodes", type=int, default=Solver.nodes, help=f"grid nodes (default {Solver.nodes})")
-    scene.add_argument("--dtype", default=Solver.dtype, choices=("float64", "float32"))
-    scene.add_argument("--rtol", type=float, default=Solver.rtol, help=f"relative tolerance (default {Solver.rtol:g})")
-    scene.add_argument("--end-time", type=float, default=None,
-                       help="s (default: when the detachment is over, at most max_end_time = 80 s)")
-    scene.add_argument("--grid-check", action="store_true",
-                       help="also run on about half the nodes and report each front speed's change (its grid error)")
-    scene.add_argument("--relaxation-gate", default=Model.relaxation_gate, choices=RELAXATION_GATES,
-                       help="friction law's gate (default stress: GRL 2012; none: the SPEC v1 law)")
+    add(dask, "--scheduler", default=None, metavar="ADDRESS",
+        help="run the chunks on the Dask scheduler at ADDRESS (e.g. tcp://host:8786), one task each")
+    add(dask, "--local-cluster", action="store_true",
+        help="start a local Dask cluster: one worker per GPU (dask-cuda if installed), else CPU processes")
+    add(dask, "--workers", type=int, default=None, metavar="N",
+        help="workers of --local-cluster (default: the GPU count, else the core count)")
+    scene = run.add_argument_group("default scene (without a sweep file; a sweep file sets these itself)")
+    add(scene, "--normal-force", type=float, default=None, metavar="F",
+        help=f"normal force, N (default {Parameters.normal_force:g})")
+    add(scene, "--eccentricity", type=float, default=None, metavar="E",
+        help=f"normalised eccentricity 2e/L, dimensionless, in [-0.6, 0.6] (default {Parameters.eccentricity:g})")
+    add(scene, "--disc-velocity", type=float, default=None, metavar="V",
+        help=f"disc velocity, m/s; negative: the other way (default {Parameters.disc_velocity:g})")
+    add(scene, "--end-time", type=float, default=None, metavar="T",
+        help="end of the run, s (default: when the detachment is over, at most max_end_time = 80 s)")
+    add(scene, "--nodes", type=int, default=None, help=f"grid nodes, >= 3 (default {Solver.nodes})")
+    add(scene, "--dtype", default=None, choices=("float64", "float32"),
+        help=f"floating-point precision of the state (default {Solver.dtype}; float32 needs "
+             "--relaxation-gate none or velocity)")
+    add(scene, "--rtol", type=float, default=None,
+        help=f"relative tolerance of the adaptive step, in [1e-12, 0.1] (default {Solver.rtol:g})")
+    add(scene, "--grid-check", action="store_true",
+        help="also run on about half the nodes and report each front speed's change (its grid error)")
+    add(scene, "--relaxation-gate", default=None, choices=RELAXATION_GATES,
+        help=f"friction law's gate (default {Model.relaxation_gate}: GRL 2012; none: the SPEC v1 law)")
     info = sub.add_parser("info", help="summary of an ensemble file (or of an interrupted run, or of several files combined)")
-    info.add_argument("file", nargs="+")
+    add(info, "file", nargs="+", metavar="FILE",
+        help="ensemble file (OUT.nc, or the OUT.nc of an interrupted run); several: their combination")
     plot = sub.add_parser("plot", help="quick-look PNGs of an ensemble file")
-    plot.add_argument("file")
-    plot.add_argument("--outdir", default=None, help="folder for the PNGs (default: OUT next to OUT.nc)")
+    add(plot, "file", metavar="FILE", help="ensemble file (netCDF, from warpfric run)")
+    add(plot, "--outdir", default=None, help="folder for the PNGs (default: OUT next to OUT.nc)")
     sens = sub.add_parser("sensitivity", help="Sobol (Saltelli design) or Morris indices of a design's outputs (needs SALib)")
-    sens.add_argument("file")
-    sens.add_argument("--output", action="append", help="per-member output to analyse (repeatable; default mu_s)")
-    sens.add_argument("--on-failure", default="refuse", choices=("refuse", "fill-mean"),
-                      help="members that failed or lack an output: refuse (default) or replace by the mean")
-    sens.add_argument("--log", action="store_true", help="analyse the log of each output (heavy-tailed outputs: front speeds)")
-    sens.add_argument("-o", "--out", default=None, help="result file (default OUT_sensitivity.nc, and .png)")
-    argv = sys.argv[1:] if argv is None else list(argv)
-    args = parser.parse_args(argv)
-    args.command_line = shlex.join(["warpfric", *map(str, argv)])  # the files' history attribute
+    add(sens, "file", metavar="FILE", help="ensemble file of a sweep with a [design] table")
+    add(sens, "--output", action="append", help="per-member output to analyse (repeatable; default mu_s)")
+    add(sens, "--on-failure", default="refuse", choices=("refuse", "fill-mean"),
+        help="members that failed or lack an output: refuse (default) or replace by the mean")
+    add(sens, "--log", action="store_true", help="analyse the log of each output (heavy-tailed outputs: front speeds)")
+    add(sens, "-o", "--out", default=None, help="result file (default OUT_sensitivity.nc, and .png)")
+    return parser, value_options
+
+
+def join_negative_values(argv: list, value_options: set) -> list:
+    """``--disc-velocity -1e-4`` -> ``--disc-velocity=-1e-4``: argparse would take the number for an
+    option (it only knows negative numbers of the forms -1 and -1.5)."""
+    out = []
+    for word in argv:
+        if out and out[-1] in value_options and NEGATIVE_NUMBER.match(word):
+            out[-1] = f"{out[-1]}={word}"
+        else:
+            out.append(word)
+    return out
+
+
+def main(argv=None) -> int:
+    from .io import OutputBusy, OutputWriteError
+
+    parser, value_options = build_parser()
+    argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
+    args = parser.parse_args(join_negative_values(argv, value_options))
+    args.command_line = shlex.join(["warpfric", *argv])  # the files' history attribute
     handlers = {"run": _run, "info": _info, "plot": _plot, "sensitivity": _sensitivity}
     try:
         return handlers[args.command](args)
-    except ValueError as err:  # bad input: one line, exit 2
+    except ValueError as err:  # bad input, or an output folder that cannot be written: one line, exit 2
         return _fail(str(err))
-    except KeyboardInterrupt:
-        print("warpfric: interrupted; finished chunks are kept, continue with --resume", file=sys.stderr)
-        return 130
+    except OutputWriteError as err:  # disk full (or another I/O error) while writing
+        return _fail(str(err), EXIT_WRITE_FAILED)
+    except OutputBusy as err:
+        return _fail(str(err), EXIT_OUTPUT_BUSY)
+    except KeyboardInterrupt as err:
+        message = getattr(err, "message", None) or (str(err) if err.args else "interrupted")
+        print(f"warpfric: {message}", file=sys.stderr)
+        return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -7,32 +7,59 @@ the model switches, solver and front settings, package and Warp versions and the
 global attributes.
 
 Layout on disk (what ``xr.open_dataset``/``xr.open_mfdataset`` show) differs from the in-memory
-layout of :func:`warpfric.simulate` only for recorded fields: their dims are
-(``recorded_member``, ``record_time``, ``x``), where ``recorded_member`` is a coordinate variable
-holding the member numbers (values of ``member``) and ``record_time`` is the recording time (not
-named ``time``: CF reserves that name for calendar time with ``units = "s since <epoch>"``).
-:func:`open_ensemble` gives back the layout of ``simulate()``: (``recorded``, ``time``, ``x``).
-Coordinates carry no ``_FillValue``; integers are int32 or int8 (netCDF classic types, CF-1.8);
-the global attribute ``history`` says when and by which command the file was written.
+layout of :func:`warpfric.simulate` in two ways, both so that the files of separate runs combine
+however a user opens them:
 
-Combining files: :func:`open_ensembles` (refuses repeated member numbers), or
-``xr.open_mfdataset(files, **COMBINE_KWARGS)`` (needs dask): members concatenate along
-``member`` and recorded fields are aligned on ``recorded_member``.
+- Member identity: coordinate ``member`` holds each member's label ``<run id>:<number>`` (run id:
+  the run's UTC start time to the millisecond and 6 random hex digits; number: 10 digits,
+  e.g. ``20261125T193512123-3f2a9c:0000000004``), unique across runs and sorted within a file;
+  ``member_number`` (int32) holds the member numbers. The chunks of one sweep share its run id
+  (kept in the manifest, also by ``--resume``). Two runs made without ``--member-offset`` number
+  their members alike, but their labels differ, so xarray's default ``xr.open_mfdataset(files)``
+  (combine="by_coords") concatenates them along ``member``, every member once, runs in the order
+  they started (before the labels it kept 2 of 5 members, or padded mu_s to recorded_member x
+  member with NaN). :func:`open_ensemble` gives back simulate()'s layout: ``member`` the numbers,
+  ``member_id`` the labels (which :func:`write_ensemble` keeps).
+- Recorded fields live in the netCDF4 group ``recorded`` (``xr.open_dataset(path,
+  group="recorded")``): dims (``recorded_member``, ``record_time``, ``x``), ``recorded_member``
+  the labels of the recorded members, ``recorded_member_number`` their numbers, ``record_time``
+  the recording time (not named ``time``: CF reserves that name for calendar time with
+  ``units = "s since <epoch>"``). In the root group they made by_coords concatenate along a second
+  dimension. :func:`open_ensemble` gives back (``recorded``, ``time``, ``x``) with
+  ``recorded_member`` the numbers.
+
+Files written before the labels (numbers as ``member``, recorded fields in the root) still open.
+Coordinates carry no ``_FillValue``; integers are int32 or int8 (netCDF classic types, CF-1.8);
+labels are zlib-compressed char arrays; the global attribute ``history`` says when and by which
+command the file was written.
+
+Combining files: :func:`open_ensembles` (refuses repeated member numbers, saying what to do), or
+lazily (needs dask) ``xr.open_mfdataset(files)`` at xarray's defaults or with
+``**COMBINE_KWARGS``, and ``xr.open_mfdataset(files, group="recorded")`` for the recorded fields.
 
 Completeness: a file written by :func:`write_ensemble` has the global attribute
 ``warpfric_complete = 1`` and is written under a temporary name and renamed, so a killed run never
-leaves a file that looks complete. A chunked run (:class:`ChunkStore`) keeps its finished chunks
-in ``OUT.nc.parts/`` until all are done, then combines them into ``OUT.nc``.
+leaves a file that looks complete; a write that fails (a full disk) or is interrupted removes its
+temporary file and raises :class:`OutputWriteError`. A chunked run (:class:`ChunkStore`) keeps its
+finished chunks in ``OUT.nc.parts/`` until all are done, then combines them into ``OUT.nc``.
+
+Before a run: :func:`lock_output` takes ``OUT.nc.lock`` (created with O_EXCL: the first proof that
+the folder is writable, and the refusal of a second run on the same output, :class:`OutputBusy`),
+:func:`check_free_space` compares the folder's free space with :func:`estimate_bytes`, and
+:func:`remove_stale_temporaries` removes what an earlier killed run left.
 """
 
 from __future__ import annotations
 
 import contextlib
 import datetime
+import errno
 import hashlib
 import json
 import os
 import shutil
+import socket
+import time
 import uuid
 from pathlib import Path
 
@@ -45,13 +72,209 @@ COMPLETE_ATTR = "warpfric_complete"
 PARTS_SUFFIX = ".parts"
 MANIFEST = "manifest.json"
 FILE_TIME = "record_time"  # on-disk name of the recording-time coordinate (``time`` in memory)
-RECORDED_MEMBER_ATTRS = {"long_name": "member number (value of coordinate member) of each recorded member",
-                         "units": "1"}
-# xr.open_mfdataset(files, **COMBINE_KWARGS) combines warpfric files of distinct member numbers,
-# recorded fields included, under both xarray's current and its announced combine defaults
+RECORDED_GROUP = "recorded"  # netCDF4 group of the recorded fields
+MEMBER_NUMBER = "member_number"  # on disk: the member numbers, beside the member labels
+MEMBER_ID = "member_id"  # in memory: the member labels, beside the member numbers
+RECORDED_NUMBER = "recorded_member_number"
+MEMBER_LABEL_ATTRS = {"long_name": "member label: the id of the run that simulated the member (its UTC start time "
+                      "and a random suffix) and its member number; unique across runs", "units": "1"}
+RECORDED_MEMBER_ATTRS = {"long_name": "member label (value of coordinate member of the root group) of each recorded "
+                         "member", "units": "1"}
+RECORDED_NUMBER_ATTRS = {"long_name": "member number of each recorded member", "units": "1"}
+NUMBER_DIGITS = 10  # member numbers are int32: at most 10 digits, zero-padded so that labels sort as numbers
+# xr.open_mfdataset(files, **COMBINE_KWARGS) concatenates warpfric files along member in the order
+# given (xarray's default, by_coords, orders them by their labels, i.e. by the runs' start), under
+# both xarray's current and its announced combine defaults; recorded fields: group="recorded"
 COMBINE_KWARGS = {"combine": "nested", "concat_dim": "member", "data_vars": "minimal", "coords": "minimal",
                   "compat": "no_conflicts", "join": "outer"}
 INT32_MAX = 2**31 - 1
+LOCK_SUFFIX = ".lock"
+FULL_DISK_BYTES = 1 << 20  # a netCDF write that fails with less than this free: the disk is full
+NO_SPACE_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
+
+
+class OutputUnwritable(ValueError):
+    """The output's folder cannot be written (checked before anything runs; exit code 2)."""
+
+
+class OutputWriteError(Exception):
+    """Writing an output failed during a run: a full disk, or another I/O error (exit code 3). Its
+    temporary file has been removed."""
+
+    def __init__(self, message: str, disk_full: bool = False):
+        super().__init__(message)
+        self.disk_full = disk_full
+
+
+class OutputBusy(Exception):
+    """Another run is writing the same output: its lock file exists (exit code 4)."""
+
+
+def _size(n: float) -> str:
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB"):
+        if n < 1024 or unit == "TiB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
+        n /= 1024
+    return ""  # pragma: no cover
+
+
+def free_bytes(folder) -> int | None:
+    """Free bytes in ``folder`` for this user, None where the file system does not say."""
+    try:
+        return shutil.disk_usage(folder).free
+    except OSError:
+        return None
+
+
+def estimate_bytes(n_members: int, nodes: int, *, final_fields: bool = True, front_events: int = 1,
+                   recorded: int = 0, times: int = 0) -> int:
+    """Bytes of an ensemble file before compression (zlib gains ~10 % on the fields): per member
+    ~100 scalars, each front event's arrival times and the final-state fields (8 per node); per
+    recorded member 4 fields at every recording time and node."""
+    per_member = 8 * (100 + nodes * (front_events + (8 if final_fields else 0)))
+    return int(n_members * per_member + 4 * 8 * recorded * times * nodes)
+
+
+def check_free_space(path, need: int, what: str) -> None:
+    """OutputWriteError (disk full) when the folder of ``path`` has less than half of ``need``
+    bytes free: the file cannot fit even if compression halved it."""
+    folder = Path(path).parent
+    free = free_bytes(folder)
+    if free is not None and free < need // 2:
+        raise OutputWriteError(f"output {str(path)!r}: disk full: {_size(free)} free in {str(folder)!r}, {what} needs "
+                               f"about {_size(need)}; free some space or choose another -o", disk_full=True)
+
+
+def lock_path(path) -> Path:
+    path = Path(path)
+    return path.with_name(path.name + LOCK_SUFFIX)
+
+
+def _create_exclusive(path: Path) -> int:
+    return os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
+
+
+def _unwritable(path: Path, folder: Path, err: OSError) -> OutputUnwritable:
+    reason = "read-only file system" if err.errno == errno.EROFS else (err.strerror or str(err)).lower()
+    return OutputUnwritable(f"output {str(path)!r}: cannot write in folder {str(folder)!r} ({reason}); choose "
+                            "another -o or make the folder writable")
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except (PermissionError, OverflowError, ValueError):
+        return True
+    return True
+
+
+def _stale(lock: Path) -> bool:
+    """True for a lock that no living run holds: its process is gone (same host), or it is empty
+    (its writer died before writing it) and older than 10 s."""
+    try:
+        holder = json.loads(lock.read_text() or "{}")
+    except (OSError, ValueError):
+        holder = {}
+    if not holder:
+        try:
+            return time.time() - lock.stat().st_mtime > 10
+        except OSError:
+            return True
+    return holder.get("host") == socket.gethostname() and not _pid_alive(int(holder.get("pid", -1)))
+
+
+def _holder(lock: Path) -> str:
+    try:
+        h = json.loads(lock.read_text())
+        return f"pid {h['pid']} on {h['host']}, since {h['started']}"
+    except (OSError, ValueError, KeyError, TypeError):
+        return "unknown process"
+
+
+def lock_output(path, command: str | None = None) -> Path:
+    """Take ``OUT.nc.lock`` beside ``path`` (O_EXCL) and return it; release with
+    :func:`unlock_output`. A lock whose process is gone (same host) is taken over. Raises
+    OutputBusy when a living run holds it, OutputUnwritable when the folder cannot be written."""
+    path = Path(path)
+    lock = lock_path(path)
+    for _ in range(3):
+        try:
+            fd = _create_exclusive(lock)
+        except FileExistsError:
+            if _stale(lock):
+                with contextlib.suppress(FileNotFoundError):
+                    lock.unlink()
+                continue
+            raise OutputBusy(f"output {str(path)!r} is being written by another warpfric run ({_holder(lock)}); wait "
+                             f"for it to end, or remove {str(lock)!r} if that run is gone") from None
+        except OSError as err:
+            raise _unwritable(path, path.parent, err) from None
+        now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+        with os.fdopen(fd, "w") as f:
+            json.dump({"pid": os.getpid(), "host": socket.gethostname(), "started": now, "command": command}, f)
+        return lock
+    raise OutputBusy(f"output {str(path)!r}: lock {str(lock)!r} keeps coming back; is another run starting?")
+
+
+def unlock_output(lock: Path) -> None:
+    """Remove a lock taken by :func:`lock_output` in this process (not one another run took over)."""
+    with contextlib.suppress(OSError, ValueError):
+        if json.loads(Path(lock).read_text()).get("pid") == os.getpid():
+            Path(lock).unlink()
+
+
+@contextlib.contextmanager
+def output_lock(path, command: str | None = None):
+    """``with output_lock(path):`` holds ``OUT.nc.lock`` for the block (see :func:`lock_output`)."""
+    lock = lock_output(path, command)
+    try:
+        yield lock
+    finally:
+        unlock_output(lock)
+
+
+def probe_writable(folder, path) -> None:
+    """OutputUnwritable unless a file can be created in ``folder`` (created and removed at once)."""
+    folder = Path(folder)
+    probe = folder / f".warpfric-probe-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+    try:
+        os.close(_create_exclusive(probe))
+    except OSError as err:
+        raise _unwritable(Path(path), folder, err) from None
+    probe.unlink()
+
+
+def _temporaries(folder: Path, prefix: str) -> list:
+    return sorted(folder.glob(f"{prefix}*.tmp")) if folder.is_dir() else []
+
+
+def remove_stale_temporaries(path) -> list:
+    """Remove the temporary files that killed writers of ``path`` left (``OUT.nc.<pid>.<hex>.tmp``
+    beside it and ``*.tmp`` in its parts folder); call it holding the output's lock, so that no
+    living writer of this process's run owns them. Returns the removed paths."""
+    path = Path(path)
+    removed = []
+    for tmp in _temporaries(path.parent, path.name + ".") + _temporaries(parts_dir(path), ""):
+        with contextlib.suppress(FileNotFoundError):
+            tmp.unlink()
+            removed.append(tmp)
+    return removed
+
+
+def write_failure(path, err: BaseException, free: int | None) -> OutputWriteError:
+    """The OutputWriteError of a failed write. 'disk full' for ENOSPC/EDQUOT, and for any other
+    I/O error when less than 1 MiB was left free: HDF5 reports a full disk as netCDF's generic
+    'NetCDF: HDF error' (RuntimeError) while writing, or as EACCES when it creates a file."""
+    path = Path(path)
+    code = getattr(err, "errno", None)
+    reason = " ".join(str(getattr(err, "strerror", None) or err).split())
+    if code in NO_SPACE_ERRNOS or (free is not None and free < FULL_DISK_BYTES):
+        where = f"{_size(free)} free" if free is not None else "no space left"
+        return OutputWriteError(f"disk full while writing {str(path)!r} ({where}; its partial file removed)",
+                                disk_full=True)
+    return OutputWriteError(f"could not write {str(path)!r} ({type(err).__name__}: {reason}; its partial file removed)")
 
 
 def _encoding(ds: xr.Dataset, complevel: int) -> dict:
@@ -59,6 +282,8 @@ def _encoding(ds: xr.Dataset, complevel: int) -> dict:
     for name, var in ds.variables.items():
         if name in ds.coords:
             enc[name] = {"_FillValue": None}  # CF: coordinate variables have no missing values
+        if var.dtype.kind == "U":  # member labels: a compressed char array (a vlen string cannot be compressed)
+            enc[name].update({"dtype": "S1", "char_dim_name": "label_length", "zlib": True, "complevel": complevel})
         if var.ndim == 0 or var.dtype.kind not in "biuf":
             continue
         enc.setdefault(name, {}).update({"zlib": True, "complevel": complevel, "shuffle": True})
@@ -76,15 +301,30 @@ def _int32(value, where: str):
     return out if isinstance(value, np.ndarray) else out[()]
 
 
-def _to_file_layout(ds: xr.Dataset) -> xr.Dataset:
-    """The in-memory layout of simulate() -> the on-disk layout (see the module docstring)."""
+def new_run_id() -> str:
+    """A run's id: its UTC start time to the millisecond (so that runs sort by it) and 6 random hex
+    digits (two runs of one millisecond differ), e.g. '20261125T193512123-3f2a9c'."""
+    now = datetime.datetime.now(datetime.timezone.utc)
+    return f"{now:%Y%m%dT%H%M%S}{now.microsecond // 1000:03d}-{uuid.uuid4().hex[:6]}"
+
+
+def member_labels(run_id: str, numbers) -> np.ndarray:
+    """The labels ``<run id>:<number, 10 digits>`` of members ``numbers`` of run ``run_id``."""
+    return np.array([f"{run_id}:{int(n):0{NUMBER_DIGITS}d}" for n in np.asarray(numbers).reshape(-1)], dtype=str)
+
+
+def _labels(ds: xr.Dataset, run_id: str | None) -> np.ndarray:
+    """The member labels to write: those ``ds`` carries (read from a file) where they are strictly
+    increasing, as a file's coordinate must be; else new ones of run ``run_id`` (a new id if None)."""
+    if MEMBER_ID in ds.coords and run_id is None:
+        labels = np.asarray(ds[MEMBER_ID].values).astype(str)
+        if labels.size < 2 or bool(np.all(labels[1:] > labels[:-1])):
+            return labels
+    return member_labels(run_id or new_run_id(), ds.member.values)
+
+
+def _file_variables(ds: xr.Dataset) -> xr.Dataset:
     out = ds.copy()
-    if "recorded" in out.dims:
-        numbers = np.asarray(out.recorded_member.values)
-        out = out.assign_coords(recorded_member=("recorded", _int32(numbers, "recorded_member"),
-                                                 RECORDED_MEMBER_ATTRS)).swap_dims(recorded="recorded_member")
-    if "time" in out.dims:
-        out = out.rename(time=FILE_TIME)
     for name, var in list(out.variables.items()):
         if var.dtype == np.int64:
             out[name] = out[name].copy(data=_int32(var.values, name))
@@ -93,8 +333,44 @@ def _to_file_layout(ds: xr.Dataset) -> xr.Dataset:
     return out
 
 
-def _from_file_layout(ds: xr.Dataset) -> xr.Dataset:
-    """The on-disk layout -> the in-memory layout of simulate()."""
+def _to_file_layout(ds: xr.Dataset, run_id: str | None = None) -> tuple[xr.Dataset, xr.Dataset | None]:
+    """The in-memory layout of simulate() -> the on-disk layout: (root group, recorded group or None),
+    see the module docstring."""
+    labels = _labels(ds, run_id)
+    numbers = _int32(np.asarray(ds.member.values), "member")
+    rec_vars = [v for v in ds.data_vars if "recorded" in ds[v].dims]
+    root = ds.drop_vars(rec_vars + [c for c in ("recorded_member", "time", MEMBER_ID) if c in ds.coords])
+    root = root.drop_vars("member").assign_coords(member=("member", labels, MEMBER_LABEL_ATTRS),
+                                                  **{MEMBER_NUMBER: ("member", numbers, dict(ds.member.attrs))})
+    recorded = None
+    if rec_vars:
+        rec = ds[rec_vars].drop_vars([c for c in ("member", MEMBER_ID) if c in ds[rec_vars].coords])
+        rec_numbers = _int32(np.asarray(ds.recorded_member.values), "recorded_member")
+        where = {int(n): i for i, n in enumerate(ds.member.values)}
+        rec = rec.drop_vars("recorded_member").assign_coords(
+            recorded_member=("recorded", labels[[where[int(n)] for n in rec_numbers]], RECORDED_MEMBER_ATTRS),
+            **{RECORDED_NUMBER: ("recorded", rec_numbers, RECORDED_NUMBER_ATTRS)}).swap_dims(recorded="recorded_member")
+        rec = rec.rename(time=FILE_TIME)
+        rec.attrs = {"Conventions": ds.attrs.get("Conventions", "CF-1.8"),
+                     "title": "recorded fields of chosen members (the ensemble is in the root group)"}
+        recorded = _file_variables(rec)
+    return _file_variables(root), recorded
+
+
+def _from_file_layout(ds: xr.Dataset, recorded: xr.Dataset | None = None) -> xr.Dataset:
+    """The on-disk layout (root group, recorded group) -> the in-memory layout of simulate(). Reads
+    the layout before member labels too (numbers as the member coordinate, recorded fields in the root)."""
+    if MEMBER_NUMBER in ds.coords:
+        labels, numbers = ds.member.values.astype(str), ds[MEMBER_NUMBER]
+        ds = ds.drop_vars(["member", MEMBER_NUMBER]).assign_coords(
+            member=("member", numbers.values, dict(numbers.attrs)), **{MEMBER_ID: ("member", labels, MEMBER_LABEL_ATTRS)})
+    if recorded is not None:
+        numbers = recorded[RECORDED_NUMBER]
+        recorded = recorded.drop_vars(["recorded_member", RECORDED_NUMBER, "x"]).rename(
+            {FILE_TIME: "time", "recorded_member": "recorded"}).assign_coords(
+            recorded_member=("recorded", numbers.values, dict(numbers.attrs)))
+        recorded.attrs = {}
+        ds = ds.assign(recorded.data_vars).assign_coords(recorded_member=recorded.recorded_member, time=recorded.time)
     if FILE_TIME in ds.dims:
         ds = ds.rename({FILE_TIME: "time"})
     if "recorded_member" in ds.dims:
@@ -107,6 +383,14 @@ def _history_line(command: str | None) -> str:
 
     now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
     return f"{now}: {command or 'warpfric.io.write_ensemble (Python)'} (warpfric {__version__})"
+
+
+def parameters_along_member(ds: xr.Dataset) -> xr.Dataset:
+    """Every parameter along ``member``, the constant ones too: how files store them, so that runs of
+    different constants combine under any xarray settings (a scalar that differs between files is
+    kept from the first file under xarray's announced defaults, compat="override")."""
+    return ds.assign({name: ds[name].broadcast_like(ds.member) for name in PARAMETER_NAMES
+                      if name in ds and "member" not in ds[name].dims})
 
 
 def collapse_constants(ds: xr.Dataset, varying) -> xr.Dataset:
@@ -132,15 +416,22 @@ def _in_process_locks():
     return dask.config.set(scheduler="synchronous")
 
 
-def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, command: str | None = None) -> Path:
+def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, command: str | None = None,
+                   run_id: str | None = None) -> Path:
     """Write ``ds`` (from :func:`warpfric.simulate`) to netCDF4 at ``path``, atomically.
 
-    varying:   names of the parameters to keep along ``member`` (default: those that vary in ds,
-               ``ds.attrs['varying_parameters']``); the others are stored as scalars.
+    varying:   names of the swept parameters (default: those that vary in ds,
+               ``ds.attrs['varying_parameters']``), the file's ``varying_parameters``. Every
+               parameter is stored along ``member``; :func:`open_ensemble` gives back the others,
+               where constant, as scalars.
     complevel: zlib level (1..9) of every numeric variable.
     command:   what produced the file, for the ``history`` attribute (a line
                "<UTC time>: <command> (warpfric <version>)" put before any earlier history).
+    run_id:    the id in the member labels (coordinate ``member`` of the file, ``<run id>:<number>``;
+               the chunks of one sweep share it). None: the labels ``ds`` was read with
+               (``member_id``), else a new id (:func:`new_run_id`).
     ``recorded_member`` must hold member numbers (values of ``member``).
+    Raises OutputWriteError when the file cannot be written (its temporary file removed).
     """
     path = Path(path)
     if varying is None:
@@ -148,25 +439,49 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
     if "recorded_member" in ds.coords and not np.isin(ds.recorded_member.values, ds.member.values).all():
         raise ValueError(f"recorded_member {ds.recorded_member.values.tolist()}: not among the member numbers "
                          f"{ds.member.values.min()}..{ds.member.values.max()} of the ensemble")
-    out = collapse_constants(ds, set(varying))
+    out = parameters_along_member(ds)
     out.attrs["varying_parameters"] = " ".join(v for v in PARAMETER_NAMES if v in set(varying))
     out.attrs[COMPLETE_ATTR] = np.int8(1)
     earlier = out.attrs.get("history", "")
     out.attrs["history"] = _history_line(command) + ("\n" + earlier if earlier else "")
-    out = _to_file_layout(out)
+    root, recorded = _to_file_layout(out, run_id)
     # a name of its own per writer: two writers of one chunk (a task run twice) never share a file
     tmp = path.with_name(f"{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    with _in_process_locks():
-        out.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=_encoding(out, complevel))
-    os.replace(tmp, path)
+    try:
+        with _in_process_locks():
+            root.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=_encoding(root, complevel))
+            if recorded is not None:
+                recorded.to_netcdf(tmp, mode="a", group=RECORDED_GROUP, format="NETCDF4", engine="netcdf4",
+                                   encoding=_encoding(recorded, complevel))
+        os.replace(tmp, path)
+    except BaseException as err:  # a full disk, an I/O error, Ctrl-C: no temporary file stays behind
+        free = free_bytes(path.parent)
+        with contextlib.suppress(OSError):
+            tmp.unlink()
+        if isinstance(err, (OSError, RuntimeError)):  # netCDF4 reports HDF5's failures as RuntimeError
+            raise write_failure(path, err, free) from err
+        raise
     return path
+
+
+def _has_group(path, group: str) -> bool:
+    import netCDF4
+
+    with netCDF4.Dataset(path, "r") as nc:
+        return group in nc.groups
 
 
 def _read(path) -> xr.Dataset:
     """A netCDF file, loaded, in the in-memory layout; ValueError (one line) if it is not netCDF."""
     try:
         with xr.open_dataset(path, engine="netcdf4") as ds:
-            return _from_file_layout(ds.load())
+            ds = ds.load()
+        recorded = None
+        if _has_group(path, RECORDED_GROUP):
+            with xr.open_dataset(path, engine="netcdf4", group=RECORDED_GROUP) as rec:
+                recorded = rec.load()
+        ds = _from_file_layout(ds, recorded)
+        return collapse_constants(ds, set(ds.attrs.get("varying_parameters", "").split()))
     except (OSError, ValueError, RuntimeError) as err:
         reason = " ".join(str(err).split())
         raise ValueError(f"{path}: not a readable netCDF file ({reason})") from None
@@ -266,8 +581,9 @@ class ChunkStore:
         sl = self.members(index)
         try:
             with xr.open_dataset(path, engine="netcdf4") as ds:
+                numbers = ds[MEMBER_NUMBER] if MEMBER_NUMBER in ds else ds.member
                 return int(ds.attrs.get(COMPLETE_ATTR, 0)) == 1 and np.array_equal(
-                    ds.member.values, np.arange(sl.start, sl.stop) + self.member_offset)
+                    numbers.values, np.arange(sl.start, sl.stop) + self.member_offset)
         except Exception:  # noqa: BLE001 - a damaged chunk is simply redone
             return False
 
@@ -281,7 +597,7 @@ class ChunkStore:
         combined.attrs.pop("chunk_index", None)
         combined.attrs.pop("history", None)
         combined.attrs["chunks"] = self.n_chunks
-        write_ensemble(combined, path, command=command)
+        write_ensemble(combined, path, command=command, run_id=self.manifest.get("run_id"))
         shutil.rmtree(self.directory)
         return Path(path)
 
@@ -298,7 +614,8 @@ def duplicate_members(datasets, names=None) -> str:
     where = [n for n, ds in zip(names, datasets) if np.isin(ds.member.values, repeated).any()]
     shown = ", ".join(map(str, repeated[:5].tolist())) + (f", ... ({repeated.size} in all)" if repeated.size > 5 else "")
     return (f"member numbers {shown} occur more than once (in {', '.join(where)}); give separate runs distinct "
-            "numbers with `warpfric run --member-offset K` (or [run] member_offset, or simulate(member_offset=K))")
+            "numbers with `warpfric run --member-offset K` (or [run] member_offset, or simulate(member_offset=K)), "
+            "or open these files with xr.open_mfdataset(files), which keeps them apart by their member labels")
 
 
 def concat_members(datasets, names=None) -> xr.Dataset:
@@ -330,6 +647,8 @@ def concat_members(datasets, names=None) -> xr.Dataset:
             along_member.add(pname)
     datasets = [ds.assign({p: ds[p].broadcast_like(ds.member) for p in along_member
                            if p in ds and "member" not in ds[p].dims}) for ds in datasets]
+    if not all(MEMBER_ID in ds.coords for ds in datasets):  # labels only where every part has them
+        datasets = [ds.drop_vars(MEMBER_ID, errors="ignore") for ds in datasets]
     first = datasets[0]
     member_vars = [v for v in first.data_vars if "member" in first[v].dims]
     parts = [ds[member_vars] for ds in datasets]
@@ -341,7 +660,15 @@ def concat_members(datasets, names=None) -> xr.Dataset:
             if name in ds and not var.equals(ds[name]):
                 raise ValueError(f"{names[0]} and {other} differ in {name}: not one ensemble")
         out[name] = var
-    recorded = [ds for ds in datasets if "recorded" in ds.dims]
+    recorded = [(name, ds) for name, ds in zip(names, datasets) if "recorded" in ds.dims]
+    for name, ds in recorded[1:]:
+        times, first_times = ds.time.values, recorded[0][1].time.values
+        if times.shape != first_times.shape or not np.array_equal(times, first_times):
+            raise ValueError(f"{recorded[0][0]} and {name} recorded their fields at different times ({first_times.size} "
+                             f"and {times.size} times in [{first_times.min():g}, {first_times.max():g}] and "
+                             f"[{times.min():g}, {times.max():g}] s): open_ensembles needs one recording grid; open "
+                             "the recorded groups with xr.open_mfdataset(files, group='recorded') (times joined)")
+    recorded = [ds for _, ds in recorded]
     if recorded:
         rec_vars = [v for v in recorded[0].data_vars if "recorded" in recorded[0][v].dims]
         rec = xr.concat([ds[rec_vars] for ds in recorded], dim="recorded", data_vars="all", coords="different",

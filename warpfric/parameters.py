@@ -118,6 +118,12 @@ def parameter_long_name(name: str) -> str:
     return _FIELDS[name].metadata["long_name"]
 
 
+def units_text(units: str) -> str:
+    """A unit as a reader should see it: '' for the dimensionless '1' of the files (CF/UDUNITS),
+    which reads like an index in a message, else the unit."""
+    return "" if units in ("1", "") else units
+
+
 def _range_text(meta) -> str:
     """Valid range, e.g. '(0, inf)': an infinite end is always open (inf itself is never a value,
     except stop_time = inf, which means "no stop")."""
@@ -156,10 +162,16 @@ def validate_value(name: str, value: np.ndarray) -> None:
     if name in ("stop_time", "end_time"):  # inf means "no stop" / "when the detachment is over"
         bad &= ~np.isposinf(arr)
     if np.any(bad):
-        first = arr.reshape(-1)[np.flatnonzero(bad.reshape(-1))[0]]
+        flat = bad.reshape(-1)
+        index = int(np.flatnonzero(flat)[0])
+        first = float(arr.reshape(-1)[index])
+        units = units_text(parameter_units(name))
+        # a per-member array: name the member, e.g. eccentricity[1234] = nan
+        what = f"{name}[{index}]" if arr.size > 1 else repr(name)
+        more = f" ({int(flat.sum())} members out of range)" if flat.sum() > 1 else ""
         raise ValueError(
-            f"parameter {name!r} = {float(first)!r} ({parameter_units(name)}) is out of range; "
-            f"valid range {_range_text(meta)}"
+            f"parameter {what} = {first!r}{' ' + units if units else ''} is out of range; valid range "
+            f"{_range_text(meta)}{' ' + units if units else ' (dimensionless)'}{more}"
         )
 
 

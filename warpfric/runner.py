@@ -47,6 +47,8 @@ class ChunkJob:
     device: str | None  # None: the worker's own device (its GPU if it has one, else the CPU)
     command: str | None
     progress: bool
+    cpu_workers: int | None = None  # simulate(workers=...): CPU worker processes for this chunk
+    run_id: str | None = None  # the run's id in the member labels (warpfric.io.member_labels)
 
 
 def worker_device(worker=None) -> str:
@@ -80,7 +82,7 @@ def run_chunk(job: ChunkJob) -> dict:
     index, members, failed members, device, wall time, process id)."""
     from .io import write_ensemble
     from .simulate import simulate
-    from .sweep import parse_sweep
+    from .sweep_file import parse_sweep
 
     t0 = time.perf_counter()
     sweep = parse_sweep(job.sweep_text, job.sweep_name)
@@ -97,7 +99,7 @@ def run_chunk(job: ChunkJob) -> dict:
     label = (f"chunk {job.index + 1}/{job.n_chunks} (members {job.start}..{job.stop - 1})" if job.progress else False)
     ds = simulate(sweep.member_slice(sl) or None, scene=sweep.scene, model=sweep.model, solver=sweep.solver,
                   fronts=sweep.fronts, record=record, device=device, progress=label,
-                  member_offset=job.member_offset + job.start)
+                  member_offset=job.member_offset + job.start, workers=job.cpu_workers)
     if record is not None:  # member numbers, as the member coordinate
         ds = ds.assign_coords(recorded_member=ds.recorded_member.copy(data=ds.member.values[list(record.members)]))
     ds.attrs["title"] = sweep.title or ds.attrs["title"]
@@ -113,7 +115,7 @@ def run_chunk(job: ChunkJob) -> dict:
     failed = int((ds.status.values != 0).sum())
     if not sweep.run.get("final_fields", True):
         ds = ds.drop_vars([v for v in FINAL_FIELDS if v in ds])
-    write_ensemble(ds, job.path, varying=sweep.varying, command=job.command)
+    write_ensemble(ds, job.path, varying=sweep.varying, command=job.command, run_id=job.run_id)
     return dict(index=job.index, members=job.stop - job.start, failed=failed, device=device,
                 wall_s=time.perf_counter() - t0, pid=os.getpid())
 
@@ -125,7 +127,7 @@ def prepare_worker(sweep_text: str, sweep_name: str, device: str | None) -> dict
     import dataclasses as dc
 
     from .simulate import simulate
-    from .sweep import parse_sweep
+    from .sweep_file import parse_sweep
 
     t0 = time.perf_counter()
     sweep = parse_sweep(sweep_text, sweep_name)
@@ -133,7 +135,7 @@ def prepare_worker(sweep_text: str, sweep_name: str, device: str | None) -> dict
     fronts = dc.replace(sweep.fronts, grid_check=False) if sweep.fronts is not None else None
     simulate(sweep.member_slice(slice(0, 1)) or None, scene=sweep.scene, model=sweep.model,
              solver=dc.replace(sweep.solver, max_steps=2, float32_fallback=False), fronts=fronts, device=device,
-             progress=False)
+             progress=False, workers=1)
     return dict(device=device, pid=os.getpid(), seconds=time.perf_counter() - t0)
 
 
@@ -249,17 +251,25 @@ def connect(address: str):
         raise RunError(f"scheduler {address!r}: cannot connect ({err})") from None
 
 
+def check_output_name(path: Path) -> None:
+    """Refuse an output name that cannot be a file: not .nc, a folder, in a folder that does not exist."""
+    if path.suffix != ".nc":
+        raise RunError(f"output {str(path)!r}: expected a file name ending in .nc")
+    if not path.parent.is_dir():
+        raise RunError(f"output {str(path)!r}: folder {str(path.parent)!r} does not exist")
+    if path.is_dir():
+        raise RunError(f"output {str(path)!r} is a folder; give a file name ending in .nc")
+
+
 def check_output(path: Path, resume: bool, overwrite: bool) -> None:
     """Refuse an output that would lose results: an existing file without overwrite, an interrupted
-    run's parts without resume or overwrite (RunError, one line)."""
+    run's parts without resume or overwrite (RunError, one line). Call it holding the output's lock
+    (warpfric.io.output_lock): the parts of a run that is still going are not an interrupted run."""
     from .io import parts_dir
 
     if resume and overwrite:
         raise RunError("--resume and --overwrite exclude each other")
-    if path.suffix != ".nc":
-        raise RunError(f"output {str(path)!r}: expected a file name ending in .nc")
-    if not path.parent.exists():
-        raise RunError(f"output {str(path)!r}: folder {str(path.parent)!r} does not exist")
+    check_output_name(path)
     if path.exists() and not overwrite:
         raise RunError(f"output {str(path)!r} exists; pass --overwrite to replace it"
                        + (" (it is complete: nothing to resume)" if resume else ""))
@@ -268,28 +278,75 @@ def check_output(path: Path, resume: bool, overwrite: bool) -> None:
                        "or --overwrite to start again")
 
 
+class RunInterrupted(KeyboardInterrupt):
+    """Ctrl-C during a sweep, with what was kept (``message``, one line for the command line)."""
+
+    def __init__(self, message: str):
+        super().__init__(message)
+        self.message = message
+
+
+def sweep_bytes(sweep, n_members: int) -> int:
+    """Estimated bytes of a sweep's output before compression (see warpfric.io.estimate_bytes)."""
+    from .io import estimate_bytes
+
+    record = sweep.record
+    return estimate_bytes(n_members, sweep.solver.nodes, final_fields=sweep.run.get("final_fields", True),
+                          front_events=len(sweep.fronts.events) if sweep.fronts is not None else 0,
+                          recorded=len(record.members) if record else 0, times=len(record.times) if record else 0)
+
+
 def run_sweep(sweep_file, output=None, *, chunk: int | None = None, member_offset: int | None = None,
               device: str | None = None, resume: bool = False, overwrite: bool = False, client=None,
               scheduler: str | None = None, local: bool | None = None, workers: int | None = None,
-              quiet: bool = False, command: str | None = None) -> RunReport:
+              quiet: bool = False, command: str | None = None, cpu_workers: int | None = None) -> RunReport:
     """Run a sweep file in resumable chunks into ``output`` (default: the sweep's name with .nc).
 
     Where the chunks run: ``client`` (a ``distributed.Client``), else ``scheduler`` (an address), else
     ``local=True`` (a new local cluster: one worker per GPU, or ``workers`` CPU processes), else the
     sweep's ``[run] scheduler`` ("local" or an address), else this process. ``chunk``,
     ``member_offset`` and ``device`` default to the interrupted run's (resume), then the sweep's
-    ``[run]`` table; ``device`` None on a cluster: each worker's own GPU (or CPU).
+    ``[run]`` table; ``device`` None on a cluster: each worker's own GPU (or CPU). ``cpu_workers``:
+    ``simulate(workers=...)`` of each chunk run in this process (None: all cores where it pays).
     Returns a RunReport; ``output`` is written once every chunk exists (else report.output is None
-    and ``resume=True`` finishes the run). Raises RunError/SweepError (ValueError) before running."""
-    from .io import ChunkStore, parts_dir, sweep_digest
-    from .simulate import _check_device
-    from .sweep import check_member_offset, load_sweep
+    and ``resume=True`` finishes the run).
+
+    Before anything runs: RunError/SweepError (ValueError) for bad input, OutputUnwritable (a
+    ValueError) for a folder that cannot be written, OutputBusy while another run holds the output's
+    lock, OutputWriteError when the folder has clearly too little free space. During the run: an
+    OutputWriteError (disk full) keeps the finished chunks; RunInterrupted (a KeyboardInterrupt) on
+    Ctrl-C. A parts folder that this call created is removed again when it ends without a finished
+    chunk, so that nothing half written blocks the next run."""
+    from .io import check_free_space, output_lock, parts_dir, probe_writable, remove_stale_temporaries
+    from .sweep_file import load_sweep
 
     sweep = load_sweep(sweep_file)
     out = Path(output) if output else Path(sweep_file).with_suffix(".nc")
-    check_output(out, resume, overwrite)
+    if resume and overwrite:
+        raise RunError("--resume and --overwrite exclude each other")
     if chunk is not None and (isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1):
         raise RunError(f"--chunk {chunk}: expected an integer >= 1 (members per chunk file)")
+    check_output_name(out)
+    with output_lock(out, command):  # the folder is writable, and no other run writes this output
+        check_output(out, resume, overwrite)
+        if resume and parts_dir(out).exists():
+            probe_writable(parts_dir(out), out)
+        stale = remove_stale_temporaries(out)
+        if stale:
+            _say(f"removed {len(stale)} temporary files that an interrupted run left ({stale[0].name}, ...)", quiet)
+        return _run_locked(sweep, sweep_file, out, chunk=chunk, member_offset=member_offset, device=device,
+                           resume=resume, client=client, scheduler=scheduler, local=local, workers=workers,
+                           quiet=quiet, command=command, check_space=check_free_space, cpu_workers=cpu_workers)
+
+
+def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, resume, client, scheduler, local,
+                workers, quiet, command, check_space, cpu_workers) -> RunReport:
+    import shutil
+
+    from .io import ChunkStore, OutputWriteError, free_bytes, new_run_id, parts_dir, sweep_digest, write_failure
+    from .simulate import _check_device
+    from .sweep_file import check_member_offset
+
     parts = parts_dir(out)
     previous = ChunkStore.load(parts) if resume and parts.exists() else None
     # an omitted option takes, in this order: the interrupted run's value (resume), the sweep's [run]
@@ -313,67 +370,105 @@ def run_sweep(sweep_file, output=None, *, chunk: int | None = None, member_offse
     if not use_cluster:  # on a cluster, each worker checks its own device
         device = _check_device(device)
     digest = sweep_digest(f"{sweep.text}\nchunk={chunk}" + (f"\nmember_offset={offset}" if offset else ""))
-    if previous is not None:
-        store = previous
-        if store.digest != digest:
-            raise RunError(f"{str(parts)!r} belongs to a different sweep, chunk size ({store.chunk}) or member "
-                           f"offset ({store.member_offset}); run with --overwrite to start again")
-    else:
-        store = ChunkStore.create(parts, digest, sweep.n_members, chunk, member_offset=offset,
-                                  sweep_file=str(Path(sweep_file).resolve()), device=device)
-    todo = [i for i in range(store.n_chunks) if not store.is_done(i)]
+    if previous is not None and previous.digest != digest:
+        raise RunError(f"{str(parts)!r} belongs to a different sweep, chunk size ({previous.chunk}) or member "
+                       f"offset ({previous.member_offset}); run with --overwrite to start again")
+    # the chunk files and the combined file exist side by side until the parts are removed; a resumed
+    # run's finished chunks are on the disk already
+    done = sum(previous.members(i).stop - previous.members(i).start for i in range(previous.n_chunks)
+               if previous.is_done(i)) if previous is not None else 0
+    check_space(out, sweep_bytes(sweep, sweep.n_members - done) + sweep_bytes(sweep, sweep.n_members),
+                f"this run ({sweep.n_members - done} members of {sweep.solver.nodes} nodes to run, chunks and "
+                "combined file)")
     own_client = None
-    if use_cluster and client is None:
+    if use_cluster and client is None:  # before any file: an unreachable scheduler leaves nothing behind
         own_client = local_cluster(workers) if (local or where == "local") else connect(where)
         client = own_client
+    resume_command = f"warpfric run {sweep_file} -o {out} --resume" + (f" --device {device}" if device else "")
+    store = previous
     try:
-        place = "this process, device " + str(device)
-        if client is not None:
-            n_workers = len(client.scheduler_info().get("workers", {}))
-            place = f"Dask cluster {client.scheduler.address} ({n_workers} workers, dashboard {client.dashboard_link})"
-        _say(f"{sweep.n_members} members (numbers {offset}..{offset + sweep.n_members - 1}) in {store.n_chunks} chunks "
-             f"of <= {chunk}, {len(todo)} to run on {place}; swept: {', '.join(sweep.varying) or 'nothing'}", False)
-        if client is not None and todo:
-            t_ready = time.perf_counter()
-            try:  # every worker loads its kernels once, outside the timed run (a task each: heartbeats go on)
-                addresses = list(client.scheduler_info().get("workers", {}))
-                # loose restriction: a worker that dies meanwhile must not leave its warm-up unrunnable
-                ready = client.gather([client.submit(prepare_worker, sweep.text, str(sweep_file), device, workers=[a],
-                                                     allow_other_workers=True, pure=False) for a in addresses])
-                devices = sorted({r["device"] for r in ready})
-                _say(f"{len(ready)} workers ready in {time.perf_counter() - t_ready:.1f} s (kernels loaded on "
-                     f"{', '.join(devices)})", quiet)
-            except Exception as err:  # noqa: BLE001 - the chunks report it by member range
-                _say(f"preparing the workers failed ({type(err).__name__}: {err}); running the chunks anyway", quiet)
-        elif todo:  # compile (or load from Warp's cache) before the timed run, and say how long it took
-            ready = prepare_worker(sweep.text, str(sweep_file), device)
-            _say(f"kernels ready on {ready['device']} in {ready['seconds']:.1f} s", quiet)
-        t0 = time.perf_counter()
-        jobs = [ChunkJob(sweep_text=sweep.text, sweep_name=str(sweep_file), index=i, n_chunks=store.n_chunks,
-                         start=store.members(i).start, stop=store.members(i).stop, member_offset=offset,
-                         path=str(store.chunk_path(i).resolve()), device=device, command=command,
-                         progress=not quiet and client is None)
-                for i in todo]
-        if client is None:
-            reports, errors = run_local(jobs)
-        else:
-            reports, errors = run_on_client(jobs, client, quiet)
+        if store is None:
+            try:
+                store = ChunkStore.create(parts, digest, sweep.n_members, chunk, member_offset=offset,
+                                          sweep_file=str(Path(sweep_file).resolve()), device=device,
+                                          run_id=new_run_id())
+            except OSError as err:
+                shutil.rmtree(parts, ignore_errors=True)
+                raise write_failure(parts, err, free_bytes(out.parent)) from None
+        reports, errors, wall = _run_chunks(sweep, sweep_file, store, chunk, offset, device, client, quiet, command,
+                                            cpu_workers)
+        missing = [i for i in range(store.n_chunks) if not store.is_done(i)]
+        if errors or missing:
+            ranges = ", ".join(f"{store.members(i).start}..{store.members(i).stop - 1}" for i in missing)
+            _say(f"{len(missing)} chunks missing (members {ranges}; {len(errors)} raised, see above); the finished "
+                 f"chunks are kept in {parts}: `{resume_command}` runs the rest", False)
+            return RunReport(chunks=reports, errors=errors, output=None, wall_s=wall)
+        store.combine(out, command=command)
+    except BaseException as err:  # noqa: BLE001 - cleaned up, then raised again
+        kept = _keep_or_remove(store, previous is None)
+        if not isinstance(err, (OutputWriteError, KeyboardInterrupt)):
+            raise
+        first = "free some space, then " if getattr(err, "disk_full", False) else ""
+        what = (f"the {kept} finished chunks are kept in {str(parts)!r}; {first}`{resume_command}` goes on from them"
+                if kept else "nothing was kept")
+        if isinstance(err, KeyboardInterrupt):
+            raise RunInterrupted(f"interrupted; {what}") from None
+        raise OutputWriteError(f"{err}; {what}", err.disk_full) from None
     finally:
         if own_client is not None:
             cluster = own_client.cluster
             own_client.close()
             if cluster is not None:
                 cluster.close()
-    wall = time.perf_counter() - t0
-    missing = [i for i in range(store.n_chunks) if not store.is_done(i)]
-    if errors or missing:
-        ranges = ", ".join(f"{store.members(i).start}..{store.members(i).stop - 1}" for i in missing)
-        resume = f"warpfric run {sweep_file} -o {out} --resume" + (f" --device {device}" if device else "")
-        _say(f"{len(missing)} chunks missing (members {ranges}; {len(errors)} raised, see above); the finished chunks "
-             f"are kept in {parts}: `{resume}` runs the rest", False)
-        return RunReport(chunks=reports, errors=errors, output=None, wall_s=wall)
-    store.combine(out, command=command)
     report = RunReport(chunks=reports, errors=[], output=out, wall_s=wall)
     _say(f"wrote {out} ({sweep.n_members} members, {wall:.1f} s this run, {report.failed_members} failed members in "
          "the chunks run now)", False)
     return report
+
+
+def _keep_or_remove(store, created: bool) -> int:
+    """The number of finished chunks of ``store``; a parts folder created by this run that holds none
+    is removed (so that the next plain run is not told to --resume)."""
+    import shutil
+
+    if store is None:
+        return 0
+    done = store.done_count() if store.directory.exists() else 0
+    if done == 0 and created:
+        shutil.rmtree(store.directory, ignore_errors=True)
+    return done
+
+
+def _run_chunks(sweep, sweep_file, store, chunk, offset, device, client, quiet, command, cpu_workers):
+    """Run the chunks that ``store`` lacks (here or on ``client``): (reports, errors, wall seconds)."""
+    todo = [i for i in range(store.n_chunks) if not store.is_done(i)]
+    place = "this process, device " + str(device)
+    if client is not None:
+        n_workers = len(client.scheduler_info().get("workers", {}))
+        place = f"Dask cluster {client.scheduler.address} ({n_workers} workers, dashboard {client.dashboard_link})"
+    _say(f"{sweep.n_members} members (numbers {offset}..{offset + sweep.n_members - 1}) in {store.n_chunks} chunks "
+         f"of <= {chunk}, {len(todo)} to run on {place}; swept: {', '.join(sweep.varying) or 'nothing'}", False)
+    if client is not None and todo:
+        t_ready = time.perf_counter()
+        try:  # every worker loads its kernels once, outside the timed run (a task each: heartbeats go on)
+            addresses = list(client.scheduler_info().get("workers", {}))
+            # loose restriction: a worker that dies meanwhile must not leave its warm-up unrunnable
+            ready = client.gather([client.submit(prepare_worker, sweep.text, str(sweep_file), device, workers=[a],
+                                                 allow_other_workers=True, pure=False) for a in addresses])
+            devices = sorted({r["device"] for r in ready})
+            _say(f"{len(ready)} workers ready in {time.perf_counter() - t_ready:.1f} s (kernels loaded on "
+                 f"{', '.join(devices)})", quiet)
+        except Exception as err:  # noqa: BLE001 - the chunks report it by member range
+            _say(f"preparing the workers failed ({type(err).__name__}: {err}); running the chunks anyway", quiet)
+    elif todo:  # compile (or load from Warp's cache) before the timed run, and say how long it took
+        ready = prepare_worker(sweep.text, str(sweep_file), device)
+        _say(f"kernels ready on {ready['device']} in {ready['seconds']:.1f} s", quiet)
+    t0 = time.perf_counter()
+    jobs = [ChunkJob(sweep_text=sweep.text, sweep_name=str(sweep_file), index=i, n_chunks=store.n_chunks,
+                     start=store.members(i).start, stop=store.members(i).stop, member_offset=offset,
+                     path=str(store.chunk_path(i).resolve()), device=device, command=command,
+                     progress=not quiet and client is None, cpu_workers=cpu_workers,
+                     run_id=store.manifest.get("run_id"))
+            for i in todo]
+    reports, errors = run_local(jobs) if client is None else run_on_client(jobs, client, quiet)
+    return reports, errors, time.perf_counter() - t0

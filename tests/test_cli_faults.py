@@ -1,0 +1,410 @@
+"""Every fault before or during a run ends in one line, its own exit code and nothing half written
+(issue 22, part 1): a folder that cannot be written (exit 2, checked before anything runs), a full
+disk (exit 3; no temporary file stays, a sweep's finished chunks do), a second run on the same
+output (exit 4, OUT.nc.lock), an unreachable scheduler (exit 2, no parts folder), Ctrl-C (130),
+and the temporary files of a killed run (removed by the next run on that output)."""
+
+import errno
+import importlib
+import json
+import os
+import shutil
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import xarray as xr
+from conftest import DEVICE
+
+from warpfric.cli import main
+from warpfric.io import open_ensemble
+
+SIMULATE_MODULE = importlib.import_module("warpfric.simulate")
+IO_MODULE = importlib.import_module("warpfric.io")
+
+SWEEP = """
+fronts = false
+[solver]
+nodes = 11
+[grid]
+eccentricity = [-0.2, 0.0, 0.2]
+"""
+
+
+def _main(capsys, *args):
+    code = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return code, out.strip().splitlines(), err.strip().splitlines()
+
+
+def _error_line(err, *words):
+    """The last stderr line is the one error line, and the only line starting 'warpfric: error:'."""
+    errors = [line for line in err if line.startswith("warpfric: error:")]
+    assert len(errors) == 1 and err[-1] == errors[0], err
+    for word in words:
+        assert word in errors[0], (word, errors[0])
+
+
+def _files(folder: Path) -> list:
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*"))
+
+
+@pytest.fixture
+def sweep(tmp_path):
+    path = tmp_path / "s.toml"
+    path.write_text(SWEEP)
+    return path
+
+
+@pytest.fixture
+def no_simulation(monkeypatch):
+    """The faults checked before a run: any simulation (the kernels' warm-up included) fails the test."""
+    def forbidden(*args, **kwargs):
+        raise AssertionError("simulate() ran although the output cannot be written")
+
+    monkeypatch.setattr(SIMULATE_MODULE, "simulate", forbidden)
+
+
+def _deny_writes_in(monkeypatch, folder: Path, error=errno.EACCES):
+    """os.open of a new file in ``folder`` fails as it does in a folder without write permission
+    (we run as root here, which chmod does not stop); other paths open as usual."""
+    real = os.open
+    folder = folder.resolve()
+
+    def guarded(path, flags, *args, **kwargs):
+        if flags & os.O_CREAT and Path(path).resolve().parent == folder:
+            raise OSError(error, os.strerror(error), str(path))
+        return real(path, flags, *args, **kwargs)
+
+    monkeypatch.setattr(os, "open", guarded)
+
+
+@pytest.mark.parametrize("kind", ["default scene", "sweep"])
+def test_an_unwritable_folder_exits_2_before_anything_runs(tmp_path, sweep, capsys, monkeypatch, no_simulation, kind):
+    folder = tmp_path / "ro"
+    folder.mkdir()
+    _deny_writes_in(monkeypatch, folder)
+    out = folder / "out.nc"
+    args = (["run", "--nodes", 11] if kind == "default scene" else ["run", sweep]) + ["-o", out, "--device", DEVICE]
+    code, stdout, err = _main(capsys, *args)
+    assert code == 2 and stdout == []
+    assert err == [f"warpfric: error: output '{out}': cannot write in folder '{folder}' (permission denied); "
+                   "choose another -o or make the folder writable"]
+    assert _files(folder) == []  # no parts folder, no lock, no temporary file
+
+
+def _mount_tmpfs(folder: Path, options: str) -> bool:
+    """A small tmpfs at ``folder`` where this process may mount one (root with CAP_SYS_ADMIN)."""
+    if os.geteuid() != 0 or shutil.which("mount") is None:
+        return False
+    folder.mkdir()
+    return subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(folder)],
+                          capture_output=True).returncode == 0
+
+
+def test_a_really_unwritable_folder_exits_2(tmp_path, sweep, capsys, no_simulation):
+    """The same with a folder the file system refuses: read-only tmpfs as root, chmod 555 otherwise."""
+    folder = tmp_path / "ro"
+    if os.geteuid() == 0:
+        if not _mount_tmpfs(folder, "size=64k,ro"):
+            pytest.skip("root without mount: no real read-only folder here (the os.open test covers it)")
+        reason = "read-only file system"
+    else:
+        folder.mkdir()
+        folder.chmod(0o555)
+        reason = "permission denied"
+    try:
+        code, _, err = _main(capsys, "run", sweep, "-o", folder / "s.nc", "--device", DEVICE)
+        assert code == 2
+        _error_line(err, f"cannot write in folder '{folder}' ({reason})")
+        assert _files(folder) == []
+    finally:
+        if os.geteuid() == 0:
+            subprocess.run(["umount", "-l", str(folder)], check=False)  # -l: a handle the failed HDF5 write left
+        else:
+            folder.chmod(0o755)
+
+
+def test_a_folder_without_write_permission_as_a_normal_user():
+    """The issue's case (mkdir ro && chmod 555 ro && warpfric run -o ro/out.nc) as a normal user: as
+    root, the command runs as user nobody (setpriv); exit 2, one line, nothing written."""
+    import tempfile
+
+    command = [sys.executable, "-m", "warpfric", "run", "--nodes", "11", "--device", "cpu"]
+    if os.geteuid() == 0:
+        if shutil.which("setpriv") is None:
+            pytest.skip("root without setpriv: no normal user to run as")
+        command = ["setpriv", "--reuid", "65534", "--regid", "65534", "--clear-groups", *command]
+    home = Path(tempfile.mkdtemp(prefix="warpfric-ro-"))  # not pytest's tmp_path: nobody cannot enter it
+    try:
+        home.chmod(0o755)
+        folder = home / "ro"
+        folder.mkdir()
+        folder.chmod(0o555)
+        if os.geteuid() == 0 and subprocess.run(["setpriv", "--reuid", "65534", "--regid", "65534", "--clear-groups",
+                                                 sys.executable, "-c", "import warpfric"], capture_output=True,
+                                                cwd=home).returncode != 0:
+            pytest.skip("user nobody cannot import warpfric from this environment")
+        env = {**os.environ, "HOME": str(home), "PYTHONWARNINGS": "ignore"}
+        res = subprocess.run([*command, "-o", str(folder / "out.nc")], capture_output=True, text=True, timeout=120,
+                             env=env, cwd=home)
+        errors = [line for line in res.stderr.splitlines() if line.startswith("warpfric:")]
+        assert res.returncode == 2 and errors == [
+            f"warpfric: error: output '{folder / 'out.nc'}': cannot write in folder '{folder}' (permission denied); "
+            "choose another -o or make the folder writable"], res.stderr
+        assert res.stdout == "" and _files(folder) == []
+    finally:
+        shutil.rmtree(home, ignore_errors=True)
+
+
+def _interrupted_run(tmp_path, sweep, capsys, monkeypatch, out, interrupt_at=2):
+    """Run the sweep in chunks of one member, Ctrl-C in chunk ``interrupt_at`` (1-based)."""
+    real = SIMULATE_MODULE.simulate
+    calls = []
+
+    def interrupted(*args, **kwargs):
+        if "member_offset" in kwargs:
+            calls.append(kwargs["member_offset"])
+            if len(calls) == interrupt_at:
+                raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(SIMULATE_MODULE, "simulate", interrupted)
+    code, _, err = _main(capsys, "run", sweep, "-o", out, "--chunk", 1, "--device", DEVICE, "--quiet")
+    monkeypatch.setattr(SIMULATE_MODULE, "simulate", real)
+    return code, err
+
+
+def test_an_unwritable_parts_folder_stops_resume_before_it_runs(tmp_path, sweep, capsys, monkeypatch):
+    out = tmp_path / "s.nc"
+    code, err = _interrupted_run(tmp_path, sweep, capsys, monkeypatch, out)
+    assert code == 130
+    parts = tmp_path / "s.nc.parts"
+    before = _files(parts)
+    _deny_writes_in(monkeypatch, parts)
+    monkeypatch.setattr(SIMULATE_MODULE, "simulate", lambda *a, **k: pytest.fail("ran"))
+    code, _, err = _main(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
+    assert code == 2
+    _error_line(err, f"cannot write in folder '{parts}' (permission denied)")
+    assert _files(parts) == before and not (tmp_path / "s.nc.lock").exists()
+
+
+def _full_disk(monkeypatch, fail_on):
+    """Dataset.to_netcdf fails as on a full disk (HDF5's ENOSPC is netCDF's 'NetCDF: HDF error') for
+    the files whose name starts with ``fail_on``, after writing part of the file."""
+    real, real_free = xr.Dataset.to_netcdf, IO_MODULE.free_bytes
+    full = []
+
+    def to_netcdf(self, path=None, *args, **kwargs):
+        if path is not None and Path(path).name.startswith(fail_on):
+            Path(path).write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(1000))  # the part written before the disk filled
+            full.append(path)
+            raise RuntimeError("NetCDF: HDF error")
+        return real(self, path, *args, **kwargs)
+
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", to_netcdf)
+    monkeypatch.setattr(IO_MODULE, "free_bytes", lambda folder: 0 if full else real_free(folder))
+
+
+def test_a_full_disk_in_a_chunk_exits_3_and_keeps_the_finished_chunks(tmp_path, sweep, capsys, monkeypatch):
+    out = tmp_path / "s.nc"
+    _full_disk(monkeypatch, "chunk-000001.nc")
+    code, _, err = _main(capsys, "run", sweep, "-o", out, "--chunk", 1, "--device", DEVICE, "--quiet")
+    assert code == 3
+    _error_line(err, "disk full while writing", "chunk-000001.nc", "0 bytes free", "its partial file removed",
+                "the 1 finished chunks are kept", "free some space, then", "--resume")
+    assert _files(tmp_path) == ["s.nc.parts", "s.nc.parts/chunk-000000.nc", "s.nc.parts/manifest.json", "s.toml"]
+    monkeypatch.undo()
+    code, _, err = _main(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE, "--quiet")
+    assert code == 0, err
+    assert open_ensemble(out).member.values.tolist() == [0, 1, 2]
+    assert _files(tmp_path) == ["s.nc", "s.toml"]
+
+
+def test_a_full_disk_in_the_first_chunk_leaves_nothing(tmp_path, sweep, capsys, monkeypatch):
+    _full_disk(monkeypatch, "chunk-000000.nc")
+    code, _, err = _main(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--device", DEVICE, "--quiet")
+    assert code == 3
+    _error_line(err, "disk full", "nothing was kept")
+    assert _files(tmp_path) == ["s.toml"]  # no parts folder blocks the next plain run
+
+
+def test_a_full_disk_while_combining_keeps_every_chunk_for_resume(tmp_path, sweep, capsys, monkeypatch):
+    out = tmp_path / "s.nc"
+    _full_disk(monkeypatch, "s.nc.")
+    code, _, err = _main(capsys, "run", sweep, "-o", out, "--chunk", 2, "--device", DEVICE, "--quiet")
+    assert code == 3
+    _error_line(err, f"disk full while writing '{out}'", "the 2 finished chunks are kept")
+    assert not list(tmp_path.rglob("*.tmp")) and not out.exists()
+    monkeypatch.undo()
+    code, _, err = _main(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
+    assert code == 0 and "0 to run" in err[-2], err  # resume only combines
+    assert _files(tmp_path) == ["s.nc", "s.toml"]
+
+
+def test_a_full_disk_writing_the_default_scene_exits_3(tmp_path, capsys, monkeypatch):
+    _full_disk(monkeypatch, "d.nc")
+    code, stdout, err = _main(capsys, "run", "--nodes", 11, "-o", tmp_path / "d.nc", "--device", DEVICE, "--quiet")
+    assert code == 3 and stdout[0].startswith("scene:")  # the run itself was printed
+    assert err == [f"warpfric: error: disk full while writing '{tmp_path / 'd.nc'}' (0 bytes free; its partial "
+                   "file removed)"]
+    assert _files(tmp_path) == []
+
+
+def test_an_io_error_that_is_not_a_full_disk_says_what_it_was(tmp_path, capsys, monkeypatch):
+    _full_disk(monkeypatch, "d.nc")
+    monkeypatch.setattr(IO_MODULE, "free_bytes", lambda folder: 10**12)  # plenty: another I/O error
+    code, _, err = _main(capsys, "run", "--nodes", 11, "-o", tmp_path / "d.nc", "--device", DEVICE, "--quiet")
+    assert code == 3
+    _error_line(err, "could not write", "RuntimeError: NetCDF: HDF error", "its partial file removed")
+    assert _files(tmp_path) == []
+
+
+def test_too_little_free_space_is_refused_before_the_run(tmp_path, sweep, capsys, monkeypatch, no_simulation):
+    monkeypatch.setattr(shutil, "disk_usage", lambda folder: shutil._ntuple_diskusage(10**9, 10**9 - 1000, 1000))
+    code, _, err = _main(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--device", DEVICE)
+    assert code == 3
+    _error_line(err, "disk full: 1000 bytes free", "this run (3 members of 11 nodes", "needs about")
+    assert _files(tmp_path) == ["s.toml"]
+
+
+@pytest.mark.parametrize("size, words", [
+    ("300k", ["disk full: 29", "free in", "needs about 851.2 KiB"]),  # refused before the run
+    ("500k", ["disk full while writing", "finished chunks are kept", "--resume"]),  # the run fills it
+])
+def test_a_really_full_disk(tmp_path, capsys, size, words):
+    """A small tmpfs (where this process may mount one): too small for the estimate, the run is
+    refused; big enough for the estimate but not for the chunks and the combined file, the write
+    that does not fit ends the run; exit 3 either way, and no temporary file or lock stays."""
+    folder = tmp_path / "small"
+    if not _mount_tmpfs(folder, f"size={size}"):
+        pytest.skip("no tmpfs can be mounted here (the injected ENOSPC tests cover it)")
+    try:
+        sweep = tmp_path / "big.toml"  # ~120 KB per chunk of 20 members
+        sweep.write_text(SWEEP.replace("nodes = 11", "nodes = 101\nrtol = 1e-3").replace(
+            "[-0.2, 0.0, 0.2]", "{start = -0.2, stop = 0.2, num = 60}"))
+        code, _, err = _main(capsys, "run", sweep, "-o", folder / "big.nc", "--chunk", 20, "--device", DEVICE,
+                             "--quiet")
+        assert code == 3
+        _error_line(err, *words)
+        assert not list(folder.rglob("*.tmp")) and not (folder / "big.nc").exists()
+        assert not (folder / "big.nc.lock").exists()
+    finally:
+        subprocess.run(["umount", "-l", str(folder)], check=False)  # -l: a handle the failed HDF5 write left
+
+
+def _hold_lock(out: Path, pid: int) -> Path:
+    lock = out.with_name(out.name + ".lock")
+    lock.write_text(json.dumps({"pid": pid, "host": socket.gethostname(), "started": "2026-01-01T00:00:00Z"}))
+    return lock
+
+
+def test_a_second_run_on_the_same_output_is_refused_with_exit_4(tmp_path, sweep, capsys, monkeypatch):
+    out = tmp_path / "s.nc"
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        lock = _hold_lock(out, other.pid)
+        for args in (["run", sweep, "-o", out], ["run", "--nodes", 11, "-o", out]):
+            monkeypatch.setattr(SIMULATE_MODULE, "simulate", lambda *a, **k: pytest.fail("ran"))
+            code, _, err = _main(capsys, *args, "--device", DEVICE)
+            assert code == 4
+            assert err == [f"warpfric: error: output '{out}' is being written by another warpfric run (pid {other.pid} "
+                           f"on {socket.gethostname()}, since 2026-01-01T00:00:00Z); wait for it to end, or remove "
+                           f"'{lock}' if that run is gone"]
+            assert _files(tmp_path) == ["s.nc.lock", "s.toml"]
+    finally:
+        other.kill()
+        other.wait()
+    monkeypatch.undo()
+    code, _, err = _main(capsys, "run", sweep, "-o", out, "--device", DEVICE, "--quiet")  # its run is gone: stale
+    assert code == 0, err
+    assert _files(tmp_path) == ["s.nc", "s.toml"]  # the lock is removed at the end
+
+
+def test_two_runs_started_at_once_one_is_refused(tmp_path, sweep):
+    """Two processes on one output: one writes it, the other exits 4 with one line."""
+    slow = tmp_path / "slow.toml"
+    slow.write_text(SWEEP.replace("[-0.2, 0.0, 0.2]", "[-0.3, -0.2, -0.1, 0.0, 0.1, 0.2]"))
+    out = tmp_path / "slow.nc"
+    cmd = [sys.executable, "-m", "warpfric", "run", str(slow), "-o", str(out), "--chunk", "1", "--device", DEVICE,
+           "--quiet"]
+    first = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
+    lock = out.with_name("slow.nc.lock")
+    while not lock.exists() and first.poll() is None:
+        pass
+    second = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert first.wait(timeout=120) == 0
+    errors = [line for line in second.stderr.splitlines() if line.startswith("warpfric: error:")]
+    assert second.returncode == 4 and len(errors) == 1 and "being written by another warpfric run" in errors[0]
+    assert open_ensemble(out).sizes["member"] == 6 and not lock.exists()
+
+
+def test_an_unreachable_scheduler_leaves_no_parts_folder(tmp_path, sweep, capsys, monkeypatch):
+    distributed = pytest.importorskip("distributed")
+
+    def unreachable(address, timeout=None, **kwargs):
+        raise OSError(f"Timed out trying to connect to {address} after {timeout}")
+
+    monkeypatch.setattr(distributed, "Client", unreachable)
+    out = tmp_path / "s.nc"
+    code, _, err = _main(capsys, "run", sweep, "-o", out, "--scheduler", "tcp://127.0.0.1:1", "--chunk", 1)
+    assert code == 2
+    _error_line(err, "scheduler 'tcp://127.0.0.1:1': cannot connect")
+    assert _files(tmp_path) == ["s.toml"]
+    monkeypatch.undo()
+    code, _, err = _main(capsys, "run", sweep, "-o", out, "--device", DEVICE, "--quiet")  # the next plain run
+    assert code == 0, err
+
+
+def test_resume_removes_what_a_killed_run_left(tmp_path, sweep, capsys, monkeypatch):
+    out = tmp_path / "s.nc"
+    assert _interrupted_run(tmp_path, sweep, capsys, monkeypatch, out)[0] == 130
+    # a combine killed by SIGKILL, and a chunk's writer killed mid-file
+    (tmp_path / "s.nc.12345.0badf00d.tmp").write_bytes(b"half a file")
+    (tmp_path / "s.nc.parts" / "chunk-000001.nc.12345.deadbeef.tmp").write_bytes(b"half a chunk")
+    code, _, err = _main(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
+    assert code == 0, err
+    assert "removed 2 temporary files that an interrupted run left" in "\n".join(err)
+    assert _files(tmp_path) == ["s.nc", "s.toml"]
+
+
+def test_ctrl_c_in_one_scene_says_nothing_of_chunks(tmp_path, capsys, monkeypatch):
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(SIMULATE_MODULE, "simulate", interrupted)
+    code, _, err = _main(capsys, "run", "--nodes", 11, "-o", tmp_path / "d.nc", "--device", DEVICE)
+    assert code == 130 and err == ["warpfric: interrupted; nothing was written"]
+    code, _, err = _main(capsys, "run", "--nodes", 11, "--device", DEVICE)
+    assert code == 130 and err == ["warpfric: interrupted"]
+    assert _files(tmp_path) == []
+
+
+def test_ctrl_c_in_a_sweep_says_what_was_kept(tmp_path, sweep, capsys, monkeypatch):
+    out = tmp_path / "s.nc"
+    code, err = _interrupted_run(tmp_path, sweep, capsys, monkeypatch, out, interrupt_at=1)
+    assert code == 130 and err[-1] == "warpfric: interrupted; nothing was kept"
+    assert _files(tmp_path) == ["s.toml"]
+    code, err = _interrupted_run(tmp_path, sweep, capsys, monkeypatch, out, interrupt_at=3)
+    assert code == 130
+    assert err[-1] == (f"warpfric: interrupted; the 2 finished chunks are kept in '{tmp_path / 's.nc.parts'}'; "
+                       f"`warpfric run {sweep} -o {out} --resume --device {DEVICE}` goes on from them")
+    assert not list(tmp_path.rglob("*.tmp")) and not (tmp_path / "s.nc.lock").exists()
+
+
+def test_write_ensemble_removes_its_temporary_file_on_ctrl_c(tmp_path, monkeypatch):
+    from warpfric.io import write_ensemble
+
+    ds = xr.Dataset({"mu_s": ("member", np.array([0.5]))}, coords={"member": np.array([0], dtype=np.int32)})
+
+    def interrupted(self, path=None, *args, **kwargs):
+        Path(path).write_bytes(b"partial")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        write_ensemble(ds, tmp_path / "e.nc")
+    assert _files(tmp_path) == []

@@ -1,0 +1,167 @@
+"""Files that combine however a user opens them (issue 22, part 3). Two runs made without any flag
+number their members alike (0, 1, ...), but every file labels its members '<run id>:<number>'
+(coordinate ``member``; the numbers are ``member_number``) and keeps its recorded fields in the
+netCDF4 group 'recorded': xarray's default ``xr.open_mfdataset(files)`` (combine='by_coords')
+then keeps every member exactly once, and ``warpfric.io.open_ensembles`` refuses repeated member
+numbers with a message that says what to do. Before, by_coords kept 2 of 5 members of plain files
+and made mu_s 2-D (recorded_member x member) with NaN padding when members were recorded."""
+
+import re
+import warnings
+
+import numpy as np
+import pytest
+import xarray as xr
+from conftest import DEVICE
+
+import warpfric as wf
+from warpfric.cli import main
+from warpfric.io import open_ensemble, open_ensembles, write_ensemble
+
+pytest.importorskip("dask")  # xr.open_mfdataset needs it
+
+SWEEP = """
+fronts = false
+[solver]
+nodes = 11
+[grid]
+eccentricity = {values}
+"""
+RECORD = "[record]\nmembers = [{member}]\nstart = 20.2\nstop = 20.3\ncount = 5\n"
+LABEL = re.compile(r"^\d{8}T\d{9}-[0-9a-f]{6}:\d{10}$")  # <UTC start, ms>-<random>:<number>
+
+
+def _run(tmp_path, capsys, name, values, record=None, *args):
+    sweep = tmp_path / f"{name}.toml"
+    sweep.write_text(SWEEP.format(values=values) + (RECORD.format(member=record) if record is not None else ""))
+    code = main(["run", str(sweep), "-o", str(tmp_path / f"{name}.nc"), "--device", DEVICE, "--quiet",
+                 *map(str, args)])
+    assert code == 0, capsys.readouterr().err
+    capsys.readouterr()
+    return tmp_path / f"{name}.nc"
+
+
+def _open_defaults(paths, new_defaults, **kwargs):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        with xr.set_options(use_new_combine_kwarg_defaults=new_defaults):
+            return xr.open_mfdataset(paths, **kwargs).load()
+
+
+@pytest.mark.parametrize("new_defaults", [False, True])
+@pytest.mark.parametrize("recorded", [False, True])
+def test_two_runs_without_flags_keep_every_member_at_xarrays_defaults(tmp_path, capsys, recorded, new_defaults):
+    a = _run(tmp_path, capsys, "a", "[-0.2, 0.0, 0.2]", 1 if recorded else None)
+    b = _run(tmp_path, capsys, "b", "[0.1, 0.3]", 0 if recorded else None)
+    first, second = open_ensemble(a), open_ensemble(b)
+    assert first.member.values.tolist() == [0, 1, 2] and second.member.values.tolist() == [0, 1]  # alike
+    both = _open_defaults([a, b], new_defaults)
+    assert dict(both.sizes) == {"member": 5, "x": 11}
+    assert both.mu_s.dims == ("member",) and not np.isnan(both.mu_s.values).any()  # no padding
+    np.testing.assert_array_equal(both.mu_s.values, np.concatenate([first.mu_s.values, second.mu_s.values]))
+    np.testing.assert_array_equal(both.eccentricity.values, [-0.2, 0.0, 0.2, 0.1, 0.3])
+    np.testing.assert_array_equal(both.member_number.values, [0, 1, 2, 0, 1])
+    assert all(LABEL.match(label) for label in both.member.values) and np.unique(both.member.values).size == 5
+    runs = [label.split(":")[0] for label in both.member.values]
+    assert len(set(runs[:3])) == len(set(runs[3:])) == 1 and runs[0] < runs[3]  # runs sort by their start
+    if recorded:
+        rec = _open_defaults([a, b], new_defaults, group="recorded")
+        np.testing.assert_array_equal(rec.recorded_member_number.values, [1, 0])
+        np.testing.assert_array_equal(rec.recorded_member.values, [both.member.values[1], both.member.values[3]])
+        np.testing.assert_array_equal(rec.velocity_history.values, np.concatenate(
+            [first.velocity_history.values, second.velocity_history.values]))
+
+
+def test_open_ensembles_refuses_them_and_says_what_to_do(tmp_path, capsys):
+    a = _run(tmp_path, capsys, "a", "[-0.2, 0.0, 0.2]", 1)
+    b = _run(tmp_path, capsys, "b", "[0.1, 0.3]", 0)
+    with pytest.raises(ValueError) as err:
+        open_ensembles([a, b])
+    message = str(err.value)
+    assert "member numbers 0, 1 occur more than once" in message and "--member-offset K" in message
+    assert "xr.open_mfdataset(files)" in message
+    c = _run(tmp_path, capsys, "c", "[0.1, 0.3]", 0, "--member-offset", 3)  # what it says: distinct numbers
+    combined = open_ensembles([a, c])
+    assert combined.member.values.tolist() == [0, 1, 2, 3, 4]
+    assert combined.recorded_member.values.tolist() == [1, 3]
+
+
+def test_one_file_given_twice_is_an_error_not_a_duplicate(tmp_path, capsys):
+    a = _run(tmp_path, capsys, "a", "[-0.2, 0.0, 0.2]")
+    with pytest.raises(ValueError, match="Could not find any dimension coordinates"):
+        _open_defaults([a, a], False)
+    with pytest.raises(ValueError, match="occur more than once"):
+        open_ensembles([a, a])
+
+
+def test_the_chunks_of_a_run_share_its_id_and_a_resumed_run_keeps_it(tmp_path, capsys, monkeypatch):
+    import importlib
+
+    simulate_module = importlib.import_module("warpfric.simulate")
+    real = simulate_module.simulate
+    calls = []
+
+    def interrupted(*args, **kwargs):
+        if "member_offset" in kwargs:
+            calls.append(1)
+            if len(calls) == 2:
+                raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    sweep = tmp_path / "s.toml"
+    sweep.write_text(SWEEP.format(values="[-0.2, 0.0, 0.2]"))
+    out = tmp_path / "s.nc"
+    monkeypatch.setattr(simulate_module, "simulate", interrupted)
+    assert main(["run", str(sweep), "-o", str(out), "--chunk", "1", "--device", DEVICE, "--quiet"]) == 130
+    monkeypatch.setattr(simulate_module, "simulate", real)
+    assert main(["run", str(sweep), "-o", str(out), "--resume", "--device", DEVICE, "--quiet"]) == 0
+    with xr.open_dataset(out) as ds:
+        labels = ds.member.values.tolist()
+    assert len({label.split(":")[0] for label in labels}) == 1
+    assert [label.split(":")[1] for label in labels] == ["0000000000", "0000000001", "0000000002"]
+
+
+def test_labels_survive_a_rewrite_and_old_files_still_open(tmp_path):
+    ds = wf.simulate({"eccentricity": [0.0, 0.1]}, solver=wf.Solver(nodes=11), fronts=None, device=DEVICE,
+                     progress=False, record=wf.Record.window(20.2, 20.3, 3, members=(1,)))
+    write_ensemble(ds, tmp_path / "a.nc")
+    back = open_ensemble(tmp_path / "a.nc")
+    assert back.member.values.tolist() == [0, 1] and back.member_id.dims == ("member",)
+    write_ensemble(back, tmp_path / "b.nc")  # the same members: the same labels
+    np.testing.assert_array_equal(open_ensemble(tmp_path / "b.nc").member_id.values, back.member_id.values)
+    # a file in the layout before labels: numbers as the member coordinate, recorded fields in the root
+    old = ds.assign_coords(recorded_member=("recorded", [1])).swap_dims(recorded="recorded_member").rename(
+        time="record_time")
+    old.attrs["warpfric_complete"] = 1
+    old.to_netcdf(tmp_path / "old.nc")
+    again = open_ensemble(tmp_path / "old.nc")
+    assert again.member.values.tolist() == [0, 1] and again.recorded_member.values.tolist() == [1]
+    np.testing.assert_array_equal(again.velocity_history.values, ds.velocity_history.values)
+
+
+@pytest.mark.parametrize("new_defaults", [False, True])
+def test_runs_of_different_constants_keep_each_members_value(tmp_path, capsys, new_defaults):
+    """A parameter constant in each run but not between them: every member keeps its own value (files
+    store every parameter along member; a scalar would be kept from the first file under xarray's
+    announced defaults, compat='override')."""
+    paths = []
+    for name, force in (("a", 500.0), ("b", 900.0)):
+        sweep = tmp_path / f"{name}.toml"
+        sweep.write_text(SWEEP.format(values="[0.0, 0.1]") + f"[scene]\nnormal_force = {force}\n")
+        assert main(["run", str(sweep), "-o", str(tmp_path / f"{name}.nc"), "--device", DEVICE, "--quiet"]) == 0
+        paths.append(tmp_path / f"{name}.nc")
+    both = _open_defaults(paths, new_defaults)
+    np.testing.assert_array_equal(both.normal_force.values, [500.0, 500.0, 900.0, 900.0])
+    assert open_ensemble(paths[0]).normal_force.dims == ()  # in memory a constant is a scalar again
+
+
+def test_open_ensembles_refuses_different_recording_times_in_one_line(tmp_path, capsys):
+    a = _run(tmp_path, capsys, "a", "[-0.2, 0.0, 0.2]", 1)
+    sweep = tmp_path / "b.toml"
+    sweep.write_text(SWEEP.format(values="[0.1, 0.3]") + RECORD.format(member=0).replace("stop = 20.3", "stop = 20.4"))
+    assert main(["run", str(sweep), "-o", str(tmp_path / "b.nc"), "--member-offset", "3", "--device", DEVICE,
+                 "--quiet"]) == 0
+    with pytest.raises(ValueError) as err:
+        open_ensembles([a, tmp_path / "b.nc"])
+    assert "recorded their fields at different times" in str(err.value) and "group='recorded'" in str(err.value)
+    assert "\n" not in str(err.value)

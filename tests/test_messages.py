@@ -1,0 +1,66 @@
+"""Messages a person can read (issue 22, part 7): a bad value in a per-member array names the
+member; a dimensionless parameter prints no '(1)', which reads like an index."""
+
+import re
+
+import numpy as np
+import pytest
+from conftest import DEVICE
+
+import warpfric as wf
+from warpfric.cli import main, summary
+
+
+def _refusal(members) -> str:
+    with pytest.raises(ValueError) as err:
+        wf.simulate(members, device=DEVICE, progress=False)
+    return str(err.value)
+
+
+def test_a_nan_among_10000_members_is_named_by_its_index():
+    e = np.zeros(10_000)
+    e[1234] = np.nan
+    assert _refusal({"eccentricity": e}) == ("parameter eccentricity[1234] = nan is out of range; valid range "
+                                             "[-0.6, 0.6] (dimensionless)")
+
+
+def test_the_first_bad_member_is_named_with_the_unit_and_the_count():
+    message = _refusal({"normal_force": [1000.0, -2.0, np.inf]})
+    assert message == ("parameter normal_force[1] = -2.0 N is out of range; valid range (0, inf) N "
+                       "(2 members out of range)")
+
+
+def test_broadcast_members_are_named_by_their_flat_index():
+    # 3 x 2 members in C order: normal_force[2] is member (1, 0)
+    message = _refusal({"normal_force": [[500.0], [np.nan], [800.0]], "eccentricity": [0.0, 0.1]})
+    assert message.startswith("parameter normal_force[2] = nan N is out of range")
+
+
+@pytest.mark.parametrize("members", [{"eccentricity": 0.9}, {"eccentricity": [0.1, 0.9]}, {"poisson_ratio": 0.5},
+                                     {"aging_coefficient": -1.0}])
+def test_dimensionless_parameters_print_no_unit_1(members):
+    message = _refusal(members)
+    assert "(1)" not in message and not re.search(r"\b1\)", message) and "(dimensionless)" in message
+
+
+def test_a_scalar_is_named_without_an_index():
+    assert _refusal({"density": np.nan}).startswith("parameter 'density' = nan kg m-3 is out of range")
+
+
+def test_a_sweep_file_value_names_its_member(tmp_path, capsys):
+    sweep = tmp_path / "s.toml"
+    sweep.write_text("[grid]\nnormal_force = [500.0, 1000.0]\neccentricity = [0.0, 0.2, 0.7]\n")
+    assert main(["run", str(sweep), "-o", str(tmp_path / "s.nc")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == ("warpfric: error: parameter eccentricity[2] = 0.7 is out of range; valid range [-0.6, 0.6] "
+                   "(dimensionless) (2 members out of range)")
+
+
+def test_info_prints_dimensionless_ranges_without_unit_1():
+    ds = wf.simulate({"eccentricity": [0.0, 0.1], "normal_force": [500.0, 600.0]}, solver=wf.Solver(nodes=11),
+                     fronts=None, device=DEVICE, progress=False)
+    ds.attrs.update(varying_parameters="normal_force eccentricity", warpfric_version="x", wall_time_s=0.0)
+    lines = summary(ds, "x.nc").splitlines()
+    ecc = next(line for line in lines if line.strip().startswith("eccentricity"))
+    force = next(line for line in lines if line.strip().startswith("normal_force"))
+    assert ecc.endswith("in [0, 0.1] (dimensionless)") and force.endswith("in [500, 600] N")

@@ -1,0 +1,320 @@
+"""Sweep files (TOML) -> the members and settings of an ensemble run (public as warpfric.sweep).
+
+A sweep file (examples in studies/sweeps/, reference in docs/sweeps.md)::
+
+    title = "mu_s against eccentricity and force"      # optional
+    [scene]   normal_force = 1000.0 ...                 # Parameters defaults for every member (SI)
+    [model]   tilt = true ...                           # Model switches
+    [solver]  nodes = 100, rtol = 1e-5 ...              # Solver settings
+    [fronts]  threshold = 0.4 ...                       # Fronts settings; `fronts = false` skips them
+    [record]  members = [0], start = 20.0, stop = 20.6, count = 121   # or times = [...]
+    [grid]    eccentricity = [-0.2, 0.0, 0.2]           # full grid; or {start, stop, num, spacing}
+    [zip]     a = [...], b = [...]                      # zipped lists of one length
+    [sample]  n = 1000, seed = 1, viscous_coefficient = {distribution = "uniform", low = 0, high = 2.7e13}
+    [design]  method = "saltelli", n = 1024, ...          # SALib designs (warpfric.sensitivity)
+    [run]     chunk = 1000, device = "cpu"              # defaults of the command-line options;
+              final_fields = false                      # leave out the final-state fields (member, x)
+              member_offset = 0                         # number of the first member (combining runs)
+              scheduler = "local"                       # or "tcp://host:8786": chunks as Dask tasks
+
+Members are every combination of one grid point, one zip row and one sample row, in C order over
+the blocks: grid keys in file order, then the zip rows, then the sample rows (fastest). Each sampled parameter draws from its own random stream, seeded by (seed, name), so
+adding a parameter does not change the others' draws.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+import tomllib
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .members import resolve_members
+from .parameters import PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solver
+
+TOP_KEYS = ("title", "description", "scene", "model", "solver", "fronts", "record", "grid", "zip", "sample", "design",
+            "run")
+RUN_KEYS = {"chunk": int, "device": str, "final_fields": bool, "member_offset": int, "scheduler": str,
+            "workers": int}
+MEMBER_NUMBER_LIMIT = 2**31 - 2**24  # member numbers are int32 (simulate's member_offset bound)
+MEMBERS_NEEDED = ("a sweep file needs members: a [grid], [zip], [sample] or [design] table, or a [scene] table "
+                  "(even an empty one) to run that scene as one member")
+DISTRIBUTIONS = {"uniform": ("low", "high"), "normal": ("mean", "std"), "loguniform": ("low", "high")}
+RANGE_KEYS = ("start", "stop", "num", "spacing")
+
+
+class SweepError(ValueError):
+    """A sweep file that cannot be run; the message names the key and the accepted values."""
+
+
+@dataclass(frozen=True)
+class Sweep:
+    text: str  # the file's text (stored in the output's attributes)
+    title: str
+    scene: Parameters
+    model: Model
+    solver: Solver
+    fronts: Fronts | None
+    record: Record | None
+    members: dict  # name -> (M,) float64, only the swept parameters
+    varying: tuple
+    run: dict
+    design: dict | None = None  # a sensitivity design (warpfric.sensitivity), JSON-serialisable
+
+    @property
+    def n_members(self) -> int:
+        return next(iter(self.members.values())).shape[0] if self.members else 1
+
+    def member_slice(self, sl: slice) -> dict:
+        return {k: v[sl] for k, v in self.members.items()}
+
+
+def _where(table: str, key: str | None = None) -> str:
+    return f"[{table}] {key}" if key else f"[{table}]"
+
+
+def _number(value, where: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SweepError(f"{where} = {value!r}: expected a number")
+    return float(value)
+
+
+def _dataclass_kwargs(table: dict, cls, where: str, parameters: bool = False) -> dict:
+    names = {f.name: f for f in dataclasses.fields(cls)}
+    out = {}
+    for key, value in table.items():
+        if key not in names:
+            raise SweepError(f"unknown key {_where(where, key)}; accepted: {', '.join(names)}")
+        default = names[key].default
+        if parameters:
+            out[key] = _number(value, _where(where, key)) if value is not None else None
+        elif isinstance(default, bool):
+            if not isinstance(value, bool):
+                raise SweepError(f"{_where(where, key)} = {value!r}: expected true or false")
+            out[key] = value
+        elif isinstance(default, int) and not isinstance(default, bool):
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise SweepError(f"{_where(where, key)} = {value!r}: expected an integer")
+            out[key] = value
+        elif isinstance(default, float):
+            out[key] = _number(value, _where(where, key))
+        else:
+            if not isinstance(value, str):
+                raise SweepError(f"{_where(where, key)} = {value!r}: expected a string")
+            out[key] = value
+    return out
+
+
+def _values(spec, where: str) -> np.ndarray:
+    """A list of numbers or {start, stop, num, spacing = 'linear' | 'log'}."""
+    if isinstance(spec, list):
+        if not spec:
+            raise SweepError(f"{where} is empty: give at least one value")
+        return np.array([_number(v, where) for v in spec], dtype=np.float64)
+    if isinstance(spec, dict):
+        unknown = set(spec) - set(RANGE_KEYS)
+        if unknown:
+            raise SweepError(f"unknown key {where}.{sorted(unknown)[0]}; accepted: {', '.join(RANGE_KEYS)}")
+        for key in ("start", "stop", "num"):
+            if key not in spec:
+                raise SweepError(f"{where}: missing key {key!r} (a range needs start, stop, num)")
+        start, stop = _number(spec["start"], f"{where}.start"), _number(spec["stop"], f"{where}.stop")
+        num = spec["num"]
+        if isinstance(num, bool) or not isinstance(num, int) or num < 1:
+            raise SweepError(f"{where}.num = {num!r}: expected an integer >= 1")
+        spacing = spec.get("spacing", "linear")
+        if spacing == "linear":
+            return np.linspace(start, stop, num)
+        if spacing == "log":
+            if start <= 0 or stop <= 0:
+                raise SweepError(f"{where}: log spacing needs start > 0 and stop > 0, got {start!r}, {stop!r}")
+            return np.geomspace(start, stop, num)
+        raise SweepError(f"{where}.spacing = {spacing!r}; accepted: linear, log")
+    raise SweepError(f"{where} = {spec!r}: expected a list of numbers or a table {{start, stop, num, spacing}}")
+
+
+def _draw(name: str, spec, n: int, seed: int, where: str) -> np.ndarray:
+    if not isinstance(spec, dict) or "distribution" not in spec:
+        raise SweepError(f"{where} = {spec!r}: expected {{distribution = 'uniform' | 'normal' | 'loguniform', ...}}")
+    dist = spec["distribution"]
+    if dist not in DISTRIBUTIONS:
+        raise SweepError(f"{where}.distribution = {dist!r}; accepted: {', '.join(DISTRIBUTIONS)}")
+    keys = DISTRIBUTIONS[dist]
+    unknown = set(spec) - set(keys) - {"distribution"}
+    if unknown:
+        raise SweepError(f"unknown key {where}.{sorted(unknown)[0]}; accepted for {dist}: {', '.join(keys)}")
+    for key in keys:
+        if key not in spec:
+            raise SweepError(f"{where}: missing key {key!r} for the {dist} distribution")
+    a, b = (_number(spec[k], f"{where}.{k}") for k in keys)
+    rng = np.random.default_rng([seed, zlib.crc32(name.encode())])
+    if dist == "uniform":
+        if not a < b:
+            raise SweepError(f"{where}: low = {a!r} must be below high = {b!r}")
+        return rng.uniform(a, b, n)
+    if dist == "loguniform":
+        if not 0 < a < b:
+            raise SweepError(f"{where}: loguniform needs 0 < low < high, got low = {a!r}, high = {b!r}")
+        return np.exp(rng.uniform(math.log(a), math.log(b), n))
+    if not b > 0:
+        raise SweepError(f"{where}.std = {b!r}: expected a number > 0")
+    return rng.normal(a, b, n)
+
+
+def load_sweep(path) -> Sweep:
+    """Read and validate a sweep file; raises SweepError (a ValueError) with a one-line message."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except OSError as err:
+        raise SweepError(f"sweep file {str(path)!r}: {err.strerror}") from None
+    return parse_sweep(text, str(path))
+
+
+def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise SweepError(f"{name}: not valid TOML ({err})") from None
+    for key in doc:
+        if key not in TOP_KEYS:
+            raise SweepError(f"unknown key {key!r} in {name}; accepted: {', '.join(TOP_KEYS)}")
+    for key in ("scene", "model", "solver", "record", "grid", "zip", "sample", "design", "run"):
+        if key in doc and not isinstance(doc[key], dict):
+            raise SweepError(f"{key} = {doc[key]!r}: expected a table [{key}]")
+    title = doc.get("title", "")
+    if not isinstance(title, str):
+        raise SweepError(f"title = {title!r}: expected a string")
+    try:
+        scene = Parameters(**_dataclass_kwargs(doc.get("scene", {}), Parameters, "scene", parameters=True))
+        model = Model(**_dataclass_kwargs(doc.get("model", {}), Model, "model"))
+        solver = Solver(**_dataclass_kwargs(doc.get("solver", {}), Solver, "solver"))
+        fronts_spec = doc.get("fronts", {})
+        if fronts_spec is False:
+            fronts = None
+        elif isinstance(fronts_spec, dict):
+            fronts = Fronts(**_dataclass_kwargs(fronts_spec, Fronts, "fronts"))
+        else:
+            raise SweepError(f"fronts = {fronts_spec!r}: expected a table [fronts] or false")
+    except TypeError as err:  # pragma: no cover - unknown keys are caught above
+        raise SweepError(str(err)) from None
+
+    blocks = []  # lists of {name: (k,) array}
+    seen: dict[str, str] = {}
+
+    def claim(pname: str, where: str):
+        if pname not in PARAMETER_NAMES:
+            raise SweepError(f"unknown parameter {where}; accepted: {', '.join(PARAMETER_NAMES)}")
+        if pname in seen:
+            raise SweepError(f"parameter {pname!r} is swept twice ({seen[pname]} and {where})")
+        seen[pname] = where
+
+    for pname, spec in doc.get("grid", {}).items():
+        claim(pname, _where("grid", pname))
+        blocks.append({pname: _values(spec, _where("grid", pname))})
+    zipped = doc.get("zip", {})
+    if zipped:
+        cols = {}
+        for pname, spec in zipped.items():
+            claim(pname, _where("zip", pname))
+            cols[pname] = _values(spec, _where("zip", pname))
+        lengths = {k: len(v) for k, v in cols.items()}
+        if len(set(lengths.values())) != 1:
+            raise SweepError(f"[zip] lists differ in length: {lengths}; all must have one length")
+        blocks.append(cols)
+    sample = dict(doc.get("sample", {}))
+    if sample:
+        n = sample.pop("n", None)
+        seed = sample.pop("seed", 0)
+        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+            raise SweepError(f"[sample] n = {n!r}: expected an integer >= 1 (the number of samples)")
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise SweepError(f"[sample] seed = {seed!r}: expected an integer >= 0")
+        if not sample:
+            raise SweepError("[sample] has no parameters to sample")
+        cols = {}
+        for pname, spec in sample.items():
+            claim(pname, _where("sample", pname))
+            cols[pname] = _draw(pname, spec, n, seed, _where("sample", pname))
+        blocks.append(cols)
+    members: dict[str, np.ndarray] = {}
+    design = None
+    if "design" in doc:
+        from .sensitivity import generate, parse_design
+
+        if blocks:
+            raise SweepError("[design] cannot be combined with [grid], [zip] or [sample]: the analysis needs the "
+                             "design's rows exactly (put fixed values in [scene])")
+        design = parse_design(doc["design"])
+        members = generate(design)
+    if blocks:
+        sizes = [len(next(iter(b.values()))) for b in blocks]
+        index = np.array(list(itertools.product(*(range(s) for s in sizes))), dtype=np.int64).reshape(-1, len(blocks))
+        for j, block in enumerate(blocks):
+            for pname, values in block.items():
+                members[pname] = values[index[:, j]]
+    record = None
+    if "record" in doc:
+        record = _record(doc["record"])
+    if not members and "scene" not in doc:
+        raise SweepError(f"{name}: nothing to run; {MEMBERS_NEEDED}")
+    run = _dataclass_like(doc.get("run", {}), RUN_KEYS, "run")
+    if run.get("chunk", 1) < 1:
+        raise SweepError(f"[run] chunk = {run['chunk']}: expected an integer >= 1 (members per chunk file)")
+    n_members = next(iter(members.values())).shape[0] if members else 1
+    check_member_offset(run.get("member_offset", 0), n_members, "[run] member_offset")
+    # validate every member now (ranges, protocol), before anything runs or is written
+    resolve_members(members or None, scene)
+    varying = tuple(k for k in PARAMETER_NAMES if k in members)
+    return Sweep(text, title, scene, model, solver, fronts, record, members, varying, run, design)
+
+
+def check_member_offset(offset: int, n_members: int, where: str) -> int:
+    """``offset`` if the member numbers offset .. offset + n_members - 1 fit in int32, else SweepError."""
+    top = MEMBER_NUMBER_LIMIT - n_members
+    if not 0 <= offset <= top:
+        raise SweepError(f"{where} = {offset}: expected an integer in [0, {top}] (the number of the first of "
+                         f"{n_members} members; member numbers are int32)")
+    return offset
+
+
+def _record(spec: dict) -> Record:
+    keys = ("members", "times", "start", "stop", "count")
+    for key in spec:
+        if key not in keys:
+            raise SweepError(f"unknown key [record] {key}; accepted: {', '.join(keys)}")
+    members = spec.get("members", [0])
+    if not isinstance(members, list) or not all(isinstance(i, int) and not isinstance(i, bool) for i in members):
+        raise SweepError(f"[record] members = {members!r}: expected a list of member indices")
+    if "times" in spec:
+        if any(k in spec for k in ("start", "stop", "count")):
+            raise SweepError("[record]: give either times or start/stop/count, not both")
+        times = _values(spec["times"], "[record] times")
+        return Record(members=tuple(members), times=tuple(times))
+    for key in ("start", "stop", "count"):
+        if key not in spec:
+            raise SweepError(f"[record]: missing key {key!r} (give times = [...] or start, stop, count)")
+    count = spec["count"]
+    if isinstance(count, bool) or not isinstance(count, int):
+        raise SweepError(f"[record] count = {count!r}: expected an integer >= 2")
+    return Record.window(_number(spec["start"], "[record] start"), _number(spec["stop"], "[record] stop"), count,
+                         members=tuple(members))
+
+
+def _dataclass_like(table: dict, kinds: dict, where: str) -> dict:
+    out = {}
+    for key, value in table.items():
+        if key not in kinds:
+            raise SweepError(f"unknown key {_where(where, key)}; accepted: {', '.join(kinds)}")
+        kind = kinds[key]
+        if (isinstance(value, bool) and kind is not bool) or not isinstance(value, kind):
+            expected = {int: "an integer", str: "a string", bool: "true or false"}[kind]
+            raise SweepError(f"{_where(where, key)} = {value!r}: expected {expected}")
+        out[key] = value
+    return out
+
