@@ -147,12 +147,12 @@ class _Sink:
             _INBOX.put(("progress", self.run_id, self.chunk, float(fraction), int(done)))
 
 
-def _run_chunk(run_id: int, chunk: int, members: dict, record, member_offset: int, show: bool, common: dict):
-    from .simulate import simulate
-
+def _run_chunk(runner, run_id: int, chunk: int, members: dict, record, member_offset: int, show: bool, common: dict):
+    """In a worker: one chunk's Dataset, ``runner`` being warpfric.simulate.simulate (passed by the
+    parent, pickled by reference, so that this module imports no simulate)."""
     progress_module.SINK = _Sink(run_id, chunk) if show else None
     try:
-        return simulate(members, record=record, member_offset=member_offset, progress=show, workers=1, **common)
+        return runner(members, record=record, member_offset=member_offset, progress=show, workers=1, **common)
     finally:
         progress_module.SINK = None
 
@@ -235,10 +235,13 @@ def _chunk_record(record, start: int, stop: int):
     return dataclasses.replace(record, members=tuple(int(record.members[k]) - start for k in chosen)), chosen
 
 
-def run(n_workers: int, values: dict, varying, *, scene, model, solver, fronts, record, device, progress,
-        member_offset: int):
+def run(n_workers: int, values: dict, *, scene, model, solver, fronts, record, device, progress,
+        member_offset: int, runner, x, varying_parameters: str):
     """simulate()'s run of the resolved members ``values`` on ``n_workers`` worker processes: one
-    Dataset, as one process would return it (see the module's docstring)."""
+    Dataset, as one process would return it (see the module's docstring). ``runner``: the function
+    each worker runs on its chunk (warpfric.simulate.simulate); ``x``: the ensemble's x coordinate;
+    ``varying_parameters``: the ensemble's attribute of that name (a chunk may hold one length, or
+    one value of a swept parameter)."""
     t0 = time.perf_counter()
     n = values["normal_force"].shape[0]
     bounds = chunk_bounds(n, n_workers)
@@ -252,7 +255,7 @@ def run(n_workers: int, values: dict, varying, *, scene, model, solver, fronts, 
     records = [_chunk_record(record, start, stop) for start, stop in bounds]
     fractions, done = np.zeros(len(bounds)), np.zeros(len(bounds), dtype=np.int64)
     try:
-        futures = [pool.executor.submit(_run_chunk, run_id, k, {name: v[start:stop] for name, v in values.items()},
+        futures = [pool.executor.submit(_run_chunk, runner, run_id, k, {name: v[start:stop] for name, v in values.items()},
                                         records[k][0], member_offset + start, show, common)
                    for k, (start, stop) in enumerate(bounds)]
         while True:
@@ -274,7 +277,7 @@ def run(n_workers: int, values: dict, varying, *, scene, model, solver, fronts, 
             line.stop()
         shutdown(terminate=True)
         raise
-    ds = join(parts, [chosen for _, chosen in records], values, varying, solver.nodes)
+    ds = join(parts, [chosen for _, chosen in records], x, varying_parameters)
     build = max(float(p.attrs.get("kernel_build_time_s", 0.0)) for p in parts)
     ds.attrs["kernel_build_time_s"] = build
     ds.attrs["wall_time_s"] = max(time.perf_counter() - t0 - build, 0.0)
@@ -307,21 +310,18 @@ def _read_inbox(pool: _Pool, run_id: int, fractions: np.ndarray, done: np.ndarra
             done[chunk] = max(done[chunk], members_done)
 
 
-def join(parts: list, chosen: list, values: dict, varying, nodes: int):
+def join(parts: list, chosen: list, x, varying_parameters: str):
     """The chunks' Datasets as one: every variable along ``member`` concatenated in member order, the
     recorded members in the order of record.members (``chosen``: each chunk's indices there), the
-    ensemble's x coordinate and varying_parameters (a chunk may hold one length, or one value of a
-    swept parameter)."""
+    ensemble's x coordinate ``x`` and its ``varying_parameters`` attribute."""
     import xarray as xr
-
-    from .simulate import _varying_parameters, _x_coordinate
 
     recorded = [name for p in parts for name, var in p.variables.items() if "recorded" in var.dims or name == "time"]
     recorded = list(dict.fromkeys(recorded))
     ds = xr.concat([p.drop_vars([name for name in recorded if name in p.variables]) for p in parts], dim="member",
                    data_vars="minimal", coords="minimal", compat="override", join="override",
                    combine_attrs="override")
-    ds = ds.assign_coords(x=_x_coordinate(values["length"], nodes))
+    ds = ds.assign_coords(x=x)
     with_record = [(p, c) for p, c in zip(parts, chosen) if c]
     if with_record:
         order = np.argsort([k for _, c in with_record for k in c], kind="stable")
@@ -336,5 +336,5 @@ def join(parts: list, chosen: list, values: dict, varying, nodes: int):
             else:
                 ds[name] = var
         ds = ds[list(first.data_vars)]  # the variables in one process's order
-    ds.attrs["varying_parameters"] = _varying_parameters(values, varying)
+    ds.attrs["varying_parameters"] = varying_parameters
     return ds

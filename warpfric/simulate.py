@@ -108,8 +108,10 @@ def simulate(
 
     n_workers = pool.plan(workers, device, values["normal_force"].shape[0], solver, fronts, record)
     if n_workers > 1:
-        return pool.run(n_workers, values, varying, scene=scene, model=model, solver=solver, fronts=fronts,
-                        record=record, device=device, progress=progress, member_offset=member_offset)
+        return pool.run(n_workers, values, scene=scene, model=model, solver=solver, fronts=fronts,
+                        record=record, device=device, progress=progress, member_offset=member_offset,
+                        runner=simulate, x=_x_coordinate(values["length"], solver.nodes),
+                        varying_parameters=_varying_parameters(values, varying))
     from warpfric.kernels.types import STATUS_MEANINGS
 
     from . import engine
