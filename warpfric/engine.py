@@ -48,8 +48,8 @@ class EngineResult:
     passes: int  # integration passes (2 with the velocity front, else 1)
 
 
-# the cooperative kernel's largest team when Solver.lanes is None (docs/performance.md, "Session 5:
-# the cooperative kernel": on the H100 32 lanes beat 8 and equal 64 at N = 200), and the fewest
+# the cooperative kernel's largest team when Solver.lanes is None (docs/performance.md, "GPU: where
+# the time goes", team size: on the H100 32 lanes beat 8 and equal 64 at N = 200), and the fewest
 # nodes for which it is chosen (a team of 8 lanes of 2 nodes)
 AUTO_LANES = 32
 AUTO_MIN_NODES = 16
@@ -330,7 +330,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     team = lanes > 1
     if team and not str(device).startswith("cuda"):
         warnings.warn(f"Solver(lanes={lanes}) on {device}: the cooperative kernel runs there on Warp's experimental "
-                      "CPU fibers, slowly and for tests only (docs/performance.md, 'Session 5: the cooperative kernel'); "
+                      "CPU fibers, slowly and for tests only (docs/model.md, 'Time integration'); "
                       "lanes=1 is the CPU's kernel", stacklevel=3)
     t_build = time.perf_counter()
     kern = get_integrator(solver.dtype, model, lanes, solver.method)

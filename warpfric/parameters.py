@@ -78,7 +78,7 @@ class Parameters:
     # --- load protocol --------------------------------------------------------------------------
     normal_force: float = _p(1000.0, "N", "maximum normal force F_max", 0.0, INF, low_open=True)
     # beyond |2e/L| = 0.6 most of the pad lifts off; its undamped free vibration then holds the step
-    # size at ~5e-7 s (docs/model.md, "Lift-off"): such scenes stall and are refused
+    # size at ~5e-7 s (docs/model.md, "Open choices [10] and how to change them": lift-off): such scenes stall and are refused
     eccentricity: float = _p(0.0, "1", "normalised eccentricity 2e/L of the normal force", -0.6, 0.6)
     disc_velocity: float = _p(1e-4, "m s-1", "maximum disc velocity v_max", -INF, INF, True, True)
     force_ramp_time: float = _p(10.0, "s", "duration of the normal-force ramp", 0.0, INF)
@@ -230,7 +230,7 @@ class Solver:
                       without fronts (Fronts: use 'tr_bdf2').
     rtol:             relative local error tolerance of the adaptive step (1e-12 .. 1e-1).
                       The absolute tolerance of each variable kind is rtol times its natural scale
-                      (docs/model.md, "Error control").
+                      (docs/model.md, "Time integration").
     initial_step:     s, the first step and the backward-Euler restart step after a discontinuity.
     min_step:         s, a member whose step falls below this stops with status step_size_underflow.
     max_step:         s, largest step.
@@ -266,8 +266,8 @@ class Solver:
                       kernel); 2 .. min(256, nodes // 2): a team of that many threads (one Warp tile
                       block) shares each member's nodes, its tridiagonal Newton solve and its
                       reductions (the cooperative kernel; float64 only). None (default): chosen per
-                      run, see warpfric.engine.choose_lanes and docs/performance.md, "Session 5:
-                      the cooperative kernel". Results of the two kernels agree within the error control, not bit
+                      run, see warpfric.engine.choose_lanes and docs/model.md, "Time
+                      integration" (the cooperative kernel). Results of the two kernels agree within the error control, not bit
                       for bit (sums are taken in another order).
     """
 
