@@ -77,6 +77,11 @@ Hermite of y around the largest point; 'stepped': one step of the method itself 
 point before the dense maximum to its time. Errors relative to the reference (TR-BDF2 at
 --ref-rtol, same N, same gate treatment, parabola reading); mu_s_time errors absolute (s).
 
+A fourth accuracy measure, free of how a reading refines the peak: 'mu(t)', the largest error of mu
+at the run's accepted points after the disc starts (against the reference's Hermite). Steps by
+phase: start-up (t < 1 ms), force ramp, rest, disc sliding before the gates open (to 20.12 s), the
+switching window (20.12-20.14 s: the 40 gates open there at N = 40), after it.
+
 Prints one JSON line per run, then per scene the table of runs and the work-precision table: the
 weighted work (and L, attempts) at mu_s error 1e-5, 1e-6, 1e-7 (log-log interpolation along each
 method's rtol sweep, esdirk_order `at_error`) and its ratio to TR-BDF2. Writes --out.
@@ -101,7 +106,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from baseline_scipy import PadODE  # noqa: E402
 from esdirk_order import (  # noqa: E402
     FAILURE_FACTOR, INITIAL_STEP, MAX_FACTOR, MAX_STEP, MIN_FACTOR, MIN_STEP, SAFETY, FastPad, at_error, attempt,
-    mu_readings, next_breakpoint, tableau_trbdf2,
+    hermite, mu_readings, next_breakpoint, tableau_trbdf2,
 )
 
 import warpfric as wf  # noqa: E402
@@ -613,6 +618,36 @@ def readings(gp: GatedPad, run):
     return mu_readings(gp, run, step=step)
 
 
+def mu_path_error(gp: GatedPad, run, ref_run, ref_value):
+    """max over the run's accepted points after the disc starts of |mu(t_k) - mu_ref(t_k)| / mu_s_ref,
+    mu_ref from the cubic Hermite of the reference's state (its steps are short): the accuracy of
+    mu(t) where the readings take it from, free of how a reading refines the peak."""
+    p = gp.p
+    tr, yr, fr = ref_run["t"], ref_run["y"], ref_run["f"]
+    ts, ys = run["t"], run["y"]
+    worst = 0.0
+    for k in range(int(np.searchsorted(ts, p.rest_until)), len(ts)):
+        tk = ts[k]
+        j = min(max(int(np.searchsorted(tr, tk, side="right")) - 1, 0), len(tr) - 2)
+        gp.set_step(tr[j], tr[j + 1])
+        mu_ref = gp.mu(tk, hermite(tr[j], tr[j + 1], yr[j], yr[j + 1], fr[j], fr[j + 1], tk))
+        gp.set_step(ts[max(k - 1, 0)], tk)
+        worst = max(worst, abs(gp.mu(tk, ys[k]) - mu_ref))
+    gp.piece = None
+    return worst / ref_value
+
+
+def steps_by_phase(p, t):
+    edges = [0.0, 1e-3, p.force_ramp_time, p.rest_until, 20.12, 20.14, np.inf]
+    return {f"{a:g}-{b:g} s": int(np.sum((t[1:] > a) & (t[1:] <= b))) for a, b in zip(edges[:-1], edges[1:])}
+
+
+def cheapest_within(rows, err, key, cost="work"):
+    """The cost of the cheapest run whose ``key`` error is <= err (no interpolation; None if none)."""
+    c = [r[cost] for r in rows if r[key] <= err]
+    return min(c) if c else None
+
+
 def engine_run(p, n, rtol, predict):
     solver = wf.Solver(nodes=n, rtol=rtol, max_steps=10**6, predict_switches=predict)
     ds = wf.simulate(scene=p, solver=solver, fronts=None, device="cpu")
@@ -638,6 +673,8 @@ def main(argv=None):
     ap.add_argument("--filter", choices=["engine", "full", "none"], default="engine",
                     help="the velocity error filter, the same for every method (default: the kernels')")
     ap.add_argument("--targets", type=float, nargs="+", default=[1e-5, 1e-6, 1e-7])
+    ap.add_argument("--time-targets", type=float, nargs="+", default=[1e-5, 3e-6, 1e-6])
+    ap.add_argument("--path-targets", type=float, nargs="+", default=[1e-4, 1e-5, 1e-6])
     ap.add_argument("--no-engine", action="store_true", help="skip the warpfric check of the reference")
     ap.add_argument("--check", action="store_true", help="the tableau checks only")
     ap.add_argument("--out", default="studies/results/rosenbrock_w_cpu.json")
@@ -668,7 +705,6 @@ def main(argv=None):
             engine["relative_difference_to_reference"] = engine["mu_s"] / ref_value - 1
             engine["time_difference_to_reference"] = engine["mu_s_time"] - ref_time
             print(json.dumps(dict(eccentricity=ecc, engine=engine)), flush=True)
-        del ref_run
         rows = []
         for method in args.methods:
             for rtol in args.rtols:
@@ -688,22 +724,30 @@ def main(argv=None):
                 row["mu_s_error_stepped"] = abs(row["mu_s_stepped"] / ref_value - 1)
                 row["mu_s_error_dense"] = abs(row["mu_s_dense"] / ref_value - 1)
                 row["mu_s_time_error_dense"] = abs(row["mu_s_time_dense"] - ref_time)
+                row["mu_path_error"] = mu_path_error(gp, r, ref_run, ref_value)
+                row["steps_by_phase"] = steps_by_phase(p, r["t"])
                 rows.append(row)
                 print(json.dumps(row), flush=True)
+        del ref_run
         ok_rows = [r for r in rows if "failed" not in r]
         wp = {}
-        for reading in ("parabola", "stepped"):
-            key = "mu_s_error" if reading == "parabola" else "mu_s_error_stepped"
+        measures = {"parabola": ("mu_s_error", args.targets), "stepped": ("mu_s_error_stepped", args.targets),
+                    "mu(t) at accepted points": ("mu_path_error", args.path_targets),
+                    "mu_s_time (s)": ("mu_s_time_error", args.time_targets)}
+        for reading, (key, targets) in measures.items():
             wp[reading] = {}
             for method in args.methods:
                 sr = [dict(r, mu_s_error=r[key]) for r in ok_rows if r["method"] == method]
-                wp[reading][method] = {f"{tgt:g}": {k: at_error(sr, tgt, k) for k in ("work", "linear_solves_fresh", "attempts")}
-                                       for tgt in args.targets}
+                wp[reading][method] = {f"{tgt:g}": dict(**{k: at_error(sr, tgt, k) for k in ("work", "linear_solves_fresh", "attempts")},
+                                                        cheapest_within=cheapest_within(sr, tgt, "mu_s_error"))
+                                       for tgt in targets}
             base = wp[reading].get("trbdf2")
             for method in args.methods:
                 for tgt in wp[reading][method]:
                     v, b0 = wp[reading][method][tgt], (base or {}).get(tgt, {})
                     v["work_ratio_to_trbdf2"] = (v["work"] / b0["work"]) if (v["work"] and b0.get("work")) else None
+                    v["cheapest_ratio_to_trbdf2"] = ((v["cheapest_within"] / b0["cheapest_within"])
+                                                     if (v["cheapest_within"] and b0.get("cheapest_within")) else None)
         scenes.append(dict(eccentricity=ecc, reference=ref, engine=engine, rows=rows, work_precision=wp))
 
     wall_script = time.perf_counter() - t_script
@@ -739,7 +783,7 @@ def print_tables(out):
                   f"time {e['time_difference_to_reference']:+.1e} s, {e['steps_accepted']} + {e['steps_rejected']} steps, "
                   f"{e['newton_iterations']} Newton")
         print(f"{'method':>9} {'rtol':>6} {'acc':>6} {'rej e/s/sw':>13} {'L':>6} {'S':>6} {'F':>6} {'work/1e3':>9} "
-              f"{'mu_s err':>8} {'t err s':>8} {'stepped':>8} {'dense':>8} {'wall':>6}")
+              f"{'mu_s err':>8} {'t err s':>8} {'stepped':>8} {'dense':>8} {'mu(t)':>8} {'wall':>6}  steps by phase")
         for r in sc["rows"]:
             if "failed" in r:
                 print(f"{r['method']:>9} {r['rtol']:6.0e} FAILED: {r['failed']}")
@@ -747,14 +791,16 @@ def print_tables(out):
             rej = f"{r['rejected_error']}/{r['rejected_solve']}/{r['rejected_switch']}"
             print(f"{r['method']:>9} {r['rtol']:6.0e} {r['steps_accepted']:6d} {rej:>13} {r['linear_solves_fresh']:6d} "
                   f"{r['substitutions']:6d} {r['f_evaluations']:6d} {r['work'] / 1e3:9.1f} {r['mu_s_error']:8.1e} "
-                  f"{r['mu_s_time_error']:8.1e} {r['mu_s_error_stepped']:8.1e} {r['mu_s_error_dense']:8.1e} {r['wall_s']:6.1f}")
+                  f"{r['mu_s_time_error']:8.1e} {r['mu_s_error_stepped']:8.1e} {r['mu_s_error_dense']:8.1e} "
+                  f"{r['mu_path_error']:8.1e} {r['wall_s']:6.1f}  {'/'.join(str(v) for v in r['steps_by_phase'].values())}")
         for reading, tab in sc["work_precision"].items():
-            print(f"  work at equal mu_s error ({reading} reading): work/1e3 (L, attempts) and work ratio to TR-BDF2")
+            print(f"  work at equal error ({reading}): work/1e3 (L, attempts), work ratio to TR-BDF2 interpolated "
+                  f"[cheapest run within the error]")
             for method, v in tab.items():
                 cells = []
                 for tgt, c in v.items():
                     cells.append(f"{tgt}: {fmt(c['work'] and c['work'] / 1e3, '.1f'):>7} ({fmt(c['linear_solves_fresh'])}, "
-                                 f"{fmt(c['attempts'])}) x{fmt(c['work_ratio_to_trbdf2'], '.2f')}")
+                                 f"{fmt(c['attempts'])}) x{fmt(c['work_ratio_to_trbdf2'], '.2f')} [x{fmt(c['cheapest_ratio_to_trbdf2'], '.2f')}]")
                 print(f"    {method:>9}  " + "  ".join(cells))
 
 
