@@ -183,8 +183,10 @@ class FastPad:
     linear parts (sigma's u part, the elastic force) are PadODE's own functions applied to unit
     vectors, so the geometry is PadODE's."""
 
+    GATES = ("none",)  # relaxation laws this class implements (a subclass may add the stress gate)
+
     def __init__(self, ode: PadODE):
-        if ode.model.relaxation_gate != "none" or not ode.model.viscous_friction or not ode.model.poisson_coupling:
+        if ode.model.relaxation_gate not in self.GATES or not ode.model.viscous_friction or not ode.model.poisson_coupling:
             raise ValueError("FastPad implements the gate-less default model")
         self.ode = ode
         p, n = ode.p, ode.n
@@ -269,23 +271,28 @@ class FastPad:
         self.plate = d
         return d.copy()
 
+    def relaxation(self, s):
+        """The relaxation speed r (m/s) in tau_el' and phi' and dr/ds: |s| and sign(s) gate-less
+        (a subclass holds a gate g per node: g|s| and g*sign(s))."""
+        return np.abs(s), np.sign(s)
+
     def f(self, t, y, jac=False):
         p, n = self.p, self.n
         u, v, tau, phi = y[:n], y[n:2 * n], y[2 * n:3 * n], y[3 * n:]
         d = self.solve_plate(u, v, tau, phi, t)
         sigma, c, ag, alpha, area, s, L, tau_f = self._terms(u, v, tau, phi, t, d)
         abs_s = np.abs(s)
+        r, dr = self.relaxation(s)
         D = p.memory_length
         E = self.Ku @ u + self.e0 * d[0] + self.ea * d[1]
         dv = (E + tau_f - p.damping * v) / self.rhoH
-        dtau = p.interface_stiffness * area * s - tau * abs_s / D
-        dphi = 1 - phi * abs_s / D
+        dtau = p.interface_stiffness * area * s - tau * r / D
+        dphi = 1 - phi * r / D
         fy = np.concatenate([v, dv, dtau, dphi])
         if not jac:
             return fy
         # ---- exact Jacobian with d held, then the plate's response ----
         k = p.interface_stiffness
-        sg = np.sign(s)
         dL = 1.0 / (p.reference_velocity + abs_s)  # dL/ds
         dag = p.aging_coefficient / (p.aging_time + phi)
         darea_phi = c * sigma / p.hardness * dag
@@ -302,11 +309,11 @@ class FastPad:
         J[n + I, 3 * n + I] = dtf_phi / self.rhoH
         rt = slice(2 * n, 3 * n)
         J[rt, 0:n] = (k * s * alpha)[:, None] * self.S
-        J[2 * n + I, n + I] = -self.kif * k * area + self.kif * tau * sg / D
-        J[2 * n + I, 2 * n + I] = -abs_s / D
+        J[2 * n + I, n + I] = -self.kif * k * area + self.kif * tau * dr / D
+        J[2 * n + I, 2 * n + I] = -r / D
         J[2 * n + I, 3 * n + I] = k * s * darea_phi
-        J[3 * n + I, n + I] = phi * sg * self.kif / D
-        J[3 * n + I, 3 * n + I] = -abs_s / D
+        J[3 * n + I, n + I] = phi * dr * self.kif / D
+        J[3 * n + I, 3 * n + I] = -r / D
         if self.force(t) != 0:
             Fd = np.zeros((4 * n, 2))
             Fd[rv, 0] = (self.e0 + dtf_sigma * self.A0) / self.rhoH
@@ -523,9 +530,11 @@ def hermite(t0, t1, y0, y1, f0, f1, t):
     return h00 * y0 + h10 * h * f0 + h01 * y1 + h11 * h * f1
 
 
-def mu_readings(fp: FastPad, run):
+def mu_readings(fp: FastPad, run, step=None):
     """mu at every accepted point; mu_s by the engine's parabola and by the dense (Hermite)
-    maximum around the largest point."""
+    maximum around the largest point. ``step(j, t)``, if given, takes the stepped reading's step
+    from accepted point j to t and returns the state there (None if it failed); default: the
+    ESDIRK ``attempt`` with run['tableau']."""
     ts, ys, fs = run["t"], run["y"], run["f"]
     p = fp.p
     fp.piece = None
@@ -572,8 +581,12 @@ def mu_readings(fp: FastPad, run):
     mu_step = best
     if tbest > ts[j]:
         fp.plate = run["plates"][j].copy()
-        ok, y_t, *_ = attempt(run["tableau"], fp, ts[j], ys[j], fs[j], tbest - ts[j], tbest, run["rtol"],
-                              np.eye(ys.shape[1]))
+        if step is None:
+            ok, y_t, *_ = attempt(run["tableau"], fp, ts[j], ys[j], fs[j], tbest - ts[j], tbest, run["rtol"],
+                                  np.eye(ys.shape[1]))
+        else:
+            y_t = step(j, tbest)
+            ok = y_t is not None
         if ok:
             fp.set_step(ts[j], tbest)
             mu_step = fp.mu(tbest, y_t)
