@@ -7,7 +7,7 @@ chosen for the next one and the FSAL derivatives are corrected in closed form.
 another law than the stress gate they compile to constants (gate 1, not sliding). It composes one
 factory per part: ``make_node_gates`` (the gate a node holds over a step), ``make_switch_test`` (the
 end-of-step test), ``make_switch_location`` (retries and predicted step ends) and
-``make_gate_update`` (the regimes after an accepted step).
+``make_gate_update`` (the regimes after an accepted step, with ``make_contact_arrival``).
 """
 
 import warp as wp
@@ -211,22 +211,8 @@ def make_switch_location(ft, SwitchTest):
     return dict(locate_switch=locate_switch, drop_stale_limit=drop_stale_limit, after_accept=after_accept)
 
 
-def make_gate_update(ft, terms, team):
-    """After an accepted step: each node's gate regime for the next step, the FSAL correction, the
-    first opening time and the contact front's arrival (switch_gates)."""
-    Coeffs = terms["Coeffs"]
-    team_count = team["team_count"]
-    array3 = wp.array3d(dtype=ft)
-    array4 = wp.array4d(dtype=ft)
-
-    @wp.func
-    def gate_regime(gate: ft, sliding: ft):
-        """0: closed, 1: sliding on the yield surface, 2: open."""
-        if sliding > ft(0.0):
-            return 1
-        if gate >= ft(1.0):
-            return 2
-        return 0
+def make_contact_arrival(ft):
+    """The contact front's arrival time at a node whose gate opened in a step (contact_arrival)."""
 
     @wp.func
     def contact_arrival(p: MemberParams, st: IntegratorState, t_old: wp.float64, t_new: wp.float64, z_prev: ft,
@@ -255,6 +241,27 @@ def make_gate_update(ft, terms, team):
             if t_quad >= t_old and t_quad <= t_new:
                 return t_quad, wp.abs(t_quad - t_lin)
         return t_lin, t_new - t_old
+
+    return dict(contact_arrival=contact_arrival)
+
+
+def make_gate_update(ft, terms, team):
+    """After an accepted step: each node's gate regime for the next step, the FSAL correction, the
+    first opening time and the contact front's arrival (switch_gates)."""
+    Coeffs = terms["Coeffs"]
+    team_count = team["team_count"]
+    contact_arrival = make_contact_arrival(ft)["contact_arrival"]
+    array3 = wp.array3d(dtype=ft)
+    array4 = wp.array4d(dtype=ft)
+
+    @wp.func
+    def gate_regime(gate: ft, sliding: ft):
+        """0: closed, 1: sliding on the yield surface, 2: open."""
+        if sliding > ft(0.0):
+            return 1
+        if gate >= ft(1.0):
+            return 2
+        return 0
 
     @wp.func
     def switch_gates(
