@@ -18,7 +18,10 @@ last stage becomes the next step's s1. ``stage_constant``, ``solution_increment`
 the solution on a linear stiff system, the order 3 of the error estimate on a non-stiff one, and
 L-stability); the array functions apply them to every node and component.
 
-``make_esdirk(ft, model, terms, newton, gates)`` builds the functions for one working precision and model.
+``make_esdirk(ft, model, terms, newton, gates, team, method)`` builds the functions for one working
+precision and model, by part: the tableau (``make_tableau``), its application to the arrays
+(``make_tr_bdf2_arrays``), the StepResult (``make_step_result``) and the attempted steps
+(``make_tr_bdf2_steps``); ESDIRK4 likewise (``make_esdirk4_arrays``, ``make_esdirk4``).
 """
 
 import math
@@ -101,36 +104,19 @@ def make_tableau(ft):
     return dict(stage_constant=stage_constant, solution_increment=solution_increment, error_increment=error_increment)
 
 
-def make_esdirk(ft, model, terms, newton, gates, team, method="tr_bdf2"):
+def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
+    """The tableau applied to every node and component of a member: the stage constants and Newton
+    start (prepare_stage), the error norm (fold_error, error_norm) and the solution update
+    (advance_state)."""
     inertia = bool(model.inertia)
     team_max = team["team_max"]
     barrier = team["barrier"]
     Coeffs = terms["Coeffs"]
-    StageSums = newton["StageSums"]
-    SwitchTest = gates["SwitchTest"]
-    newton_solve = newton["newton_solve"]
-    stage_derivatives = newton["stage_derivatives"]
-    tableau = make_tableau(ft)
     stage_constant = tableau["stage_constant"]
     solution_increment = tableau["solution_increment"]
     error_increment = tableau["error_increment"]
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
-
-    @wp.struct
-    class StepResult:
-        """An attempted step: converged (1) or not, its error norm (1 = the tolerance; 0 for a
-        backward-Euler step), Newton iterations, non-finite (1), the plate's delta0 (m) and tilt
-        (rad) at its end, the integrals of its last stage and its gate-switch test."""
-
-        ok: wp.int32
-        error: wp.float64
-        iterations: wp.int32
-        non_finite: wp.int32
-        delta0: ft
-        tilt: ft
-        sums: StageSums
-        switch_test: SwitchTest
 
     @wp.func
     def prepare_stage(
@@ -210,6 +196,43 @@ def make_esdirk(ft, model, terms, newton, gates, team, method="tr_bdf2"):
                     else:
                         state[comp, i, m] = state[comp, i, m] + solution_increment(h, K[s1, comp, i, m], K[s2, comp, i, m], k3)
 
+    return dict(prepare_stage=prepare_stage, fold_error=fold_error, error_norm=error_norm, advance_state=advance_state)
+
+
+def make_step_result(ft, newton, gates):
+    """The StepResult struct of an attempted step (any method)."""
+    StageSums = newton["StageSums"]
+    SwitchTest = gates["SwitchTest"]
+
+    @wp.struct
+    class StepResult:
+        """An attempted step: converged (1) or not, its error norm (1 = the tolerance; 0 for a
+        backward-Euler step), Newton iterations, non-finite (1), the plate's delta0 (m) and tilt
+        (rad) at its end, the integrals of its last stage and its gate-switch test."""
+
+        ok: wp.int32
+        error: wp.float64
+        iterations: wp.int32
+        non_finite: wp.int32
+        delta0: ft
+        tilt: ft
+        sums: StageSums
+        switch_test: SwitchTest
+
+    return StepResult
+
+
+def make_tr_bdf2_steps(ft, terms, newton, StepResult, arrays):
+    """The attempted steps: backward Euler (a (re)start) and TR-BDF2, each stage solved by Newton
+    (kernels/newton.py)."""
+    Coeffs = terms["Coeffs"]
+    newton_solve = newton["newton_solve"]
+    stage_derivatives = newton["stage_derivatives"]
+    prepare_stage = arrays["prepare_stage"]
+    error_norm = arrays["error_norm"]
+    array3 = wp.array3d(dtype=ft)
+    array4 = wp.array4d(dtype=ft)
+
     @wp.func
     def backward_euler_step(
         c: Coeffs, p: MemberParams, settings: SolverSettings, m: int, n: int, state: array3, K: array4,
@@ -265,23 +288,32 @@ def make_esdirk(ft, model, terms, newton, gates, team, method="tr_bdf2"):
         res.tilt = a
         return res
 
-    out = dict(StepResult=StepResult, prepare_stage=prepare_stage, error_norm=error_norm, advance_state=advance_state,
-               backward_euler_step=backward_euler_step, tr_bdf2_step=tr_bdf2_step, **tableau)
+    return dict(backward_euler_step=backward_euler_step, tr_bdf2_step=tr_bdf2_step)
+
+
+def make_esdirk(ft, model, terms, newton, gates, team, method="tr_bdf2"):
+    """The steppers for one working precision and model: TR-BDF2 and backward Euler, and with
+    method = 'esdirk4' ESDIRK4's step (make_esdirk4)."""
+    tableau = make_tableau(ft)
+    arrays = make_tr_bdf2_arrays(ft, model, terms, team, tableau)
+    StepResult = make_step_result(ft, newton, gates)
+    steps = make_tr_bdf2_steps(ft, terms, newton, StepResult, arrays)
+    out = dict(StepResult=StepResult, prepare_stage=arrays["prepare_stage"], error_norm=arrays["error_norm"],
+               advance_state=arrays["advance_state"], backward_euler_step=steps["backward_euler_step"],
+               tr_bdf2_step=steps["tr_bdf2_step"], **tableau)
     if method == "esdirk4":
-        out.update(make_esdirk4(ft, model, terms, newton, gates, team, StepResult, fold_error))
+        out.update(make_esdirk4(ft, model, terms, newton, gates, team, StepResult, arrays["fold_error"]))
     return out
 
 
-def make_esdirk4(ft, model, terms, newton, gates, team, StepResult, fold_error):
-    """ESDIRK4(3)6L[2]SA's step (Solver.method = 'esdirk4'): the stages in six slots of K, the slot
-    of stage j being (s1 + j) % 6 (s1 = FSAL slot: f(y_n)); the last stage's slot becomes the next
-    step's s1."""
+def make_esdirk4_arrays(ft, model, terms, team, fold_error):
+    """ESDIRK4's tableau applied to every node and component of a member: the stage constants and
+    Newton start (prepare_stage4), the error norm (error_norm4) and the solution update
+    (advance_state4); e4_row and e4_abscissa read the tableau."""
     inertia = bool(model.inertia)
     team_max = team["team_max"]
     barrier = team["barrier"]
     Coeffs = terms["Coeffs"]
-    newton_solve = newton["newton_solve"]
-    stage_derivatives = newton["stage_derivatives"]
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
     vec6 = wp.types.vector(length=6, dtype=ft)
@@ -360,6 +392,24 @@ def make_esdirk4(ft, model, terms, newton, gates, team, StepResult, fold_error):
                         inc += b[j] * K[(s1 + j) % 6, comp, i, m]
                     state[comp, i, m] = state[comp, i, m] + h * inc
 
+    return dict(e4_abscissa=e4_abscissa, prepare_stage4=prepare_stage4, error_norm4=error_norm4,
+                advance_state4=advance_state4)
+
+
+def make_esdirk4(ft, model, terms, newton, gates, team, StepResult, fold_error):
+    """ESDIRK4(3)6L[2]SA's step (Solver.method = 'esdirk4'): the stages in six slots of K, the slot
+    of stage j being (s1 + j) % 6 (s1 = FSAL slot: f(y_n)); the last stage's slot becomes the next
+    step's s1."""
+    Coeffs = terms["Coeffs"]
+    newton_solve = newton["newton_solve"]
+    stage_derivatives = newton["stage_derivatives"]
+    arrays = make_esdirk4_arrays(ft, model, terms, team, fold_error)
+    e4_abscissa = arrays["e4_abscissa"]
+    prepare_stage4 = arrays["prepare_stage4"]
+    error_norm4 = arrays["error_norm4"]
+    array3 = wp.array3d(dtype=ft)
+    array4 = wp.array4d(dtype=ft)
+
     @wp.func
     def esdirk4_step(
         c: Coeffs, p: MemberParams, settings: SolverSettings, m: int, n: int, state: array3, K: array4,
@@ -400,5 +450,5 @@ def make_esdirk4(ft, model, terms, newton, gates, team, StepResult, fold_error):
         res.tilt = a
         return res
 
-    return dict(esdirk4_step=esdirk4_step, advance_state4=advance_state4, error_norm4=error_norm4,
+    return dict(esdirk4_step=esdirk4_step, advance_state4=arrays["advance_state4"], error_norm4=error_norm4,
                 prepare_stage4=prepare_stage4)

@@ -3,8 +3,11 @@ held over a step; a switch inside a step is located by rejecting the step and re
 past it; after an accepted step each node's regime (closed, open, sliding on the yield surface) is
 chosen for the next one and the FSAL derivatives are corrected in closed form.
 
-``make_gates(ft, model, terms)`` builds the functions for one working precision and model; with
-another law than the stress gate they compile to constants (gate 1, not sliding).
+``make_gates(ft, model, terms, team)`` builds the functions for one working precision and model; with
+another law than the stress gate they compile to constants (gate 1, not sliding). It composes one
+factory per part: ``make_node_gates`` (the gate a node holds over a step), ``make_switch_test`` (the
+end-of-step test), ``make_switch_location`` (retries and predicted step ends) and
+``make_gate_update`` (the regimes after an accepted step, with ``make_contact_arrival``).
 """
 
 import warp as wp
@@ -27,17 +30,39 @@ MAX_PREDICTION_MISSES = 2
 NO_PREDICTION = 1.0e30
 
 
-def make_gates(ft, model, terms, team):
+def make_node_gates(ft, model):
+    """Each node's yield gate and sliding flag over the current step, read from the gates array
+    (constants 1 and 0 for the gate-less and velocity laws)."""
     stress_gate = model.relaxation_gate == "stress"
+    array3 = wp.array3d(dtype=ft)
+
+    @wp.func
+    def node_gate(gates: array3, i: int, m: int):
+        """The yield gate of node i over the current step (1 for the gate-less and velocity laws)."""
+        if wp.static(stress_gate):
+            return gates[G_GATE, i, m]
+        return ft(1.0)
+
+    @wp.func
+    def node_sliding(gates: array3, i: int, m: int):
+        """1 where node i slides on the yield surface (stress gate), else 0."""
+        if wp.static(stress_gate):
+            return gates[G_SLIDE, i, m]
+        return ft(0.0)
+
+    return dict(node_gate=node_gate, node_sliding=node_sliding)
+
+
+def make_switch_test(ft, model, terms, team, node_sliding):
+    """The gate-switch test at the end of a step: each node's yield margin against the gate it held
+    (test_switch), combined over the team (team_switch_test), as a SwitchTest."""
     viscous = bool(model.viscous_friction)
     Coeffs = terms["Coeffs"]
     Friction = terms["Friction"]
     yield_margin = terms["yield_margin"]
-    team_count = team["team_count"]
     team_max = team["team_max"]
     team_min = team["team_min"]
     array3 = wp.array3d(dtype=ft)
-    array4 = wp.array4d(dtype=ft)
 
     @wp.struct
     class SwitchTest:
@@ -56,20 +81,6 @@ def make_gates(ft, model, terms, team):
         test.retry_fraction = ft(1.0)
         test.next_switch = ft(NO_PREDICTION)
         return test
-
-    @wp.func
-    def node_gate(gates: array3, i: int, m: int):
-        """The yield gate of node i over the current step (1 for the gate-less and velocity laws)."""
-        if wp.static(stress_gate):
-            return gates[G_GATE, i, m]
-        return ft(1.0)
-
-    @wp.func
-    def node_sliding(gates: array3, i: int, m: int):
-        """1 where node i slides on the yield surface (stress gate), else 0."""
-        if wp.static(stress_gate):
-            return gates[G_SLIDE, i, m]
-        return ft(0.0)
 
     @wp.func
     def test_switch(
@@ -132,6 +143,15 @@ def make_gates(ft, model, terms, team):
         out.next_switch = team_min(test.next_switch)
         return out
 
+    return dict(SwitchTest=SwitchTest, no_switch=no_switch, test_switch=test_switch,
+                team_switch_test=team_switch_test)
+
+
+def make_switch_location(ft, SwitchTest):
+    """The step-size side of the gate switches: retry a step up to a located switch (locate_switch),
+    and after an accepted step count missed predictions and set the next predicted step end
+    (after_accept, drop_stale_limit)."""
+
     @wp.func
     def locate_switch(st: IntegratorState, settings: SolverSettings, t: wp.float64, h: wp.float64, test: SwitchTest):
         """A step that passed the error test but not the switch test: return (st, 1) to retry it up to
@@ -149,13 +169,50 @@ def make_gates(ft, model, terms, team):
         return st, 0
 
     @wp.func
-    def gate_regime(gate: ft, sliding: ft):
-        """0: closed, 1: sliding on the yield surface, 2: open."""
-        if sliding > ft(0.0):
-            return 1
-        if gate >= ft(1.0):
-            return 2
-        return 0
+    def drop_stale_limit(st: IntegratorState, t_new: wp.float64):
+        """After every accepted step and its observers: a step limit that the step reached (a
+        backward-Euler (re)start has no after_accept) or any limit when the step ended on the sudden
+        stop (st.restart set: the load jumps, so a prediction made before it says nothing after it)
+        is dropped."""
+        if t_new >= st.switch_limit or st.restart != 0:
+            st.switch_limit = wp.float64(1.0e300)
+            st.switch_predicted = 0
+        return st
+
+    @wp.func
+    def after_accept(st: IntegratorState, settings: SolverSettings, switches_before: int, test: SwitchTest,
+                     t_new: wp.float64, clipped: int):
+        """Bookkeeping of the switch location after an accepted step with a switch test (not a
+        backward-Euler (re)start; ``clipped``: the step's clipping code, kernels/controller.py), and
+        the end of the next step at a predicted switch.
+
+        A prediction that did not happen (the step clipped at it switched nothing) counts a miss;
+        after MAX_PREDICTION_MISSES in a row predictions stop until the next switch, so that a margin
+        that only approaches 0 (e.g. a steady state just below the yield stress) cannot hold the
+        step size down. A predicted limit never replaces a located one (a rejected step's)."""
+        switched = st.gate_switches != switches_before
+        if switched or test.error > ft(1.0):
+            st.switch_retries = 0  # the located switch happened (or was given up)
+        if switched:
+            st.prediction_misses = 0
+        elif clipped == STEP_AT_SWITCH and st.switch_predicted == 1:
+            st.prediction_misses = st.prediction_misses + 1
+            st.missed_predictions = st.missed_predictions + 1
+        st = drop_stale_limit(st, t_new)  # st.restart is 0 here: the limit this step reached
+        located_pending = st.switch_limit < wp.float64(1.0e300) and st.switch_predicted == 0
+        if settings.predict_switches == 1 and st.prediction_misses < MAX_PREDICTION_MISSES and not located_pending:
+            if test.next_switch < ft(NO_PREDICTION):
+                limit = t_new + wp.float64(test.next_switch)
+                if limit < st.switch_limit:
+                    st.switch_limit = limit
+                    st.switch_predicted = 1
+        return st
+
+    return dict(locate_switch=locate_switch, drop_stale_limit=drop_stale_limit, after_accept=after_accept)
+
+
+def make_contact_arrival(ft):
+    """The contact front's arrival time at a node whose gate opened in a step (contact_arrival)."""
 
     @wp.func
     def contact_arrival(p: MemberParams, st: IntegratorState, t_old: wp.float64, t_new: wp.float64, z_prev: ft,
@@ -184,6 +241,27 @@ def make_gates(ft, model, terms, team):
             if t_quad >= t_old and t_quad <= t_new:
                 return t_quad, wp.abs(t_quad - t_lin)
         return t_lin, t_new - t_old
+
+    return dict(contact_arrival=contact_arrival)
+
+
+def make_gate_update(ft, terms, team):
+    """After an accepted step: each node's gate regime for the next step, the FSAL correction, the
+    first opening time and the contact front's arrival (switch_gates)."""
+    Coeffs = terms["Coeffs"]
+    team_count = team["team_count"]
+    contact_arrival = make_contact_arrival(ft)["contact_arrival"]
+    array3 = wp.array3d(dtype=ft)
+    array4 = wp.array4d(dtype=ft)
+
+    @wp.func
+    def gate_regime(gate: ft, sliding: ft):
+        """0: closed, 1: sliding on the yield surface, 2: open."""
+        if sliding > ft(0.0):
+            return 1
+        if gate >= ft(1.0):
+            return 2
+        return 0
 
     @wp.func
     def switch_gates(
@@ -258,46 +336,18 @@ def make_gates(ft, model, terms, team):
         st.gate_switches = st.gate_switches + team_count(switches)
         return st
 
-    @wp.func
-    def drop_stale_limit(st: IntegratorState, t_new: wp.float64):
-        """After every accepted step and its observers: a step limit that the step reached (a
-        backward-Euler (re)start has no after_accept) or any limit when the step ended on the sudden
-        stop (st.restart set: the load jumps, so a prediction made before it says nothing after it)
-        is dropped."""
-        if t_new >= st.switch_limit or st.restart != 0:
-            st.switch_limit = wp.float64(1.0e300)
-            st.switch_predicted = 0
-        return st
+    return dict(switch_gates=switch_gates)
 
-    @wp.func
-    def after_accept(st: IntegratorState, settings: SolverSettings, switches_before: int, test: SwitchTest,
-                     t_new: wp.float64, clipped: int):
-        """Bookkeeping of the switch location after an accepted step with a switch test (not a
-        backward-Euler (re)start; ``clipped``: the step's clipping code, kernels/controller.py), and
-        the end of the next step at a predicted switch.
 
-        A prediction that did not happen (the step clipped at it switched nothing) counts a miss;
-        after MAX_PREDICTION_MISSES in a row predictions stop until the next switch, so that a margin
-        that only approaches 0 (e.g. a steady state just below the yield stress) cannot hold the
-        step size down. A predicted limit never replaces a located one (a rejected step's)."""
-        switched = st.gate_switches != switches_before
-        if switched or test.error > ft(1.0):
-            st.switch_retries = 0  # the located switch happened (or was given up)
-        if switched:
-            st.prediction_misses = 0
-        elif clipped == STEP_AT_SWITCH and st.switch_predicted == 1:
-            st.prediction_misses = st.prediction_misses + 1
-            st.missed_predictions = st.missed_predictions + 1
-        st = drop_stale_limit(st, t_new)  # st.restart is 0 here: the limit this step reached
-        located_pending = st.switch_limit < wp.float64(1.0e300) and st.switch_predicted == 0
-        if settings.predict_switches == 1 and st.prediction_misses < MAX_PREDICTION_MISSES and not located_pending:
-            if test.next_switch < ft(NO_PREDICTION):
-                limit = t_new + wp.float64(test.next_switch)
-                if limit < st.switch_limit:
-                    st.switch_limit = limit
-                    st.switch_predicted = 1
-        return st
-
-    return dict(SwitchTest=SwitchTest, drop_stale_limit=drop_stale_limit, no_switch=no_switch, team_switch_test=team_switch_test, node_gate=node_gate, node_sliding=node_sliding,
-                test_switch=test_switch, locate_switch=locate_switch, switch_gates=switch_gates,
-                after_accept=after_accept)
+def make_gates(ft, model, terms, team):
+    """The stress gate's functions for one working precision and model, by part: the node gates,
+    the switch test, the switch location and the gate update."""
+    node_gates = make_node_gates(ft, model)
+    test = make_switch_test(ft, model, terms, team, node_gates["node_sliding"])
+    location = make_switch_location(ft, test["SwitchTest"])
+    update = make_gate_update(ft, terms, team)
+    return dict(SwitchTest=test["SwitchTest"], drop_stale_limit=location["drop_stale_limit"],
+                no_switch=test["no_switch"], team_switch_test=test["team_switch_test"],
+                node_gate=node_gates["node_gate"], node_sliding=node_gates["node_sliding"],
+                test_switch=test["test_switch"], locate_switch=location["locate_switch"],
+                switch_gates=update["switch_gates"], after_accept=location["after_accept"])

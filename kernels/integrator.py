@@ -5,17 +5,18 @@ The ``integrate`` kernel is a loop of attempted steps, each: the controller prop
 (kernels/controller.py), the stepper attempts it (kernels/esdirk.py: TR-BDF2 or, with
 Solver.method = 'esdirk4', ESDIRK4(3)6L[2]SA; backward Euler at a (re)start; the stages solved by
 kernels/newton.py on the model terms of kernels/model_terms.py), the stress gate may ask to retry it
-up to a located switch (kernels/gates.py), and an accepted step
-advances the state, updates the gates and calls the observers (kernels/observers.py: mu_s, fronts,
-recording). Arrays and structs: kernels/types.py. Scheme and choices: docs/model.md, "Time
-integration" and "Gate switches".
+up to a located switch (kernels/gates.py), and an accepted step (``accept_step``) advances the
+state, updates the gates and calls the observers (kernels/observers.py: mu_s, fronts, recording).
+``make_stages`` builds the device functions stage by stage; ``make_acceptance``,
+``make_integrate_kernel`` and ``make_field_kernel`` build on them. Arrays and structs:
+kernels/types.py. Scheme and choices: docs/model.md, "Time integration" and "Gate switches".
 """
 
 import os
 
 import warp as wp
 
-from .controller import accepted_step_size, out_of_steps, propose_step, reject, stalled, step_factor_for
+from .controller import Step, accepted_step_size, out_of_steps, propose_step, reject, stalled, step_factor_for
 from .esdirk import make_esdirk
 from .gates import make_gates
 from .model_terms import disc_velocity_at, make_model_terms
@@ -62,27 +63,92 @@ def make_stages(ft, model, lanes: int = 1, method: str = "tr_bdf2") -> dict:
 
 
 def _make_integrator(dtype: str, model, lanes: int, registers=None, method: str = "tr_bdf2"):
+    """The integrate and evaluate_fields kernels for one working precision, model, team size and
+    method (get_integrator caches them)."""
     ft = wp.float64 if dtype == "float64" else wp.float32
-    team_on = lanes > 1
-    esdirk4 = method == "esdirk4"
-    n_slots = stage_slots(method)
-    step_factor = step_factor_for(method)
     stages = make_stages(ft, model, lanes, method)
+    acceptance = make_acceptance(ft, model, method, stages)
+    integrate = make_integrate_kernel(ft, model, lanes, registers, method, stages, acceptance)
+    evaluate_fields = make_field_kernel(ft, stages)
+    return dict(integrate=integrate, evaluate_fields=evaluate_fields, ft=ft, stages=stages)
+
+
+def make_acceptance(ft, model, method, stages):
+    """accept_step: what follows an accepted step in the integrate kernel (advance, gates, step
+    size, observers)."""
+    esdirk4 = method == "esdirk4"
+    stress_gate = model.relaxation_gate == "stress"
     terms, gates, esdirk, observers = stages["terms"], stages["gates"], stages["esdirk"], stages["observers"]
-    make_coeffs = terms["make_coeffs"]
-    state_displacement = observers["state_displacement"]
-    state_contact = observers["state_contact"]
-    backward_euler_step = esdirk["backward_euler_step"]
-    tr_bdf2_step = esdirk["tr_bdf2_step"]
+    Coeffs = terms["Coeffs"]
+    StepResult = esdirk["StepResult"]
     advance_state = esdirk["advance_state"]
-    esdirk4_step = esdirk.get("esdirk4_step", tr_bdf2_step)
     advance_state4 = esdirk.get("advance_state4", advance_state)
-    locate_switch = gates["locate_switch"]
     switch_gates = gates["switch_gates"]
     after_accept = gates["after_accept"]
     drop_stale_limit = gates["drop_stale_limit"]
     on_accept = observers["on_accept"]
+    array3 = wp.array3d(dtype=ft)
+    array4 = wp.array4d(dtype=ft)
+
+    @wp.func
+    def accept_step(
+        c: Coeffs, p: MemberParams, st: IntegratorState, settings: SolverSettings, outputs: OutputSettings, m: int,
+        n: int, state: array3, K: array4, work: array3, gates: array3, s1: int, s2: int, s3: int, t: wp.float64,
+        step: Step, factor: wp.float64, res: StepResult, restart: int, yield_time: wp.array2d(dtype=wp.float64),
+        arrival: wp.array3d(dtype=wp.float64), arrival_error: wp.array3d(dtype=wp.float64),
+        strength: wp.array3d(dtype=wp.float64), record_times: wp.array(dtype=wp.float64), record_previous: array3,
+        record: array4,
+    ):
+        """The step from t to step.t_new was accepted (res: its StepResult, factor: the step-size
+        factor of its error, restart: 1 for a backward-Euler (re)start): advance the state, switch
+        the gates, set the next step size and the FSAL slot s3, and run the observers. Returns st."""
+        if wp.static(esdirk4):
+            if restart != 0:
+                advance_state(c, m, n, state, K, s1, s2, s3, ft(step.h), restart)
+            else:
+                advance_state4(c, m, n, state, K, s1, ft(step.h))
+        else:
+            advance_state(c, m, n, state, K, s1, s2, s3, ft(step.h), restart)
+        if wp.static(stress_gate):
+            switches_before = st.gate_switches
+            st = switch_gates(c, p, st, outputs, m, n, state, K, s3, gates, work, t, step.t_new, restart, yield_time,
+                              arrival, arrival_error)
+            if restart == 0:
+                st = after_accept(st, settings, switches_before, res.switch_test, step.t_new, step.clipped)
+        delta0 = res.delta0
+        tilt = res.tilt
+        if restart != 0:
+            st.restart = 0
+            st.h = settings.initial_step
+        else:
+            st.h = accepted_step_size(st, step, factor)
+        st.fsal = s3
+        st = on_accept(c, p, st, outputs, m, n, state, K, work, s1, s2, s3, t, step.t_new, delta0, tilt,
+                       res.sums.friction, res.sums.normal, res.sums.min_normal, restart, arrival, arrival_error,
+                       strength, record_times, record_previous, record)
+        if wp.static(stress_gate):
+            st = drop_stale_limit(st, step.t_new)
+        if st.restart != 0:
+            st.h = settings.initial_step  # the step ended on the sudden stop: restart
+        return st
+
+    return dict(accept_step=accept_step)
+
+
+def make_integrate_kernel(ft, model, lanes: int, registers, method, stages, acceptance):
+    """The integrate kernel: the loop of attempted steps (stepper, controller, accept_step)."""
+    team_on = lanes > 1
+    esdirk4 = method == "esdirk4"
+    n_slots = stage_slots(method)
+    step_factor = step_factor_for(method)
     stress_gate = model.relaxation_gate == "stress"
+    make_coeffs = stages["terms"]["make_coeffs"]
+    esdirk = stages["esdirk"]
+    backward_euler_step = esdirk["backward_euler_step"]
+    tr_bdf2_step = esdirk["tr_bdf2_step"]
+    esdirk4_step = esdirk.get("esdirk4_step", tr_bdf2_step)
+    locate_switch = stages["gates"]["locate_switch"]
+    accept_step = acceptance["accept_step"]
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
 
@@ -174,38 +240,24 @@ def _make_integrator(dtype: str, model, lanes: int, registers=None, method: str 
                     break
                 continue
             # ---- accepted: advance, gates, observers ----
-            if wp.static(esdirk4):
-                if restart != 0:
-                    advance_state(c, m, n, state, K, s1, s2, s3, ft(step.h), restart)
-                else:
-                    advance_state4(c, m, n, state, K, s1, ft(step.h))
-            else:
-                advance_state(c, m, n, state, K, s1, s2, s3, ft(step.h), restart)
-            if wp.static(stress_gate):
-                switches_before = st.gate_switches
-                st = switch_gates(c, p, st, outputs, m, n, state, K, s3, gates, work, t, step.t_new, restart, yield_time,
-                                  arrival, arrival_error)
-                if restart == 0:
-                    st = after_accept(st, settings, switches_before, res.switch_test, step.t_new, step.clipped)
+            st = accept_step(c, p, st, settings, outputs, m, n, state, K, work, gates, s1, s2, s3, t, step, factor, res,
+                             restart, yield_time, arrival, arrival_error, strength, record_times, record_previous, record)
             delta0 = res.delta0
             tilt = res.tilt
-            if restart != 0:
-                st.restart = 0
-                st.h = settings.initial_step
-            else:
-                st.h = accepted_step_size(st, step, factor)
-            st.fsal = s3
-            st = on_accept(c, p, st, outputs, m, n, state, K, work, s1, s2, s3, t, step.t_new, delta0, tilt,
-                           res.sums.friction, res.sums.normal, res.sums.min_normal, restart, arrival, arrival_error,
-                           strength, record_times, record_previous, record)
-            if wp.static(stress_gate):
-                st = drop_stale_limit(st, step.t_new)
-            if st.restart != 0:
-                st.h = settings.initial_step  # the step ended on the sudden stop: restart
         st.delta0 = wp.float64(delta0)
         st.tilt = wp.float64(tilt)
         if lane == 0:
             member_states[m] = st
+
+    return integrate
+
+
+def make_field_kernel(ft, stages):
+    """The evaluate_fields kernel: the interface stresses of the current state."""
+    make_coeffs = stages["terms"]["make_coeffs"]
+    state_displacement = stages["observers"]["state_displacement"]
+    state_contact = stages["observers"]["state_contact"]
+    array3 = wp.array3d(dtype=ft)
 
     @wp.kernel(module="unique")
     def evaluate_fields(
@@ -235,4 +287,4 @@ def _make_integrator(dtype: str, model, lanes: int, registers=None, method: str 
             u_l = u_c
             u_c = u_r
 
-    return dict(integrate=integrate, evaluate_fields=evaluate_fields, ft=ft, stages=stages)
+    return evaluate_fields

@@ -3,7 +3,11 @@ implicit integrator needs.
 
 Everything here is a pure function of its arguments. ``make_model_terms(ft, model)`` builds the
 functions for one floating-point type ``ft`` (wp.float32 or wp.float64) and one set of model
-switches; switched-off terms are removed at compile time (``wp.static``).
+switches; switched-off terms are removed at compile time (``wp.static``). It composes one factory
+per part of the model: ``make_coefficients`` (the per-member Coeffs), ``make_grid`` (node positions
+and weights), ``make_elastic_stencil`` (normal stress and elastic force, SPEC sections 3-4),
+``make_friction_at_gate`` and ``make_friction_law`` (the friction law, SPEC section 5), joined at
+the interface by ``contact_terms``.
 
 Discretisation (docs/model.md, "Space"): nodes x_i = -L/2 + i*dx, i = 0..N-1, dx = L/(N-1), with
 control volumes of width w_i = dx (interior) and dx/2 (the two edge nodes). The axial force per
@@ -114,13 +118,9 @@ def normal_force_piece(p: MemberParams, t: wp.float64, step_start: wp.float64):
     return p.normal_force * t / p.force_ramp_time
 
 
-def make_model_terms(ft, model):
-    """Warp functions of the model for scalar type ``ft`` and switches ``model`` (a Model)."""
-    poisson = bool(model.poisson_coupling)
-    viscous = bool(model.viscous_friction)
-    tilt_on = bool(model.tilt)
-    velocity_gate = model.relaxation_gate == "velocity"
-    stress_gate = model.relaxation_gate == "stress"
+def make_coefficients(ft):
+    """The per-member coefficients (Coeffs, in the working precision ``ft``) and make_coeffs, which
+    derives them from a member's MemberParams (float64, SI units) for a grid of n nodes."""
 
     @wp.struct
     class Coeffs:
@@ -159,37 +159,6 @@ def make_model_terms(ft, model):
         first_node: wp.int32
         end_node: wp.int32
         lane: wp.int32
-
-    @wp.struct
-    class StencilTerm:
-        """A node quantity of the 3-point stencil and its partial derivatives with respect to
-        u_{i-1}, u_i, u_{i+1} (per m), the plate compression delta0 (per m) and tilt a (per rad)."""
-
-        value: ft
-        d_u_left: ft
-        d_u_center: ft
-        d_u_right: ft
-        d_delta0: ft
-        d_tilt: ft
-
-    @wp.struct
-    class Friction:
-        """The friction law at one node over an implicit stage (interface_friction, friction_at_gate)."""
-
-        stress: ft  # tau_f, Pa
-        d_normal: ft  # d tau_f/d sigma_n (1)
-        d_slip: ft  # d tau_f/d s, Pa s/m (total: through phi, tau_el and, sliding, the gate)
-        elastic_stress: ft  # tau_el, Pa
-        contact_age: ft  # phi, s
-        elastic_stress_rate: ft  # d tau_el/dt, Pa/s
-        contact_age_rate: ft  # d phi/dt (1)
-        contact: ft  # 1 where sigma_n >= 0, else 0
-        area: ft  # real-contact fraction A (1)
-        d_area_normal: ft  # dA/d sigma_n, 1/Pa
-        d_area_slip: ft  # dA/ds (gate fixed), s/m
-        d_gate: ft  # d tau_f/d gate (slip fixed), Pa
-        d_area_gate: ft  # dA/d gate (1)
-        gate: ft  # the gate used (1)
 
     @wp.func
     def make_coeffs(p: MemberParams, n: int):
@@ -237,6 +206,12 @@ def make_model_terms(ft, model):
         c.lane = 0
         return c
 
+    return dict(Coeffs=Coeffs, make_coeffs=make_coeffs)
+
+
+def make_grid(ft, Coeffs):
+    """Node positions and the quadrature weights of the grid (docs/model.md, "Space")."""
+
     @wp.func
     def node_x(c: Coeffs, i: int):
         """Position of node i, m."""
@@ -258,6 +233,28 @@ def make_model_terms(ft, model):
         if i == n - 1:
             return c.dx * (ft(0.5) * x - c.dx / ft(6.0))
         return x * c.dx
+
+    return dict(node_x=node_x, node_weight=node_weight, node_moment_weight=node_moment_weight)
+
+
+def make_elastic_stencil(ft, model, Coeffs, node_x):
+    """The 3-point displacement stencil of the pad (SPEC sections 3-4): the interface normal stress
+    sigma_n and the elastic force density at a node, each as a StencilTerm (value and partial
+    derivatives). ``model`` switches the Poisson coupling and the tilt."""
+    poisson = bool(model.poisson_coupling)
+    tilt_on = bool(model.tilt)
+
+    @wp.struct
+    class StencilTerm:
+        """A node quantity of the 3-point stencil and its partial derivatives with respect to
+        u_{i-1}, u_i, u_{i+1} (per m), the plate compression delta0 (per m) and tilt a (per rad)."""
+
+        value: ft
+        d_u_left: ft
+        d_u_center: ft
+        d_u_right: ft
+        d_delta0: ft
+        d_tilt: ft
 
     @wp.func
     def stencil_term(value: ft, d_u_left: ft, d_u_center: ft, d_u_right: ft, d_delta0: ft, d_tilt: ft):
@@ -353,6 +350,34 @@ def make_model_terms(ft, model):
             d_a = ft(0.0)
         return stencil_term(force, d_ul, d_uc, d_ur, d_d0, d_a)
 
+    return dict(StencilTerm=StencilTerm, normal_stress=normal_stress, elastic_force=elastic_force)
+
+
+def make_friction_at_gate(ft, model, Coeffs):
+    """The friction law's closed-form stage solution at one node for a given slip rate and gate
+    (SPEC section 5), as a Friction. ``model`` switches the velocity gate and the viscous term."""
+    viscous = bool(model.viscous_friction)
+    velocity_gate = model.relaxation_gate == "velocity"
+
+    @wp.struct
+    class Friction:
+        """The friction law at one node over an implicit stage (interface_friction, friction_at_gate)."""
+
+        stress: ft  # tau_f, Pa
+        d_normal: ft  # d tau_f/d sigma_n (1)
+        d_slip: ft  # d tau_f/d s, Pa s/m (total: through phi, tau_el and, sliding, the gate)
+        elastic_stress: ft  # tau_el, Pa
+        contact_age: ft  # phi, s
+        elastic_stress_rate: ft  # d tau_el/dt, Pa/s
+        contact_age_rate: ft  # d phi/dt (1)
+        contact: ft  # 1 where sigma_n >= 0, else 0
+        area: ft  # real-contact fraction A (1)
+        d_area_normal: ft  # dA/d sigma_n, 1/Pa
+        d_area_slip: ft  # dA/ds (gate fixed), s/m
+        d_gate: ft  # d tau_f/d gate (slip fixed), Pa
+        d_area_gate: ft  # dA/d gate (1)
+        gate: ft  # the gate used (1)
+
     @wp.func
     def friction_at_gate(c: Coeffs, sigma: ft, s: ft, z_tau: ft, z_phi: ft, g: ft, gate: ft):
         """The closed-form stage solution of the friction law at one node for a given slip rate s and
@@ -410,6 +435,15 @@ def make_model_terms(ft, model):
         out.d_area_gate = darea_dgate
         out.gate = gate
         return out
+
+    return dict(Friction=Friction, friction_at_gate=friction_at_gate)
+
+
+def make_friction_law(ft, model, Coeffs, friction_at_gate):
+    """The friction law at one node over an implicit stage (interface_friction: with the stress
+    gate, a node sliding on the yield surface has its gate solved there) and the stress gate's
+    yield margin."""
+    stress_gate = model.relaxation_gate == "stress"
 
     @wp.func
     def sliding_gate_of(c: Coeffs, tau_f: ft, area: ft, scale: ft):
@@ -476,6 +510,29 @@ def make_model_terms(ft, model):
         return fr
 
     @wp.func
+    def yield_margin(c: Coeffs, tau_f: ft, area: ft):
+        """|tau_f| - tau_c*A (Pa): the stress gate is open where this is > 0, i.e. where the
+        asperity-level stress |tau_f|/A exceeds tau_c; a point without contact area (A = 0) that still
+        carries a friction stress is open (the limit A -> 0+), one carrying none is closed."""
+        return wp.abs(tau_f) - c.tau_c * area
+
+    return dict(interface_friction=interface_friction, yield_margin=yield_margin)
+
+
+def make_model_terms(ft, model):
+    """Warp functions of the model for scalar type ``ft`` and switches ``model`` (a Model): the
+    coefficients, the grid, the elastic stencil and the friction law, joined at the interface by
+    contact_terms."""
+    coefficients = make_coefficients(ft)
+    Coeffs = coefficients["Coeffs"]
+    grid = make_grid(ft, Coeffs)
+    stencil = make_elastic_stencil(ft, model, Coeffs, grid["node_x"])
+    at_gate = make_friction_at_gate(ft, model, Coeffs)
+    law = make_friction_law(ft, model, Coeffs, at_gate["friction_at_gate"])
+    normal_stress = stencil["normal_stress"]
+    interface_friction = law["interface_friction"]
+
+    @wp.func
     def contact_terms(
         c: Coeffs, i: int, n: int, u_l: ft, u_c: ft, u_r: ft, delta0: ft, tilt: ft, velocity: ft, v_disc: ft,
         z_tau: ft, z_phi: ft, g: ft, gate: ft, sliding: ft, width: ft,
@@ -488,24 +545,17 @@ def make_model_terms(ft, model):
         fr = interface_friction(c, ns.value, velocity, v_disc, z_tau, z_phi, g, gate, sliding, width)
         return ns, fr
 
-    @wp.func
-    def yield_margin(c: Coeffs, tau_f: ft, area: ft):
-        """|tau_f| - tau_c*A (Pa): the stress gate is open where this is > 0, i.e. where the
-        asperity-level stress |tau_f|/A exceeds tau_c; a point without contact area (A = 0) that still
-        carries a friction stress is open (the limit A -> 0+), one carrying none is closed."""
-        return wp.abs(tau_f) - c.tau_c * area
-
     return dict(
         Coeffs=Coeffs,
-        StencilTerm=StencilTerm,
-        Friction=Friction,
-        make_coeffs=make_coeffs,
-        node_x=node_x,
-        node_weight=node_weight,
-        node_moment_weight=node_moment_weight,
+        StencilTerm=stencil["StencilTerm"],
+        Friction=at_gate["Friction"],
+        make_coeffs=coefficients["make_coeffs"],
+        node_x=grid["node_x"],
+        node_weight=grid["node_weight"],
+        node_moment_weight=grid["node_moment_weight"],
         normal_stress=normal_stress,
-        elastic_force=elastic_force,
+        elastic_force=stencil["elastic_force"],
         interface_friction=interface_friction,
         contact_terms=contact_terms,
-        yield_margin=yield_margin,
+        yield_margin=law["yield_margin"],
     )

@@ -13,11 +13,16 @@ It is solved with the Thomas algorithm on three right-hand sides, y0 = J^-1 (-R)
 y2 = J^-1 B1, and the 2 x 2 Schur complement (D - C y1|y2) (dd0, da) = -E - C y0; then
 dV = y0 - y1 dd0 - y2 da: O(N) work and memory per member. ``forward_row``, ``back_substitution``,
 ``schur_solve`` and ``solution_row`` are that solver alone (tests/test_kernels.py checks them against
-numpy.linalg.solve); ``newton_solve`` assembles the rows from the model terms and calls them row by
-row, so that nothing but the Thomas rows is stored. ``stage_derivatives`` evaluates f(Y) of a
-converged stage.
+numpy.linalg.solve); ``assemble_system`` evaluates each node's row of the system from the model
+terms (``node_row``) and eliminates it at once, so that nothing but the Thomas rows is stored;
+``newton_solve`` iterates that, the Schur complement and the update. ``stage_derivatives``
+evaluates f(Y) of a converged stage.
 
-``make_newton(ft, model, terms, gates)`` builds the functions for one working precision and model.
+``make_newton(ft, model, terms, gates, team, method)`` builds the functions for one working precision
+and model from one factory per stage: ``make_bordered_solver`` (or ``make_team_solver``, the team's
+partitioned solve), ``make_stage_equations`` (the load and each node's row), ``make_newton_system``
+(passes 1 and 2 of an iteration), ``make_newton_solve`` (the iteration) and
+``make_stage_derivatives`` (the converged stage).
 """
 
 import warp as wp
@@ -154,9 +159,16 @@ def make_team_solver(ft, team):
     -c_{hi-2} e_{hi-2} (to its own separator E_k), so that an interior unknown is
     x_i = xP_i + E_{k-1} xL_i + E_k xR_i. Substituted into the separator rows this leaves a P x P
     tridiagonal system in the separators (team.reduced_solve). Every lane owns >= 2 nodes."""
+    elimination = make_lane_elimination(ft)
+    solve = make_lane_solve(ft, team, elimination["LaneRows"])
+    return dict(LaneRows=elimination["LaneRows"], start_rows=elimination["start_rows"], lane_row=elimination["lane_row"],
+                team_solve=solve["team_solve"])
+
+
+def make_lane_elimination(ft):
+    """A lane's forward sweep of the team's bordered solve (make_team_solver): its interior rows
+    eliminated, its separator row kept (LaneRows, start_rows, lane_row)."""
     array3 = wp.array3d(dtype=ft)
-    from_next_lane = team["from_next_lane"]
-    reduced_solve = team["reduced_solve"]
 
     @wp.struct
     class LaneRows:
@@ -239,6 +251,15 @@ def make_team_solver(ft, team):
             out.rr = rr
         return out
 
+    return dict(LaneRows=LaneRows, start_rows=start_rows, lane_row=lane_row)
+
+
+def make_lane_solve(ft, team, LaneRows):
+    """A lane's back substitution and the separators' reduced system (make_team_solver): team_solve."""
+    array3 = wp.array3d(dtype=ft)
+    from_next_lane = team["from_next_lane"]
+    reduced_solve = team["reduced_solve"]
+
     @wp.func
     def interior_back_substitution(work: array3, lo: int, hi: int, m: int):
         """Back substitution of the interior rows lo..hi-2 (five right-hand sides, in place). Returns
@@ -295,17 +316,18 @@ def make_team_solver(ft, team):
             sums = sums + vec6d(c1 * y[0], c1 * y[1], c1 * y[2], c2 * y[0], c2 * y[1], c2 * y[2])
         return sums
 
-    return dict(LaneRows=LaneRows, start_rows=start_rows, lane_row=lane_row, team_solve=team_solve)
+    return dict(team_solve=team_solve)
 
 
-def make_newton(ft, model, terms, gates, team, method="tr_bdf2"):
+def make_stage_equations(ft, model, terms, gates, method="tr_bdf2"):
+    """The stage equations at one node, for the Newton solve and the converged stage: the load at a
+    stage time, the stage displacement and each node's row of the Newton system (node_row)."""
     # the load at a stage time: ESDIRK4 has a stage past the step's end (c = 26/25), evaluated on the
     # smooth continuation of the step's protocol piece; TR-BDF2's stages lie inside the step
     continued = method != "tr_bdf2"
     disc_velocity_stage = disc_velocity_piece if continued else disc_velocity_at
     normal_force_stage = normal_force_piece if continued else normal_force_in_step
     inertia = bool(model.inertia)
-    tilt_on = bool(model.tilt)
     Coeffs = terms["Coeffs"]
     node_weight = terms["node_weight"]
     node_moment_weight = terms["node_moment_weight"]
@@ -313,35 +335,35 @@ def make_newton(ft, model, terms, gates, team, method="tr_bdf2"):
     contact_terms = terms["contact_terms"]
     node_gate = gates["node_gate"]
     node_sliding = gates["node_sliding"]
-    test_switch = gates["test_switch"]
-    no_switch = gates["no_switch"]
-    solver = make_bordered_solver(ft, tilt_on)
-    team_on = team["lanes"] > 1
-    team_solver = make_team_solver(ft, team) if team_on else {}
-    team_max = team["team_max"]
-    team_min = team["team_min"]
-    team_sum = team["team_sum"]
-    team_sum_vec12 = team.get("team_sum_vec12", None)
-    team_switch_test = gates["team_switch_test"]
-    start_rows = team_solver.get("start_rows", None)
-    lane_row = team_solver.get("lane_row", None)
-    team_solve = team_solver.get("team_solve", None)
-    forward_row = solver["forward_row"]
-    back_substitution = solver["back_substitution"]
-    schur_solve = solver["schur_solve"]
-    solution_row = solver["solution_row"]
-    stress_gate = model.relaxation_gate == "stress"
     array3 = wp.array3d(dtype=ft)
-    array4 = wp.array4d(dtype=ft)
 
     @wp.struct
-    class StageSums:
-        """Integrals over the pad of a converged stage, per unit depth: int tau_f dx (N/m),
-        int sigma_n^+ dx (N/m), and min sigma_n (Pa)."""
+    class NodeRow:
+        """Node i's part of the Newton system of a stage: the pad's residual R_i (Pa) and its row of
+        J (d R_i/d V_{i-1}, V_i, V_{i+1}, Pa s/m) and of the border columns B0 (d R_i/d delta0, Pa/m)
+        and B1 (d R_i/d a, Pa), and what the node adds to the plate's balance rows (per unit
+        depth): to the force and moment residuals E1 (N/m), E2 (N), to the D block (d11 =
+        dE1/d delta0, d12 = dE1/da, d21 = dE2/d delta0, d22 = dE2/da) and to the C rows' entries
+        at V_{i-1}, V_i, V_{i+1}."""
 
-        friction: wp.float64
-        normal: wp.float64
-        min_normal: wp.float64
+        residual: ft
+        jac_left: ft
+        jac_center: ft
+        jac_right: ft
+        col_delta0: ft
+        col_tilt: ft
+        e1: ft
+        e2: ft
+        d11: ft
+        d12: ft
+        d21: ft
+        d22: ft
+        c1_left: ft
+        c1_center: ft
+        c1_right: ft
+        c2_left: ft
+        c2_center: ft
+        c2_right: ft
 
     @wp.func
     def stage_displacement(work: array3, i: int, n: int, m: int, g: ft):
@@ -349,6 +371,240 @@ def make_newton(ft, model, terms, gates, team, method="tr_bdf2"):
         if i >= n:
             return ft(0.0)
         return work[W_ZU, i, m] + g * work[W_V, i, m]
+
+    @wp.func
+    def node_row(
+        c: Coeffs, settings: SolverSettings, m: int, n: int, work: array3, gates: array3, i: int, u_l: ft,
+        u_c: ft, u_r: ft, delta0: ft, tilt: ft, v_disc: ft, g: ft,
+    ):
+        """Node i's NodeRow at the stage's current V (work[W_V]), displacements u_{i-1}, u_i, u_{i+1}
+        (m) and plate state delta0 (m), tilt (rad); g = gamma*h (s)."""
+        vel = work[W_V, i, m]
+        ns, fr = contact_terms(c, i, n, u_l, u_c, u_r, delta0, tilt, vel, v_disc, work[W_ZT, i, m],
+                               work[W_ZP, i, m], g, node_gate(gates, i, m), node_sliding(gates, i, m),
+                               ft(settings.sliding_width))
+        sigma = ns.value
+        ef = elastic_force(c, i, n, u_l, u_c, u_r, delta0, tilt)
+        row = NodeRow()
+        residual = -(ef.value + fr.stress - c.damping * vel)
+        jac_c = -g * (ef.d_u_center + fr.d_normal * ns.d_u_center) + c.kif * fr.d_slip + c.damping
+        if wp.static(inertia):
+            residual += c.rhoH * (vel - work[W_ZV, i, m]) / g
+            jac_c += c.rhoH / g
+        row.residual = residual
+        row.jac_center = jac_c
+        row.jac_left = -g * (ef.d_u_left + fr.d_normal * ns.d_u_left)
+        row.jac_right = -g * (ef.d_u_right + fr.d_normal * ns.d_u_right)
+        row.col_delta0 = -(ef.d_delta0 + fr.d_normal * ns.d_delta0)
+        row.col_tilt = -(ef.d_tilt + fr.d_normal * ns.d_tilt)
+        # plate balance rows: force (1) and moment (2), per unit depth
+        wgt = node_weight(c, i, n)
+        wmom = node_moment_weight(c, i, n)
+        row.e1 = wgt * fr.contact * sigma
+        row.e2 = wmom * fr.contact * sigma + c.h_arm * wgt * fr.stress
+        row.d11 = wgt * fr.contact * ns.d_delta0
+        row.d12 = wgt * fr.contact * ns.d_tilt
+        row.d21 = (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * ns.d_delta0
+        row.d22 = (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * ns.d_tilt
+        q1 = wgt * fr.contact * g
+        q2 = (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * g
+        row.c1_left = q1 * ns.d_u_left
+        row.c1_center = q1 * ns.d_u_center
+        row.c1_right = q1 * ns.d_u_right
+        row.c2_left = q2 * ns.d_u_left
+        row.c2_center = q2 * ns.d_u_center - c.h_arm * wgt * c.kif * fr.d_slip
+        row.c2_right = q2 * ns.d_u_right
+        return row
+
+    return dict(NodeRow=NodeRow, disc_velocity_stage=disc_velocity_stage, normal_force_stage=normal_force_stage,
+                stage_displacement=stage_displacement, node_row=node_row)
+
+
+def make_bordered_system(ft):
+    """BorderedSystem: what the Schur complement of a Newton iteration needs."""
+
+    @wp.struct
+    class BorderedSystem:
+        """The plate rows of a Newton iteration after the elimination of J, summed over the pad:
+        the force and moment residuals E1 (N/m), E2 (N), the D block d11 = dE1/d delta0,
+        d12 = dE1/da, d21 = dE2/d delta0, d22 = dE2/da, and the border products
+        s10, s11, s12 = C1.y0, C1.y1, C1.y2 and s20, s21, s22 = C2.y0, C2.y1, C2.y2."""
+
+        e1: ft
+        e2: ft
+        d11: ft
+        d12: ft
+        d21: ft
+        d22: ft
+        s10: ft
+        s11: ft
+        s12: ft
+        s20: ft
+        s21: ft
+        s22: ft
+
+    @wp.func
+    def bordered_system(e1: ft, e2: ft, d11: ft, d12: ft, d21: ft, d22: ft, s10: ft, s11: ft, s12: ft, s20: ft,
+                        s21: ft, s22: ft):
+        out = BorderedSystem()
+        out.e1 = e1
+        out.e2 = e2
+        out.d11 = d11
+        out.d12 = d12
+        out.d21 = d21
+        out.d22 = d22
+        out.s10 = s10
+        out.s11 = s11
+        out.s12 = s12
+        out.s20 = s20
+        out.s21 = s21
+        out.s22 = s22
+        return out
+
+    return dict(BorderedSystem=BorderedSystem, bordered_system=bordered_system)
+
+
+def make_newton_system(ft, model, terms, team, equations, solver, team_solver):
+    """assemble_system: the first two passes of a Newton iteration (one thread's Thomas solve, or a
+    lane's part of the team's partitioned solve)."""
+    inertia = bool(model.inertia)
+    Coeffs = terms["Coeffs"]
+    team_on = team["lanes"] > 1
+    team_sum_vec12 = team.get("team_sum_vec12", None)
+    start_rows = team_solver.get("start_rows", None)
+    lane_row = team_solver.get("lane_row", None)
+    team_solve = team_solver.get("team_solve", None)
+    forward_row = solver["forward_row"]
+    back_substitution = solver["back_substitution"]
+    stage_displacement = equations["stage_displacement"]
+    node_row = equations["node_row"]
+    bordered_system = make_bordered_system(ft)["bordered_system"]
+    array3 = wp.array3d(dtype=ft)
+
+    @wp.func
+    def assemble_system(
+        c: Coeffs, settings: SolverSettings, m: int, n: int, work: array3, gates: array3, g: ft, delta0: ft,
+        tilt: ft, v_disc: ft, force_per_depth: ft, moment_per_depth: ft,
+    ):
+        """Pass 1 (the residuals and Jacobian rows of the nodes, node_row, and the forward elimination
+        of J on three right-hand sides: -R, B0, B1) and pass 2 (back substitution and the border
+        products) of a Newton iteration at the stage's current V, delta0 (m) and tilt
+        (rad), under the load force_per_depth (N/m) and moment_per_depth (N). Returns the
+        BorderedSystem; y0, y1, y2 are left in work[W_R0..R2]."""
+        e1 = -force_per_depth  # force balance residual E1 (N/m)
+        e2 = -moment_per_depth  # moment balance residual E2 (N)
+        if wp.static(team_on):  # a lane sums its nodes; the load enters once, after the team sum
+            e1 = ft(0.0)
+            e2 = ft(0.0)
+        d11 = ft(0.0)
+        d12 = ft(0.0)
+        d21 = ft(0.0)
+        d22 = ft(0.0)
+        # the border rows C1, C2 get three contributions per node (i-1, i, i+1): a row entry is
+        # complete one node later
+        c1_prev = ft(0.0)
+        c1_cur = ft(0.0)
+        c2_prev = ft(0.0)
+        c2_cur = ft(0.0)
+        cp_prev = ft(0.0)
+        r0_prev = ft(0.0)
+        r1_prev = ft(0.0)
+        r2_prev = ft(0.0)
+        # a lane of a team also evaluates the halo nodes lo-1 and hi: their terms complete the
+        # border rows C1, C2 of its first and last node
+        lo = c.first_node
+        hi = c.end_node
+        first = lo
+        last = hi
+        if wp.static(team_on):
+            rows = start_rows()
+            first = wp.max(lo - 1, 0)
+            last = wp.min(hi + 1, n)
+        u_l = ft(0.0)
+        if first > 0:
+            u_l = stage_displacement(work, first - 1, n, m, g)
+        u_c = stage_displacement(work, first, n, m, g)
+        for i in range(first, last):
+            owned = i >= lo and i < hi
+            u_r = stage_displacement(work, i + 1, n, m, g)
+            row = node_row(c, settings, m, n, work, gates, i, u_l, u_c, u_r, delta0, tilt, v_disc, g)
+            if owned:
+                if wp.static(inertia):
+                    work[W_DIAG, i, m] = row.jac_center
+                e1 += row.e1
+                e2 += row.e2
+                d11 += row.d11
+                d12 += row.d12
+                d21 += row.d21
+                d22 += row.d22
+            c1_prev += row.c1_left
+            c1_cur += row.c1_center
+            c2_prev += row.c2_left
+            c2_cur += row.c2_center
+            if i - 1 >= lo and i - 1 < hi:
+                work[W_C1, i - 1, m] = c1_prev
+                work[W_C2, i - 1, m] = c2_prev
+            c1_prev = c1_cur
+            c1_cur = row.c1_right
+            c2_prev = c2_cur
+            c2_cur = row.c2_right
+            if wp.static(team_on):
+                if owned:
+                    rows = lane_row(rows, work, i, m, lo, hi, n, row.jac_left, row.jac_center, row.jac_right,
+                                    vec3d(-row.residual, row.col_delta0, row.col_tilt))
+            else:
+                cp_prev, r0_prev, r1_prev, r2_prev = forward_row(
+                    work, i, m, row.jac_left, row.jac_center, row.jac_right, -row.residual, row.col_delta0,
+                    row.col_tilt, cp_prev, r0_prev, r1_prev, r2_prev
+                )
+            u_l = u_c
+            u_c = u_r
+        if last == hi:
+            work[W_C1, last - 1, m] = c1_prev
+            work[W_C2, last - 1, m] = c2_prev
+        # ---- pass 2 ----
+        if wp.static(team_on):  # a lane's y0, y1, y2 and products; the team's sums
+            products = team_solve(work, lo, hi, m, c.lane, rows)
+            total = team_sum_vec12(vec12d(e1, e2, d11, d12, d21, d22, products[0], products[1], products[2],
+                                          products[3], products[4], products[5]))
+            return bordered_system(total[0] - force_per_depth, total[1] - moment_per_depth, total[2], total[3],
+                                   total[4], total[5], total[6], total[7], total[8], total[9], total[10], total[11])
+        else:
+            s10, s11, s12, s20, s21, s22 = back_substitution(work, n, m)
+            return bordered_system(e1, e2, d11, d12, d21, d22, s10, s11, s12, s20, s21, s22)
+
+    return dict(assemble_system=assemble_system)
+
+
+def make_newton_solve(ft, terms, team, equations, solver, system):
+    """newton_solve: one implicit stage by Newton's method on the bordered system."""
+    Coeffs = terms["Coeffs"]
+    team_on = team["lanes"] > 1
+    team_max = team["team_max"]
+    schur_solve = solver["schur_solve"]
+    solution_row = solver["solution_row"]
+    disc_velocity_stage = equations["disc_velocity_stage"]
+    normal_force_stage = equations["normal_force_stage"]
+    assemble_system = system["assemble_system"]
+    array3 = wp.array3d(dtype=ft)
+
+    @wp.func
+    def update_velocity(c: Coeffs, work: array3, lo: int, hi: int, m: int, g: ft, rtol: ft, d_delta0: ft, d_tilt: ft):
+        """Apply the Newton update dV of nodes [lo, hi) to work[W_V]; returns the error-weighted norm
+        of dV and of the displacement's g*dV, and whether every update (with d_delta0, d_tilt) is
+        finite."""
+        norm = ft(0.0)
+        finite = wp.isfinite(d_delta0) and wp.isfinite(d_tilt)  # wp.max drops NaN (fmax): test each
+        for i in range(lo, hi):
+            dv = solution_row(work, i, m, d_delta0, d_tilt)
+            vel = work[W_V, i, m] + dv
+            work[W_V, i, m] = vel
+            u = work[W_ZU, i, m] + g * vel
+            if not wp.isfinite(dv):
+                finite = False
+            norm = wp.max(norm, wp.abs(dv) / (rtol * (c.v_scale + wp.abs(vel))))
+            norm = wp.max(norm, g * wp.abs(dv) / (rtol * (c.u_scale + wp.abs(u))))
+        return norm, finite
 
     @wp.func
     def newton_solve(
@@ -372,123 +628,14 @@ def make_newton(ft, model, terms, gates, team, method="tr_bdf2"):
         for it in range(settings.newton_max_iter):
             iters = it + 1
             # ---- pass 1: residuals, Jacobian rows, forward elimination (3 right-hand sides) ----
-            e1 = -force_per_depth  # force balance residual E1 (N/m)
-            e2 = -moment_per_depth  # moment balance residual E2 (N)
-            if wp.static(team_on):  # a lane sums its nodes; the load enters once, after the team sum
-                e1 = ft(0.0)
-                e2 = ft(0.0)
-            d11 = ft(0.0)
-            d12 = ft(0.0)
-            d21 = ft(0.0)
-            d22 = ft(0.0)
-            # the border rows C1, C2 get three contributions per node (i-1, i, i+1): a row entry is
-            # complete one node later
-            c1_prev = ft(0.0)
-            c1_cur = ft(0.0)
-            c2_prev = ft(0.0)
-            c2_cur = ft(0.0)
-            cp_prev = ft(0.0)
-            r0_prev = ft(0.0)
-            r1_prev = ft(0.0)
-            r2_prev = ft(0.0)
-            # a lane of a team also evaluates the halo nodes lo-1 and hi: their terms complete the
-            # border rows C1, C2 of its first and last node
-            lo = c.first_node
-            hi = c.end_node
-            first = lo
-            last = hi
-            if wp.static(team_on):
-                rows = start_rows()
-                first = wp.max(lo - 1, 0)
-                last = wp.min(hi + 1, n)
-            u_l = ft(0.0)
-            if first > 0:
-                u_l = stage_displacement(work, first - 1, n, m, g)
-            u_c = stage_displacement(work, first, n, m, g)
-            for i in range(first, last):
-                owned = i >= lo and i < hi
-                u_r = stage_displacement(work, i + 1, n, m, g)
-                vel = work[W_V, i, m]
-                ns, fr = contact_terms(c, i, n, u_l, u_c, u_r, delta0, tilt, vel, v_disc, work[W_ZT, i, m],
-                                       work[W_ZP, i, m], g, node_gate(gates, i, m), node_sliding(gates, i, m),
-                                       ft(settings.sliding_width))
-                sigma = ns.value
-                ef = elastic_force(c, i, n, u_l, u_c, u_r, delta0, tilt)
-                residual = -(ef.value + fr.stress - c.damping * vel)
-                jac_c = -g * (ef.d_u_center + fr.d_normal * ns.d_u_center) + c.kif * fr.d_slip + c.damping
-                if wp.static(inertia):
-                    residual += c.rhoH * (vel - work[W_ZV, i, m]) / g
-                    jac_c += c.rhoH / g
-                    if owned:
-                        work[W_DIAG, i, m] = jac_c
-                jac_l = -g * (ef.d_u_left + fr.d_normal * ns.d_u_left)
-                jac_r = -g * (ef.d_u_right + fr.d_normal * ns.d_u_right)
-                col_d0 = -(ef.d_delta0 + fr.d_normal * ns.d_delta0)
-                col_a = -(ef.d_tilt + fr.d_normal * ns.d_tilt)
-                # plate balance rows: force (1) and moment (2), per unit depth
-                wgt = node_weight(c, i, n)
-                wmom = node_moment_weight(c, i, n)
-                if owned:
-                    e1 += wgt * fr.contact * sigma
-                    e2 += wmom * fr.contact * sigma + c.h_arm * wgt * fr.stress
-                    d11 += wgt * fr.contact * ns.d_delta0
-                    d12 += wgt * fr.contact * ns.d_tilt
-                    d21 += (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * ns.d_delta0
-                    d22 += (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * ns.d_tilt
-                q1 = wgt * fr.contact * g
-                q2 = (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * g
-                c1_prev += q1 * ns.d_u_left
-                c1_cur += q1 * ns.d_u_center
-                c1_next = q1 * ns.d_u_right
-                c2_prev += q2 * ns.d_u_left
-                c2_cur += q2 * ns.d_u_center - c.h_arm * wgt * c.kif * fr.d_slip
-                c2_next = q2 * ns.d_u_right
-                if i - 1 >= lo and i - 1 < hi:
-                    work[W_C1, i - 1, m] = c1_prev
-                    work[W_C2, i - 1, m] = c2_prev
-                c1_prev = c1_cur
-                c1_cur = c1_next
-                c2_prev = c2_cur
-                c2_cur = c2_next
-                if wp.static(team_on):
-                    if owned:
-                        rows = lane_row(rows, work, i, m, lo, hi, n, jac_l, jac_c, jac_r, vec3d(-residual, col_d0, col_a))
-                else:
-                    cp_prev, r0_prev, r1_prev, r2_prev = forward_row(
-                        work, i, m, jac_l, jac_c, jac_r, -residual, col_d0, col_a, cp_prev, r0_prev, r1_prev, r2_prev
-                    )
-                u_l = u_c
-                u_c = u_r
-            if last == hi:
-                work[W_C1, last - 1, m] = c1_prev
-                work[W_C2, last - 1, m] = c2_prev
-            # ---- pass 2: back substitution and the border products; the Schur complement ----
-            if wp.static(team_on):
-                products = team_solve(work, lo, hi, m, c.lane, rows)
-                total = team_sum_vec12(vec12d(e1, e2, d11, d12, d21, d22, products[0], products[1], products[2],
-                                              products[3], products[4], products[5]))
-                e1 = total[0] - force_per_depth
-                e2 = total[1] - moment_per_depth
-                d11 = total[2]
-                d12 = total[3]
-                d21 = total[4]
-                d22 = total[5]
-                s10, s11, s12, s20, s21, s22 = total[6], total[7], total[8], total[9], total[10], total[11]
-            else:
-                s10, s11, s12, s20, s21, s22 = back_substitution(work, n, m)
-            d_delta0, d_tilt = schur_solve(d11, d12, d21, d22, e1, e2, s10, s11, s12, s20, s21, s22)
+            # ---- pass 2: back substitution and the border products ----
+            bs = assemble_system(c, settings, m, n, work, gates, g, delta0, tilt, v_disc, force_per_depth,
+                                 moment_per_depth)
+            # ---- the Schur complement ----
+            d_delta0, d_tilt = schur_solve(bs.d11, bs.d12, bs.d21, bs.d22, bs.e1, bs.e2, bs.s10, bs.s11, bs.s12,
+                                           bs.s20, bs.s21, bs.s22)
             # ---- pass 3: update and error-weighted norm of the update ----
-            norm = ft(0.0)
-            finite = wp.isfinite(d_delta0) and wp.isfinite(d_tilt)  # wp.max drops NaN (fmax): test each
-            for i in range(lo, hi):
-                dv = solution_row(work, i, m, d_delta0, d_tilt)
-                vel = work[W_V, i, m] + dv
-                work[W_V, i, m] = vel
-                u = work[W_ZU, i, m] + g * vel
-                if not wp.isfinite(dv):
-                    finite = False
-                norm = wp.max(norm, wp.abs(dv) / (rtol * (c.v_scale + wp.abs(vel))))
-                norm = wp.max(norm, g * wp.abs(dv) / (rtol * (c.u_scale + wp.abs(u))))
+            norm, finite = update_velocity(c, work, c.first_node, c.end_node, m, g, rtol, d_delta0, d_tilt)
             if wp.static(team_on):
                 # every lane must take the same branch, so every decision below reads the one
                 # reduced value: a lane's non-finite update reaches the others as an infinite norm
@@ -515,6 +662,39 @@ def make_newton(ft, model, terms, gates, team, method="tr_bdf2"):
                 break
             prev_norm = norm
         return converged, delta0, tilt, iters, non_finite
+
+    return dict(newton_solve=newton_solve)
+
+
+def make_stage_derivatives(ft, model, terms, gates, team, equations):
+    """The derivatives f(Y) of a converged stage, its StageSums and (end of a step) its gate-switch
+    test."""
+    inertia = bool(model.inertia)
+    stress_gate = model.relaxation_gate == "stress"
+    team_on = team["lanes"] > 1
+    Coeffs = terms["Coeffs"]
+    node_weight = terms["node_weight"]
+    contact_terms = terms["contact_terms"]
+    node_gate = gates["node_gate"]
+    node_sliding = gates["node_sliding"]
+    test_switch = gates["test_switch"]
+    no_switch = gates["no_switch"]
+    team_switch_test = gates["team_switch_test"]
+    team_min = team["team_min"]
+    team_sum = team["team_sum"]
+    disc_velocity_stage = equations["disc_velocity_stage"]
+    stage_displacement = equations["stage_displacement"]
+    array3 = wp.array3d(dtype=ft)
+    array4 = wp.array4d(dtype=ft)
+
+    @wp.struct
+    class StageSums:
+        """Integrals over the pad of a converged stage, per unit depth: int tau_f dx (N/m),
+        int sigma_n^+ dx (N/m), and min sigma_n (Pa)."""
+
+        friction: wp.float64
+        normal: wp.float64
+        min_normal: wp.float64
 
     @wp.func
     def stage_derivatives(
@@ -568,5 +748,18 @@ def make_newton(ft, model, terms, gates, team, method="tr_bdf2"):
                 test = team_switch_test(test)
         return sums, test
 
-    return dict(StageSums=StageSums, newton_solve=newton_solve, stage_derivatives=stage_derivatives,
-                **solver)
+    return dict(StageSums=StageSums, stage_derivatives=stage_derivatives)
+
+
+def make_newton(ft, model, terms, gates, team, method="tr_bdf2"):
+    """The implicit stage for one working precision, model, team and method: the stage equations,
+    the bordered solve (one thread's, or the team's), the Newton iteration and the converged
+    stage's derivatives."""
+    solver = make_bordered_solver(ft, bool(model.tilt))
+    team_solver = make_team_solver(ft, team) if team["lanes"] > 1 else {}
+    equations = make_stage_equations(ft, model, terms, gates, method)
+    system = make_newton_system(ft, model, terms, team, equations, solver, team_solver)
+    solve = make_newton_solve(ft, terms, team, equations, solver, system)
+    derivatives = make_stage_derivatives(ft, model, terms, gates, team, equations)
+    return dict(StageSums=derivatives["StageSums"], newton_solve=solve["newton_solve"],
+                stage_derivatives=derivatives["stage_derivatives"], **solver)

@@ -7,8 +7,10 @@ advanced); the front and recording observers are compiled in always but run only
 asks for them (OutputSettings.velocity_front / strength_front, IntegratorState.record_slot); the
 contact front is recorded with the gate switches (kernels/gates.py).
 
-``make_observers(ft, model, terms)`` builds the functions for one working precision and model (the
-model's switches reach them through ``terms``).
+``make_observers(ft, model, terms, team, method)`` builds the functions for one working precision and
+model (the model's switches reach them through ``terms``), one factory per observer:
+``make_state_interface`` (the friction law at the state, shared by the next two),
+``make_velocity_front``, ``make_strength_front`` and ``make_recording``.
 """
 
 import warp as wp
@@ -99,17 +101,12 @@ def run_finished(p: MemberParams, st: IntegratorState, outputs: OutputSettings):
     return False
 
 
-def make_observers(ft, model, terms, team, method="tr_bdf2"):
-    # mu_s: TR-BDF2 refines the maximum by a parabola through three accepted points, ESDIRK4 by a
-    # cubic through four (its longer steps)
-    cubic = 1 if method == "esdirk4" else 0
+def make_state_interface(ft, terms):
+    """The interface of the state itself (the friction law at the state, g = 0), node by node along
+    a lane's nodes: the displacement stencil's start and each node's normal stress and friction."""
     Coeffs = terms["Coeffs"]
-    team_max = team["team_max"]
-    team_count = team["team_count"]
-    barrier = team["barrier"]
     contact_terms = terms["contact_terms"]
     array3 = wp.array3d(dtype=ft)
-    array4 = wp.array4d(dtype=ft)
 
     @wp.func
     def state_displacement(state: array3, i: int, n: int, m: int):
@@ -132,6 +129,17 @@ def make_observers(ft, model, terms, team, method="tr_bdf2"):
         """The interface at node i of the state itself (the friction law at the state: g = 0)."""
         return contact_terms(c, i, n, u_l, u_c, u_r, delta0, tilt, state[C_V, i, m], v_disc, state[C_TAU, i, m],
                              state[C_PHI, i, m], ft(0.0), ft(1.0), ft(0.0), ft(1.0))
+
+    return dict(state_displacement=state_displacement, lane_stencil_start=lane_stencil_start,
+                state_contact=state_contact)
+
+
+def make_velocity_front(ft, terms, team):
+    """The velocity front (OutputSettings.velocity_front): track_fronts."""
+    Coeffs = terms["Coeffs"]
+    team_max = team["team_max"]
+    array3 = wp.array3d(dtype=ft)
+    array4 = wp.array4d(dtype=ft)
 
     @wp.func
     def track_fronts(
@@ -182,6 +190,19 @@ def make_observers(ft, model, terms, team, method="tr_bdf2"):
             st.front_last = t_new
         st.front_now = w_step
         return st
+
+    return dict(track_fronts=track_fronts)
+
+
+def make_strength_front(ft, terms, team, interface):
+    """The strength front (OutputSettings.strength_front): track_strength."""
+    Coeffs = terms["Coeffs"]
+    team_count = team["team_count"]
+    barrier = team["barrier"]
+    state_displacement = interface["state_displacement"]
+    lane_stencil_start = interface["lane_stencil_start"]
+    state_contact = interface["state_contact"]
+    array3 = wp.array3d(dtype=ft)
 
     @wp.func
     def track_strength(
@@ -243,6 +264,19 @@ def make_observers(ft, model, terms, team, method="tr_bdf2"):
         st.strength_rising = team_count(rising)
         return st
 
+    return dict(track_strength=track_strength)
+
+
+def make_recording(ft, terms, team, interface):
+    """The recorded fields of a recorded member (IntegratorState.record_slot): record_fields."""
+    Coeffs = terms["Coeffs"]
+    barrier = team["barrier"]
+    state_displacement = interface["state_displacement"]
+    lane_stencil_start = interface["lane_stencil_start"]
+    state_contact = interface["state_contact"]
+    array3 = wp.array3d(dtype=ft)
+    array4 = wp.array4d(dtype=ft)
+
     @wp.func
     def record_fields(
         c: Coeffs, p: MemberParams, st: IntegratorState, m: int, n: int, state: array3,
@@ -283,6 +317,23 @@ def make_observers(ft, model, terms, team, method="tr_bdf2"):
         st.record_next = k_end
         return st
 
+    return dict(record_fields=record_fields)
+
+
+def make_observers(ft, model, terms, team, method="tr_bdf2"):
+    """The observers for one working precision and model, composed into on_accept: the velocity
+    front, the strength front, the recording and the friction point."""
+    # mu_s: TR-BDF2 refines the maximum by a parabola through three accepted points, ESDIRK4 by a
+    # cubic through four (its longer steps)
+    cubic = 1 if method == "esdirk4" else 0
+    Coeffs = terms["Coeffs"]
+    interface = make_state_interface(ft, terms)
+    track_fronts = make_velocity_front(ft, terms, team)["track_fronts"]
+    track_strength = make_strength_front(ft, terms, team, interface)["track_strength"]
+    record_fields = make_recording(ft, terms, team, interface)["record_fields"]
+    array3 = wp.array3d(dtype=ft)
+    array4 = wp.array4d(dtype=ft)
+
     @wp.func
     def on_accept(
         c: Coeffs, p: MemberParams, st: IntegratorState, outputs: OutputSettings, m: int, n: int, state: array3,
@@ -308,4 +359,4 @@ def make_observers(ft, model, terms, team, method="tr_bdf2"):
         return friction_point(st, p, t_new, friction, normal, min_normal, cubic)
 
     return dict(on_accept=on_accept, track_fronts=track_fronts, track_strength=track_strength, record_fields=record_fields,
-                state_displacement=state_displacement, state_contact=state_contact)
+                state_displacement=interface["state_displacement"], state_contact=interface["state_contact"])

@@ -244,32 +244,10 @@ def write_segment(
     out[row + 3, m] = speed
 
 
-@wp.kernel
-def segment_fronts(
-    length: wp.array(dtype=wp.float64),
-    arrival: wp.array2d(dtype=wp.float64),
-    settings: SegmentSettings,
-    sums: wp.array3d(dtype=wp.float64),
-    out: wp.array2d(dtype=wp.float64),
-):
-    """Front metrics of each member from its arrival times t_a (s, nodes x members; NaN = never).
-
-    The front is the run of arrived nodes around the nucleation node (the earliest arrival); nodes
-    beyond an unreached node are not part of it (detached_fraction still counts every arrived node).
-    Works on the intervals between neighbouring nodes of that run, each
-    with its local speed c_j = dx / |t_a(x_{j+1}) - t_a(x_j)|. v_fast is the plateau (mode within
-    10 %) of the local speeds among the fastest fast_fraction of the intervals: the sustained speed
-    of the fast front, not the unbounded local speed at an interior nucleation point. An interval is slow when its local speed,
-    smoothed by two running medians of three, is below v_fast / speed_ratio. The left (right)
-    segment is the run of slow intervals from the left (right) end; it exists when it has at least
-    min_nodes intervals and its mean speed is at most v_middle / speed_ratio. The middle segment is
-    the rest. Absent segments are NaN. Segment speeds are length / time spent (segment_speed)."""
-    m = wp.tid()
-    n = arrival.shape[0]
-    for r in range(N_FRONT_METRICS):
-        out[r, m] = wp.float64(wp.nan)
-    L = length[m]
-    dx = L / wp.float64(n - 1)
+@wp.func
+def nucleation(arrival: wp.array2d(dtype=wp.float64), m: int, n: int):
+    """The earliest arrival: (its node i_first, -1 where no node arrived; its time t0, s; the number
+    of arrived nodes)."""
     t0 = wp.float64(1.0e300)
     i_first = int(-1)
     arrived = int(0)
@@ -280,11 +258,13 @@ def segment_fronts(
             if ta < t0:
                 t0 = ta
                 i_first = i
-    out[FM_ARRIVED_FRACTION, m] = wp.float64(arrived) / wp.float64(n)
-    if i_first < 0:
-        return
-    # the front: the run of arrived nodes around the nucleation node; a node beyond a node that the
-    # front never reached is not part of it (no segment spans an unreached node)
+    return i_first, t0, arrived
+
+
+@wp.func
+def front_run(arrival: wp.array2d(dtype=wp.float64), m: int, n: int, i_first: int):
+    """The front: the run of arrived nodes lo..hi around the nucleation node i_first; a node beyond a
+    node that the front never reached is not part of it (no segment spans an unreached node)."""
     lo = i_first
     while lo > 0:
         if not wp.isfinite(arrival[lo - 1, m]):
@@ -295,22 +275,15 @@ def segment_fronts(
         if not wp.isfinite(arrival[hi + 1, m]):
             break
         hi += 1
-    t_last = wp.float64(-1.0e300)
-    for i in range(lo, hi + 1):
-        t_last = wp.max(t_last, arrival[i, m])
-    x_first = -wp.float64(0.5) * L + wp.float64(i_first) * dx
-    out[FM_NUCLEATION_POSITION, m] = x_first
-    edge = wp.float64(0.0)
-    if x_first <= -wp.float64(0.5) * L + settings.edge_zone:
-        edge = wp.float64(-1.0)
-    elif x_first >= wp.float64(0.5) * L - settings.edge_zone:
-        edge = wp.float64(1.0)
-    out[FM_NUCLEATION_EDGE, m] = edge
-    out[FM_FIRST_ARRIVAL, m] = t0
-    out[FM_LAST_ARRIVAL, m] = t_last
-    # rows of sums: 0, 1 prefix sums of the count of usable intervals and of the time spent
-    # |dt| (s); 2 the log slowness q = log(|dt|/dx) of interval j (+inf where an end never
-    # arrived: such intervals count as slow); 3, 4 its running medians
+    return lo, hi
+
+
+@wp.func
+def interval_sums(arrival: wp.array2d(dtype=wp.float64), sums: wp.array3d(dtype=wp.float64), m: int, n: int,
+                  dx: wp.float64):
+    """Rows of sums: 0, 1 prefix sums of the count of usable intervals and of the time spent |dt|
+    (s); 2 the log slowness q = log(|dt|/dx) of interval j (+inf where an end never arrived: such
+    intervals count as slow)."""
     sums[0, 0, m] = wp.float64(0.0)
     sums[1, 0, m] = wp.float64(0.0)
     for j in range(n - 1):
@@ -326,17 +299,16 @@ def segment_fronts(
         sums[0, j + 1, m] = sums[0, j, m] + w
         sums[1, j + 1, m] = sums[1, j, m] + dt
         sums[2, j, m] = q
-    if hi == lo:
-        return
-    a = lo
-    e = hi  # intervals lo..hi-1
-    k = settings.min_nodes
-    # fast reference speed v_fast: the plateau (mode) of the local speeds among the fastest
-    # fast_fraction of the usable intervals. q_cut: their slowest log slowness (an order statistic);
-    # the mode: the q_j with the most such q_i within +-MODE_WIDTH, averaged over those neighbours.
-    # O(N^2) once per member.
+
+
+@wp.func
+def fast_log_slowness(sums: wp.array3d(dtype=wp.float64), m: int, a: int, e: int, fast_fraction: wp.float64):
+    """The log slowness of the fast reference speed v_fast over intervals a..e-1: the plateau (mode)
+    of the local speeds among the fastest fast_fraction of the usable intervals. q_cut: their
+    slowest log slowness (an order statistic); the mode: the q_j with the most such q_i within
+    +-MODE_WIDTH, averaged over those neighbours. O(N^2) once per member."""
     n_usable = int(sums[0, e, m] - sums[0, a, m])
-    rank = int(wp.floor(settings.fast_fraction * wp.float64(n_usable)))
+    rank = int(wp.floor(fast_fraction * wp.float64(n_usable)))
     rank = wp.min(wp.max(rank, 0), n_usable - 1)
     q_cut = wp.float64(wp.inf)
     for j in range(a, e):
@@ -369,10 +341,19 @@ def segment_fronts(
             if count > best_count or (count == best_count and total / wp.float64(count) < q_fast):
                 best_count = count
                 q_fast = total / wp.float64(count)
-    slow_q = wp.log(settings.speed_ratio) + q_fast  # q above this: slower than v_fast / ratio
-    smooth_pass(sums, m, 2, 3, a, e)
-    smooth_pass(sums, m, 3, 4, a, e)
-    # slow end segments: the runs of intervals from each end whose smoothed speed is slow
+    return q_fast
+
+
+@wp.func
+def slow_end_segments(
+    arrival: wp.array2d(dtype=wp.float64), sums: wp.array3d(dtype=wp.float64), m: int, a: int, e: int,
+    dx: wp.float64, i_first: int, settings: SegmentSettings, slow_q: wp.float64,
+):
+    """The slow end segments a..b1 and b2..e (b1 = a, b2 = e: none) from the smoothed log slowness
+    (row 4 of sums): the runs of intervals from each end slower than slow_q, each kept when it has
+    at least min_nodes intervals, a fast part of as many lies between them and its mean speed is
+    at most the middle's / speed_ratio. Returns (b1, b2)."""
+    k = settings.min_nodes
     b1 = a
     while b1 < e:
         if sums[4, b1, m] <= slow_q:
@@ -399,6 +380,64 @@ def segment_fronts(
         if b2 < e:
             if not (segment_speed(arrival, sums, m, b2, e, dx, i_first) * settings.speed_ratio <= v_mid):
                 b2 = e
+    return b1, b2
+
+
+@wp.kernel
+def segment_fronts(
+    length: wp.array(dtype=wp.float64),
+    arrival: wp.array2d(dtype=wp.float64),
+    settings: SegmentSettings,
+    sums: wp.array3d(dtype=wp.float64),
+    out: wp.array2d(dtype=wp.float64),
+):
+    """Front metrics of each member from its arrival times t_a (s, nodes x members; NaN = never).
+
+    The front is the run of arrived nodes around the nucleation node (the earliest arrival); nodes
+    beyond an unreached node are not part of it (detached_fraction still counts every arrived node).
+    Works on the intervals between neighbouring nodes of that run, each
+    with its local speed c_j = dx / |t_a(x_{j+1}) - t_a(x_j)|. v_fast is the plateau (mode within
+    10 %) of the local speeds among the fastest fast_fraction of the intervals: the sustained speed
+    of the fast front, not the unbounded local speed at an interior nucleation point. An interval is slow when its local speed,
+    smoothed by two running medians of three, is below v_fast / speed_ratio. The left (right)
+    segment is the run of slow intervals from the left (right) end; it exists when it has at least
+    min_nodes intervals and its mean speed is at most v_middle / speed_ratio. The middle segment is
+    the rest. Absent segments are NaN. Segment speeds are length / time spent (segment_speed)."""
+    m = wp.tid()
+    n = arrival.shape[0]
+    for r in range(N_FRONT_METRICS):
+        out[r, m] = wp.float64(wp.nan)
+    L = length[m]
+    dx = L / wp.float64(n - 1)
+    i_first, t0, arrived = nucleation(arrival, m, n)
+    out[FM_ARRIVED_FRACTION, m] = wp.float64(arrived) / wp.float64(n)
+    if i_first < 0:
+        return
+    lo, hi = front_run(arrival, m, n, i_first)
+    t_last = wp.float64(-1.0e300)
+    for i in range(lo, hi + 1):
+        t_last = wp.max(t_last, arrival[i, m])
+    x_first = -wp.float64(0.5) * L + wp.float64(i_first) * dx
+    out[FM_NUCLEATION_POSITION, m] = x_first
+    edge = wp.float64(0.0)
+    if x_first <= -wp.float64(0.5) * L + settings.edge_zone:
+        edge = wp.float64(-1.0)
+    elif x_first >= wp.float64(0.5) * L - settings.edge_zone:
+        edge = wp.float64(1.0)
+    out[FM_NUCLEATION_EDGE, m] = edge
+    out[FM_FIRST_ARRIVAL, m] = t0
+    out[FM_LAST_ARRIVAL, m] = t_last
+    # rows of sums: 0, 1 the prefix sums, 2 the log slowness (interval_sums); 3, 4 its running medians
+    interval_sums(arrival, sums, m, n, dx)
+    if hi == lo:
+        return
+    a = lo
+    e = hi  # intervals lo..hi-1
+    q_fast = fast_log_slowness(sums, m, a, e, settings.fast_fraction)
+    slow_q = wp.log(settings.speed_ratio) + q_fast  # q above this: slower than v_fast / ratio
+    smooth_pass(sums, m, 2, 3, a, e)
+    smooth_pass(sums, m, 3, 4, a, e)
+    b1, b2 = slow_end_segments(arrival, sums, m, a, e, dx, i_first, settings, slow_q)
     if b1 > a:
         write_segment(out, m, 0, a, b1, L, dx, segment_speed(arrival, sums, m, a, b1, dx, i_first))
     if b2 < e:

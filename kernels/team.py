@@ -18,8 +18,10 @@ freed shared memory of the previous result before their first synchronisation, a
 a team of 2-8 read different sums (found in review: teams of 7 and 8 lanes failed on a lift-off
 member; tests/test_team.py checks the sums of every lane).
 
-``make_team(ft, lanes)`` builds the functions; with lanes = 1 they are the identity (no tile
-operation is compiled, the thread-per-member kernel is unchanged bit for bit). A team needs
+``make_team(ft, lanes)`` builds the functions; with lanes = 1 they are the identity (``make_solo``: no
+tile operation is compiled, the thread-per-member kernel is unchanged bit for bit), else the tile
+reductions (``make_tile_reductions``) and the separator exchange of the team's tridiagonal solve
+(``make_separator_exchange``). A team needs
 float64 (``ft``): the cooperative kernel is compiled for float64 only.
 """
 
@@ -42,35 +44,37 @@ def node_range(lane: int, lanes: int, n: int):
     return (lane * n) // lanes, ((lane + 1) * n) // lanes
 
 
-def make_team(ft, lanes: int):
-    """Reductions over a member's team (identity for lanes = 1)."""
-    if lanes == 1:
+def make_solo():
+    """The team of one (the thread-per-member kernel): every reduction is the identity and no tile
+    operation is compiled, so that kernel is unchanged bit for bit."""
 
-        @wp.func
-        def team_max(x: Any):
-            return x
+    @wp.func
+    def team_max(x: Any):
+        return x
 
-        @wp.func
-        def team_min(x: Any):
-            return x
+    @wp.func
+    def team_min(x: Any):
+        return x
 
-        @wp.func
-        def team_sum(x: Any):
-            return x
+    @wp.func
+    def team_sum(x: Any):
+        return x
 
-        @wp.func
-        def team_count(x: int):
-            return x
+    @wp.func
+    def team_count(x: int):
+        return x
 
-        @wp.func
-        def barrier():
-            pass
+    @wp.func
+    def barrier():
+        pass
 
-        return dict(lanes=1, team_max=team_max, team_min=team_min, team_sum=team_sum, team_count=team_count,
-                    barrier=barrier)
+    return dict(lanes=1, team_max=team_max, team_min=team_min, team_sum=team_sum, team_count=team_count,
+                barrier=barrier)
 
-    if ft != wp.float64:
-        raise ValueError("a team of lanes needs float64")
+
+def make_tile_reductions(lanes: int):
+    """Reductions over a team of ``lanes`` threads (float64) with Warp's tile primitives, each ending
+    with ``settle``, and the explicit ``barrier``."""
 
     @wp.func
     def settle():
@@ -113,6 +117,14 @@ def make_team(ft, lanes: int):
         r = wp.tile_sum(wp.tile(x, preserve_type=True))[0]
         settle()
         return r
+
+    return dict(team_max=team_max, team_min=team_min, team_sum=team_sum, team_count=team_count, barrier=barrier,
+                team_sum_vec12=team_sum_vec12)
+
+
+def make_separator_exchange(lanes: int):
+    """The team's part of the partitioned tridiagonal solve (kernels/newton.py make_team_solver): a
+    neighbour lane's value (from_next_lane) and the separators' reduced system (reduced_solve)."""
 
     @wp.func
     def from_next_lane(x: vec5d, lane: int):
@@ -172,6 +184,14 @@ def make_team(ft, lanes: int):
             e_prev = (d_up - c_up * e_self) / b_up
         return e_prev, e_self
 
-    return dict(lanes=lanes, team_max=team_max, team_min=team_min, team_sum=team_sum, team_count=team_count,
-                barrier=barrier, team_sum_vec12=team_sum_vec12, from_next_lane=from_next_lane,
-                reduced_solve=reduced_solve)
+    return dict(from_next_lane=from_next_lane, reduced_solve=reduced_solve)
+
+
+def make_team(ft, lanes: int):
+    """Reductions over a member's team (identity for lanes = 1) and the separator exchange of the
+    team's tridiagonal solve."""
+    if lanes == 1:
+        return make_solo()
+    if ft != wp.float64:
+        raise ValueError("a team of lanes needs float64")
+    return dict(lanes=lanes, **make_tile_reductions(lanes), **make_separator_exchange(lanes))
