@@ -23,7 +23,7 @@ from .model_terms import next_breakpoint
 from .types import STATUS_MAX_STEPS, STATUS_NON_FINITE, STATUS_STALLED, STATUS_STEP_UNDERFLOW, IntegratorState, MemberParams, SolverSettings
 
 # the local error of the order-2 solution is O(h^3): h_next ~ err^(-1/3). The exponent is -1/3
-# rounded to float32 (-0.3333333432674408): the kernel has used that value since session 1 (Warp
+# rounded to float32 (-0.3333333432674408): the kernel has used that value from its first version (Warp
 # folded the literal division -1.0/3.0 in float32); kept so that outputs stay equal (it changes a
 # step size by at most ~3e-8 relative, far inside the controller's own slack)
 ERROR_EXPONENT = -0.3333333432674408

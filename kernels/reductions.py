@@ -383,7 +383,7 @@ def slow_end_segments(
     return b1, b2
 
 
-@wp.kernel
+@wp.kernel(enable_backward=False)
 def segment_fronts(
     length: wp.array(dtype=wp.float64),
     arrival: wp.array2d(dtype=wp.float64),
@@ -445,7 +445,7 @@ def segment_fronts(
     write_segment(out, m, 1, b1, b2, L, dx, segment_speed(arrival, sums, m, b1, b2, dx, i_first))
 
 
-@wp.kernel
+@wp.kernel(enable_backward=False)
 def arrival_from_history(
     times: wp.array(dtype=wp.float64),
     velocity: wp.array3d(dtype=wp.float64),
