@@ -163,8 +163,10 @@ def main(argv=None):
             continue  # the cooperative kernel is float64 only
         solver = wf.Solver(nodes=args.nodes, dtype=dtype, rtol=args.rtol, lanes=lanes, predict_switches=predict == "on",
                            method=method, **({} if spl is None else dict(steps_per_launch=spl)))
-        wf.simulate(members(1), scene=wf.Parameters(end_time=20.01), model=model, solver=solver, fronts=fronts,
-                    device=device)  # compile
+        warm = wf.simulate(members(1), scene=wf.Parameters(end_time=20.01), model=model, solver=solver, fronts=fronts,
+                           device=device)  # compile
+        build_s = float(warm.attrs.get("kernel_build_time_s", float("nan")))
+        print(f"kernel build (compile, or load from Warp's cache): {build_s:.1f} s", flush=True)
         for m in args.members:
             best = None
             for _ in range(args.repeat):
@@ -188,7 +190,7 @@ def main(argv=None):
                 mean_rejected_steps=float(ds.steps_rejected.values.mean()),
                 mean_newton_per_step=float(ds.newton_iterations.values.sum() / max(steps.sum(), 1)),
                 status_ok=int((ds.status.values == 0).sum()), mu_s_max_rel_error=err,
-                steps_per_launch=solver.steps_per_launch,
+                steps_per_launch=solver.steps_per_launch, kernel_build_s=build_s,
                 mean_rejected_error_test=float(ds.rejected_error_test.values.mean()),
                 mean_rejected_newton=float(ds.rejected_newton.values.mean()),
                 mean_rejected_switch=float(ds.rejected_switch.values.mean()),
