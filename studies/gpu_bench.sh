@@ -25,6 +25,9 @@
 #   peers          JAX + diffrax (needs jax and the wheels of studies/diffrax_wheels.sh) and scipy BDF
 #   profile        one member: time per attempt against N (team of 32)
 #   launch-chunks  launches of 7 attempts against one launch: outputs equal bit for bit
+#   launches       where the time goes: every launch of 1 / 1,000 / 10,000 members timed (running
+#                  members, attempts), launches of 500 and 100 attempts, and Nsight Compute's
+#                  occupancy and SM-active cycles of each 10,000-member launch
 #   ncu            Nsight Compute on the 10,000-member launch (occupancy, rooflines); GATE, LANES
 #   ncu-one        Nsight Compute's warp stall reasons of the one-member launch
 #   ncu-sources    Nsight Compute's source counters of the one-member launch (line info on)
@@ -89,6 +92,13 @@ case "$mode" in
     $B profile --device cuda:0 --lanes 32 "$@" 2>&1 | tee "$OUT/profile.txt" | tail -8 ;;
   launch-chunks)
     $B launch-chunks --device cuda:0 "$@" 2>&1 | tail -3 | tee "$OUT/launch_chunks.txt" ;;
+  launches)
+    $E --members 1 1000 10000 --steps-per-launch 500 100 --launch-log "$OUT/launches.jsonl" \
+      --out "$OUT/bench_launches.json" "$@" 2>&1 | tee "$OUT/launches.log" | grep -v '^{' | tail -12
+    "$(ncu_bin)" --profile-from-start off -k regex:integrate --section SpeedOfLight --section Occupancy \
+      --section LaunchStats python3 studies/bench_engine.py --device cuda:0 --dtypes float64 --members 10000 \
+      --steps-per-launch 100 --cuda-profile-range --out "$OUT/bench_ncu.json" > "$OUT/ncu_launches.txt" 2>&1
+    grep -E "Duration|SM Active Cycles|Elapsed Cycles|Achieved Occupancy" "$OUT/ncu_launches.txt" ;;
   ncu)
     GATE=${GATE:-none}; LANES=${LANES:-32}; NCU=$(ncu_bin); echo "ncu: $NCU"
     python3 studies/bench_engine.py --device cuda:0 --members 1 --dtypes float64 --relaxation-gate "$GATE" --lanes "$LANES" \
