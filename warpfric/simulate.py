@@ -278,7 +278,10 @@ for _seg, _words in _SEGMENT_WORDS.items():
 
 
 def _add_fronts(ds: xr.Dataset, front: dict, fronts: Fronts) -> None:
+    """The front outputs and the Fronts settings (attributes) into ``ds``, in place; the variables in
+    one update (one at a time, each a merge over every variable, took 35 ms for one member)."""
     failed = ds.status.values != 0
+    new = {}
     for name, arr in front.items():
         arr = np.where(failed[:, None] if arr.ndim == 2 else failed, np.nan, arr)
         event = next((e for e in fronts.events[1:] if name.startswith(e + "_")), fronts.events[0])
@@ -286,7 +289,7 @@ def _add_fronts(ds: xr.Dataset, front: dict, fronts: Fronts) -> None:
         words = _EVENT_WORDS[event]
         if base == "nucleation_edge":
             edge = np.where(np.isfinite(arr), arr, -2).astype(np.int8)
-            ds[name] = xr.DataArray(edge, dims=("member",), attrs={
+            new[name] = xr.DataArray(edge, dims=("member",), attrs={
                 "long_name": f"edge where the {words} nucleates",
                 "flag_values": np.array([-2, -1, 0, 1], dtype=np.int8),
                 "flag_meanings": "none left interior right",
@@ -294,7 +297,8 @@ def _add_fronts(ds: xr.Dataset, front: dict, fronts: Fronts) -> None:
             continue
         units, long_name = _FRONT_ATTRS[base]
         dims = ("member", "x") if arr.ndim == 2 else ("member",)
-        ds[name] = xr.DataArray(arr, dims=dims, attrs={"units": units, "long_name": long_name.format(front=words)})
+        new[name] = xr.DataArray(arr, dims=dims, attrs={"units": units, "long_name": long_name.format(front=words)})
+    ds.update(new)
     for f in dataclasses.fields(fronts):
         value = getattr(fronts, f.name)
         if f.name == "event":
