@@ -8,6 +8,32 @@ import warpfric as wf
 # CPU by default (CI); WARPFRIC_TEST_DEVICE=cuda:0 runs the same assertions on a GPU
 DEVICE = os.environ.get("WARPFRIC_TEST_DEVICE", "cpu")
 
+# a sweep file of three tiny members without fronts, for the command-line tests
+TINY_SWEEP = """
+fronts = false
+[solver]
+nodes = 11
+[grid]
+eccentricity = [-0.2, 0.0, 0.2]
+"""
+
+
+def run_cli(capsys, *args):
+    """warpfric's main() in this process (no interpreter start-up): (exit code, stdout lines, stderr
+    lines)."""
+    from warpfric.cli import main
+
+    code = main([str(a) for a in args])
+    out, err = capsys.readouterr()
+    return code, out.strip().splitlines(), err.strip().splitlines()
+
+
+def one_line_error(err, *words):
+    """stderr is one line, warpfric's error line, and it names each of ``words``."""
+    assert len(err) == 1 and err[0].startswith("warpfric: error:"), err
+    for word in words:
+        assert word in err[0], (word, err[0])
+
 
 def run(members=None, *, scene=None, model=None, nodes=40, rtol=1e-6, dtype="float64", fronts=None,
         record=None, **solver_kw):

@@ -17,27 +17,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
-from conftest import DEVICE
+from conftest import DEVICE, run_cli, TINY_SWEEP
 
-from warpfric.cli import main
 from warpfric.io import open_ensemble
 
 SIMULATE_MODULE = importlib.import_module("warpfric.simulate")
 IO_MODULE = importlib.import_module("warpfric.io")
-
-SWEEP = """
-fronts = false
-[solver]
-nodes = 11
-[grid]
-eccentricity = [-0.2, 0.0, 0.2]
-"""
-
-
-def _main(capsys, *args):
-    code = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return code, out.strip().splitlines(), err.strip().splitlines()
 
 
 def _error_line(err, *words):
@@ -55,7 +40,7 @@ def _files(folder: Path) -> list:
 @pytest.fixture
 def sweep(tmp_path):
     path = tmp_path / "s.toml"
-    path.write_text(SWEEP)
+    path.write_text(TINY_SWEEP)
     return path
 
 
@@ -89,7 +74,7 @@ def test_an_unwritable_folder_exits_2_before_anything_runs(tmp_path, sweep, caps
     _deny_writes_in(monkeypatch, folder)
     out = folder / "out.nc"
     args = (["run", "--nodes", 11] if kind == "default scene" else ["run", sweep]) + ["-o", out, "--device", DEVICE]
-    code, stdout, err = _main(capsys, *args)
+    code, stdout, err = run_cli(capsys, *args)
     assert code == 2 and stdout == []
     assert err == [f"warpfric: error: output '{out}': cannot write in folder '{folder}' (permission denied); "
                    "choose another -o or make the folder writable"]
@@ -117,7 +102,7 @@ def test_a_really_unwritable_folder_exits_2(tmp_path, sweep, capsys, no_simulati
         folder.chmod(0o555)
         reason = "permission denied"
     try:
-        code, _, err = _main(capsys, "run", sweep, "-o", folder / "s.nc", "--device", DEVICE)
+        code, _, err = run_cli(capsys, "run", sweep, "-o", folder / "s.nc", "--device", DEVICE)
         assert code == 2
         _error_line(err, f"cannot write in folder '{folder}' ({reason})")
         assert _files(folder) == []
@@ -173,7 +158,7 @@ def _interrupted_run(tmp_path, sweep, capsys, monkeypatch, out, interrupt_at=2):
         return real(*args, **kwargs)
 
     monkeypatch.setattr(SIMULATE_MODULE, "simulate", interrupted)
-    code, _, err = _main(capsys, "run", sweep, "-o", out, "--chunk", 1, "--device", DEVICE, "--quiet")
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--chunk", 1, "--device", DEVICE, "--quiet")
     monkeypatch.setattr(SIMULATE_MODULE, "simulate", real)
     return code, err
 
@@ -186,7 +171,7 @@ def test_an_unwritable_parts_folder_stops_resume_before_it_runs(tmp_path, sweep,
     before = _files(parts)
     _deny_writes_in(monkeypatch, parts)
     monkeypatch.setattr(SIMULATE_MODULE, "simulate", lambda *a, **k: pytest.fail("ran"))
-    code, _, err = _main(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
     assert code == 2
     _error_line(err, f"cannot write in folder '{parts}' (permission denied)")
     assert _files(parts) == before and not (tmp_path / "s.nc.lock").exists()
@@ -212,13 +197,13 @@ def _full_disk(monkeypatch, fail_on):
 def test_a_full_disk_in_a_chunk_exits_3_and_keeps_the_finished_chunks(tmp_path, sweep, capsys, monkeypatch):
     out = tmp_path / "s.nc"
     _full_disk(monkeypatch, "chunk-000001.nc")
-    code, _, err = _main(capsys, "run", sweep, "-o", out, "--chunk", 1, "--device", DEVICE, "--quiet")
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--chunk", 1, "--device", DEVICE, "--quiet")
     assert code == 3
     _error_line(err, "disk full while writing", "chunk-000001.nc", "0 bytes free", "its partial file removed",
                 "the 1 finished chunks are kept", "free some space, then", "--resume")
     assert _files(tmp_path) == ["s.nc.parts", "s.nc.parts/chunk-000000.nc", "s.nc.parts/manifest.json", "s.toml"]
     monkeypatch.undo()
-    code, _, err = _main(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE, "--quiet")
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE, "--quiet")
     assert code == 0, err
     assert open_ensemble(out).member.values.tolist() == [0, 1, 2]
     assert _files(tmp_path) == ["s.nc", "s.toml"]
@@ -226,7 +211,7 @@ def test_a_full_disk_in_a_chunk_exits_3_and_keeps_the_finished_chunks(tmp_path, 
 
 def test_a_full_disk_in_the_first_chunk_leaves_nothing(tmp_path, sweep, capsys, monkeypatch):
     _full_disk(monkeypatch, "chunk-000000.nc")
-    code, _, err = _main(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--device", DEVICE, "--quiet")
+    code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--device", DEVICE, "--quiet")
     assert code == 3
     _error_line(err, "disk full", "nothing was kept")
     assert _files(tmp_path) == ["s.toml"]  # no parts folder blocks the next plain run
@@ -235,19 +220,19 @@ def test_a_full_disk_in_the_first_chunk_leaves_nothing(tmp_path, sweep, capsys, 
 def test_a_full_disk_while_combining_keeps_every_chunk_for_resume(tmp_path, sweep, capsys, monkeypatch):
     out = tmp_path / "s.nc"
     _full_disk(monkeypatch, "s.nc.")
-    code, _, err = _main(capsys, "run", sweep, "-o", out, "--chunk", 2, "--device", DEVICE, "--quiet")
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--chunk", 2, "--device", DEVICE, "--quiet")
     assert code == 3
     _error_line(err, f"disk full while writing '{out}'", "the 2 finished chunks are kept")
     assert not list(tmp_path.rglob("*.tmp")) and not out.exists()
     monkeypatch.undo()
-    code, _, err = _main(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
     assert code == 0 and "0 to run" in err[-2], err  # resume only combines
     assert _files(tmp_path) == ["s.nc", "s.toml"]
 
 
 def test_a_full_disk_writing_the_default_scene_exits_3(tmp_path, capsys, monkeypatch):
     _full_disk(monkeypatch, "d.nc")
-    code, stdout, err = _main(capsys, "run", "--nodes", 11, "-o", tmp_path / "d.nc", "--device", DEVICE, "--quiet")
+    code, stdout, err = run_cli(capsys, "run", "--nodes", 11, "-o", tmp_path / "d.nc", "--device", DEVICE, "--quiet")
     assert code == 3 and stdout[0].startswith("scene:")  # the run itself was printed
     assert err == [f"warpfric: error: disk full while writing '{tmp_path / 'd.nc'}' (0 bytes free; its partial "
                    "file removed)"]
@@ -257,7 +242,7 @@ def test_a_full_disk_writing_the_default_scene_exits_3(tmp_path, capsys, monkeyp
 def test_an_io_error_that_is_not_a_full_disk_says_what_it_was(tmp_path, capsys, monkeypatch):
     _full_disk(monkeypatch, "d.nc")
     monkeypatch.setattr(IO_MODULE, "free_bytes", lambda folder: 10**12)  # plenty: another I/O error
-    code, _, err = _main(capsys, "run", "--nodes", 11, "-o", tmp_path / "d.nc", "--device", DEVICE, "--quiet")
+    code, _, err = run_cli(capsys, "run", "--nodes", 11, "-o", tmp_path / "d.nc", "--device", DEVICE, "--quiet")
     assert code == 3
     _error_line(err, "could not write", "RuntimeError: NetCDF: HDF error", "its partial file removed")
     assert _files(tmp_path) == []
@@ -265,7 +250,7 @@ def test_an_io_error_that_is_not_a_full_disk_says_what_it_was(tmp_path, capsys, 
 
 def test_too_little_free_space_is_refused_before_the_run(tmp_path, sweep, capsys, monkeypatch, no_simulation):
     monkeypatch.setattr(shutil, "disk_usage", lambda folder: shutil._ntuple_diskusage(10**9, 10**9 - 1000, 1000))
-    code, _, err = _main(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--device", DEVICE)
+    code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--device", DEVICE)
     assert code == 3
     _error_line(err, "disk full: 1000 bytes free", "this run (3 members of 11 nodes", "needs about")
     assert _files(tmp_path) == ["s.toml"]
@@ -284,9 +269,9 @@ def test_a_really_full_disk(tmp_path, capsys, size, words):
         pytest.skip("no tmpfs can be mounted here (the injected ENOSPC tests cover it)")
     try:
         sweep = tmp_path / "big.toml"  # ~120 KB per chunk of 20 members
-        sweep.write_text(SWEEP.replace("nodes = 11", "nodes = 101\nrtol = 1e-3").replace(
+        sweep.write_text(TINY_SWEEP.replace("nodes = 11", "nodes = 101\nrtol = 1e-3").replace(
             "[-0.2, 0.0, 0.2]", "{start = -0.2, stop = 0.2, num = 60}"))
-        code, _, err = _main(capsys, "run", sweep, "-o", folder / "big.nc", "--chunk", 20, "--device", DEVICE,
+        code, _, err = run_cli(capsys, "run", sweep, "-o", folder / "big.nc", "--chunk", 20, "--device", DEVICE,
                              "--quiet")
         assert code == 3
         _error_line(err, *words)
@@ -309,7 +294,7 @@ def test_a_second_run_on_the_same_output_is_refused_with_exit_4(tmp_path, sweep,
         lock = _hold_lock(out, other.pid)
         for args in (["run", sweep, "-o", out], ["run", "--nodes", 11, "-o", out]):
             monkeypatch.setattr(SIMULATE_MODULE, "simulate", lambda *a, **k: pytest.fail("ran"))
-            code, _, err = _main(capsys, *args, "--device", DEVICE)
+            code, _, err = run_cli(capsys, *args, "--device", DEVICE)
             assert code == 4
             assert err == [f"warpfric: error: output '{out}' is being written by another warpfric run (pid {other.pid} "
                            f"on {socket.gethostname()}, since 2026-01-01T00:00:00Z); wait for it to end, or remove "
@@ -319,7 +304,7 @@ def test_a_second_run_on_the_same_output_is_refused_with_exit_4(tmp_path, sweep,
         other.kill()
         other.wait()
     monkeypatch.undo()
-    code, _, err = _main(capsys, "run", sweep, "-o", out, "--device", DEVICE, "--quiet")  # its run is gone: stale
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--device", DEVICE, "--quiet")  # its run is gone: stale
     assert code == 0, err
     assert _files(tmp_path) == ["s.nc", "s.toml"]  # the lock is removed at the end
 
@@ -327,7 +312,7 @@ def test_a_second_run_on_the_same_output_is_refused_with_exit_4(tmp_path, sweep,
 def test_two_runs_started_at_once_one_is_refused(tmp_path, sweep):
     """Two processes on one output: one writes it, the other exits 4 with one line."""
     slow = tmp_path / "slow.toml"
-    slow.write_text(SWEEP.replace("[-0.2, 0.0, 0.2]", "[-0.3, -0.2, -0.1, 0.0, 0.1, 0.2]"))
+    slow.write_text(TINY_SWEEP.replace("[-0.2, 0.0, 0.2]", "[-0.3, -0.2, -0.1, 0.0, 0.1, 0.2]"))
     out = tmp_path / "slow.nc"
     cmd = [sys.executable, "-m", "warpfric", "run", str(slow), "-o", str(out), "--chunk", "1", "--device", DEVICE,
            "--quiet"]
@@ -350,12 +335,12 @@ def test_an_unreachable_scheduler_leaves_no_parts_folder(tmp_path, sweep, capsys
 
     monkeypatch.setattr(distributed, "Client", unreachable)
     out = tmp_path / "s.nc"
-    code, _, err = _main(capsys, "run", sweep, "-o", out, "--scheduler", "tcp://127.0.0.1:1", "--chunk", 1)
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--scheduler", "tcp://127.0.0.1:1", "--chunk", 1)
     assert code == 2
     _error_line(err, "scheduler 'tcp://127.0.0.1:1': cannot connect")
     assert _files(tmp_path) == ["s.toml"]
     monkeypatch.undo()
-    code, _, err = _main(capsys, "run", sweep, "-o", out, "--device", DEVICE, "--quiet")  # the next plain run
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--device", DEVICE, "--quiet")  # the next plain run
     assert code == 0, err
 
 
@@ -365,7 +350,7 @@ def test_resume_removes_what_a_killed_run_left(tmp_path, sweep, capsys, monkeypa
     # a combine killed by SIGKILL, and a chunk's writer killed mid-file
     (tmp_path / "s.nc.12345.0badf00d.tmp").write_bytes(b"half a file")
     (tmp_path / "s.nc.parts" / "chunk-000001.nc.12345.deadbeef.tmp").write_bytes(b"half a chunk")
-    code, _, err = _main(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
     assert code == 0, err
     assert "removed 2 temporary files that an interrupted run left" in "\n".join(err)
     assert _files(tmp_path) == ["s.nc", "s.toml"]
@@ -376,9 +361,9 @@ def test_ctrl_c_in_one_scene_says_nothing_of_chunks(tmp_path, capsys, monkeypatc
         raise KeyboardInterrupt
 
     monkeypatch.setattr(SIMULATE_MODULE, "simulate", interrupted)
-    code, _, err = _main(capsys, "run", "--nodes", 11, "-o", tmp_path / "d.nc", "--device", DEVICE)
+    code, _, err = run_cli(capsys, "run", "--nodes", 11, "-o", tmp_path / "d.nc", "--device", DEVICE)
     assert code == 130 and err == ["warpfric: interrupted; nothing was written"]
-    code, _, err = _main(capsys, "run", "--nodes", 11, "--device", DEVICE)
+    code, _, err = run_cli(capsys, "run", "--nodes", 11, "--device", DEVICE)
     assert code == 130 and err == ["warpfric: interrupted"]
     assert _files(tmp_path) == []
 

@@ -6,32 +6,13 @@ simulate(workers=...), and every option and argument has help text."""
 import importlib
 
 import pytest
-from conftest import DEVICE
+from conftest import DEVICE, one_line_error, run_cli, TINY_SWEEP
 
 from warpfric.cli import build_parser, join_negative_values, main
 from warpfric.io import open_ensemble
 
 SIMULATE_MODULE = importlib.import_module("warpfric.simulate")
 
-SWEEP = """
-fronts = false
-[solver]
-nodes = 11
-[grid]
-eccentricity = [-0.2, 0.0, 0.2]
-"""
-
-
-def _main(capsys, *args):
-    code = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return code, out.strip().splitlines(), err.strip().splitlines()
-
-
-def _one_line_error(err, *words):
-    assert len(err) == 1 and err[0].startswith("warpfric: error:"), err
-    for word in words:
-        assert word in err[0], (word, err[0])
 
 
 @pytest.fixture
@@ -54,10 +35,10 @@ def no_simulation(monkeypatch):
 ])
 def test_scene_options_with_a_sweep_file_are_refused(tmp_path, capsys, no_simulation, args, words):
     sweep = tmp_path / "s.toml"
-    sweep.write_text(SWEEP)
-    code, out, err = _main(capsys, "run", sweep, "-o", tmp_path / "s.nc", *args)
+    sweep.write_text(TINY_SWEEP)
+    code, out, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "s.nc", *args)
     assert code == 2 and out == []
-    _one_line_error(err, *words, "default scene only", str(sweep))
+    one_line_error(err, *words, "default scene only", str(sweep))
     assert [p.name for p in tmp_path.iterdir()] == ["s.toml"]
 
 
@@ -70,18 +51,18 @@ def test_scene_options_with_a_sweep_file_are_refused(tmp_path, capsys, no_simula
 ])
 def test_options_that_do_not_apply_without_a_sweep_file_are_refused(tmp_path, capsys, no_simulation, args, words):
     out = [] if "--overwrite" in args else ["-o", tmp_path / "x.nc"]
-    code, stdout, err = _main(capsys, "run", *out, *args)
+    code, stdout, err = run_cli(capsys, "run", *out, *args)
     assert code == 2 and stdout == []
-    _one_line_error(err, *words)
+    one_line_error(err, *words)
     assert list(tmp_path.iterdir()) == []
 
 
 def test_cpu_workers_is_refused_on_a_dask_cluster(tmp_path, capsys, no_simulation):
     sweep = tmp_path / "s.toml"
-    sweep.write_text(SWEEP)
-    code, _, err = _main(capsys, "run", sweep, "--cpu-workers", 2, "--local-cluster")
+    sweep.write_text(TINY_SWEEP)
+    code, _, err = run_cli(capsys, "run", sweep, "--cpu-workers", 2, "--local-cluster")
     assert code == 2
-    _one_line_error(err, "--cpu-workers", "Dask")
+    one_line_error(err, "--cpu-workers", "Dask")
 
 
 @pytest.mark.parametrize("words, expected", [
@@ -98,7 +79,7 @@ def test_negative_numbers_are_joined_to_their_option(words, expected):
 
 
 def test_a_negative_disc_velocity_runs(tmp_path, capsys):
-    code, out, err = _main(capsys, "run", "--disc-velocity", "-1e-4", "--eccentricity", "-0.2", "--nodes", 11,
+    code, out, err = run_cli(capsys, "run", "--disc-velocity", "-1e-4", "--eccentricity", "-0.2", "--nodes", 11,
                            "-o", tmp_path / "neg.nc", "--device", DEVICE, "--quiet")
     assert code == 0, err
     assert out[0].startswith("scene: F = 1000 N, 2e/L = -0.2, v_d = -0.0001 m/s")
@@ -111,12 +92,12 @@ def test_cpu_workers_reach_simulate(tmp_path, capsys):
     """--cpu-workers 2 splits a sweep's members over two worker processes (the file says so), and
     the default scene passes it on to simulate(workers=...)."""
     sweep = tmp_path / "s.toml"
-    sweep.write_text(SWEEP)
-    code, _, err = _main(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--cpu-workers", 2, "--device", "cpu",
+    sweep.write_text(TINY_SWEEP)
+    code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--cpu-workers", 2, "--device", "cpu",
                          "--quiet")
     assert code == 0, err
     assert int(open_ensemble(tmp_path / "s.nc").attrs["workers"]) == 2
-    code, _, err = _main(capsys, "run", "--nodes", 11, "--cpu-workers", 1, "--device", "cpu", "--quiet")
+    code, _, err = run_cli(capsys, "run", "--nodes", 11, "--cpu-workers", 1, "--device", "cpu", "--quiet")
     assert code == 0, err
 
 

@@ -11,10 +11,9 @@ import netCDF4
 import numpy as np
 import pytest
 import xarray as xr
-from conftest import DEVICE, run
+from conftest import DEVICE, one_line_error, run, run_cli
 
 import warpfric as wf
-from warpfric.cli import main
 from warpfric.io import COMBINE_KWARGS, open_ensemble, open_ensembles, write_ensemble
 
 SIMULATE_MODULE = importlib.import_module("warpfric.simulate")  # (warpfric.simulate is also the function)
@@ -34,17 +33,6 @@ count = 5
 """
 
 
-def _main(capsys, *args):
-    """main() in this process (no interpreter start-up): (exit code, stdout lines, stderr lines)."""
-    code = main([str(a) for a in args])
-    out, err = capsys.readouterr()
-    return code, out.strip().splitlines(), err.strip().splitlines()
-
-
-def _one_line_error(err, *words):
-    assert len(err) == 1 and err[0].startswith("warpfric: error:"), err
-    for word in words:
-        assert word in err[0], (word, err[0])
 
 
 def _cf_failures(path, tmp_path) -> list:
@@ -72,7 +60,7 @@ def test_written_files_pass_the_cf_checker(tmp_path, capsys):
     assert _cf_failures(path, tmp_path) == []
     sweep = tmp_path / "s.toml"
     sweep.write_text(SWEEP)
-    code, _, err = _main(capsys, "run", sweep, "-o", tmp_path / "cli.nc", "--chunk", 2, "--device", DEVICE, "--quiet")
+    code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "cli.nc", "--chunk", 2, "--device", DEVICE, "--quiet")
     assert code == 0, err
     assert _cf_failures(tmp_path / "cli.nc", tmp_path) == []
     for name in ("api.nc", "cli.nc"):
@@ -99,14 +87,14 @@ def _two_runs(tmp_path, capsys, second_offset_in_file: bool):
     sweep = tmp_path / "s.toml"
     sweep.write_text(SWEEP)
     a, b = tmp_path / "a.nc", tmp_path / "b.nc"
-    code, _, err = _main(capsys, "run", sweep, "-o", a, "--chunk", 2, "--device", DEVICE, "--quiet")
+    code, _, err = run_cli(capsys, "run", sweep, "-o", a, "--chunk", 2, "--device", DEVICE, "--quiet")
     assert code == 0, err
     if second_offset_in_file:
         sweep_b = tmp_path / "s_b.toml"
         sweep_b.write_text(SWEEP + "[run]\nmember_offset = 3\n")
-        code, _, err = _main(capsys, "run", sweep_b, "-o", b, "--chunk", 2, "--device", DEVICE, "--quiet")
+        code, _, err = run_cli(capsys, "run", sweep_b, "-o", b, "--chunk", 2, "--device", DEVICE, "--quiet")
     else:
-        code, _, err = _main(capsys, "run", sweep, "-o", b, "--chunk", 2, "--member-offset", 3, "--device", DEVICE,
+        code, _, err = run_cli(capsys, "run", sweep, "-o", b, "--chunk", 2, "--member-offset", 3, "--device", DEVICE,
                              "--quiet")
     assert code == 0, err
     assert "numbers 3..5" in err[0]
@@ -154,7 +142,7 @@ def test_repeated_member_numbers_are_kept_or_refused_never_dropped(tmp_path, cap
     other.write_text(sweep.read_text().replace("[-0.2, 0.0, 0.2]", "[0.1, 0.3, 0.4]"))
     a, b = tmp_path / "a.nc", tmp_path / "b.nc"
     for s, out in ((sweep, a), (other, b)):  # both numbered 0..2: the user forgot --member-offset
-        code, _, err = _main(capsys, "run", s, "-o", out, "--device", DEVICE, "--quiet")
+        code, _, err = run_cli(capsys, "run", s, "-o", out, "--device", DEVICE, "--quiet")
         assert code == 0, err
     with xr.open_mfdataset([a, b], **COMBINE_KWARGS) as both:  # xarray keeps all six, apart by their labels
         np.testing.assert_array_equal(both.member_number.values, [0, 1, 2, 0, 1, 2])
@@ -162,8 +150,8 @@ def test_repeated_member_numbers_are_kept_or_refused_never_dropped(tmp_path, cap
         np.testing.assert_array_equal(both.eccentricity.values, [-0.2, 0.0, 0.2, 0.1, 0.3, 0.4])
     with pytest.raises(ValueError, match="member numbers 0, 1, 2 occur more than once.*--member-offset"):
         open_ensembles([a, b])
-    code, out, err = _main(capsys, "info", a, b)
-    _one_line_error(err, "more than once", str(a), str(b), "--member-offset")
+    code, out, err = run_cli(capsys, "info", a, b)
+    one_line_error(err, "more than once", str(a), str(b), "--member-offset")
     assert code == 2 and out == []
 
 
@@ -174,7 +162,7 @@ def test_recorded_fields_with_repeated_numbers_do_not_merge_silently(tmp_path, c
     sweep.write_text(SWEEP)
     other.write_text(SWEEP.replace("[-0.2, 0.0, 0.2]", "[0.1, 0.3, 0.4]"))
     for s, out in ((sweep, "a.nc"), (other, "b.nc")):
-        assert _main(capsys, "run", s, "-o", tmp_path / out, "--device", DEVICE, "--quiet")[0] == 0
+        assert run_cli(capsys, "run", s, "-o", tmp_path / out, "--device", DEVICE, "--quiet")[0] == 0
     paths = [tmp_path / "a.nc", tmp_path / "b.nc"]
     with xr.open_mfdataset(paths, group="recorded") as recorded:
         np.testing.assert_array_equal(recorded.recorded_member_number.values, [1, 2, 1, 2])
@@ -203,12 +191,12 @@ def test_combining_runs_of_different_constant_parameters_makes_them_vary(tmp_pat
 
 def test_member_offset_of_the_default_run_and_a_scene_only_sweep(tmp_path, capsys):
     out = tmp_path / "d.nc"
-    code, _, err = _main(capsys, "run", "-o", out, "--nodes", 11, "--member-offset", 7, "--device", DEVICE, "--quiet")
+    code, _, err = run_cli(capsys, "run", "-o", out, "--nodes", 11, "--member-offset", 7, "--device", DEVICE, "--quiet")
     assert code == 0, err
     assert open_ensemble(out).member.values.tolist() == [7]
     scene = tmp_path / "scene.toml"
     scene.write_text("fronts = false\n[scene]\nnormal_force = 800.0\n[solver]\nnodes = 11\n[run]\nmember_offset = 5\n")
-    code, _, err = _main(capsys, "run", scene, "-o", tmp_path / "scene.nc", "--device", DEVICE, "--quiet")
+    code, _, err = run_cli(capsys, "run", scene, "-o", tmp_path / "scene.nc", "--device", DEVICE, "--quiet")
     assert code == 0, err
     ds = open_ensemble(tmp_path / "scene.nc")
     assert ds.member.values.tolist() == [5] and float(ds.normal_force) == 800.0
@@ -224,9 +212,9 @@ def test_bad_chunk_and_offset_options_exit_2(tmp_path, capsys, args, words):
     sweep = tmp_path / "s.toml"
     sweep.write_text(SWEEP)
     out = tmp_path / "s.nc"
-    code, _, err = _main(capsys, "run", sweep, "-o", out, "--device", DEVICE, *args)
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--device", DEVICE, *args)
     assert code == 2
-    _one_line_error(err, *words)
+    one_line_error(err, *words)
     assert not out.exists() and not (tmp_path / "s.nc.parts").exists()
 
 
@@ -237,9 +225,9 @@ def test_bad_chunk_and_offset_options_exit_2(tmp_path, capsys, args, words):
 def test_bad_run_table_exits_2(tmp_path, capsys, table, words):
     sweep = tmp_path / "s.toml"
     sweep.write_text(SWEEP + table)
-    code, _, err = _main(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--device", DEVICE)
+    code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--device", DEVICE)
     assert code == 2
-    _one_line_error(err, *words)
+    one_line_error(err, *words)
     assert list(tmp_path.iterdir()) == [sweep]
 
 
@@ -247,9 +235,9 @@ def test_bad_run_table_exits_2(tmp_path, capsys, table, words):
 def test_empty_sweep_file_is_refused(tmp_path, capsys, text):
     sweep = tmp_path / "empty.toml"
     sweep.write_text(text)
-    code, out, err = _main(capsys, "run", sweep, "--device", DEVICE)
+    code, out, err = run_cli(capsys, "run", sweep, "--device", DEVICE)
     assert code == 2 and out == []
-    _one_line_error(err, "empty.toml", "nothing to run", "[grid]", "[sample]", "[design]", "[scene]")
+    one_line_error(err, "empty.toml", "nothing to run", "[grid]", "[sample]", "[design]", "[scene]")
     assert list(tmp_path.iterdir()) == [sweep]
 
 
@@ -257,20 +245,20 @@ def test_empty_sweep_file_is_refused(tmp_path, capsys, text):
 def test_info_on_a_file_that_is_not_netcdf(tmp_path, capsys, content):
     path = tmp_path / "junk.nc"
     path.write_bytes(content)
-    code, out, err = _main(capsys, "info", path)
+    code, out, err = run_cli(capsys, "info", path)
     assert code == 2 and out == []
-    _one_line_error(err, str(path), "not a readable netCDF file")
+    one_line_error(err, str(path), "not a readable netCDF file")
 
 
 def test_info_on_netcdf_that_is_not_an_ensemble_and_on_a_folder(tmp_path, capsys):
     xr.Dataset({"a": ("x", [1.0, 2.0])}).to_netcdf(tmp_path / "other.nc")
-    code, _, err = _main(capsys, "info", tmp_path / "other.nc")
+    code, _, err = run_cli(capsys, "info", tmp_path / "other.nc")
     assert code == 2
-    _one_line_error(err, "not a complete warpfric ensemble")
+    one_line_error(err, "not a complete warpfric ensemble")
     (tmp_path / "dir.nc").mkdir()
-    code, _, err = _main(capsys, "info", tmp_path / "dir.nc")
+    code, _, err = run_cli(capsys, "info", tmp_path / "dir.nc")
     assert code == 2
-    _one_line_error(err, "folder")
+    one_line_error(err, "folder")
 
 
 def test_info_prints_a_resume_command_that_works(tmp_path, capsys, monkeypatch):
@@ -291,18 +279,18 @@ def test_info_prints_a_resume_command_that_works(tmp_path, capsys, monkeypatch):
         return real(*args, **kwargs)
 
     monkeypatch.setattr(SIMULATE_MODULE, "simulate", interrupted)
-    code, _, err = _main(capsys, "run", sweep, "-o", out, "--chunk", 1, "--member-offset", 10, "--device", DEVICE,
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--chunk", 1, "--member-offset", 10, "--device", DEVICE,
                          "--quiet")
     assert code == 130 and "--resume" in err[-1] and calls == [10, 11]
     monkeypatch.setattr(SIMULATE_MODULE, "simulate", real)
-    code, lines, _ = _main(capsys, "info", out)
+    code, lines, _ = run_cli(capsys, "info", out)
     assert code == 1 and "INCOMPLETE" in lines[0] and "1/3 chunks" in lines[0]
     command = shlex.split(lines[0].split("`")[1])
     assert command[:2] == ["warpfric", "run"] and "--resume" in command and "--chunk" not in command
-    code, _, err = _main(capsys, *command[1:], "--chunk", 2)  # another chunk size: refused, names it
+    code, _, err = run_cli(capsys, *command[1:], "--chunk", 2)  # another chunk size: refused, names it
     assert code == 2
-    _one_line_error(err, "chunk size (1)", "--overwrite")
-    code, _, err = _main(capsys, *command[1:], "--quiet")
+    one_line_error(err, "chunk size (1)", "--overwrite")
+    code, _, err = run_cli(capsys, *command[1:], "--quiet")
     assert code == 0, err
     assert "(numbers 10..12) in 3 chunks of <= 1, 2 to run" in err[0]
     ds = open_ensemble(out)
