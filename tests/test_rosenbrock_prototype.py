@@ -11,6 +11,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "studies"))
 import rosenbrock_w as rw  # noqa: E402
 from baseline_scipy import PadODE  # noqa: E402
+from esdirk_order import fd_jacobian  # noqa: E402
 
 import warpfric as wf  # noqa: E402
 
@@ -55,16 +56,7 @@ def test_gated_jacobian_is_exact_for_the_held_gate():
     f0, J = gp.f(t, y, jac=True)
     d = gp.plate.copy()
     sc = gp.scales + np.abs(y)
-    Jfd = np.zeros_like(J)
-    for j in range(4 * n):
-        hj = 1e-6 * sc[j]
-        yp, ym = y.copy(), y.copy()
-        yp[j] += hj
-        ym[j] -= hj
-        gp.plate = d.copy()
-        fp = gp.f(t, yp)
-        gp.plate = d.copy()
-        Jfd[:, j] = (fp - gp.f(t, ym)) / (2 * hj)
+    Jfd = fd_jacobian(lambda yy: gp.f(t, yy), y, sc, lambda: setattr(gp, "plate", d.copy()))
     for k in range(4):  # each component block, relative to its largest scaled entry
         rows = slice(k * n, (k + 1) * n)
         a, b = J[rows] * sc, Jfd[rows] * sc
