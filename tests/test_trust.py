@@ -131,7 +131,7 @@ def test_device_none_keeps_small_ensembles_on_the_cpu():
     import warp as wp
 
     import warpfric as wf
-    from warpfric.simulate import SMALL_ENSEMBLE
+    from warpfric.device import SMALL_ENSEMBLE
 
     assert SMALL_ENSEMBLE == 16
     assert wf.default_device(1) == wf.default_device(16) == "cpu"

@@ -26,6 +26,7 @@ def _attach_kernels():
 _attach_kernels()
 
 from .parameters import PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solver  # noqa: E402
-from .simulate import default_device, simulate  # noqa: E402
+from .device import default_device  # noqa: E402
+from .simulate import simulate  # noqa: E402
 
 __all__ = ["Parameters", "Model", "Solver", "Fronts", "Record", "simulate", "default_device", "PARAMETER_NAMES", "__version__"]

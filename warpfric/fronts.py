@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from .device import check_device, init_warp
 from .parameters import Fronts
 
 FRONT_METRIC_NAMES = (
@@ -47,18 +48,6 @@ def name_from_start(metrics: dict) -> dict:
     return out
 
 
-def _warp():
-    from .device import init_warp
-
-    return init_warp()
-
-
-def _device(device):
-    from .device import check_device
-
-    return check_device(device)
-
-
 def min_segment_intervals(fronts: Fronts, nodes: int) -> int:
     """Fewest node intervals of a front segment: min_segment_fraction of the pad, at least 3."""
     return max(3, int(math.ceil(fronts.min_segment_fraction * (nodes - 1) - 1e-9)))
@@ -74,7 +63,7 @@ def segment(arrival_time, length, fronts: Fronts = Fronts(), device: str | None 
     start (:func:`name_from_start`; positions and lengths in m, times in s, speeds in m/s;
     nucleation_edge -1 left, 0 interior, +1 right, NaN none).
     """
-    wp = _warp()
+    wp = init_warp()
     from warpfric.kernels.reductions import N_FRONT_METRICS, SegmentSettings, segment_fronts
 
     ta = np.atleast_2d(np.asarray(arrival_time, dtype=np.float64))
@@ -89,7 +78,7 @@ def segment(arrival_time, length, fronts: Fronts = Fronts(), device: str | None 
     seg.fast_fraction = fronts.fast_fraction
     seg.speed_ratio = fronts.speed_ratio
     seg.edge_zone = float(fronts.edge_zone_fraction * np.min(length))
-    with wp.ScopedDevice(_device(device)):
+    with wp.ScopedDevice(check_device(device)):
         arrival = wp.array(np.ascontiguousarray(ta.T), dtype=wp.float64)
         sums = wp.zeros((5, n, n_members), dtype=wp.float64)
         out = wp.zeros((N_FRONT_METRICS, n_members), dtype=wp.float64)
@@ -109,7 +98,7 @@ def arrival_times_from_history(times, velocity, disc_velocity=1.0, fronts: Front
     disc_velocity: sign source for the detachment velocity (scalar or (members,), m/s).
     Returns (arrival_time (members, nodes) s, event_max_velocity (members,) m/s).
     """
-    wp = _warp()
+    wp = init_warp()
     from warpfric.kernels.types import FRONT_DIRECTIONS
     from warpfric.kernels.reductions import arrival_from_history
 
@@ -121,7 +110,7 @@ def arrival_times_from_history(times, velocity, disc_velocity=1.0, fronts: Front
     if times.shape != (n_t,) or (np.diff(times) <= 0).any():
         raise ValueError(f"times: shape {times.shape}; valid: ({n_t},) increasing (s)")
     sign = np.where(np.broadcast_to(np.asarray(disc_velocity, dtype=np.float64), (n_members,)) < 0, -1.0, 1.0)
-    with wp.ScopedDevice(_device(device)):
+    with wp.ScopedDevice(check_device(device)):
         vel = wp.array(np.ascontiguousarray(np.transpose(v, (1, 2, 0))), dtype=wp.float64)
         arrival = wp.zeros((n, n_members), dtype=wp.float64)
         event_max = wp.zeros(n_members, dtype=wp.float64)

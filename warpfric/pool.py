@@ -45,6 +45,7 @@ import types
 import numpy as np
 
 from . import progress as progress_module
+from .device import init_warp
 
 # split when one core would take at least this long (s, by progress.cpu_seconds). Measured on this
 # project's 2-core machine (studies/bench_cpu_workers.py, fronts on, N = 100, fresh processes): 100
@@ -120,13 +121,11 @@ def _init_worker(inbox) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     os.environ["CUDA_VISIBLE_DEVICES"] = ""
     _IN_WORKER, _INBOX = True, inbox
-    from .device import init_warp as _warp
-
     saved = os.dup(2)
     try:
         with open(os.devnull, "w") as devnull:
             os.dup2(devnull.fileno(), 2)
-            _warp()
+            init_warp()
     finally:
         os.dup2(saved, 2)
         os.close(saved)

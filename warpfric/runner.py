@@ -56,7 +56,7 @@ def worker_device(worker=None) -> str:
     (dask-cuda's LocalCUDACluster, a SLURM GPU job); on a plain LocalCluster of a multi-GPU host, where
     every worker sees every GPU, the GPU numbered by the worker's name modulo the GPU count; else the
     first CUDA device, else the CPU. ``worker``: the Dask worker (found from the running task when None)."""
-    from .simulate import default_device
+    from .device import default_device
 
     device = default_device()
     if not device.startswith("cuda") or os.environ.get("CUDA_VISIBLE_DEVICES", "").strip():
@@ -344,7 +344,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
     import shutil
 
     from .io import ChunkStore, OutputWriteError, free_bytes, new_run_id, parts_dir, sweep_digest, write_failure
-    from .simulate import _check_device
+    from .device import check_device
     from .sweep_file import check_member_offset
 
     parts = parts_dir(out)
@@ -368,7 +368,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
             _say(f"[run] device = {device!r} pins every worker to that device (--device to choose another; "
                  "leave it out to let each worker use its own GPU)", False)
     if not use_cluster:  # on a cluster, each worker checks its own device
-        device = _check_device(device)
+        device = check_device(device)
     digest = sweep_digest(f"{sweep.text}\nchunk={chunk}" + (f"\nmember_offset={offset}" if offset else ""))
     if previous is not None and previous.digest != digest:
         raise RunError(f"{str(parts)!r} belongs to a different sweep, chunk size ({previous.chunk}) or member "

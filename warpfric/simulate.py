@@ -12,15 +12,10 @@ import numpy as np
 import xarray as xr
 
 from . import __version__
-from .device import SMALL_ENSEMBLE, check_device, default_device, init_warp  # noqa: F401
+from .device import check_device, init_warp
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
 from .parameters import Fronts, Model, Parameters, Record, Solver, parameter_long_name, parameter_units
-
-
-# the device helpers live in warpfric/device.py; the old private names stay for callers
-_warp = init_warp
-_check_device = check_device
 
 
 def simulate(
@@ -103,7 +98,7 @@ def simulate(
         raise ValueError(f"fronts setting 'grid_check' needs solver setting 'nodes' >= 5 (got {solver.nodes}): the "
                          "check compares with (nodes + 1)//2 nodes")
     values, varying = resolve_members(members, scene)
-    device = _check_device(device, values["normal_force"].shape[0])
+    device = check_device(device, values["normal_force"].shape[0])
     from . import pool  # a CPU ensemble large enough to pay: its members split over worker processes
 
     n_workers = pool.plan(workers, device, values["normal_force"].shape[0], solver, fronts, record)
@@ -116,7 +111,7 @@ def simulate(
 
     from . import engine
 
-    _warp()
+    init_warp()
     show = sys.stderr.isatty() if progress is None else bool(progress)
     t_start = time.perf_counter()
     result = engine.run(values, model, solver, fronts, record, device, show, progress if isinstance(progress, str) else "")
