@@ -12,6 +12,7 @@ found.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 import time
 import warnings
 
@@ -242,6 +243,16 @@ def straggler_limit(st: np.ndarray, solver: Solver) -> int:
     return int(min(limit, NO_STALL_LIMIT))
 
 
+def apply_straggler_limit(st: np.ndarray, solver: Solver, stall_limit, last_limit: int) -> int:
+    """Set the device's stall_limit (a (1,) int32 array the integrate kernel reads) to the
+    straggler_limit of the snapshot ``st`` where it differs from ``last_limit``, the one set before;
+    returns the limit now set."""
+    limit = straggler_limit(st, solver)
+    if limit != last_limit:
+        stall_limit.fill_(limit)
+    return limit
+
+
 def real_event(front_max, front_last, values, fronts: Fronts) -> np.ndarray:
     """Members with a detachment event: a maximum detachment velocity of at least
     fronts.min_event_fraction * |disc_velocity| (docs/model.md, "Fronts"). Below it (e.g. a disc that
@@ -288,7 +299,7 @@ def log_launches(log: list, pass_index: int, member_states, launch, device, stal
     cuda = wp.get_device(device).is_cuda
     before = member_states.numpy().copy()
     last_limit = NO_STALL_LIMIT
-    for k in range(10**7):
+    for k in itertools.count():
         if cuda:
             start, end = wp.Event(enable_timing=True), wp.Event(enable_timing=True)
             wp.record_event(start)
@@ -309,10 +320,7 @@ def log_launches(log: list, pass_index: int, member_states, launch, device, stal
         if (after["done"] != 0).all():
             return
         if pass_index == 0:
-            limit = straggler_limit(after, solver)
-            if limit != last_limit:
-                stall_limit.fill_(limit)
-                last_limit = limit
+            last_limit = apply_straggler_limit(after, solver, stall_limit, last_limit)
 
 
 def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, record: Record | None, device: str,
@@ -407,10 +415,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                 st_now = snapshot.wait(pending)
                 pending = snapshot.take(member_states)
                 if pass_index == 0:
-                    limit = straggler_limit(st_now, solver)
-                    if limit != last_limit:
-                        stall_limit.fill_(limit)
-                        last_limit = limit
+                    last_limit = apply_straggler_limit(st_now, solver, stall_limit, last_limit)
                 n_done = int(st_now["done"].sum())
                 bar.update(st_now)
                 if n_done == n_members:
