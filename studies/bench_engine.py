@@ -89,8 +89,9 @@ def write_launch_log(path: str, row: dict, values: dict, model, solver, fronts, 
             f.write(json.dumps({**{k: row[k] for k in keys}, **r}) + "\n")
     total = sum(r["kernel_s"] for r in log)
     tail = sum(r["kernel_s"] for r in log if resident is not None and r["running_members"] < resident)
-    print(f"launch log: {len(log)} launches, kernel {total:.3f} s, in launches with fewer running members than "
-          f"the {resident} the GPU holds: {tail:.3f} s", flush=True)
+    tail_text = (f", in launches with fewer running members than the {resident} the GPU holds: {tail:.3f} s"
+                 if resident is not None else "")
+    print(f"launch log: {len(log)} launches, kernel {total:.3f} s{tail_text}", flush=True)
 
 
 def main(argv=None):
