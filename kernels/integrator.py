@@ -225,7 +225,7 @@ def make_integrate_kernel(ft, model, lanes: int, registers, method, stages, acce
             st.newton_iterations = st.newton_iterations + res.iterations
             # ---- controller ----
             if res.ok != 1:
-                st.rejected_solve = st.rejected_solve + 1
+                st.rejected_newton = st.rejected_newton + 1
                 st = reject(st, settings, step.h * settings.failure_factor, res.non_finite)
                 if st.done != 0:
                     break
@@ -237,7 +237,7 @@ def make_integrate_kernel(ft, model, lanes: int, registers, method, stages, acce
                     if retry == 1:
                         continue
             if res.error > wp.float64(1.0):
-                st.rejected_error = st.rejected_error + 1
+                st.rejected_error_test = st.rejected_error_test + 1
                 st = reject(st, settings, step.h * wp.min(factor, settings.step_safety), 0)
                 if st.done != 0:
                     break

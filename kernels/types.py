@@ -194,8 +194,8 @@ class IntegratorState:
     record_next: wp.int32  # next index of the recording time grid
     strength_rising: wp.int32  # nodes in contact whose tau_f/sigma_n is within STRENGTH_PEAK_DROP of its maximum (strength front)
     # why steps were rejected (the three add up to steps_rejected), and wasted predictions
-    rejected_error: wp.int32  # rejected by the error test (error norm > 1)
-    rejected_solve: wp.int32  # rejected because a stage's Newton solve failed (no convergence or a non-finite value)
+    rejected_error_test: wp.int32  # rejected by the error test (error norm > 1)
+    rejected_newton: wp.int32  # rejected because a stage's Newton solve failed (no convergence or a non-finite value)
     rejected_switch: wp.int32  # rejected to locate a gate switch (retried up to just past it; stress gate)
     missed_predictions: wp.int32  # accepted steps that ended at a predicted gate switch that did not happen
 
