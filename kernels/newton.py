@@ -28,7 +28,7 @@ partitioned solve), ``make_stage_equations`` (the load and each node's row), ``m
 import warp as wp
 
 from .model_terms import disc_velocity_at, disc_velocity_piece, normal_force_in_step, normal_force_piece
-from .team import vec3d, vec5d, vec6d, vec12d
+from .team import vec3d, vec4d, vec5d, vec6d, vec12d
 from .types import (
     C_PHI,
     C_TAU,
@@ -471,6 +471,7 @@ def make_newton_system(ft, model, terms, team, equations, solver, team_solver):
     Coeffs = terms["Coeffs"]
     team_on = team["lanes"] > 1
     team_sum_vec12 = team.get("team_sum_vec12", None)
+    from_neighbour_lanes = team.get("from_neighbour_lanes", None)
     start_rows = team_solver.get("start_rows", None)
     lane_row = team_solver.get("lane_row", None)
     team_solve = team_solver.get("team_solve", None)
@@ -510,48 +511,47 @@ def make_newton_system(ft, model, terms, team, equations, solver, team_solver):
         r0_prev = ft(0.0)
         r1_prev = ft(0.0)
         r2_prev = ft(0.0)
-        # a lane of a team also evaluates the halo nodes lo-1 and hi: their terms complete the
-        # border rows C1, C2 of its first and last node
+        # a lane of a team evaluates its own nodes [lo, hi) only: the entries its first and last
+        # node give the border rows C1, C2 of the neighbouring lanes' nodes lo-1 and hi are
+        # exchanged after the sweep (from_neighbour_lanes)
         lo = c.first_node
         hi = c.end_node
-        first = lo
-        last = hi
+        to_previous_c1 = ft(0.0)
+        to_previous_c2 = ft(0.0)
         if wp.static(team_on):
             rows = start_rows()
-            first = wp.max(lo - 1, 0)
-            last = wp.min(hi + 1, n)
         u_l = ft(0.0)
-        if first > 0:
-            u_l = stage_displacement(work, first - 1, n, m, g)
-        u_c = stage_displacement(work, first, n, m, g)
-        for i in range(first, last):
-            owned = i >= lo and i < hi
+        if lo > 0:
+            u_l = stage_displacement(work, lo - 1, n, m, g)
+        u_c = stage_displacement(work, lo, n, m, g)
+        for i in range(lo, hi):
             u_r = stage_displacement(work, i + 1, n, m, g)
             row = node_row(c, settings, m, n, work, gates, i, u_l, u_c, u_r, delta0, tilt, v_disc, g)
-            if owned:
-                if wp.static(inertia):
-                    work[W_DIAG, i, m] = row.jac_center
-                e1 += row.e1
-                e2 += row.e2
-                d11 += row.d11
-                d12 += row.d12
-                d21 += row.d21
-                d22 += row.d22
+            if wp.static(inertia):
+                work[W_DIAG, i, m] = row.jac_center
+            e1 += row.e1
+            e2 += row.e2
+            d11 += row.d11
+            d12 += row.d12
+            d21 += row.d21
+            d22 += row.d22
             c1_prev += row.c1_left
             c1_cur += row.c1_center
             c2_prev += row.c2_left
             c2_cur += row.c2_center
-            if i - 1 >= lo and i - 1 < hi:
+            if i > lo:
                 work[W_C1, i - 1, m] = c1_prev
                 work[W_C2, i - 1, m] = c2_prev
+            else:
+                to_previous_c1 = row.c1_left
+                to_previous_c2 = row.c2_left
             c1_prev = c1_cur
             c1_cur = row.c1_right
             c2_prev = c2_cur
             c2_cur = row.c2_right
             if wp.static(team_on):
-                if owned:
-                    rows = lane_row(rows, work, i, m, lo, hi, n, row.jac_left, row.jac_center, row.jac_right,
-                                    vec3d(-row.residual, row.col_delta0, row.col_tilt))
+                rows = lane_row(rows, work, i, m, lo, hi, n, row.jac_left, row.jac_center, row.jac_right,
+                                vec3d(-row.residual, row.col_delta0, row.col_tilt))
             else:
                 cp_prev, r0_prev, r1_prev, r2_prev = forward_row(
                     work, i, m, row.jac_left, row.jac_center, row.jac_right, -row.residual, row.col_delta0,
@@ -559,11 +559,17 @@ def make_newton_system(ft, model, terms, team, equations, solver, team_solver):
                 )
             u_l = u_c
             u_c = u_r
-        if last == hi:
-            work[W_C1, last - 1, m] = c1_prev
-            work[W_C2, last - 1, m] = c2_prev
+        work[W_C1, hi - 1, m] = c1_prev
+        work[W_C2, hi - 1, m] = c2_prev
         # ---- pass 2 ----
         if wp.static(team_on):  # a lane's y0, y1, y2 and products; the team's sums
+            # the border-row entries of the lane's end nodes from its neighbours' end nodes
+            from_prev, from_next = from_neighbour_lanes(
+                vec4d(to_previous_c1, to_previous_c2, c1_cur, c2_cur), c.lane)
+            work[W_C1, lo, m] = work[W_C1, lo, m] + from_prev[2]
+            work[W_C2, lo, m] = work[W_C2, lo, m] + from_prev[3]
+            work[W_C1, hi - 1, m] = work[W_C1, hi - 1, m] + from_next[0]
+            work[W_C2, hi - 1, m] = work[W_C2, hi - 1, m] + from_next[1]
             products = team_solve(work, lo, hi, m, c.lane, rows)
             total = team_sum_vec12(vec12d(e1, e2, d11, d12, d21, d22, products[0], products[1], products[2],
                                           products[3], products[4], products[5]))

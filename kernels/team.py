@@ -29,10 +29,12 @@ from typing import Any
 
 import warp as wp
 
-# vector types the team exchanges (float64): the reduced system's rows (A, B, C, D0, D1, D2), a
+# vector types the team exchanges (float64): the border-row entries a lane's end nodes give its
+# neighbours' nodes (kernels/newton.py assemble_system), the reduced system's rows (A, B, C, D0, D1, D2), a
 # node's solution as affine in the neighbouring separators (xP0, xP1, xP2, xL, xR), the Newton
 # sums (force and moment residuals, the 2 x 2 D block, the six border products)
 vec3d = wp.types.vector(length=3, dtype=wp.float64)
+vec4d = wp.types.vector(length=4, dtype=wp.float64)
 vec5d = wp.types.vector(length=5, dtype=wp.float64)
 vec6d = wp.types.vector(length=6, dtype=wp.float64)
 vec12d = wp.types.vector(length=12, dtype=wp.float64)
@@ -42,6 +44,13 @@ vec12d = wp.types.vector(length=12, dtype=wp.float64)
 def node_range(lane: int, lanes: int, n: int):
     """The nodes [first, end) of lane ``lane`` of ``lanes`` (all n for a team of one)."""
     return (lane * n) // lanes, ((lane + 1) * n) // lanes
+
+
+@wp.func
+def settle():
+    """A barrier that synchronises before it writes (a shared tile's assignment: sync, write,
+    sync): every lane has finished what it did before, reads of the last reduction included."""
+    wp.tile_extract(wp.tile(int(0)), 0)
 
 
 def make_solo():
@@ -75,12 +84,6 @@ def make_solo():
 def make_tile_reductions(lanes: int):
     """Reductions over a team of ``lanes`` threads (float64) with Warp's tile primitives, each ending
     with ``settle``, and the explicit ``barrier``."""
-
-    @wp.func
-    def settle():
-        """A barrier that synchronises before it writes (a shared tile's assignment: sync, write,
-        sync): every lane has finished what it did before, reads of the last reduction included."""
-        wp.tile_extract(wp.tile(int(0)), 0)
 
     @wp.func
     def team_max(x: wp.float64):
@@ -136,6 +139,20 @@ def make_separator_exchange(lanes: int):
         return out
 
     @wp.func
+    def from_neighbour_lanes(x: vec4d, lane: int):
+        """The values of lane - 1 and lane + 1 (zero beyond the first and the last lane); ends with
+        a settle, so that the next tile operation cannot overwrite them while a lane still reads."""
+        t = wp.tile(x, preserve_type=True)
+        prev = vec4d()
+        nxt = vec4d()
+        if lane > 0:
+            prev = wp.tile_extract(t, lane - 1)
+        if lane + 1 < lanes:
+            nxt = wp.tile_extract(t, lane + 1)
+        settle()
+        return prev, nxt
+
+    @wp.func
     def eliminate(coupling: wp.float64, diagonal: wp.float64, rhs: vec3d, pivot: wp.float64, carried: wp.float64,
                   carried_rhs: vec3d, first: bool):
         """One step of a tridiagonal elimination: the row (coupling to the eliminated neighbour,
@@ -184,7 +201,7 @@ def make_separator_exchange(lanes: int):
             e_prev = (d_up - c_up * e_self) / b_up
         return e_prev, e_self
 
-    return dict(from_next_lane=from_next_lane, reduced_solve=reduced_solve)
+    return dict(from_next_lane=from_next_lane, from_neighbour_lanes=from_neighbour_lanes, reduced_solve=reduced_solve)
 
 
 def make_team(ft, lanes: int):
