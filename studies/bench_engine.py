@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import subprocess
 import time
@@ -151,8 +152,10 @@ def main(argv=None):
     ref_mu = np.asarray(reference["mu_s"])
     rows = []
     front_events = args.front_events or (["contact"] if args.fronts else ["off"])
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
-                            cwd=Path(__file__).parent).stdout.strip() or "unknown"
+    # WARPFRIC_COMMIT names the tree where there is no git (a GPU host that got a copy of it)
+    commit = os.environ.get("WARPFRIC_COMMIT") or subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=Path(__file__).parent
+    ).stdout.strip() or "unknown"
     for dtype, lanes, predict, method, event, spl in [(d, k, p, me, ev, sp) for d in args.dtypes for k in args.lanes
                                                       for p in args.predict_switches for me in args.methods
                                                       for ev in front_events for sp in args.steps_per_launch]:
