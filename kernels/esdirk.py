@@ -234,53 +234,56 @@ def make_tr_bdf2_steps(ft, terms, newton, StepResult, arrays):
     array4 = wp.array4d(dtype=ft)
 
     @wp.func
-    def backward_euler_step(
-        c: Coeffs, p: MemberParams, settings: SolverSettings, m: int, n: int, state: array3, K: array4,
-        work: array3, gates: array3, s1: int, s3: int, t: wp.float64, h: wp.float64, t_new: wp.float64,
-        delta0: ft, tilt: ft,
-    ):
-        """One backward-Euler stage of size h from t (ending at t_new; its derivatives into K[s3]); no
-        error estimate."""
-        res = StepResult()
-        res.error = wp.float64(0.0)
-        g = ft(h)
-        prepare_stage(c, m, n, state, K, work, ft(h), ft(0.0), s1, ft(0.0), s1, 0, ft(0.0))
-        ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, gates, g, t_new, t, delta0, tilt)
-        res.ok = ok
-        res.iterations = iters
-        res.non_finite = bad
-        res.delta0 = d0
-        res.tilt = a
-        if ok == 1:
-            sums, test = stage_derivatives(c, p, settings, m, n, work, gates, K, s3, g, t_new, t, d0, a, ft(h), 1)
-            res.sums = sums
-            res.switch_test = test
-        return res
-
-    @wp.func
-    def tr_bdf2_step(
+    def implicit_step(
         c: Coeffs, p: MemberParams, settings: SolverSettings, m: int, n: int, state: array3, K: array4,
         work: array3, gates: array3, s1: int, s2: int, s3: int, t: wp.float64, h: wp.float64,
-        t_new: wp.float64, delta0: ft, tilt: ft,
+        t_new: wp.float64, delta0: ft, tilt: ft, backward_euler: int,
     ):
-        """One TR-BDF2 step of size h from t (ending at t_new): stage 2 (trapezoidal, at t + 2 gamma h)
-        into K[s2], stage 3 (BDF2, at t_new) into K[s3], and the error norm."""
+        """One step of size h from t (ending at t_new). TR-BDF2 (backward_euler = 0): stage 2
+        (trapezoidal, at t + 2 gamma h) into K[s2], stage 3 (BDF2, at t_new) into K[s3], and the
+        error norm; backward Euler (1, a (re)start): one stage at t_new into K[s3], no error
+        estimate. The stages are one loop with a bound known only at run time, so that the code of
+        a stage (the Newton solve above all) is compiled once, not once per stage: on a GPU several
+        inlined copies overflow the instruction cache when the warps of an SM are in different
+        stages (docs/performance.md, "GPU: where the time goes")."""
         res = StepResult()
         res.error = wp.float64(0.0)
         g = ft(wp.float64(GAMMA) * h)
-        prepare_stage(c, m, n, state, K, work, ft(h), ft(GAMMA), s1, ft(0.0), s1, 1, ft(0.0))
-        ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, gates, g, t + wp.float64(C2) * h, t, delta0, tilt)
-        iterations = iters
-        if ok == 1:
-            stage_derivatives(c, p, settings, m, n, work, gates, K, s2, g, t + wp.float64(C2) * h, t, d0, a, ft(h), 0)
-            prepare_stage(c, m, n, state, K, work, ft(h), ft(W_TRB), s1, ft(W_TRB), s2, 2, ft(EXTRAPOLATE_STAGE3))
-            ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, gates, g, t_new, t, d0, a)
+        n_stages = 2
+        if backward_euler == 1:
+            g = ft(h)
+            n_stages = 1
+        ok = int(1)
+        bad = int(0)
+        iterations = int(0)
+        d0 = delta0
+        a = tilt
+        for stage in range(n_stages):
+            last = stage == n_stages - 1
+            t_stage = t_new
+            slot = s3
+            if backward_euler == 1:
+                prepare_stage(c, m, n, state, K, work, ft(h), ft(0.0), s1, ft(0.0), s1, 0, ft(0.0))
+            elif stage == 0:
+                t_stage = t + wp.float64(C2) * h
+                slot = s2
+                prepare_stage(c, m, n, state, K, work, ft(h), ft(GAMMA), s1, ft(0.0), s1, 1, ft(0.0))
+            else:
+                prepare_stage(c, m, n, state, K, work, ft(h), ft(W_TRB), s1, ft(W_TRB), s2, 2, ft(EXTRAPOLATE_STAGE3))
+            ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, gates, g, t_stage, t, d0, a)
             iterations = iterations + iters
-            if ok == 1:
-                sums, test = stage_derivatives(c, p, settings, m, n, work, gates, K, s3, g, t_new, t, d0, a, ft(h), 1)
+            if ok != 1:
+                break
+            end_of_step = int(0)
+            if last:
+                end_of_step = 1
+            sums, test = stage_derivatives(c, p, settings, m, n, work, gates, K, slot, g, t_stage, t, d0, a, ft(h),
+                                           end_of_step)
+            if last:
                 res.sums = sums
                 res.switch_test = test
-                res.error = wp.float64(error_norm(c, settings, m, n, state, K, work, s1, s2, s3, ft(h)))
+        if ok == 1 and backward_euler == 0:
+            res.error = wp.float64(error_norm(c, settings, m, n, state, K, work, s1, s2, s3, ft(h)))
         res.ok = ok
         res.iterations = iterations
         res.non_finite = bad
@@ -288,7 +291,7 @@ def make_tr_bdf2_steps(ft, terms, newton, StepResult, arrays):
         res.tilt = a
         return res
 
-    return dict(backward_euler_step=backward_euler_step, tr_bdf2_step=tr_bdf2_step)
+    return dict(implicit_step=implicit_step)
 
 
 def make_esdirk(ft, model, terms, newton, gates, team, method="tr_bdf2"):
@@ -299,8 +302,7 @@ def make_esdirk(ft, model, terms, newton, gates, team, method="tr_bdf2"):
     StepResult = make_step_result(ft, newton, gates)
     steps = make_tr_bdf2_steps(ft, terms, newton, StepResult, arrays)
     out = dict(StepResult=StepResult, prepare_stage=arrays["prepare_stage"], error_norm=arrays["error_norm"],
-               advance_state=arrays["advance_state"], backward_euler_step=steps["backward_euler_step"],
-               tr_bdf2_step=steps["tr_bdf2_step"], **tableau)
+               advance_state=arrays["advance_state"], implicit_step=steps["implicit_step"], **tableau)
     if method == "esdirk4":
         out.update(make_esdirk4(ft, model, terms, newton, gates, team, StepResult, arrays["fold_error"]))
     return out

@@ -36,6 +36,45 @@ def team_max_registers():
     return value if value > 0 else None
 
 
+def team_compile_options():
+    """Benchmark switches of the cooperative kernel's compilation (docs/performance.md, "GPU: where
+    the time goes"), from the environment: WARPFRIC_INLINE = 'force' or 'never' asks CUDA to inline
+    every device function of the integrator, or none (unset: the compiler chooses);
+    WARPFRIC_TEAM_SMEM_SPILLING=1 lets CUDA 13 spill registers to shared memory."""
+    inline = os.environ.get("WARPFRIC_INLINE", "") or None
+    if inline not in (None, "force", "never"):
+        raise ValueError(f"WARPFRIC_INLINE={inline!r} is invalid; valid: 'force', 'never' or unset")
+    out_of_line = tuple(sorted(name for name in os.environ.get("WARPFRIC_NOINLINE", "").split(",") if name))
+    return inline, os.environ.get("WARPFRIC_TEAM_SMEM_SPILLING", "0") == "1", out_of_line
+
+
+def device_functions(kernel) -> list:
+    """Every user device function (wp.func) the kernel calls, directly or through other functions
+    (closures and module globals), as Warp Function objects."""
+    found, stack, seen = [], [kernel.func], set()
+    while stack:
+        py = stack.pop()
+        if id(py) in seen:
+            continue
+        seen.add(id(py))
+        refs = [cell.cell_contents for cell in (py.__closure__ or ()) if _filled(cell)]
+        refs += [py.__globals__.get(name) for name in py.__code__.co_names]
+        for ref in refs:
+            if isinstance(ref, wp.Function) and not ref.is_builtin() and ref.func is not None:
+                if all(ref is not f for f in found):
+                    found.append(ref)
+                    stack.append(ref.func)
+    return found
+
+
+def _filled(cell) -> bool:
+    try:
+        cell.cell_contents
+    except ValueError:
+        return False
+    return True
+
+
 def get_integrator(dtype: str, model, lanes: int = 1, method: str = "tr_bdf2") -> dict:
     """Compiled kernels for one working precision, one set of model switches, one team size
     (lanes = 1: one thread per member; > 1: the cooperative kernel, launched with block_dim = lanes,
@@ -44,9 +83,21 @@ def get_integrator(dtype: str, model, lanes: int = 1, method: str = "tr_bdf2") -
     if method not in ("tr_bdf2", "esdirk4"):
         raise ValueError(f"integrator method {method!r} is invalid; valid: 'tr_bdf2' or 'esdirk4'")
     registers = team_max_registers() if lanes > 1 else None
-    key = (dtype, model, lanes, registers, method)
+    inline, smem_spilling, out_of_line = team_compile_options() if lanes > 1 else (None, False, ())
+    key = (dtype, model, lanes, registers, method, inline, smem_spilling, out_of_line)
     if key not in _CACHE:
-        _CACHE[key] = _make_integrator(dtype, model, lanes, registers, method)
+        kernels = _make_integrator(dtype, model, lanes, registers, method, smem_spilling)
+        for fn in device_functions(kernels["integrate"]):
+            hint = None
+            if inline is not None:
+                hint = "forceinline" if inline == "force" else "noinline"
+            if fn.func.__name__ in out_of_line:
+                hint = "noinline"
+            if hint is not None:
+                fn.inline_hint = hint
+                for overload in fn.user_overloads.values():
+                    overload.inline_hint = hint
+        _CACHE[key] = kernels
     return _CACHE[key]
 
 
@@ -62,13 +113,13 @@ def make_stages(ft, model, lanes: int = 1, method: str = "tr_bdf2") -> dict:
     return dict(team=team, terms=terms, gates=gates, newton=newton, esdirk=esdirk, observers=observers)
 
 
-def _make_integrator(dtype: str, model, lanes: int, registers=None, method: str = "tr_bdf2"):
+def _make_integrator(dtype: str, model, lanes: int, registers=None, method: str = "tr_bdf2", smem_spilling=False):
     """The integrate and evaluate_fields kernels for one working precision, model, team size and
     method (get_integrator caches them)."""
     ft = wp.float64 if dtype == "float64" else wp.float32
     stages = make_stages(ft, model, lanes, method)
     acceptance = make_acceptance(ft, model, method, stages)
-    integrate = make_integrate_kernel(ft, model, lanes, registers, method, stages, acceptance)
+    integrate = make_integrate_kernel(ft, model, lanes, registers, method, stages, acceptance, smem_spilling)
     evaluate_fields = make_field_kernel(ft, stages)
     return dict(integrate=integrate, evaluate_fields=evaluate_fields, ft=ft, stages=stages)
 
@@ -135,7 +186,7 @@ def make_acceptance(ft, model, method, stages):
     return dict(accept_step=accept_step)
 
 
-def make_integrate_kernel(ft, model, lanes: int, registers, method, stages, acceptance):
+def make_integrate_kernel(ft, model, lanes: int, registers, method, stages, acceptance, smem_spilling=False):
     """The integrate kernel: the loop of attempted steps (stepper, controller, accept_step)."""
     team_on = lanes > 1
     esdirk4 = method == "esdirk4"
@@ -144,9 +195,8 @@ def make_integrate_kernel(ft, model, lanes: int, registers, method, stages, acce
     stress_gate = model.relaxation_gate == "stress"
     make_coeffs = stages["terms"]["make_coeffs"]
     esdirk = stages["esdirk"]
-    backward_euler_step = esdirk["backward_euler_step"]
-    tr_bdf2_step = esdirk["tr_bdf2_step"]
-    esdirk4_step = esdirk.get("esdirk4_step", tr_bdf2_step)
+    implicit_step = esdirk["implicit_step"]
+    esdirk4_step = esdirk.get("esdirk4_step", implicit_step)
     locate_switch = stages["gates"]["locate_switch"]
     accept_step = acceptance["accept_step"]
     array3 = wp.array3d(dtype=ft)
@@ -155,7 +205,12 @@ def make_integrate_kernel(ft, model, lanes: int, registers, method, stages, acce
     # enable_backward=False: no adjoint code is generated (nothing differentiates through the
     # integrator); the forward code is the same, and the first compile takes a third of the time
     # (CPU, default law: 13.2 s -> 4.7 s)
-    @wp.kernel(module="unique", cuda_max_registers=registers, enable_backward=False)
+    # smem_spilling (a benchmark switch, team_compile_options) needs launch bounds instead of a
+    # register cap
+    spill_options = dict(enable_cuda_smem_spilling=True, launch_bounds=lanes) if smem_spilling else {}
+
+    @wp.kernel(module="unique", cuda_max_registers=None if smem_spilling else registers, enable_backward=False,
+               **spill_options)
     def integrate(
         # inputs
         params: wp.array(dtype=MemberParams),
@@ -216,12 +271,15 @@ def make_integrate_kernel(ft, model, lanes: int, registers, method, stages, acce
             s3 = (s1 + n_slots - 1) % n_slots  # the last stage's slot (TR-BDF2: s1 + 2; ESDIRK4: s1 + 5)
             restart = st.restart
             # ---- stepper ----
-            if restart != 0:
-                res = backward_euler_step(c, p, settings, m, n, state, K, work, gates, s1, s3, t, step.h, step.t_new, delta0, tilt)
-            elif wp.static(esdirk4):
-                res = esdirk4_step(c, p, settings, m, n, state, K, work, gates, s1, t, step.h, step.t_new, delta0, tilt)
-            else:
-                res = tr_bdf2_step(c, p, settings, m, n, state, K, work, gates, s1, s2, s3, t, step.h, step.t_new, delta0, tilt)
+            if wp.static(esdirk4):
+                if restart != 0:
+                    res = implicit_step(c, p, settings, m, n, state, K, work, gates, s1, s2, s3, t, step.h, step.t_new,
+                                        delta0, tilt, 1)
+                else:
+                    res = esdirk4_step(c, p, settings, m, n, state, K, work, gates, s1, t, step.h, step.t_new, delta0, tilt)
+            else:  # TR-BDF2, or backward Euler at a (re)start: one call, so the stage code is compiled once
+                res = implicit_step(c, p, settings, m, n, state, K, work, gates, s1, s2, s3, t, step.h, step.t_new,
+                                    delta0, tilt, restart)
             st.newton_iterations = st.newton_iterations + res.iterations
             # ---- controller ----
             if res.ok != 1:

@@ -491,12 +491,12 @@ def make_friction_law(ft, model, Coeffs, friction_at_gate):
                     dF_dgate = ft(1.0) - dtheta * margin_slope(fr.stress, fr.area, fr.d_gate, fr.d_area_gate, scale)
                     F = gate - theta
                     new_gate = wp.clamp(gate - F / dF_dgate, ft(0.0), ft(1.0))
-                    if wp.abs(new_gate - gate) <= ft(SLIDING_GATE_TOL):
-                        gate = new_gate
-                        fr = friction_at_gate(c, sigma, s, z_tau, z_phi, g, gate)
-                        break
+                    converged = wp.abs(new_gate - gate) <= ft(SLIDING_GATE_TOL)
                     gate = new_gate
+                    # one evaluation site for both outcomes: the law's code is compiled once here
                     fr = friction_at_gate(c, sigma, s, z_tau, z_phi, g, gate)
+                    if converged:
+                        break
                 if fr.area > ft(0.0):
                     # the gate follows s and sigma_n: d gate = theta' (dx/ds ds + dx/dsigma dsigma) / dF_dgate
                     theta, dtheta = sliding_gate_of(c, fr.stress, fr.area, scale)
