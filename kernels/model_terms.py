@@ -439,7 +439,7 @@ def make_friction_at_gate(ft, model, Coeffs):
     return dict(Friction=Friction, friction_at_gate=friction_at_gate)
 
 
-def make_friction_law(ft, model, Coeffs, friction_at_gate, Friction):
+def make_friction_law(ft, model, Coeffs, friction_at_gate):
     """The friction law at one node over an implicit stage (interface_friction: with the stress
     gate, a node sliding on the yield surface has its gate solved there) and the stress gate's
     yield margin."""
@@ -480,46 +480,33 @@ def make_friction_law(ft, model, Coeffs, friction_at_gate, Friction):
         Returns a Friction (d_slip and d_normal total, including a sliding gate's response).
         """
         s = v_disc - c.kif * velocity
-        if wp.static(not stress_gate):
-            return friction_at_gate(c, sigma, s, z_tau, z_phi, g, gate)
-        # the law at the given gate, then (a sliding node) at each Newton update of its gate: one
-        # loop with one evaluation site and a bound known at run time, so that the law's code is
-        # compiled once here (docs/performance.md, "GPU: where the time goes")
-        evaluations = 1
-        if sliding > ft(0.0) and g > ft(0.0):
-            evaluations = SLIDING_NEWTON_ITERATIONS + 1
-        scale = ft(0.0)
-        dF_dgate = ft(1.0)
-        dtheta = ft(0.0)
-        solved = bool(False)
-        converged = bool(False)
-        fr = Friction()
-        for it in range(evaluations):
-            if it > 0:
-                theta, dtheta = sliding_gate_of(c, fr.stress, fr.area, scale)
-                dF_dgate = ft(1.0) - dtheta * margin_slope(fr.stress, fr.area, fr.d_gate, fr.d_area_gate, scale)
-                F = gate - theta
-                new_gate = wp.clamp(gate - F / dF_dgate, ft(0.0), ft(1.0))
-                converged = wp.abs(new_gate - gate) <= ft(SLIDING_GATE_TOL)
-                gate = new_gate
-            fr = friction_at_gate(c, sigma, s, z_tau, z_phi, g, gate)
-            if it == 0:
-                if fr.area <= ft(0.0):
-                    break  # no contact area: the gate is not solved
-                solved = evaluations > 1
+        fr = friction_at_gate(c, sigma, s, z_tau, z_phi, g, gate)
+        if wp.static(stress_gate):
+            if sliding > ft(0.0) and g > ft(0.0) and fr.area > ft(0.0):
                 scale = ft(1.0) / (width * c.tau_c)
-            elif converged:
-                break
-        if solved and fr.area > ft(0.0):
-            # the gate follows s and sigma_n: d gate = theta' (dx/ds ds + dx/dsigma dsigma) / dF_dgate
-            theta, dtheta = sliding_gate_of(c, fr.stress, fr.area, scale)
-            dF_dgate = ft(1.0) - dtheta * margin_slope(fr.stress, fr.area, fr.d_gate, fr.d_area_gate, scale)
-            dx_ds = margin_slope(fr.stress, fr.area, fr.d_slip, fr.d_area_slip, scale)
-            dx_dsigma = margin_slope(fr.stress, fr.area, fr.d_normal, fr.d_area_normal, scale)
-            d_slip = fr.d_slip + fr.d_gate * dtheta * dx_ds / dF_dgate
-            d_normal = fr.d_normal + fr.d_gate * dtheta * dx_dsigma / dF_dgate
-            fr.d_slip = d_slip
-            fr.d_normal = d_normal
+                dF_dgate = ft(1.0)
+                dtheta = ft(0.0)
+                for _it in range(SLIDING_NEWTON_ITERATIONS):
+                    theta, dtheta = sliding_gate_of(c, fr.stress, fr.area, scale)
+                    dF_dgate = ft(1.0) - dtheta * margin_slope(fr.stress, fr.area, fr.d_gate, fr.d_area_gate, scale)
+                    F = gate - theta
+                    new_gate = wp.clamp(gate - F / dF_dgate, ft(0.0), ft(1.0))
+                    converged = wp.abs(new_gate - gate) <= ft(SLIDING_GATE_TOL)
+                    gate = new_gate
+                    # one evaluation site for both outcomes: the law's code is compiled once here
+                    fr = friction_at_gate(c, sigma, s, z_tau, z_phi, g, gate)
+                    if converged:
+                        break
+                if fr.area > ft(0.0):
+                    # the gate follows s and sigma_n: d gate = theta' (dx/ds ds + dx/dsigma dsigma) / dF_dgate
+                    theta, dtheta = sliding_gate_of(c, fr.stress, fr.area, scale)
+                    dF_dgate = ft(1.0) - dtheta * margin_slope(fr.stress, fr.area, fr.d_gate, fr.d_area_gate, scale)
+                    dx_ds = margin_slope(fr.stress, fr.area, fr.d_slip, fr.d_area_slip, scale)
+                    dx_dsigma = margin_slope(fr.stress, fr.area, fr.d_normal, fr.d_area_normal, scale)
+                    d_slip = fr.d_slip + fr.d_gate * dtheta * dx_ds / dF_dgate
+                    d_normal = fr.d_normal + fr.d_gate * dtheta * dx_dsigma / dF_dgate
+                    fr.d_slip = d_slip
+                    fr.d_normal = d_normal
         return fr
 
     @wp.func
@@ -541,7 +528,7 @@ def make_model_terms(ft, model):
     grid = make_grid(ft, Coeffs)
     stencil = make_elastic_stencil(ft, model, Coeffs, grid["node_x"])
     at_gate = make_friction_at_gate(ft, model, Coeffs)
-    law = make_friction_law(ft, model, Coeffs, at_gate["friction_at_gate"], at_gate["Friction"])
+    law = make_friction_law(ft, model, Coeffs, at_gate["friction_at_gate"])
     normal_stress = stencil["normal_stress"]
     interface_friction = law["interface_friction"]
 
