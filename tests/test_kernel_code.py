@@ -1,0 +1,60 @@
+"""The shape of the integrate kernel's code, where it decides the GPU's speed (docs/performance.md,
+"GPU: where the time goes"): the stage code (Newton solve, stage derivatives) has one call site,
+so that CUDA compiles it once instead of inlining a copy per stage, and the benchmark switches of
+its compilation are validated. Nothing is compiled here: the functions are read from the Python
+source the kernel is built from."""
+
+import ast
+import inspect
+import textwrap
+
+import pytest
+
+import warpfric as wf
+from warpfric.kernels.integrator import device_functions, get_integrator, team_compile_options
+
+
+def esdirk4_only(node):
+    """An ``if wp.static(esdirk4):`` block: compiled only for Solver(method='esdirk4')."""
+    test = node.test if isinstance(node, ast.If) else None
+    return (isinstance(test, ast.Call) and isinstance(test.func, ast.Attribute) and test.func.attr == "static"
+            and len(test.args) == 1 and isinstance(test.args[0], ast.Name) and test.args[0].id == "esdirk4")
+
+
+def calls(node, name):
+    """Calls of ``name`` under an AST node, but in the branches compiled for ESDIRK4 only."""
+    if esdirk4_only(node):
+        return sum(calls(child, name) for child in node.orelse)
+    here = isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == name
+    return int(here) + sum(calls(child, name) for child in ast.iter_child_nodes(node))
+
+
+def call_sites(kernel, name):
+    """Calls of the device function ``name`` in the TR-BDF2 kernel's source and in every device
+    function it reaches."""
+    sources = [kernel.func] + [fn.func for fn in device_functions(kernel)]
+    return sum(calls(ast.parse(textwrap.dedent(inspect.getsource(py))), name) for py in sources)
+
+
+@pytest.mark.parametrize("lanes", [1, 4])
+def test_the_stage_code_has_one_call_site(lanes):
+    """TR-BDF2's two stages and the backward-Euler restart share one Newton solve and one
+    stage-derivative evaluation (esdirk.implicit_step); the kernel calls the stepper once."""
+    integrate = get_integrator("float64", wf.Model(), lanes=lanes)["integrate"]
+    assert call_sites(integrate, "implicit_step") == 1
+    assert call_sites(integrate, "newton_solve") == 1
+    assert call_sites(integrate, "stage_derivatives") == 1
+    assert call_sites(integrate, "node_row") == 1  # the Newton iteration's node loop
+
+
+def test_compile_switches_are_validated_and_applied(monkeypatch):
+    monkeypatch.setenv("WARPFRIC_INLINE", "sometimes")
+    with pytest.raises(ValueError, match="WARPFRIC_INLINE='sometimes' is invalid; valid: 'force', 'never'"):
+        team_compile_options()
+    monkeypatch.delenv("WARPFRIC_INLINE")
+    monkeypatch.setenv("WARPFRIC_NOINLINE", "newton_solve")
+    assert team_compile_options() == (None, False, ("newton_solve",))
+    integrate = get_integrator("float64", wf.Model(relaxation_gate="velocity"), lanes=4)["integrate"]
+    hints = {fn.func.__name__: fn.inline_hint for fn in device_functions(integrate)}
+    assert hints["newton_solve"] == "noinline"
+    assert hints["stage_derivatives"] is None and hints["node_row"] is None
