@@ -20,8 +20,9 @@ L-stability); the array functions apply them to every node and component.
 
 ``make_esdirk(ft, model, terms, newton, gates, team, method)`` builds the functions for one working
 precision and model, by part: the tableau (``make_tableau``), its application to the arrays
-(``make_tr_bdf2_arrays``), the StepResult (``make_step_result``) and the attempted steps
-(``make_tr_bdf2_steps``); ESDIRK4 likewise (``make_esdirk4_arrays``, ``make_esdirk4``).
+(``make_tr_bdf2_arrays``), the StepResult (``make_step_result``) and the attempted step
+(``make_tr_bdf2_steps``: ``implicit_step``, TR-BDF2 or a backward-Euler restart, its stages one
+loop so that their code is compiled once); ESDIRK4 likewise (``make_esdirk4_arrays``, ``make_esdirk4``).
 """
 
 import math
@@ -125,7 +126,8 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
     ):
         """Stage constants z = y_n + h*(a1*K[s1] + a2*K[s2]) (first n_terms terms) into work[0..3] and
         the Newton start for V into work[W_V]: v_n + extrapolate*(V(stage s2) - v_n). (The lane's
-        nodes; the Newton solve that follows reads its neighbours' halo nodes: a barrier.)"""
+        nodes; the Newton solve that follows reads the stage displacement of the neighbouring lanes'
+        end nodes: a barrier.)"""
         for i in range(c.first_node, c.end_node):
             for comp in range(N_COMPONENTS):
                 work[comp, i, m] = stage_constant(state[comp, i, m], h, a1, K[s1, comp, i, m], a2, K[s2, comp, i, m], n_terms)

@@ -284,7 +284,7 @@ def make_gate_update(ft, terms, team):
         regime for the rest of the run. With the contact front (outputs.contact_front), a node whose
         gate leaves the closed regime after the disc started, for the first time in that window,
         records its arrival (contact_arrival). The lane's nodes; the switches are counted over the
-        team (which is also the barrier before the next step reads the halo's gates)."""
+        team (which is also a barrier: no lane reads another lane's gates)."""
         v_disc = ft(disc_velocity_at(p, t_new, t_old))
         h = ft(t_new - t_old)
         switches = int(0)

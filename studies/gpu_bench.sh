@@ -31,6 +31,8 @@
 #   ncu            Nsight Compute on the 10,000-member launch (occupancy, rooflines); GATE, LANES
 #   ncu-one        Nsight Compute's warp stall reasons of the one-member launch
 #   ncu-sources    Nsight Compute's source counters of the one-member launch (line info on)
+#   stalls         Nsight Compute's warp stall reasons and memory traffic of one 10,000-member launch
+#   sass           the integrate kernel's SASS instructions by inlined call site (studies/sass_sites.py)
 #   dask [SWEEP]   2 GPUs: one process against a local Dask cluster of 1 and 2 workers
 #   figures [ARGS] every figure study at full size (ARGS e.g. --relaxation-gate none)
 set -uo pipefail
@@ -120,6 +122,20 @@ case "$mode" in
       python3 studies/bench.py --jsonl "$JSONL" one-member --times 2 > "$OUT/ncu_one_member_stress_l32.txt" 2>&1
     grep -E "Duration|Warp Cycles Per Issued|Issued Ipc|stalled_.*ratio|inst_executed.sum|Local Memory|Registers Per|Stack" \
       "$OUT/ncu_one_member_stress_l32.txt" | awk '$NF+0 > 0.05 || !/stalled/' | head -40 ;;
+  stalls)
+    NCU=$(ncu_bin); echo "ncu: $NCU"
+    python3 studies/bench_engine.py --device cuda:0 --members 1 --dtypes float64 --lanes 32 --out "$OUT/stalls_warm.json" \
+      > /dev/null 2>&1  # compile outside the profiler
+    "$NCU" --profile-from-start off -k regex:integrate --launch-skip 2 --launch-count 1 \
+      --section LaunchStats --section Occupancy --section WarpStateStats --section MemoryWorkloadAnalysis \
+      --section SchedulerStats --section SpeedOfLight \
+      --metrics regex:smsp__average_warps_issue_stalled_.*_per_issue_active\.ratio,smsp__inst_executed.sum,l1tex__t_sector_pipe_lsu_mem_global_op_ld_hit_rate.pct,dram__bytes.sum \
+      python3 studies/bench_engine.py --device cuda:0 --dtypes float64 --members 10000 --lanes 32 --steps-per-launch 100 \
+      --cuda-profile-range --out "$OUT/stalls_bench.json" > "$OUT/ncu_stress_10k_stalls.txt" 2>&1
+    grep -E "Duration|Warp Cycles Per Issued|Issued Ipc|Achieved Active|stalled_.*ratio|inst_executed.sum|Hit Rate|Stack" \
+      "$OUT/ncu_stress_10k_stalls.txt" | awk '$NF+0 > 0.04 || !/stalled/' | head -30 ;;
+  sass)
+    python3 studies/sass_sites.py "$@" 2>&1 | tee "$OUT/sass_sites.txt" | head -30 ;;
   ncu-sources)
     NCU=$(ncu_bin); echo "ncu: $NCU"
     "$NCU" -k regex:integrate --launch-skip 2 --launch-count 1 --section SourceCounters --section WarpStateStats \
