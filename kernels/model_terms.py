@@ -379,6 +379,15 @@ def make_friction_at_gate(ft, model, Coeffs):
         gate: ft  # the gate used (1)
 
     @wp.func
+    def over_den(x: ft, den: ft, inv_den: ft):
+        """x / den: in float64 as x * (1/den), one division per node for the seven quotients of the
+        stage solution (the GPU's FP64 division is a long dependent sequence); float32 keeps the
+        exact quotient (its round-off decides which hard float32 members stall: tests/test_trust.py)."""
+        if wp.static(ft == wp.float64):
+            return x * inv_den
+        return x / den
+
+    @wp.func
     def friction_at_gate(c: Coeffs, sigma: ft, s: ft, z_tau: ft, z_phi: ft, g: ft, gate: ft):
         """The closed-form stage solution of the friction law at one node for a given slip rate s and
         gate (see interface_friction), as a Friction (d_slip through phi and tau_el, gate fixed)."""
@@ -390,9 +399,10 @@ def make_friction_at_gate(ft, model, Coeffs):
             r = wp.sqrt(s * s + c.v0 * c.v0)
             dr_ds = s / r
         den = ft(1.0) + g * r * c.inv_D
-        phi = (z_phi + g) / den
-        dphi_ds = -phi * g * dr_ds * c.inv_D / den
-        dphi_dgate = -phi * g * a_s * c.inv_D / den
+        inv_den = ft(1.0) / den
+        phi = over_den(z_phi + g, den, inv_den)
+        dphi_ds = over_den(-phi * g * dr_ds * c.inv_D, den, inv_den)
+        dphi_dgate = over_den(-phi * g * a_s * c.inv_D, den, inv_den)
         contact = ft(0.0)
         if sigma >= ft(0.0):
             contact = ft(1.0)
@@ -404,10 +414,10 @@ def make_friction_at_gate(ft, model, Coeffs):
         darea_dphi = sigma_c * c.inv_hardness * daging_dphi
         darea_ds = darea_dphi * dphi_ds
         darea_dgate = darea_dphi * dphi_dgate
-        tau_el = (z_tau + g * c.Kh * area * s) / den
-        dtel_darea = g * c.Kh * s / den
-        dtel_ds = (g * c.Kh * area - tau_el * g * dr_ds * c.inv_D) / den
-        dtel_dgate = -tau_el * g * a_s * c.inv_D / den
+        tau_el = over_den(z_tau + g * c.Kh * area * s, den, inv_den)
+        dtel_darea = over_den(g * c.Kh * s, den, inv_den)
+        dtel_ds = over_den(g * c.Kh * area - tau_el * g * dr_ds * c.inv_D, den, inv_den)
+        dtel_dgate = over_den(-tau_el * g * a_s * c.inv_D, den, inv_den)
         tau_f = tau_el
         dtf_darea = dtel_darea
         dtf_ds = dtel_ds
