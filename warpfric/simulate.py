@@ -129,12 +129,15 @@ def simulate(
     if yield_np is not None:
         broken = (ds.status.values != 0) & (ds.status.values != STATUS_MEANINGS.index("no_peak"))
         yt = np.where(broken[:, None], np.nan, yield_np.T)  # a run cut short still has real opening times
-        ds["yield_time"] = xr.DataArray(np.ascontiguousarray(yt), dims=("member", "x"), attrs={
-            "units": "s", "long_name": "time at which the asperity-level stress |tau_f|/A first reached tau_c "
-            "(the yield gate opened; NaN: never)"})
-        ds["yield_gate"] = xr.DataArray(np.ascontiguousarray(gate_np.T), dims=("member", "x"), attrs={
-            "units": "1", "long_name": "yield gate at the final time: 0 closed (stuck, ageing), 1 open "
-            "(sliding, rejuvenating), in between: held on the yield surface |tau_f|/A = tau_c"})
+        # one update, one merge of the Dataset (each assignment is a merge over every variable)
+        ds.update({
+            "yield_time": xr.DataArray(np.ascontiguousarray(yt), dims=("member", "x"), attrs={
+                "units": "s", "long_name": "time at which the asperity-level stress |tau_f|/A first reached tau_c "
+                "(the yield gate opened; NaN: never)"}),
+            "yield_gate": xr.DataArray(np.ascontiguousarray(gate_np.T), dims=("member", "x"), attrs={
+                "units": "1", "long_name": "yield gate at the final time: 0 closed (stuck, ageing), 1 open "
+                "(sliding, rejuvenating), in between: held on the yield surface |tau_f|/A = tau_c"}),
+        })
     if front is not None:
         _add_fronts(ds, front, fronts)
     if record is not None:
