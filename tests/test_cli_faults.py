@@ -393,3 +393,31 @@ def test_write_ensemble_removes_its_temporary_file_on_ctrl_c(tmp_path, monkeypat
     with pytest.raises(KeyboardInterrupt):
         write_ensemble(ds, tmp_path / "e.nc")
     assert _files(tmp_path) == []
+
+
+def test_a_full_disk_on_a_dask_worker_exits_3_and_keeps_the_finished_chunks(tmp_path, sweep, capsys, monkeypatch):
+    """As on one host: the worker's error ends the run with exit 3 once the other chunks have ended,
+    and the finished chunks are kept for --resume (an in-process cluster, so that the full disk
+    patched here is the worker's too)."""
+    distributed = pytest.importorskip("distributed")
+    _full_disk(monkeypatch, "chunk-000001.nc")
+    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False, dashboard_address=None)
+    try:
+        code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--chunk", 1, "--scheduler",
+                               cluster.scheduler_address, "--device", DEVICE, "--quiet")
+    finally:
+        cluster.close()
+    assert code == 3
+    _error_line(err, "disk full while writing", "chunk-000001.nc", "the 2 finished chunks are kept",
+                "free some space, then", "--resume")
+    assert _files(tmp_path) == ["s.nc.parts", "s.nc.parts/chunk-000000.nc", "s.nc.parts/chunk-000002.nc",
+                                "s.nc.parts/manifest.json", "s.toml"]
+
+
+def test_a_write_error_keeps_its_disk_full_flag_across_processes():
+    """A Dask worker's exception reaches the client pickled."""
+    import pickle
+
+    err = pickle.loads(pickle.dumps(IO_MODULE.OutputWriteError("disk full while writing 'x.nc'", True)))
+    assert isinstance(err, IO_MODULE.OutputWriteError) and err.disk_full is True
+    assert str(err) == "disk full while writing 'x.nc'"

@@ -105,6 +105,10 @@ class OutputWriteError(Exception):
         super().__init__(message)
         self.disk_full = disk_full
 
+    def __reduce__(self):
+        # a Dask worker's error reaches the client pickled: keep disk_full (exit code 3's advice)
+        return (OutputWriteError, (str(self), self.disk_full))
+
 
 class OutputBusy(Exception):
     """Another run is writing the same output: its lock file exists (exit code 4)."""

@@ -177,8 +177,12 @@ def run_local(jobs: list) -> tuple[list, list]:
 def run_on_client(jobs: list, client, quiet: bool = False) -> tuple[list, list]:
     """Run each chunk as one Dask task on ``client``'s cluster; progress (chunks done, in flight,
     members/s) on stderr as they finish. Returns (reports, errors): a chunk that raised is reported by
-    its member range and the others go on."""
+    its member range and the others go on. A chunk that could not write its file (OutputWriteError: a
+    full disk) is raised once every chunk has ended, as on a single host (exit code 3, the finished
+    chunks kept for --resume)."""
     from distributed import as_completed
+
+    from .io import OutputWriteError
 
     if not jobs:
         return [], []
@@ -188,11 +192,16 @@ def run_on_client(jobs: list, client, quiet: bool = False) -> tuple[list, list]:
         key = f"warpfric-chunk-{job.index:06d}-{Path(job.path).parent.name}-{os.getpid()}-{time.time_ns()}"
         futures[client.submit(run_chunk, job, key=key, pure=False)] = job
     reports, errors = [], []
+    write_error = None
     members_done = 0
     for future in as_completed(list(futures)):
         job = futures[future]
         try:
             report = future.result()
+        except OutputWriteError as err:  # raised below, once the other chunks have ended
+            write_error = write_error or err
+            errors.append(dict(index=job.index, start=job.start, stop=job.stop, error=f"{type(err).__name__}: {err}"))
+            continue
         except Exception as err:  # noqa: BLE001 - reported by member range, the rest goes on
             errors.append(dict(index=job.index, start=job.start, stop=job.stop, error=f"{type(err).__name__}: {err}"))
             _say(f"chunk {job.index + 1}/{job.n_chunks} (members {job.start}..{job.stop - 1}) FAILED: "
@@ -205,6 +214,8 @@ def run_on_client(jobs: list, client, quiet: bool = False) -> tuple[list, list]:
         _say(f"{len(reports)}/{len(jobs)} chunks done ({members_done} members, {members_done / elapsed:.1f} members/s), "
              f"{in_flight} to go; chunk {job.index + 1} ran on {report['device']} (pid {report['pid']}) in "
              f"{report['wall_s']:.1f} s", quiet)
+    if write_error is not None:
+        raise write_error
     return reports, errors
 
 
