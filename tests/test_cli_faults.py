@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import xarray as xr
-from conftest import DEVICE, run_cli, TINY_SWEEP
+from conftest import DEVICE, TINY_SWEEP, run, run_cli
 
 from warpfric.io import open_ensemble
 
@@ -307,6 +307,27 @@ def test_a_second_run_on_the_same_output_is_refused_with_exit_4(tmp_path, sweep,
     code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--device", DEVICE, "--quiet")  # its run is gone: stale
     assert code == 0, err
     assert _files(tmp_path) == ["s.nc", "s.toml"]  # the lock is removed at the end
+
+
+def test_write_ensemble_from_python_respects_a_running_output(tmp_path):
+    """write_ensemble beside a living run on the same output raises OutputBusy and writes nothing;
+    this process's own lock and a dead run's lock do not stop it."""
+    ds = run({"eccentricity": [0.0]}, nodes=11, fronts=None)
+    out = tmp_path / "py.nc"
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        lock = _hold_lock(out, other.pid)
+        with pytest.raises(IO_MODULE.OutputBusy, match=f"being written by another warpfric run \\(pid {other.pid} "):
+            IO_MODULE.write_ensemble(ds, out)
+        assert _files(tmp_path) == ["py.nc.lock"]
+    finally:
+        other.kill()
+        other.wait()
+    IO_MODULE.write_ensemble(ds, out)  # its run is gone: stale
+    assert open_ensemble(out).sizes["member"] == 1
+    lock.unlink()
+    with IO_MODULE.output_lock(out):
+        IO_MODULE.write_ensemble(ds, out)  # this process's own lock
 
 
 def test_two_runs_started_at_once_one_is_refused(tmp_path, sweep):

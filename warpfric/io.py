@@ -229,6 +229,24 @@ def unlock_output(lock: Path) -> None:
             Path(lock).unlink()
 
 
+def refuse_if_locked(path) -> None:
+    """OutputBusy when another living run holds ``OUT.nc.lock`` beside ``path``: a write from Python
+    (:func:`write_ensemble`) beside a running ``warpfric run`` on the same output. A lock this
+    process holds, or a stale one, does not stop it."""
+    path = Path(path)
+    lock = lock_path(path)
+    if not lock.exists() or _stale(lock):
+        return
+    try:
+        holder = json.loads(lock.read_text() or "{}")
+    except (OSError, ValueError):
+        holder = {}
+    if holder.get("pid") == os.getpid() and holder.get("host") == socket.gethostname():
+        return
+    raise OutputBusy(f"output {str(path)!r} is being written by another warpfric run ({_holder(lock)}); wait "
+                     f"for it to end, or remove {str(lock)!r} if that run is gone")
+
+
 @contextlib.contextmanager
 def output_lock(path, command: str | None = None):
     """``with output_lock(path):`` holds ``OUT.nc.lock`` for the block (see :func:`lock_output`)."""
@@ -435,9 +453,11 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
                the chunks of one sweep share it). None: the labels ``ds`` was read with
                (``member_id``), else a new id (:func:`new_run_id`).
     ``recorded_member`` must hold member numbers (values of ``member``).
-    Raises OutputWriteError when the file cannot be written (its temporary file removed).
+    Raises OutputWriteError when the file cannot be written (its temporary file removed), and
+    OutputBusy when another run holds the output's lock (``OUT.nc.lock``, :func:`lock_output`).
     """
     path = Path(path)
+    refuse_if_locked(path)
     if varying is None:
         varying = ds.attrs.get("varying_parameters", "").split()
     if "recorded_member" in ds.coords and not np.isin(ds.recorded_member.values, ds.member.values).all():
