@@ -243,7 +243,7 @@ def make_tr_bdf2_steps(ft, terms, newton, StepResult, arrays):
     ):
         """One step of size h from t (ending at t_new). TR-BDF2 (backward_euler = 0): stage 2
         (trapezoidal, at t + 2 gamma h) into K[s2], stage 3 (BDF2, at t_new) into K[s3], and the
-        error norm; backward Euler (1, a (re)start): one stage at t_new into K[s3], no error
+        error norm; backward Euler (non-zero, a (re)start): one stage at t_new into K[s3], no error
         estimate. The stages are one loop with a bound known only at run time, so that the code of
         a stage (the Newton solve above all) is compiled once, not once per stage: on a GPU several
         inlined copies overflow the instruction cache when the warps of an SM are in different
@@ -252,7 +252,7 @@ def make_tr_bdf2_steps(ft, terms, newton, StepResult, arrays):
         res.error = wp.float64(0.0)
         g = ft(wp.float64(GAMMA) * h)
         n_stages = 2
-        if backward_euler == 1:
+        if backward_euler != 0:
             g = ft(h)
             n_stages = 1
         ok = int(1)
@@ -264,7 +264,7 @@ def make_tr_bdf2_steps(ft, terms, newton, StepResult, arrays):
             last = stage == n_stages - 1
             t_stage = t_new
             slot = s3
-            if backward_euler == 1:
+            if backward_euler != 0:
                 prepare_stage(c, m, n, state, K, work, ft(h), ft(0.0), s1, ft(0.0), s1, 0, ft(0.0))
             elif stage == 0:
                 t_stage = t + wp.float64(C2) * h
@@ -284,7 +284,7 @@ def make_tr_bdf2_steps(ft, terms, newton, StepResult, arrays):
             if last:
                 res.sums = sums
                 res.switch_test = test
-        if ok == 1 and backward_euler == 0:
+        if ok == 1 and backward_euler == 0:  # TR-BDF2 only: backward Euler has no error estimate
             res.error = wp.float64(error_norm(c, settings, m, n, state, K, work, s1, s2, s3, ft(h)))
         res.ok = ok
         res.iterations = iterations

@@ -87,18 +87,37 @@ def get_integrator(dtype: str, model, lanes: int = 1, method: str = "tr_bdf2") -
     key = (dtype, model, lanes, registers, method, inline, smem_spilling, out_of_line)
     if key not in _CACHE:
         kernels = _make_integrator(dtype, model, lanes, registers, method, smem_spilling)
-        for fn in device_functions(kernels["integrate"]):
-            hint = None
-            if inline is not None:
-                hint = "forceinline" if inline == "force" else "noinline"
-            if fn.func.__name__ in out_of_line:
-                hint = "noinline"
-            if hint is not None:
-                fn.inline_hint = hint
-                for overload in fn.user_overloads.values():
-                    overload.inline_hint = hint
+        _apply_inline_hints(kernels["integrate"], inline, out_of_line)
         _CACHE[key] = kernels
     return _CACHE[key]
+
+
+# device functions whose inline hint a benchmark switch changed, with the hint they had before:
+# shared functions (module-level ones such as team.settle) serve every build, so each build first
+# undoes the hints of the one before (the switches apply to the kernels built while they are set)
+_HINTED: dict = {}
+
+
+def _set_hint(fn, hint) -> None:
+    fn.inline_hint = hint
+    for overload in fn.user_overloads.values():
+        overload.inline_hint = hint
+
+
+def _apply_inline_hints(kernel, inline, out_of_line) -> None:
+    """Undo the previous build's benchmark hints, then set this build's (team_compile_options)."""
+    for fn, hint in _HINTED.values():
+        _set_hint(fn, hint)
+    _HINTED.clear()
+    for fn in device_functions(kernel):
+        hint = None
+        if inline is not None:
+            hint = "forceinline" if inline == "force" else "noinline"
+        if fn.func.__name__ in out_of_line:
+            hint = "noinline"
+        if hint is not None:
+            _HINTED[id(fn)] = (fn, fn.inline_hint)
+            _set_hint(fn, hint)
 
 
 def make_stages(ft, model, lanes: int = 1, method: str = "tr_bdf2") -> dict:

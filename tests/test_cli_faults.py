@@ -433,6 +433,10 @@ def test_a_full_disk_on_a_dask_worker_exits_3_and_keeps_the_finished_chunks(tmp_
                 "free some space, then", "--resume")
     assert _files(tmp_path) == ["s.nc.parts", "s.nc.parts/chunk-000000.nc", "s.nc.parts/chunk-000002.nc",
                                 "s.nc.parts/manifest.json", "s.toml"]
+    monkeypatch.undo()
+    code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--resume", "--device", DEVICE, "--quiet")
+    assert code == 0, err
+    assert open_ensemble(tmp_path / "s.nc").member.values.tolist() == [0, 1, 2]
 
 
 def test_a_write_error_keeps_its_disk_full_flag_across_processes():

@@ -58,3 +58,14 @@ def test_compile_switches_are_validated_and_applied(monkeypatch):
     hints = {fn.func.__name__: fn.inline_hint for fn in device_functions(integrate)}
     assert hints["newton_solve"] == "noinline"
     assert hints["stage_derivatives"] is None and hints["node_row"] is None
+
+
+def test_compile_switches_do_not_leak_into_later_builds(monkeypatch):
+    """A switch marks shared functions too (team.settle, the load protocol): the next build undoes
+    it, so a kernel built without the switch compiles with the compiler's own choices."""
+    monkeypatch.setenv("WARPFRIC_INLINE", "never")
+    team = get_integrator("float64", wf.Model(relaxation_gate="none"), lanes=8)["integrate"]
+    assert all(fn.inline_hint == "noinline" for fn in device_functions(team))
+    monkeypatch.delenv("WARPFRIC_INLINE")
+    thread = get_integrator("float64", wf.Model(relaxation_gate="none"), lanes=1)["integrate"]
+    assert [fn.func.__name__ for fn in device_functions(thread) if fn.inline_hint is not None] == []

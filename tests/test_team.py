@@ -16,28 +16,32 @@ from warpfric.engine import AUTO_LANES, AUTO_MIN_NODES, choose_lanes, cpu_blocks
 MEMBERS = {"eccentricity": [0.0, -0.2, 0.3, 0.6], "normal_force": [1000.0, 1000.0, 300.0, 3000.0]}
 
 
-@pytest.mark.parametrize("gate, lanes, fronts", [("none", 2, False), ("none", 7, False), ("none", 8, False),
-                                                 ("stress", 4, True)])
-def test_a_team_gives_the_thread_per_member_outputs(gate, lanes, fronts):
+@pytest.mark.parametrize("gate, lanes, fronts, nodes, rtol", [("none", 2, False, 30, 1e-8), ("none", 7, False, 30, 1e-8),
+                                                              ("none", 8, False, 30, 1e-8), ("stress", 4, True, 30, 1e-8),
+                                                              ("none", 8, False, 16, 1e-7)])
+def test_a_team_gives_the_thread_per_member_outputs(gate, lanes, fronts, nodes, rtol):
     """mu_s, its time and the front speeds of a team of `lanes` threads equal the thread-per-member
     kernel's to 1e-8 relative (the runs' own error control is rtol 1e-5: the kernels differ only by
     the order of their sums); same statuses; the steps taken differ by at most one. 7 and 8 lanes
     of 30 nodes on the lift-off member are the case the review's shared-memory race broke
-    (kernels/team.py, settle). The final fields are not compared: the automatic end may fall a
-    step apart."""
+    (kernels/team.py, settle); 8 lanes of 16 nodes give every lane two nodes, both of them end
+    nodes whose border-row entries come from the neighbouring lanes (kernels/newton.py,
+    assemble_system); there the lift-off member's mu_s_time moves by 2e-8 (before that exchange)
+    to 4e-8 with the order of the sums, the others by 1e-15, hence 1e-7. The final fields are not
+    compared: the automatic end may fall a step apart."""
     model = wf.Model(relaxation_gate=gate)
     front = wf.Fronts() if fronts else None
-    ref = run(MEMBERS, model=model, nodes=30, rtol=1e-5, fronts=front, lanes=1)
+    ref = run(MEMBERS, model=model, nodes=nodes, rtol=1e-5, fronts=front, lanes=1)
     if DEVICE.startswith("cuda"):
-        team = run(MEMBERS, model=model, nodes=30, rtol=1e-5, fronts=front, lanes=lanes)
+        team = run(MEMBERS, model=model, nodes=nodes, rtol=1e-5, fronts=front, lanes=lanes)
     else:
         with pytest.warns(UserWarning, match="CPU fibers"):  # a team on the CPU is for tests only
-            team = run(MEMBERS, model=model, nodes=30, rtol=1e-5, fronts=front, lanes=lanes)
+            team = run(MEMBERS, model=model, nodes=nodes, rtol=1e-5, fronts=front, lanes=lanes)
     assert ref.attrs["lanes"] == 1 and team.attrs["lanes"] == lanes
     np.testing.assert_array_equal(team.status.values, ref.status.values)
     assert (ref.status.values == 0).all() and ref.lift_off.values[3] == 1
-    np.testing.assert_allclose(team.mu_s.values, ref.mu_s.values, rtol=1e-8)
-    np.testing.assert_allclose(team.mu_s_time.values, ref.mu_s_time.values, rtol=1e-8)
+    np.testing.assert_allclose(team.mu_s.values, ref.mu_s.values, rtol=rtol)
+    np.testing.assert_allclose(team.mu_s_time.values, ref.mu_s_time.values, rtol=rtol)
     assert np.all(np.abs(team.steps_accepted.values - ref.steps_accepted.values) <= 1)
     if fronts:
         for name in ("v_left", "v_middle", "v_right"):

@@ -107,7 +107,7 @@ class OutputWriteError(Exception):
 
     def __reduce__(self):
         # a Dask worker's error reaches the client pickled: keep disk_full (exit code 3's advice)
-        return (OutputWriteError, (str(self), self.disk_full))
+        return (type(self), (str(self), self.disk_full))
 
 
 class OutputBusy(Exception):
@@ -235,13 +235,17 @@ def refuse_if_locked(path) -> None:
     process holds, or a stale one, does not stop it."""
     path = Path(path)
     lock = lock_path(path)
-    if not lock.exists() or _stale(lock):
-        return
     try:
-        holder = json.loads(lock.read_text() or "{}")
-    except (OSError, ValueError):
+        text = lock.read_text()
+    except OSError:
+        return  # no lock (or none that can be read: the write itself will say what is wrong)
+    try:
+        holder = json.loads(text or "{}")
+    except ValueError:
         holder = {}
     if holder.get("pid") == os.getpid() and holder.get("host") == socket.gethostname():
+        return
+    if _stale(lock):
         return
     raise OutputBusy(f"output {str(path)!r} is being written by another warpfric run ({_holder(lock)}); wait "
                      f"for it to end, or remove {str(lock)!r} if that run is gone")
@@ -477,6 +481,7 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
             if recorded is not None:
                 recorded.to_netcdf(tmp, mode="a", group=RECORDED_GROUP, format="NETCDF4", engine="netcdf4",
                                    encoding=_encoding(recorded, complevel))
+        refuse_if_locked(path)  # again: a run may have started on this output during the write
         os.replace(tmp, path)
     except BaseException as err:  # a full disk, an I/O error, Ctrl-C: no temporary file stays behind
         free = free_bytes(path.parent)

@@ -198,14 +198,15 @@ def run_on_client(jobs: list, client, quiet: bool = False) -> tuple[list, list]:
         job = futures[future]
         try:
             report = future.result()
-        except OutputWriteError as err:  # raised below, once the other chunks have ended
-            write_error = write_error or err
-            errors.append(dict(index=job.index, start=job.start, stop=job.stop, error=f"{type(err).__name__}: {err}"))
-            continue
         except Exception as err:  # noqa: BLE001 - reported by member range, the rest goes on
             errors.append(dict(index=job.index, start=job.start, stop=job.stop, error=f"{type(err).__name__}: {err}"))
             _say(f"chunk {job.index + 1}/{job.n_chunks} (members {job.start}..{job.stop - 1}) FAILED: "
                  f"{type(err).__name__}: {err}", False)
+            if isinstance(err, OutputWriteError):
+                # raised below, once every chunk has ended: not cancelled, since a chunk still being
+                # written would race the handler's reads of the parts folder (HDF5 is not
+                # thread-safe, and a cluster may run in this process)
+                write_error = write_error or err
             continue
         reports.append(report)
         members_done += report["members"]
