@@ -86,15 +86,17 @@ def get_integrator(dtype: str, model, lanes: int = 1, method: str = "tr_bdf2") -
     inline, smem_spilling, out_of_line = team_compile_options() if lanes > 1 else (None, False, ())
     key = (dtype, model, lanes, registers, method, inline, smem_spilling, out_of_line)
     if key not in _CACHE:
-        kernels = _make_integrator(dtype, model, lanes, registers, method, smem_spilling)
-        _apply_inline_hints(kernels["integrate"], inline, out_of_line)
-        _CACHE[key] = kernels
+        _CACHE[key] = _make_integrator(dtype, model, lanes, registers, method, smem_spilling)
+    # on every call, cached kernels included: Warp compiles a kernel at its first launch, with the
+    # hints the functions have then
+    _apply_inline_hints(_CACHE[key]["integrate"], inline, out_of_line)
     return _CACHE[key]
 
 
 # device functions whose inline hint a benchmark switch changed, with the hint they had before:
-# shared functions (module-level ones such as team.settle) serve every build, so each build first
-# undoes the hints of the one before (the switches apply to the kernels built while they are set)
+# shared functions (module-level ones such as team.settle) serve every kernel, so each
+# get_integrator call first undoes the hints of the one before (the switches apply to the kernels
+# asked for while they are set)
 _HINTED: dict = {}
 
 
@@ -109,6 +111,8 @@ def _apply_inline_hints(kernel, inline, out_of_line) -> None:
     for fn, hint in _HINTED.values():
         _set_hint(fn, hint)
     _HINTED.clear()
+    if inline is None and not out_of_line:
+        return
     for fn in device_functions(kernel):
         hint = None
         if inline is not None:

@@ -61,11 +61,18 @@ def test_compile_switches_are_validated_and_applied(monkeypatch):
 
 
 def test_compile_switches_do_not_leak_into_later_builds(monkeypatch):
-    """A switch marks shared functions too (team.settle, the load protocol): the next build undoes
-    it, so a kernel built without the switch compiles with the compiler's own choices."""
+    """A switch marks shared functions too (team.settle, the load protocol): the next request
+    undoes it, cached kernels included, so a kernel asked for without the switch compiles with the
+    compiler's own choices."""
+    get_integrator("float64", wf.Model(relaxation_gate="none"), lanes=1)  # cached before the switch
     monkeypatch.setenv("WARPFRIC_INLINE", "never")
     team = get_integrator("float64", wf.Model(relaxation_gate="none"), lanes=8)["integrate"]
     assert all(fn.inline_hint == "noinline" for fn in device_functions(team))
     monkeypatch.delenv("WARPFRIC_INLINE")
     thread = get_integrator("float64", wf.Model(relaxation_gate="none"), lanes=1)["integrate"]
+    assert [fn.func.__name__ for fn in device_functions(thread) if fn.inline_hint is not None] == []
+    monkeypatch.setenv("WARPFRIC_INLINE", "never")
+    get_integrator("float64", wf.Model(relaxation_gate="none"), lanes=8)  # cached now: the hints come back
+    monkeypatch.delenv("WARPFRIC_INLINE")
+    get_integrator("float64", wf.Model(relaxation_gate="none"), lanes=1)  # cached too: undone again
     assert [fn.func.__name__ for fn in device_functions(thread) if fn.inline_hint is not None] == []
