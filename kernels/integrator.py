@@ -13,6 +13,7 @@ kernels/types.py. Scheme and choices: docs/model.md, "Time integration" and "Gat
 """
 
 import os
+from typing import NamedTuple
 
 import warp as wp
 
@@ -28,43 +29,43 @@ from .types import IntegratorState, MemberParams, OutputSettings, SolverSettings
 _CACHE: dict = {}
 
 
-def team_max_registers():
-    """Registers per thread the CUDA compiler may use in the cooperative kernel (None: its choice,
-    255 on the H100); the environment variable WARPFRIC_TEAM_MAX_REGISTERS sets it for benchmarks
-    (docs/performance.md, "GPU: where the time goes": team size and registers)."""
-    value = int(os.environ.get("WARPFRIC_TEAM_MAX_REGISTERS", "0"))
-    return value if value > 0 else None
-
-
-def team_compile_options():
+class TeamCompileOptions(NamedTuple):
     """Benchmark switches of the cooperative kernel's compilation (docs/performance.md, "GPU: where
-    the time goes"), from the environment: WARPFRIC_INLINE = 'force' or 'never' asks CUDA to inline
-    every device function of the integrator, or none (unset: the compiler chooses);
-    WARPFRIC_TEAM_SMEM_SPILLING=1 lets CUDA 13 spill registers to shared memory."""
+    the time goes"); the defaults are the compiler's own choices."""
+
+    max_registers: int | None = None  # registers per thread (None: the compiler's, 255 on the H100)
+    inline: str | None = None  # 'force' or 'never': inline every device function of the integrator, or none
+    smem_spilling: bool = False  # let CUDA 13 spill registers to shared memory
+    out_of_line: tuple = ()  # names of device functions kept out of line
+
+
+def team_compile_options() -> TeamCompileOptions:
+    """The benchmark switches from the environment: WARPFRIC_TEAM_MAX_REGISTERS (an integer > 0),
+    WARPFRIC_INLINE ('force' or 'never'), WARPFRIC_TEAM_SMEM_SPILLING (1) and WARPFRIC_NOINLINE
+    (comma-separated function names)."""
+    registers = int(os.environ.get("WARPFRIC_TEAM_MAX_REGISTERS", "0"))
     inline = os.environ.get("WARPFRIC_INLINE", "") or None
     if inline not in (None, "force", "never"):
         raise ValueError(f"WARPFRIC_INLINE={inline!r} is invalid; valid: 'force', 'never' or unset")
     out_of_line = tuple(sorted(name for name in os.environ.get("WARPFRIC_NOINLINE", "").split(",") if name))
-    return inline, os.environ.get("WARPFRIC_TEAM_SMEM_SPILLING", "0") == "1", out_of_line
+    return TeamCompileOptions(max_registers=registers if registers > 0 else None, inline=inline,
+                              smem_spilling=os.environ.get("WARPFRIC_TEAM_SMEM_SPILLING", "0") == "1",
+                              out_of_line=out_of_line)
 
 
 def device_functions(kernel) -> list:
     """Every user device function (wp.func) the kernel calls, directly or through other functions
     (closures and module globals), as Warp Function objects."""
-    found, stack, seen = [], [kernel.func], set()
+    found, stack = {}, [kernel.func]  # id -> Function, in the order found
     while stack:
         py = stack.pop()
-        if id(py) in seen:
-            continue
-        seen.add(id(py))
         refs = [cell.cell_contents for cell in (py.__closure__ or ()) if _filled(cell)]
         refs += [py.__globals__.get(name) for name in py.__code__.co_names]
         for ref in refs:
-            if isinstance(ref, wp.Function) and not ref.is_builtin() and ref.func is not None:
-                if all(ref is not f for f in found):
-                    found.append(ref)
-                    stack.append(ref.func)
-    return found
+            if isinstance(ref, wp.Function) and not ref.is_builtin() and ref.func is not None and id(ref) not in found:
+                found[id(ref)] = ref
+                stack.append(ref.func)
+    return list(found.values())
 
 
 def _filled(cell) -> bool:
@@ -82,14 +83,13 @@ def get_integrator(dtype: str, model, lanes: int = 1, method: str = "tr_bdf2") -
     (cached)."""
     if method not in ("tr_bdf2", "esdirk4"):
         raise ValueError(f"integrator method {method!r} is invalid; valid: 'tr_bdf2' or 'esdirk4'")
-    registers = team_max_registers() if lanes > 1 else None
-    inline, smem_spilling, out_of_line = team_compile_options() if lanes > 1 else (None, False, ())
-    key = (dtype, model, lanes, registers, method, inline, smem_spilling, out_of_line)
+    options = team_compile_options() if lanes > 1 else TeamCompileOptions()
+    key = (dtype, model, lanes, method, options)
     if key not in _CACHE:
-        _CACHE[key] = _make_integrator(dtype, model, lanes, registers, method, smem_spilling)
+        _CACHE[key] = _make_integrator(dtype, model, lanes, method, options)
     # on every call, cached kernels included: Warp compiles a kernel at its first launch, with the
     # hints the functions have then
-    _apply_inline_hints(_CACHE[key]["integrate"], inline, out_of_line)
+    _apply_inline_hints(_CACHE[key]["integrate"], options.inline, options.out_of_line)
     return _CACHE[key]
 
 
@@ -136,13 +136,13 @@ def make_stages(ft, model, lanes: int = 1, method: str = "tr_bdf2") -> dict:
     return dict(team=team, terms=terms, gates=gates, newton=newton, esdirk=esdirk, observers=observers)
 
 
-def _make_integrator(dtype: str, model, lanes: int, registers=None, method: str = "tr_bdf2", smem_spilling=False):
+def _make_integrator(dtype: str, model, lanes: int, method: str = "tr_bdf2", options=TeamCompileOptions()):
     """The integrate and evaluate_fields kernels for one working precision, model, team size and
     method (get_integrator caches them)."""
     ft = wp.float64 if dtype == "float64" else wp.float32
     stages = make_stages(ft, model, lanes, method)
     acceptance = make_acceptance(ft, model, method, stages)
-    integrate = make_integrate_kernel(ft, model, lanes, registers, method, stages, acceptance, smem_spilling)
+    integrate = make_integrate_kernel(ft, model, lanes, method, stages, acceptance, options)
     evaluate_fields = make_field_kernel(ft, stages)
     return dict(integrate=integrate, evaluate_fields=evaluate_fields, ft=ft, stages=stages)
 
@@ -209,7 +209,7 @@ def make_acceptance(ft, model, method, stages):
     return dict(accept_step=accept_step)
 
 
-def make_integrate_kernel(ft, model, lanes: int, registers, method, stages, acceptance, smem_spilling=False):
+def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, options=TeamCompileOptions()):
     """The integrate kernel: the loop of attempted steps (stepper, controller, accept_step)."""
     team_on = lanes > 1
     esdirk4 = method == "esdirk4"
@@ -228,12 +228,14 @@ def make_integrate_kernel(ft, model, lanes: int, registers, method, stages, acce
     # enable_backward=False: no adjoint code is generated (nothing differentiates through the
     # integrator); the forward code is the same, and the first compile takes a third of the time
     # (CPU, default law: 13.2 s -> 4.7 s)
-    # smem_spilling (a benchmark switch, team_compile_options) needs launch bounds instead of a
-    # register cap
-    spill_options = dict(enable_cuda_smem_spilling=True, launch_bounds=lanes) if smem_spilling else {}
+    # the benchmark switches (team_compile_options): shared-memory spilling needs launch bounds
+    # instead of a register cap
+    if options.smem_spilling:
+        limits = dict(enable_cuda_smem_spilling=True, launch_bounds=lanes)
+    else:
+        limits = dict(cuda_max_registers=options.max_registers)
 
-    @wp.kernel(module="unique", cuda_max_registers=None if smem_spilling else registers, enable_backward=False,
-               **spill_options)
+    @wp.kernel(module="unique", enable_backward=False, **limits)
     def integrate(
         # inputs
         params: wp.array(dtype=MemberParams),

@@ -11,7 +11,7 @@ import textwrap
 import pytest
 
 import warpfric as wf
-from warpfric.kernels.integrator import device_functions, get_integrator, team_compile_options
+from warpfric.kernels.integrator import TeamCompileOptions, device_functions, get_integrator, team_compile_options
 
 
 def esdirk4_only(node):
@@ -53,7 +53,10 @@ def test_compile_switches_are_validated_and_applied(monkeypatch):
         team_compile_options()
     monkeypatch.delenv("WARPFRIC_INLINE")
     monkeypatch.setenv("WARPFRIC_NOINLINE", "newton_solve")
-    assert team_compile_options() == (None, False, ("newton_solve",))
+    assert team_compile_options() == TeamCompileOptions(out_of_line=("newton_solve",))
+    monkeypatch.setenv("WARPFRIC_TEAM_MAX_REGISTERS", "168")
+    assert team_compile_options() == TeamCompileOptions(max_registers=168, out_of_line=("newton_solve",))
+    monkeypatch.delenv("WARPFRIC_TEAM_MAX_REGISTERS")
     integrate = get_integrator("float64", wf.Model(relaxation_gate="velocity"), lanes=4)["integrate"]
     hints = {fn.func.__name__: fn.inline_hint for fn in device_functions(integrate)}
     assert hints["newton_solve"] == "noinline"
