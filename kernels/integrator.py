@@ -23,7 +23,7 @@ from .gates import make_gates
 from .model_terms import disc_velocity_at, make_model_terms
 from .newton import make_newton
 from .observers import make_observers, run_finished
-from .team import make_team, node_range
+from .team import EXCHANGES, make_team, node_range
 from .types import IntegratorState, MemberParams, OutputSettings, SolverSettings, stage_slots
 
 _CACHE: dict = {}
@@ -37,20 +37,39 @@ class TeamCompileOptions(NamedTuple):
     inline: str | None = None  # 'force' or 'never': inline every device function of the integrator, or none
     smem_spilling: bool = False  # let CUDA 13 spill registers to shared memory
     out_of_line: tuple = ()  # names of device functions kept out of line
+    exchange: str | None = None  # the team's lane exchange, kernels/team.py (None: the automatic choice)
 
 
 def team_compile_options() -> TeamCompileOptions:
     """The benchmark switches from the environment: WARPFRIC_TEAM_MAX_REGISTERS (an integer > 0),
-    WARPFRIC_INLINE ('force' or 'never'), WARPFRIC_TEAM_SMEM_SPILLING (1) and WARPFRIC_NOINLINE
-    (comma-separated function names)."""
+    WARPFRIC_INLINE ('force' or 'never'), WARPFRIC_TEAM_SMEM_SPILLING (1), WARPFRIC_NOINLINE
+    (comma-separated function names) and WARPFRIC_TEAM_EXCHANGE ('tile', 'shuffle' or 'emulated':
+    kernels/team.py)."""
     registers = int(os.environ.get("WARPFRIC_TEAM_MAX_REGISTERS", "0"))
     inline = os.environ.get("WARPFRIC_INLINE", "") or None
     if inline not in (None, "force", "never"):
         raise ValueError(f"WARPFRIC_INLINE={inline!r} is invalid; valid: 'force', 'never' or unset")
     out_of_line = tuple(sorted(name for name in os.environ.get("WARPFRIC_NOINLINE", "").split(",") if name))
+    exchange = os.environ.get("WARPFRIC_TEAM_EXCHANGE", "") or None
+    if exchange not in (None,) + EXCHANGES:
+        raise ValueError(f"WARPFRIC_TEAM_EXCHANGE={exchange!r} is invalid; valid: {', '.join(EXCHANGES)} or unset")
     return TeamCompileOptions(max_registers=registers if registers > 0 else None, inline=inline,
                               smem_spilling=os.environ.get("WARPFRIC_TEAM_SMEM_SPILLING", "0") == "1",
-                              out_of_line=out_of_line)
+                              out_of_line=out_of_line, exchange=exchange)
+
+
+def team_exchange(lanes: int, cuda: bool, requested: str | None = None) -> str:
+    """The lane exchange of a team of ``lanes`` on a CUDA device (cuda) or the CPU: ``requested``
+    (WARPFRIC_TEAM_EXCHANGE), else warp shuffles on a GPU for a team of one warp (<= 32 lanes) and
+    Warp's tiles otherwise (docs/performance.md, "Warp shuffles")."""
+    if requested is None:
+        return "shuffle" if cuda and lanes <= 32 else "tile"
+    if requested == "shuffle" and not (cuda and lanes <= 32):
+        raise ValueError(f"WARPFRIC_TEAM_EXCHANGE='shuffle' needs a CUDA device and at most 32 lanes; "
+                         f"got {'a CUDA device' if cuda else 'the CPU'} and {lanes} lanes")
+    if requested == "emulated" and lanes > 32:
+        raise ValueError(f"WARPFRIC_TEAM_EXCHANGE='emulated' needs at most 32 lanes; got {lanes}")
+    return requested
 
 
 def device_functions(kernel) -> list:
@@ -76,14 +95,16 @@ def _filled(cell) -> bool:
     return True
 
 
-def get_integrator(dtype: str, model, lanes: int = 1, method: str = "tr_bdf2") -> dict:
+def get_integrator(dtype: str, model, lanes: int = 1, method: str = "tr_bdf2", cuda: bool = False) -> dict:
     """Compiled kernels for one working precision, one set of model switches, one team size
     (lanes = 1: one thread per member; > 1: the cooperative kernel, launched with block_dim = lanes,
-    float64 only; kernels/team.py) and one time integrator (Solver.method: 'tr_bdf2' or 'esdirk4')
-    (cached)."""
+    float64 only; kernels/team.py), one time integrator (Solver.method: 'tr_bdf2' or 'esdirk4') and
+    the kind of device they run on (cuda: a team's lane exchange, team_exchange) (cached)."""
     if method not in ("tr_bdf2", "esdirk4"):
         raise ValueError(f"integrator method {method!r} is invalid; valid: 'tr_bdf2' or 'esdirk4'")
     options = team_compile_options() if lanes > 1 else TeamCompileOptions()
+    if lanes > 1:
+        options = options._replace(exchange=team_exchange(lanes, cuda, options.exchange))
     key = (dtype, model, lanes, method, options)
     if key not in _CACHE:
         _CACHE[key] = _make_integrator(dtype, model, lanes, method, options)
@@ -124,10 +145,11 @@ def _apply_inline_hints(kernel, inline, out_of_line) -> None:
             _set_hint(fn, hint)
 
 
-def make_stages(ft, model, lanes: int = 1, method: str = "tr_bdf2") -> dict:
+def make_stages(ft, model, lanes: int = 1, method: str = "tr_bdf2", exchange: str = "tile") -> dict:
     """Every device function of the integrator for scalar type ``ft``, ``model``, a team of
-    ``lanes`` threads per member and an integrator method, by stage."""
-    team = make_team(ft, lanes)
+    ``lanes`` threads per member with its lane exchange (kernels/team.py) and an integrator method,
+    by stage."""
+    team = make_team(ft, lanes, exchange)
     terms = make_model_terms(ft, model)
     gates = make_gates(ft, model, terms, team)
     newton = make_newton(ft, model, terms, gates, team, method)
@@ -140,11 +162,12 @@ def _make_integrator(dtype: str, model, lanes: int, method: str = "tr_bdf2", opt
     """The integrate and evaluate_fields kernels for one working precision, model, team size and
     method (get_integrator caches them)."""
     ft = wp.float64 if dtype == "float64" else wp.float32
-    stages = make_stages(ft, model, lanes, method)
+    stages = make_stages(ft, model, lanes, method, options.exchange or "tile")
     acceptance = make_acceptance(ft, model, method, stages)
     integrate = make_integrate_kernel(ft, model, lanes, method, stages, acceptance, options)
     evaluate_fields = make_field_kernel(ft, stages)
-    return dict(integrate=integrate, evaluate_fields=evaluate_fields, ft=ft, stages=stages)
+    return dict(integrate=integrate, evaluate_fields=evaluate_fields, ft=ft, stages=stages,
+                exchange=(options.exchange or "tile") if lanes > 1 else "none")
 
 
 def make_acceptance(ft, model, method, stages):

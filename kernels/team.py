@@ -204,11 +204,395 @@ def make_separator_exchange(lanes: int):
     return dict(from_next_lane=from_next_lane, from_neighbour_lanes=from_neighbour_lanes, reduced_solve=reduced_solve)
 
 
-def make_team(ft, lanes: int):
+# ---- the lane exchange by value (exchange = "shuffle" or "emulated") ----
+# On a GPU a team of at most 32 lanes is one warp: its lanes read each other's registers with warp
+# shuffles, so nothing goes through shared memory and no block barrier is needed (only __syncwarp,
+# for the lanes' global-memory writes, which every team operation starts with, as the tiles'
+# synchronisation did). Reductions are butterflies (every lane adds its partner's partial sum at
+# distance 16, 8, .., 1; commutativity gives every lane the same bits) for a power-of-two team,
+# else a tree to lane 0 and lane 0's value to every lane; the separators' reduced system is solved
+# by parallel cyclic reduction (make_exchange_team). "emulated" runs the same operations with each
+# shuffle through a tile, on the CPU's fibers, so that the CPU tests the algorithms the GPU runs.
+
+# the CUDA side of the shuffles: the lanes' mask, a double as two 32-bit halves, one shuffle of each
+_SHUFFLE_PRELUDE = r"""
+    const unsigned mask = lanes >= 32 ? 0xffffffffu : ((1u << lanes) - 1u);
+    #define WF_SHFL64(kind, clamp, value, lane_arg, out) { \
+        unsigned lo_, hi_; \
+        asm("mov.b64 {%0, %1}, %2;" : "=r"(lo_), "=r"(hi_) : "d"(value)); \
+        asm volatile("shfl.sync." kind ".b32 %0, %1, %2, " clamp ", %3;" : "=r"(lo_) : "r"(lo_), "r"(lane_arg), "r"(mask)); \
+        asm volatile("shfl.sync." kind ".b32 %0, %1, %2, " clamp ", %3;" : "=r"(hi_) : "r"(hi_), "r"(lane_arg), "r"(mask)); \
+        asm("mov.b64 %0, {%1, %2};" : "=d"(out) : "r"(lo_), "r"(hi_)); }
+"""
+
+
+def _reduction_snippet(ctype: str, combine: str) -> str:
+    """A warp reduction of x over ``lanes`` lanes (CUDA; the CPU never runs it): a butterfly for a
+    power-of-two team, else a tree to lane 0 and lane 0's value to every lane. ``combine`` merges
+    v and other."""
+    if ctype == "double":
+        shfl = lambda kind, clamp, lane, out: f'WF_SHFL64("{kind}", "{clamp}", v, {lane}, {out});'  # noqa: E731
+    else:
+        shfl = lambda kind, clamp, lane, out: (  # noqa: E731
+            f'asm volatile("shfl.sync.{kind}.b32 %0, %1, %2, {clamp}, %3;" : "=r"({out}) : "r"(v), "r"({lane}), "r"(mask));')
+    return (r"""
+#if defined(__CUDA_ARCH__)
+""" + _SHUFFLE_PRELUDE + f"""
+    {ctype} v = x;
+    if ((lanes & (lanes - 1)) == 0) {{
+        for (int s = lanes >> 1; s > 0; s >>= 1) {{
+            {ctype} other;
+            {shfl("bfly", "0x1f", "s", "other")}
+            v = {combine};
+        }}
+    }} else {{
+        const int lane = threadIdx.x;
+        int top = 1;
+        while (top * 2 < lanes) top *= 2;
+        for (int s = top; s > 0; s >>= 1) {{
+            {ctype} other;
+            {shfl("down", "0x1f", "s", "other")}
+            if (lane + s < lanes) v = {combine};
+        }}
+        {ctype} first;
+        const int zero = 0;
+        {shfl("idx", "0x1f", "zero", "first")}
+        v = first;
+    }}
+    return v;
+#else
+    return x;  // never used: the shuffle team is built for CUDA devices only
+#endif
+""")
+
+
+@wp.func_native(_reduction_snippet("double", "v + other"))
+def warp_sum_f64(x: wp.float64, lanes: int) -> wp.float64:
+    """The sum of x over the team's lanes, the same bits in every lane (warp shuffles)."""
+    ...
+
+
+@wp.func_native(_reduction_snippet("double", "fmax(v, other)"))
+def warp_max_f64(x: wp.float64, lanes: int) -> wp.float64:
+    """The maximum of x over the team's lanes (warp shuffles; a NaN is dropped, as fmax does)."""
+    ...
+
+
+@wp.func_native(_reduction_snippet("double", "fmin(v, other)"))
+def warp_min_f64(x: wp.float64, lanes: int) -> wp.float64:
+    """The minimum of x over the team's lanes (warp shuffles)."""
+    ...
+
+
+@wp.func_native(_reduction_snippet("int", "v + other"))
+def warp_sum_i32(x: int, lanes: int) -> int:
+    """The sum of x over the team's lanes (warp shuffles)."""
+    ...
+
+
+def _move_snippet(kind: str, clamp: str) -> str:
+    return (r"""
+#if defined(__CUDA_ARCH__)
+""" + _SHUFFLE_PRELUDE + f"""
+    double v = x;
+    double out;
+    WF_SHFL64("{kind}", "{clamp}", v, delta, out);
+    return out;
+#else
+    return x;  // never used: the shuffle team is built for CUDA devices only
+#endif
+""")
+
+
+@wp.func_native(_move_snippet("up", "0"))
+def warp_up_f64(x: wp.float64, delta: int, lanes: int) -> wp.float64:
+    """x of lane - delta (undefined below lane delta: callers mask it)."""
+    ...
+
+
+@wp.func_native(_move_snippet("down", "0x1f"))
+def warp_down_f64(x: wp.float64, delta: int, lanes: int) -> wp.float64:
+    """x of lane + delta (undefined from lanes - delta on: callers mask it)."""
+    ...
+
+
+@wp.func_native(r"""
+#if defined(__CUDA_ARCH__)
+    __syncwarp(lanes >= 32 ? 0xffffffffu : ((1u << lanes) - 1u));
+#endif
+""")
+def warp_sync(lanes: int):
+    """The team's lanes wait for each other; their global-memory writes before it are seen by all
+    after it (__syncwarp)."""
+    ...
+
+
+@wp.func_native("return (int)WP_TILE_THREAD_IDX;")
+def lane_index() -> int:
+    """This thread's lane in its team (the thread's index in its tile block; CPU fibers included)."""
+    ...
+
+
+# ---- the same operations through a tile (exchange = "emulated") ----
+
+@wp.func
+def tile_value_f64(x: wp.float64, source: int):
+    """Lane ``source``'s x through a tile (the CPU's fibers)."""
+    r = wp.tile_extract(wp.tile(x), source)
+    settle()
+    return r
+
+
+@wp.func
+def tile_value_i32(x: int, source: int):
+    r = wp.tile_extract(wp.tile(x), source)
+    settle()
+    return r
+
+
+def make_emulated_shuffles(lanes: int):
+    """warp_sum_f64, .., warp_sync of a team of ``lanes`` with each shuffle through a tile, in the
+    same order of operations."""
+    power_of_two = lanes & (lanes - 1) == 0
+    levels = max(1, (lanes - 1).bit_length())  # ceil(log2(lanes))
+
+    @wp.func
+    def partner_f64(v: wp.float64, lane: int, s: int):
+        """The butterfly's partner lane ^ s, or the tree's lane + s (clamped; masked by callers)."""
+        if wp.static(power_of_two):
+            return tile_value_f64(v, lane ^ s)
+        return tile_value_f64(v, wp.min(lane + s, lanes - 1))
+
+    @wp.func
+    def partner_i32(v: int, lane: int, s: int):
+        if wp.static(power_of_two):
+            return tile_value_i32(v, lane ^ s)
+        return tile_value_i32(v, wp.min(lane + s, lanes - 1))
+
+    @wp.func
+    def merged(lane: int, s: int):
+        """Whether a lane merges its partner's value at stride s."""
+        return wp.static(power_of_two) or lane + s < lanes
+
+    @wp.func
+    def sum_f64(x: wp.float64, lanes_: int):
+        lane = lane_index()
+        v = x
+        s = int(1 << (levels - 1))
+        for _level in range(levels):
+            other = partner_f64(v, lane, s)
+            if merged(lane, s):
+                v = v + other
+            s = s // 2
+        if wp.static(not power_of_two):
+            v = tile_value_f64(v, 0)
+        return v
+
+    @wp.func
+    def max_f64(x: wp.float64, lanes_: int):
+        lane = lane_index()
+        v = x
+        s = int(1 << (levels - 1))
+        for _level in range(levels):
+            other = partner_f64(v, lane, s)
+            if merged(lane, s):
+                v = wp.max(v, other)
+            s = s // 2
+        if wp.static(not power_of_two):
+            v = tile_value_f64(v, 0)
+        return v
+
+    @wp.func
+    def min_f64(x: wp.float64, lanes_: int):
+        lane = lane_index()
+        v = x
+        s = int(1 << (levels - 1))
+        for _level in range(levels):
+            other = partner_f64(v, lane, s)
+            if merged(lane, s):
+                v = wp.min(v, other)
+            s = s // 2
+        if wp.static(not power_of_two):
+            v = tile_value_f64(v, 0)
+        return v
+
+    @wp.func
+    def sum_i32(x: int, lanes_: int):
+        lane = lane_index()
+        v = x
+        s = int(1 << (levels - 1))
+        for _level in range(levels):
+            other = partner_i32(v, lane, s)
+            if merged(lane, s):
+                v = v + other
+            s = s // 2
+        if wp.static(not power_of_two):
+            v = tile_value_i32(v, 0)
+        return v
+
+    @wp.func
+    def up_f64(x: wp.float64, delta: int, lanes_: int):
+        return tile_value_f64(x, wp.max(lane_index() - delta, 0))
+
+    @wp.func
+    def down_f64(x: wp.float64, delta: int, lanes_: int):
+        return tile_value_f64(x, wp.min(lane_index() + delta, lanes - 1))
+
+    @wp.func
+    def sync(lanes_: int):
+        settle()
+
+    return dict(sum_f64=sum_f64, max_f64=max_f64, min_f64=min_f64, sum_i32=sum_i32, up_f64=up_f64,
+                down_f64=down_f64, sync=sync)
+
+
+def make_exchange_team(lanes: int, exchange: str):
+    """The team's operations (those of make_tile_reductions and make_separator_exchange) on the lane
+    exchange by value: ``exchange`` = "shuffle" (warp shuffles: CUDA, lanes <= 32) or "emulated"
+    (the same through a tile)."""
+    if exchange == "shuffle":
+        ops = dict(sum_f64=warp_sum_f64, max_f64=warp_max_f64, min_f64=warp_min_f64, sum_i32=warp_sum_i32,
+                   up_f64=warp_up_f64, down_f64=warp_down_f64, sync=warp_sync)
+    else:
+        ops = make_emulated_shuffles(lanes)
+    sum_f64, max_f64, min_f64, sum_i32 = ops["sum_f64"], ops["max_f64"], ops["min_f64"], ops["sum_i32"]
+    up_f64, down_f64, sync = ops["up_f64"], ops["down_f64"], ops["sync"]
+    levels = max(1, (lanes - 1).bit_length())  # ceil(log2(lanes)): the cyclic reduction's levels
+
+    @wp.func
+    def team_sum(x: wp.float64):
+        sync(lanes)
+        return sum_f64(x, lanes)
+
+    @wp.func
+    def team_max(x: wp.float64):
+        """Maximum over the lanes (a NaN lane value is dropped: callers map non-finite to inf)."""
+        sync(lanes)
+        return max_f64(x, lanes)
+
+    @wp.func
+    def team_min(x: wp.float64):
+        sync(lanes)
+        return min_f64(x, lanes)
+
+    @wp.func
+    def team_count(x: int):
+        sync(lanes)
+        return sum_i32(x, lanes)
+
+    @wp.func
+    def barrier():
+        """Every lane's writes before this call are seen by every lane after it."""
+        sync(lanes)
+
+    @wp.func
+    def team_sum_vec12(x: vec12d):
+        sync(lanes)
+        return vec12d(sum_f64(x[0], lanes), sum_f64(x[1], lanes), sum_f64(x[2], lanes), sum_f64(x[3], lanes),
+                      sum_f64(x[4], lanes), sum_f64(x[5], lanes), sum_f64(x[6], lanes), sum_f64(x[7], lanes),
+                      sum_f64(x[8], lanes), sum_f64(x[9], lanes), sum_f64(x[10], lanes), sum_f64(x[11], lanes))
+
+    @wp.func
+    def from_next_lane(x: vec5d, lane: int):
+        """The value of lane + 1 (zero for the last lane)."""
+        sync(lanes)
+        out = vec5d(down_f64(x[0], 1, lanes), down_f64(x[1], 1, lanes), down_f64(x[2], 1, lanes),
+                    down_f64(x[3], 1, lanes), down_f64(x[4], 1, lanes))
+        if lane + 1 >= lanes:
+            out = vec5d()
+        return out
+
+    @wp.func
+    def from_neighbour_lanes(x: vec4d, lane: int):
+        """The values of lane - 1 and lane + 1 (zero beyond the first and the last lane)."""
+        sync(lanes)
+        prev = vec4d(up_f64(x[0], 1, lanes), up_f64(x[1], 1, lanes), up_f64(x[2], 1, lanes), up_f64(x[3], 1, lanes))
+        nxt = vec4d(down_f64(x[0], 1, lanes), down_f64(x[1], 1, lanes), down_f64(x[2], 1, lanes),
+                    down_f64(x[3], 1, lanes))
+        if lane == 0:
+            prev = vec4d()
+        if lane + 1 >= lanes:
+            nxt = vec4d()
+        return prev, nxt
+
+    @wp.func
+    def reduced_solve(row: vec6d, lane: int):
+        """The separators of the partitioned tridiagonal solve (as the tile team's reduced_solve:
+        row = (A, B, C, D0, D1, D2) of row k, returns (E_{k-1}, E_k)) by parallel cyclic
+        reduction: at stride s = 1, 2, 4, .. each row eliminates its couplings to rows k - s and
+        k + s with those rows, which couples it to rows k - 2s and k + 2s, until no coupling is
+        left inside the team; then E_k = D_k / B_k. Diagonal dominance (the Newton matrix has it)
+        keeps it stable without pivoting, as it does the Thomas algorithm."""
+        a = row[0]
+        b = row[1]
+        c = row[2]
+        d0 = row[3]
+        d1 = row[4]
+        d2 = row[5]
+        if lane == 0:
+            a = wp.float64(0.0)
+        if lane + 1 >= lanes:
+            c = wp.float64(0.0)
+        s = int(1)
+        for _level in range(levels):
+            # row k - s (up) and row k + s (down); a coupling across the team's edge is zero at
+            # every level, so the rows beyond it are not used
+            a_up = up_f64(a, s, lanes)
+            b_up = up_f64(b, s, lanes)
+            c_up = up_f64(c, s, lanes)
+            d0_up = up_f64(d0, s, lanes)
+            d1_up = up_f64(d1, s, lanes)
+            d2_up = up_f64(d2, s, lanes)
+            a_dn = down_f64(a, s, lanes)
+            b_dn = down_f64(b, s, lanes)
+            c_dn = down_f64(c, s, lanes)
+            d0_dn = down_f64(d0, s, lanes)
+            d1_dn = down_f64(d1, s, lanes)
+            d2_dn = down_f64(d2, s, lanes)
+            alpha = wp.float64(0.0)
+            gamma = wp.float64(0.0)
+            a_new = wp.float64(0.0)
+            c_new = wp.float64(0.0)
+            if lane - s >= 0:
+                alpha = -a / b_up
+                a_new = alpha * a_up
+            if lane + s < lanes:
+                gamma = -c / b_dn
+                c_new = gamma * c_dn
+            b = b + alpha * c_up + gamma * a_dn
+            d0 = d0 + alpha * d0_up + gamma * d0_dn
+            d1 = d1 + alpha * d1_up + gamma * d1_dn
+            d2 = d2 + alpha * d2_up + gamma * d2_dn
+            a = a_new
+            c = c_new
+            s = s * 2
+        inv = wp.float64(1.0) / b
+        e_self = vec3d(d0 * inv, d1 * inv, d2 * inv)
+        e_prev = vec3d(up_f64(e_self[0], 1, lanes), up_f64(e_self[1], 1, lanes), up_f64(e_self[2], 1, lanes))
+        if lane == 0:
+            e_prev = vec3d()
+        return e_prev, e_self
+
+    return dict(team_max=team_max, team_min=team_min, team_sum=team_sum, team_count=team_count, barrier=barrier,
+                team_sum_vec12=team_sum_vec12, from_next_lane=from_next_lane,
+                from_neighbour_lanes=from_neighbour_lanes, reduced_solve=reduced_solve)
+
+
+EXCHANGES = ("tile", "shuffle", "emulated")
+
+
+def make_team(ft, lanes: int, exchange: str = "tile"):
     """Reductions over a member's team (identity for lanes = 1) and the separator exchange of the
-    team's tridiagonal solve."""
+    team's tridiagonal solve: through Warp's tiles (exchange = "tile"), warp shuffles ("shuffle":
+    CUDA, at most 32 lanes) or the shuffles' algorithms through a tile ("emulated")."""
     if lanes == 1:
         return make_solo()
     if ft != wp.float64:
         raise ValueError("a team of lanes needs float64")
-    return dict(lanes=lanes, **make_tile_reductions(lanes), **make_separator_exchange(lanes))
+    if exchange not in EXCHANGES:
+        raise ValueError(f"team exchange {exchange!r} is invalid; valid: {', '.join(EXCHANGES)}")
+    if exchange == "tile":
+        return dict(lanes=lanes, exchange=exchange, **make_tile_reductions(lanes), **make_separator_exchange(lanes))
+    if lanes > 32:
+        raise ValueError(f"a team exchange {exchange!r} of {lanes} lanes is invalid: at most 32 lanes (one warp)")
+    return dict(lanes=lanes, exchange=exchange, **make_exchange_team(lanes, exchange))

@@ -184,7 +184,8 @@ def main(argv=None):
             err = float(np.max(np.abs(ds.mu_s.values[:k] / ref_mu[:k] - 1)))
             steps = ds.steps_accepted.values + ds.steps_rejected.values
             row = dict(
-                members=m, nodes=args.nodes, dtype=dtype, device=device, lanes=int(ds.attrs["lanes"]), rtol=args.rtol, fronts=event,
+                members=m, nodes=args.nodes, dtype=dtype, device=device, lanes=int(ds.attrs["lanes"]),
+                team_exchange=ds.attrs.get("team_exchange", "none"), rtol=args.rtol, fronts=event,
                 integration_passes=int(ds.attrs.get("integration_passes", 1)), commit=commit, mu_s_error=err,
                 relaxation_gate=args.relaxation_gate, predict_switches=predict, method=method,
                 mean_newton_iterations=float(ds.newton_iterations.values.mean()),

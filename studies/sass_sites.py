@@ -1,11 +1,19 @@
 """The integrate kernel's machine code by inlined call site, on a CUDA host: how many SASS
 instructions each call in the kernel's Python source became (static counts; a function that
-CUDA inlined at k sites counts k times). docs/performance.md, "Instruction cache".
+CUDA inlined at k sites counts k times), and of them the local-memory (stack: LDL/STL), barrier
+(BAR), shared-memory (LDS/STS) and FP64-reciprocal (MUFU.RCP64H, one per division or reciprocal)
+instructions; then the kernel's registers and stack (cuobjdump -res-usage).
+docs/performance.md, "Instruction cache".
 
-    python studies/sass_sites.py [--nodes 200] [--lanes 32] [--top 25]
+    python studies/sass_sites.py [--nodes 200] [--lanes 32] [--top 25] [--relaxation-gate stress]
+                                 [--arch 90]
 
 Compiles the default law's team kernel with line info (wp.config.lineinfo), disassembles its cubin
 with nvdisasm (CUDA toolkit) and prints the total and the call sites with the most instructions.
+Without a GPU (or with --arch), the kernel is compiled ahead of time by Warp's NVRTC for that
+architecture (sm_90: the H100), which needs no driver; nvdisasm and cuobjdump then come from
+$CUDA_BIN, the PATH or /usr/local/cuda/bin (the PyPI wheels nvidia-cuda-nvdisasm and
+nvidia-cuda-cuobjdump carry them). WARPFRIC_TEAM_EXCHANGE picks the team's lane exchange.
 """
 
 import argparse
@@ -24,9 +32,30 @@ SITE = re.compile(r'//## File "([^"]+)", line (\d+)(?: inlined at "([^"]+)", lin
 INSTRUCTION = re.compile(r"/\*[0-9a-f]{4,}\*/\s+(@!?U?P\w+\s+)?[A-Z]")  # not the .byte data lines
 
 
+# instruction kinds counted apart, by opcode prefix
+KINDS = {"local": ("LDL", "STL"), "barrier": ("BAR",), "shared": ("LDS", "STS"), "rcp64": ("MUFU.RCP64H",),
+         "shuffle": ("SHFL",)}
+OPCODE = re.compile(r"/\*[0-9a-f]{4,}\*/\s+(?:@!?U?P\w+\s+)?([A-Z][A-Z0-9_.]*)")
+
+
+def kind_of(line: str):
+    """The KINDS key of an instruction line, or None."""
+    m = OPCODE.search(line)
+    if not m:
+        return None
+    op = m.group(1)
+    for kind, prefixes in KINDS.items():
+        if any(op == p or op.startswith(p + ".") for p in prefixes):
+            return kind
+    return None
+
+
 def call_sites(sass: str) -> tuple:
-    """(total instructions, Counter of (file, line) of the inlined calls each instruction sits in)."""
+    """(total instructions, Counter of (file, line) of the inlined calls each instruction sits in,
+    {kind: Counter of the same sites for that kind's instructions}, {kind: total})."""
     sites, counts, total, comment, group = frozenset(), collections.Counter(), 0, False, []
+    by_kind = {k: collections.Counter() for k in KINDS}
+    kind_totals = collections.Counter()
     for line in sass.splitlines():
         m = SITE.search(line)
         if m:
@@ -41,7 +70,18 @@ def call_sites(sass: str) -> tuple:
         if INSTRUCTION.search(line):
             total += 1
             counts.update(sites)
-    return total, counts
+            kind = kind_of(line)
+            if kind:
+                kind_totals[kind] += 1
+                by_kind[kind].update(sites)
+    return total, counts, by_kind, kind_totals
+
+
+def tool(name: str) -> str:
+    """A CUDA binary utility: $CUDA_BIN/name, on the PATH, or /usr/local/cuda/bin/name."""
+    if os.environ.get("CUDA_BIN"):
+        return os.path.join(os.environ["CUDA_BIN"], name)
+    return shutil.which(name) or os.path.join("/usr/local/cuda/bin", name)
 
 
 def main(argv=None):
@@ -49,22 +89,41 @@ def main(argv=None):
     ap.add_argument("--nodes", type=int, default=200)
     ap.add_argument("--lanes", type=int, default=32)
     ap.add_argument("--top", type=int, default=25)
+    ap.add_argument("--relaxation-gate", default="stress")
+    ap.add_argument("--arch", type=int, default=None, help="compile ahead of time for this sm (no GPU needed)")
     args = ap.parse_args(argv)
-    nvdisasm = shutil.which("nvdisasm") or "/usr/local/cuda/bin/nvdisasm"
+    nvdisasm = tool("nvdisasm")
     wp.config.lineinfo = True
     wp.config.quiet = True
-    wf.simulate({"eccentricity": [0.1]}, solver=wf.Solver(nodes=args.nodes, lanes=args.lanes), fronts=None,
-                device="cuda:0", progress=False)
-    cubin = max(glob.glob(os.path.join(wp.config.kernel_cache_dir or os.path.expanduser("~/.cache/warp"),
-                                       "**", "*integrate*.cubin"), recursive=True), key=os.path.getmtime)
+    wp.init()
+    model = wf.Model(relaxation_gate=args.relaxation_gate)
+    if args.arch is None and wp.get_cuda_device_count() > 0:
+        wf.simulate({"eccentricity": [0.1]}, model=model, solver=wf.Solver(nodes=args.nodes, lanes=args.lanes),
+                    fronts=None, device="cuda:0", progress=False)
+        cubin = max(glob.glob(os.path.join(wp.config.kernel_cache_dir or os.path.expanduser("~/.cache/warp"),
+                                           "**", "*integrate*.cubin"), recursive=True), key=os.path.getmtime)
+    else:
+        from warpfric.kernels.integrator import get_integrator
+
+        kernel = get_integrator("float64", model, args.lanes, "tr_bdf2", cuda=True)["integrate"]
+        kernel.module.options["block_dim"] = args.lanes
+        cubin = str(wp.compile_aot_module(kernel.module, arch=args.arch or 90, use_ptx=False,
+                                          module_dir=os.path.join(wp.config.kernel_cache_dir, "sass_sites"))[0])
     sass = subprocess.run([nvdisasm, "-g", "-gi", cubin], capture_output=True, text=True, check=True).stdout
-    total, counts = call_sites(sass)
+    total, counts, by_kind, kind_totals = call_sites(sass)
     print(f"SASS instructions {total} ({cubin})")
+    print("of which " + ", ".join(f"{k} {kind_totals[k]}" for k in KINDS))
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    print(f"{'instr':>7s} " + " ".join(f"{k:>7s}" for k in KINDS) + "  site")
     for (name, line), n in counts.most_common(args.top):
         path = os.path.join(root, "kernels", name)
-        src = open(path).read().splitlines()[line - 1].strip()[:90] if os.path.exists(path) else ""
-        print(f"{n:7d}  {name}:{line}  {src}")
+        src = open(path).read().splitlines()[line - 1].strip()[:80] if os.path.exists(path) else ""
+        kinds = " ".join(f"{by_kind[k][(name, line)]:7d}" for k in KINDS)
+        print(f"{n:7d} {kinds}  {name}:{line}  {src}")
+    cuobjdump = tool("cuobjdump")
+    if os.path.exists(cuobjdump):
+        usage = subprocess.run([cuobjdump, "-res-usage", cubin], capture_output=True, text=True).stdout
+        print("\n".join(ln.strip() for ln in usage.splitlines() if "REG" in ln or "Function" in ln))
 
 
 if __name__ == "__main__":

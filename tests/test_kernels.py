@@ -158,11 +158,11 @@ def _bordered_kernel(tilt_on):
     return solve
 
 
-def _team_bordered_kernel(tilt_on, lanes):
+def _team_bordered_kernel(tilt_on, lanes, exchange):
     from warpfric.kernels.newton import make_bordered_solver, make_team_solver
     from warpfric.kernels.team import make_team, node_range, vec3d
 
-    team = make_team(f64, lanes)
+    team = make_team(f64, lanes, exchange)
     team_solver = make_team_solver(f64, team)
     start_rows, lane_row, team_solve = team_solver["start_rows"], team_solver["lane_row"], team_solver["team_solve"]
     team_sum_vec12 = team["team_sum_vec12"]
@@ -198,11 +198,16 @@ def _team_bordered_kernel(tilt_on, lanes):
     return solve
 
 
-@pytest.mark.parametrize("tilt_on, lanes", [(True, 1), (False, 1), (True, 4), (False, 3), (True, 8)])
-def test_bordered_tridiagonal_solve_matches_numpy(tilt_on, lanes):
+TEAM_EXCHANGES = ["tile", "emulated"] + (["shuffle"] if DEVICE.startswith("cuda") else [])
+
+
+@pytest.mark.parametrize("tilt_on, lanes, exchange", [(True, 1, None), (False, 1, None)] + [
+    (tilt_on, lanes, exchange) for exchange in TEAM_EXCHANGES for tilt_on, lanes in ((True, 4), (False, 3), (True, 8))])
+def test_bordered_tridiagonal_solve_matches_numpy(tilt_on, lanes, exchange):
     """[[J, B], [C, D]] (dV, dd0, da) = (rhs, -e) for random diagonally dominant J and random borders,
     5 systems of 17 unknowns: the kernel's Thomas + Schur solve (lanes = 1) and the partitioned solve
-    of a team (lanes > 1: 8 lanes leave lanes of two nodes, one interior row) equal
+    of a team (lanes > 1: 8 lanes leave lanes of two nodes, one interior row; its separators by
+    the tile team's twisted factorisation or by parallel cyclic reduction, kernels/team.py) equal
     numpy.linalg.solve to 1e-11."""
     rng = np.random.default_rng(7)
     members, n = 5, 17
@@ -221,7 +226,7 @@ def test_bordered_tridiagonal_solve_matches_numpy(tilt_on, lanes):
         wp.launch(_bordered_kernel(tilt_on), dim=members, inputs=inputs, device=DEVICE)
     else:
         with cpu_blocks(True):
-            wp.launch_tiled(_team_bordered_kernel(tilt_on, lanes), dim=[members], inputs=inputs, block_dim=lanes,
+            wp.launch_tiled(_team_bordered_kernel(tilt_on, lanes, exchange), dim=[members], inputs=inputs, block_dim=lanes,
                             device=DEVICE)
     k = 2 if tilt_on else 1
     for m in range(members):

@@ -16,10 +16,14 @@ from warpfric.engine import AUTO_LANES, AUTO_MIN_NODES, choose_lanes, cpu_blocks
 MEMBERS = {"eccentricity": [0.0, -0.2, 0.3, 0.6], "normal_force": [1000.0, 1000.0, 300.0, 3000.0]}
 
 
-@pytest.mark.parametrize("gate, lanes, fronts, nodes, rtol", [("none", 2, False, 30, 1e-8), ("none", 7, False, 30, 1e-8),
-                                                              ("none", 8, False, 30, 1e-8), ("stress", 4, True, 30, 1e-8),
-                                                              ("none", 8, False, 16, 1e-7)])
-def test_a_team_gives_the_thread_per_member_outputs(gate, lanes, fronts, nodes, rtol):
+# the lane exchange (kernels/team.py): None is the device's automatic one (tiles on the CPU, warp
+# shuffles on a GPU); "emulated" runs the shuffles' algorithms (tree reductions, parallel cyclic
+# reduction of the separators) on the CPU
+@pytest.mark.parametrize("gate, lanes, fronts, nodes, rtol, exchange", [
+    ("none", 2, False, 30, 1e-8, None), ("none", 7, False, 30, 1e-8, None), ("none", 8, False, 30, 1e-8, None),
+    ("stress", 4, True, 30, 1e-8, None), ("none", 8, False, 16, 1e-7, None),
+    ("stress", 7, False, 30, 1e-8, "emulated"), ("none", 8, False, 16, 1e-7, "emulated")])
+def test_a_team_gives_the_thread_per_member_outputs(gate, lanes, fronts, nodes, rtol, exchange, monkeypatch):
     """mu_s, its time and the front speeds of a team of `lanes` threads equal the thread-per-member
     kernel's to 1e-8 relative (the runs' own error control is rtol 1e-5: the kernels differ only by
     the order of their sums); same statuses; the steps taken differ by at most one. 7 and 8 lanes
@@ -28,7 +32,11 @@ def test_a_team_gives_the_thread_per_member_outputs(gate, lanes, fronts, nodes, 
     nodes whose border-row entries come from the neighbouring lanes (kernels/newton.py,
     assemble_system); there the lift-off member's mu_s_time moves by 2e-8 (before that exchange)
     to 4e-8 with the order of the sums, the others by 1e-15, hence 1e-7. The final fields are not
-    compared: the automatic end may fall a step apart."""
+    compared: the automatic end may fall a step apart. The emulated exchange (7 lanes: a team that
+    is not a power of two, the lift-off member; 8 lanes of 2 nodes) checks on the CPU the
+    algorithms of the GPU's warp shuffles."""
+    if exchange:
+        monkeypatch.setenv("WARPFRIC_TEAM_EXCHANGE", exchange)
     model = wf.Model(relaxation_gate=gate)
     front = wf.Fronts() if fronts else None
     ref = run(MEMBERS, model=model, nodes=nodes, rtol=1e-5, fronts=front, lanes=1)
@@ -48,10 +56,10 @@ def test_a_team_gives_the_thread_per_member_outputs(gate, lanes, fronts, nodes, 
             np.testing.assert_allclose(team[name].values, ref[name].values, rtol=1e-6, equal_nan=True)
 
 
-def _reductions_kernel(lanes):
+def _reductions_kernel(lanes, exchange):
     from warpfric.kernels.team import make_team, vec12d
 
-    team = make_team(wp.float64, lanes)
+    team = make_team(wp.float64, lanes, exchange)
     team_sum_vec12, team_max, team_sum = team["team_sum_vec12"], team["team_max"], team["team_sum"]
 
     @wp.kernel(module="unique")
@@ -74,14 +82,19 @@ def _reductions_kernel(lanes):
     return reduce
 
 
-@pytest.mark.parametrize("lanes", [2, 4, 7, 8, 16])
-def test_every_lane_reads_the_same_team_reductions(lanes):
+EXCHANGES = ["tile", "emulated"] + (["shuffle"] if DEVICE.startswith("cuda") else [])
+
+
+@pytest.mark.parametrize("exchange", EXCHANGES)
+@pytest.mark.parametrize("lanes", [2, 4, 7, 8, 16, 32])
+def test_every_lane_reads_the_same_team_reductions(lanes, exchange):
     """Each lane of a team gets the sums (of k/3: exact to 1e-15 in any order) and the maximum in
     back-to-back reductions: the review's race (Warp's CPU reduction writing into the freed shared
-    memory of the previous result before synchronising) gave lanes 0..6 of 8 a zero component."""
+    memory of the previous result before synchronising) gave lanes 0..6 of 8 a zero component.
+    Every lane exchange (kernels/team.py), teams that are not a power of two included."""
     out = wp.zeros((3, lanes, 14), dtype=wp.float64, device=DEVICE)
     with cpu_blocks(True):
-        wp.launch_tiled(_reductions_kernel(lanes), dim=[1], inputs=[out], block_dim=lanes, device=DEVICE)
+        wp.launch_tiled(_reductions_kernel(lanes, exchange), dim=[1], inputs=[out], block_dim=lanes, device=DEVICE)
     o = out.numpy()
     lane_sum = lanes * (lanes - 1) / 2.0
     expected = np.array([(lanes * (1.0 + j) + lane_sum) / 3.0 for j in range(12)])

@@ -46,6 +46,7 @@ class EngineResult:
     device_bytes_per_member: float  # device memory of the integration arrays per member, bytes (recorded
     # fields, the front segmentation and the read-back copies not included)
     lanes: int  # threads per member (1: the thread-per-member kernel; > 1: the cooperative kernel)
+    team_exchange: str  # how a team's lanes exchange values (kernels/team.py; "none" for one lane)
     passes: int  # integration passes (2 with the velocity front, else 1)
 
 
@@ -341,7 +342,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                       "CPU fibers, slowly and for tests only (docs/model.md, 'Time integration'); "
                       "lanes=1 is the CPU's kernel", stacklevel=3)
     t_build = time.perf_counter()
-    kern = get_integrator(solver.dtype, model, lanes, solver.method)
+    kern = get_integrator(solver.dtype, model, lanes, solver.method, cuda=str(device).startswith("cuda"))
     with cpu_blocks(team):  # compile or load now, so that it is timed apart
         wp.load_module(kern["integrate"].module, device=device, block_dim=lanes if team else None)
         wp.load_module(kern["evaluate_fields"].module, device=device)
@@ -446,7 +447,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             arrival=arrival, arrival_error=arrival_error, strength_peak=strength_peak,
             event=event, record=arrays.record.numpy() if record is not None else None,
             kernel_build_s=kernel_build_s, device_bytes_per_member=device_bytes_per_member, lanes=lanes,
-            passes=n_passes,
+            team_exchange=kern["exchange"], passes=n_passes,
         )
         wp.synchronize_device(device)
     return result
