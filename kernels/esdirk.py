@@ -218,6 +218,7 @@ def make_step_result(ft, newton, gates):
         non_finite: wp.int32
         delta0: ft
         tilt: ft
+        newton_curvature: ft  # the Newton curvature its last stage ended with (0: not known)
         sums: StageSums
         switch_test: SwitchTest
 
@@ -239,12 +240,14 @@ def make_tr_bdf2_steps(ft, terms, newton, StepResult, arrays):
     def implicit_step(
         c: Coeffs, p: MemberParams, settings: SolverSettings, m: int, n: int, state: array3, K: array4,
         work: array3, gates: array3, s1: int, s2: int, s3: int, t: wp.float64, h: wp.float64,
-        t_new: wp.float64, delta0: ft, tilt: ft, backward_euler: int,
+        t_new: wp.float64, delta0: ft, tilt: ft, backward_euler: int, newton_curvature: ft,
     ):
         """One step of size h from t (ending at t_new). TR-BDF2 (backward_euler = 0): stage 2
         (trapezoidal, at t + 2 gamma h) into K[s2], stage 3 (BDF2, at t_new) into K[s3], and the
         error norm; backward Euler (non-zero, a (re)start): one stage at t_new into K[s3], no error
-        estimate. The stages are one loop with a bound known only at run time, so that the code of
+        estimate. newton_curvature: the Newton curvature of the step before (kernels/newton.py
+        newton_solve; 0: not known), carried from stage to stage and returned in the result. The
+        stages are one loop with a bound known only at run time, so that the code of
         a stage (the Newton solve above all) is compiled once, not once per stage: on a GPU several
         inlined copies overflow the instruction cache when the warps of an SM are in different
         stages (docs/performance.md, "GPU: where the time goes")."""
@@ -260,6 +263,9 @@ def make_tr_bdf2_steps(ft, terms, newton, StepResult, arrays):
         iterations = int(0)
         d0 = delta0
         a = tilt
+        curvature = newton_curvature
+        if backward_euler != 0:
+            curvature = ft(0.0)  # another stage matrix (g = h): not carried
         for stage in range(n_stages):
             last = stage == n_stages - 1
             t_stage = t_new
@@ -272,7 +278,8 @@ def make_tr_bdf2_steps(ft, terms, newton, StepResult, arrays):
                 prepare_stage(c, m, n, state, K, work, ft(h), ft(GAMMA), s1, ft(0.0), s1, 1, ft(0.0))
             else:
                 prepare_stage(c, m, n, state, K, work, ft(h), ft(W_TRB), s1, ft(W_TRB), s2, 2, ft(EXTRAPOLATE_STAGE3))
-            ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, gates, g, t_stage, t, d0, a)
+            ok, d0, a, iters, bad, curvature = newton_solve(c, p, settings, m, n, work, gates, g, t_stage, t, d0, a,
+                                                            curvature)
             iterations = iterations + iters
             if ok != 1:
                 break
@@ -291,6 +298,7 @@ def make_tr_bdf2_steps(ft, terms, newton, StepResult, arrays):
         res.non_finite = bad
         res.delta0 = d0
         res.tilt = a
+        res.newton_curvature = curvature
         return res
 
     return dict(implicit_step=implicit_step)
@@ -437,7 +445,8 @@ def make_esdirk4(ft, model, terms, newton, gates, team, StepResult, fold_error):
                 t_stage = t + e4_abscissa(i) * h
                 end = 0
             prepare_stage4(c, m, n, state, K, work, hf, s1, i)
-            ok, d0, a, iters, bad = newton_solve(c, p, settings, m, n, work, gates, g, t_stage, t, d0, a)
+            ok, d0, a, iters, bad, _curvature = newton_solve(c, p, settings, m, n, work, gates, g, t_stage, t, d0, a,
+                                                             ft(0.0))
             iterations = iterations + iters
             if ok != 1:
                 break

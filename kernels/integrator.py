@@ -322,12 +322,17 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
             if wp.static(esdirk4):
                 if restart != 0:
                     res = implicit_step(c, p, settings, m, n, state, K, work, gates, s1, s2, s3, t, step.h, step.t_new,
-                                        delta0, tilt, 1)
+                                        delta0, tilt, 1, ft(0.0))
                 else:
                     res = esdirk4_step(c, p, settings, m, n, state, K, work, gates, s1, t, step.h, step.t_new, delta0, tilt)
             else:  # TR-BDF2, or backward Euler at a (re)start: one call, so the stage code is compiled once
                 res = implicit_step(c, p, settings, m, n, state, K, work, gates, s1, s2, s3, t, step.h, step.t_new,
-                                    delta0, tilt, restart)
+                                    delta0, tilt, restart, ft(st.newton_curvature))
+                # the next step's first Newton iteration is judged with this step's curvature
+                # (kernels/newton.py newton_solve); a failed solve or a restart forgets it
+                st.newton_curvature = wp.float64(0.0)
+                if res.ok == 1 and restart == 0:
+                    st.newton_curvature = wp.float64(res.newton_curvature)
             st.newton_iterations = st.newton_iterations + res.iterations
             # ---- controller ----
             if res.ok != 1:

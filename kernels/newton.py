@@ -364,6 +364,7 @@ def make_stage_equations(ft, model, terms, gates, method="tr_bdf2"):
         c2_left: ft
         c2_center: ft
         c2_right: ft
+        kink: ft  # 1: the node sits at a kink of the stage equations (lifted off, sliding on the yield surface, or its slip changed sign in the stage), else 0
 
     @wp.func
     def stage_displacement(work: array3, i: int, n: int, m: int, g: ft):
@@ -414,6 +415,14 @@ def make_stage_equations(ft, model, terms, gates, method="tr_bdf2"):
         row.c2_left = q2 * ns.d_u_left
         row.c2_center = q2 * ns.d_u_center - c.h_arm * wgt * c.kif * fr.d_slip
         row.c2_right = q2 * ns.d_u_right
+        # where Newton's contraction is no guide (kernels/newton.py newton_solve): a kink of the
+        # equations, i.e. a lifted-off node, a node sliding on the yield surface, or a slip that
+        # changed sign against the stage constant's (|s| in the relaxation, sign(s) in the viscous term)
+        slip = v_disc - c.kif * vel
+        slip_start = v_disc - c.kif * work[W_ZV, i, m]
+        row.kink = ft(0.0)
+        if sigma <= ft(0.0) or node_sliding(gates, i, m) > ft(0.0) or slip * slip_start <= ft(0.0):
+            row.kink = ft(1.0)
         return row
 
     return dict(NodeRow=NodeRow, disc_velocity_stage=disc_velocity_stage, normal_force_stage=normal_force_stage,
@@ -442,11 +451,13 @@ def make_bordered_system(ft):
         s20: ft
         s21: ft
         s22: ft
+        kink: ft  # 1: a node of this thread sits at a kink (NodeRow.kink); not summed over a team
 
     @wp.func
     def bordered_system(e1: ft, e2: ft, d11: ft, d12: ft, d21: ft, d22: ft, s10: ft, s11: ft, s12: ft, s20: ft,
-                        s21: ft, s22: ft):
+                        s21: ft, s22: ft, kink: ft):
         out = BorderedSystem()
+        out.kink = kink
         out.e1 = e1
         out.e2 = e2
         out.d11 = d11
@@ -501,6 +512,7 @@ def make_newton_system(ft, model, terms, team, equations, solver, team_solver):
         d12 = ft(0.0)
         d21 = ft(0.0)
         d22 = ft(0.0)
+        kink = ft(0.0)
         # the border rows C1, C2 get three contributions per node (i-1, i, i+1): a row entry is
         # complete one node later
         c1_prev = ft(0.0)
@@ -529,6 +541,7 @@ def make_newton_system(ft, model, terms, team, equations, solver, team_solver):
             row = node_row(c, settings, m, n, work, gates, i, u_l, u_c, u_r, delta0, tilt, v_disc, g)
             if wp.static(inertia):
                 work[W_DIAG, i, m] = row.jac_center
+            kink = wp.max(kink, row.kink)
             e1 += row.e1
             e2 += row.e2
             d11 += row.d11
@@ -574,12 +587,20 @@ def make_newton_system(ft, model, terms, team, equations, solver, team_solver):
             total = team_sum_vec12(vec12d(e1, e2, d11, d12, d21, d22, products[0], products[1], products[2],
                                           products[3], products[4], products[5]))
             return bordered_system(total[0] - force_per_depth, total[1] - moment_per_depth, total[2], total[3],
-                                   total[4], total[5], total[6], total[7], total[8], total[9], total[10], total[11])
+                                   total[4], total[5], total[6], total[7], total[8], total[9], total[10], total[11],
+                                   kink)
         else:
             s10, s11, s12, s20, s21, s22 = back_substitution(work, n, m)
-            return bordered_system(e1, e2, d11, d12, d21, d22, s10, s11, s12, s20, s21, s22)
+            return bordered_system(e1, e2, d11, d12, d21, d22, s10, s11, s12, s20, s21, s22, kink)
 
     return dict(assemble_system=assemble_system)
+
+
+# the error a Newton iteration may leave, estimated from its contraction, as a fraction of
+# Solver.newton_tol: the update test (norm <= newton_tol) leaves about a tenth of it with Newton's
+# usual contraction; as loose as the test itself, the velocity's noise made the velocity front's
+# time-error estimate 4x larger (docs/performance.md, "Newton iterations")
+NEWTON_ERROR_FRACTION = 0.1
 
 
 def make_newton_solve(ft, terms, team, equations, solver, system):
@@ -615,11 +636,21 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
     @wp.func
     def newton_solve(
         c: Coeffs, p: MemberParams, settings: SolverSettings, m: int, n: int, work: array3, gates: array3,
-        g: ft, t_stage: wp.float64, t_step: wp.float64, delta0_in: ft, tilt_in: ft,
+        g: ft, t_stage: wp.float64, t_step: wp.float64, delta0_in: ft, tilt_in: ft, curvature_in: ft,
     ):
         """Solve one implicit stage (stage constants z in work[W_ZU..W_ZP], start V in work[W_V], the
-        stage coefficient g = gamma*h). Returns (converged, delta0, tilt, iterations, non_finite);
-        the solved V is left in work[W_V]."""
+        stage coefficient g = gamma*h). Returns (converged, delta0, tilt, iterations, non_finite,
+        curvature); the solved V is left in work[W_V].
+
+        Converged when an update's error-weighted norm is at most settings.newton_tol, or when the
+        error left after it, estimated from its contraction theta as theta/(1 - theta) times its
+        norm, is at most NEWTON_ERROR_FRACTION x newton_tol (Hairer and Wanner II, IV.8). theta
+        is measured from the second iteration on; for the first it is predicted as K times the
+        norm, from the curvature K = theta/(previous norm) of the last measured contraction (Newton's quadratic convergence, ||dV_k|| ~ K
+        ||dV_{k-1}||^2; the affine-invariant estimate of Deuflhard's Newton codes), which
+        curvature_in carries from the previous stage or step (0: not known, no prediction). The
+        stage equations are nearly linear in V at a fixed gate, so K is small and one iteration
+        often suffices (docs/model.md, "Time integration")."""
         v_disc = ft(disc_velocity_stage(p, t_stage, t_step))
         force = normal_force_stage(p, t_stage, t_step)
         force_per_depth = ft(force / p.depth)
@@ -631,12 +662,15 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
         non_finite = int(0)
         iters = int(0)
         prev_norm = ft(1.0e30)
+        curvature = curvature_in
+        kinked = ft(0.0)  # whether an iteration of this solve met a kink (this thread's nodes)
         for it in range(settings.newton_max_iter):
             iters = it + 1
             # ---- pass 1: residuals, Jacobian rows, forward elimination (3 right-hand sides) ----
             # ---- pass 2: back substitution and the border products ----
             bs = assemble_system(c, settings, m, n, work, gates, g, delta0, tilt, v_disc, force_per_depth,
                                  moment_per_depth)
+            kinked = wp.max(kinked, bs.kink)
             # ---- the Schur complement ----
             d_delta0, d_tilt = schur_solve(bs.d11, bs.d12, bs.d21, bs.d22, bs.e1, bs.e2, bs.s10, bs.s11, bs.s12,
                                            bs.s20, bs.s21, bs.s22)
@@ -660,6 +694,21 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
             if norm <= ft(settings.newton_tol):
                 converged = 1
                 break
+            theta = ft(1.0)  # the update's contraction: measured, or predicted from the curvature
+            if it > 0:
+                theta = norm / prev_norm
+                curvature = theta / prev_norm
+            elif curvature > ft(0.0):
+                theta = curvature * norm
+            if wp.static(ft == wp.float64):
+                if theta < ft(1.0) and theta / (ft(1.0) - theta) * norm <= ft(NEWTON_ERROR_FRACTION) * ft(settings.newton_tol):
+                    # not at a kink of the equations, where the contraction says nothing of the
+                    # error (a lane's kink reaches the team through the maximum): else the solve
+                    # goes on as without the estimate and forgets the curvature
+                    if team_max(kinked) == ft(0.0):
+                        converged = 1
+                        break
+                    curvature = ft(0.0)
             # stagnation inside the error tolerance: an update within the step's tolerance (norm <= 1)
             # that no longer halves has reached the round-off level of the working precision (the
             # case it is meant for is float32; it applies to float64 too, where it is rare)
@@ -667,7 +716,7 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
                 converged = 1
                 break
             prev_norm = norm
-        return converged, delta0, tilt, iters, non_finite
+        return converged, delta0, tilt, iters, non_finite, curvature
 
     return dict(newton_solve=newton_solve)
 

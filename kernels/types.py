@@ -198,6 +198,7 @@ class IntegratorState:
     rejected_newton: wp.int32  # rejected because a stage's Newton solve failed (no convergence or a non-finite value)
     rejected_switch: wp.int32  # rejected to locate a gate switch (retried up to just past it; stress gate)
     missed_predictions: wp.int32  # accepted steps that ended at a predicted gate switch that did not happen
+    newton_curvature: wp.float64  # the last TR-BDF2 step's Newton curvature (kernels/newton.py newton_solve; 0: not known)
 
 
 @dataclasses.dataclass

@@ -572,8 +572,8 @@ def _newton_kernel():
         m = wp.tid()
         n = work.shape[1]
         c = make_coeffs(params[m], n)
-        ok, d0, a, iters, bad = newton_solve(c, params[m], settings, m, n, work, gates, f64(1e-6), f64(10.0),
-                                             f64(10.0), f64(6e-6), f64(0.0))
+        ok, d0, a, iters, bad, _curvature = newton_solve(c, params[m], settings, m, n, work, gates, f64(1e-6),
+                                                         f64(10.0), f64(10.0), f64(6e-6), f64(0.0), f64(0.0))
         out[m, 0] = ok
         out[m, 1] = bad
         out[m, 2] = iters
