@@ -22,7 +22,7 @@ from .esdirk import make_esdirk
 from .gates import make_gates
 from .model_terms import disc_velocity_at, make_model_terms
 from .newton import make_newton
-from .observers import make_observers, run_finished
+from .observers import ObserverSet, make_observers, run_finished
 from .team import EXCHANGES, make_team, node_range
 from .types import IntegratorState, MemberParams, OutputSettings, SolverSettings, stage_slots
 
@@ -95,19 +95,21 @@ def _filled(cell) -> bool:
     return True
 
 
-def get_integrator(dtype: str, model, lanes: int = 1, method: str = "tr_bdf2", cuda: bool = False) -> dict:
+def get_integrator(dtype: str, model, lanes: int = 1, method: str = "tr_bdf2", cuda: bool = False,
+                   observed: ObserverSet = ObserverSet()) -> dict:
     """Compiled kernels for one working precision, one set of model switches, one team size
     (lanes = 1: one thread per member; > 1: the cooperative kernel, launched with block_dim = lanes,
-    float64 only; kernels/team.py), one time integrator (Solver.method: 'tr_bdf2' or 'esdirk4') and
-    the kind of device they run on (cuda: a team's lane exchange, team_exchange) (cached)."""
+    float64 only; kernels/team.py), one time integrator (Solver.method: 'tr_bdf2' or 'esdirk4'),
+    the kind of device they run on (cuda: a team's lane exchange, team_exchange) and the observers
+    compiled in (kernels/observers.py ObserverSet; all by default) (cached)."""
     if method not in ("tr_bdf2", "esdirk4"):
         raise ValueError(f"integrator method {method!r} is invalid; valid: 'tr_bdf2' or 'esdirk4'")
     options = team_compile_options() if lanes > 1 else TeamCompileOptions()
     if lanes > 1:
         options = options._replace(exchange=team_exchange(lanes, cuda, options.exchange))
-    key = (dtype, model, lanes, method, options)
+    key = (dtype, model, lanes, method, options, observed)
     if key not in _CACHE:
-        _CACHE[key] = _make_integrator(dtype, model, lanes, method, options)
+        _CACHE[key] = _make_integrator(dtype, model, lanes, method, options, observed)
     # on every call, cached kernels included: Warp compiles a kernel at its first launch, with the
     # hints the functions have then
     _apply_inline_hints(_CACHE[key]["integrate"], options.inline, options.out_of_line)
@@ -145,24 +147,26 @@ def _apply_inline_hints(kernel, inline, out_of_line) -> None:
             _set_hint(fn, hint)
 
 
-def make_stages(ft, model, lanes: int = 1, method: str = "tr_bdf2", exchange: str = "tile") -> dict:
+def make_stages(ft, model, lanes: int = 1, method: str = "tr_bdf2", exchange: str = "tile",
+                observed: ObserverSet = ObserverSet()) -> dict:
     """Every device function of the integrator for scalar type ``ft``, ``model``, a team of
-    ``lanes`` threads per member with its lane exchange (kernels/team.py) and an integrator method,
-    by stage."""
+    ``lanes`` threads per member with its lane exchange (kernels/team.py), an integrator method and
+    the observers compiled in, by stage."""
     team = make_team(ft, lanes, exchange)
     terms = make_model_terms(ft, model)
     gates = make_gates(ft, model, terms, team)
     newton = make_newton(ft, model, terms, gates, team, method)
     esdirk = make_esdirk(ft, model, terms, newton, gates, team, method)
-    observers = make_observers(ft, model, terms, team, method)
+    observers = make_observers(ft, model, terms, team, method, observed)
     return dict(team=team, terms=terms, gates=gates, newton=newton, esdirk=esdirk, observers=observers)
 
 
-def _make_integrator(dtype: str, model, lanes: int, method: str = "tr_bdf2", options=TeamCompileOptions()):
-    """The integrate and evaluate_fields kernels for one working precision, model, team size and
-    method (get_integrator caches them)."""
+def _make_integrator(dtype: str, model, lanes: int, method: str = "tr_bdf2", options=TeamCompileOptions(),
+                     observed: ObserverSet = ObserverSet()):
+    """The integrate and evaluate_fields kernels for one working precision, model, team size,
+    method and observer set (get_integrator caches them)."""
     ft = wp.float64 if dtype == "float64" else wp.float32
-    stages = make_stages(ft, model, lanes, method, options.exchange or "tile")
+    stages = make_stages(ft, model, lanes, method, options.exchange or "tile", observed)
     acceptance = make_acceptance(ft, model, method, stages)
     integrate = make_integrate_kernel(ft, model, lanes, method, stages, acceptance, options)
     evaluate_fields = make_field_kernel(ft, stages)

@@ -3,15 +3,20 @@ the friction coefficient and its maximum mu_s, lift-off, the detachment fronts (
 arrival times) and the recorded fields; and the automatic end of a run, which is decided from them.
 
 ``on_accept`` is the one hook the integrator calls after each accepted step (the state already
-advanced); the front and recording observers are compiled in always but run only when the launch
-asks for them (OutputSettings.velocity_front / strength_front, IntegratorState.record_slot); the
-contact front is recorded with the gate switches (kernels/gates.py).
+advanced); the front and recording observers are compiled in only where the run may need them
+(``ObserverSet``: a run models only what its scene needs, and a smaller kernel leaves the GPU's
+instruction cache and registers to the rest) and run only when the launch asks for them
+(OutputSettings.velocity_front / strength_front, IntegratorState.record_slot); the contact front is
+recorded with the gate switches (kernels/gates.py).
 
-``make_observers(ft, model, terms, team, method)`` builds the functions for one working precision and
-model (the model's switches reach them through ``terms``), one factory per observer:
+``make_observers(ft, model, terms, team, method, observed)`` builds the functions for one working
+precision, model (the model's switches reach them through ``terms``) and ObserverSet, one factory
+per observer:
 ``make_state_interface`` (the friction law at the state, shared by the next two),
 ``make_velocity_front``, ``make_strength_front`` and ``make_recording``.
 """
+
+from typing import NamedTuple
 
 import warp as wp
 
@@ -320,9 +325,19 @@ def make_recording(ft, terms, team, interface):
     return dict(record_fields=record_fields)
 
 
-def make_observers(ft, model, terms, team, method="tr_bdf2"):
-    """The observers for one working precision and model, composed into on_accept: the velocity
-    front, the strength front, the recording and the friction point."""
+class ObserverSet(NamedTuple):
+    """The observers compiled into a kernel (the friction point always): all by default; a run
+    compiles those its fronts and recording may use (warpfric/engine.py observer_set)."""
+
+    velocity_front: bool = True
+    strength_front: bool = True
+    record: bool = True
+
+
+def make_observers(ft, model, terms, team, method="tr_bdf2", observed=ObserverSet()):
+    """The observers for one working precision, model and ObserverSet, composed into on_accept:
+    the velocity front, the strength front, the recording (those of ``observed``) and the friction
+    point."""
     # mu_s: TR-BDF2 refines the maximum by a parabola through three accepted points, ESDIRK4 by a
     # cubic through four (its longer steps)
     cubic = 1 if method == "esdirk4" else 0
@@ -346,14 +361,18 @@ def make_observers(ft, model, terms, team, method="tr_bdf2"):
         """After an accepted step from t_old to t_new (state advanced, K[s1] still f(y_old)): fronts,
         recording, then the friction point (mu(t) may jump across a backward-Euler restart: no
         parabola through it)."""
-        if outputs.velocity_front == 1:
-            st = track_fronts(c, p, st, m, n, K, work, s1, s2, s3, t_old, t_new, arrival, arrival_error,
-                              outputs.front_direction, outputs.front_threshold, 1 - backward_euler)
-        if outputs.strength_front == 1:
-            st = track_strength(c, p, st, m, n, state, t_old, t_new, delta0, tilt, backward_euler, strength, arrival,
-                                arrival_error)
-        if st.record_slot >= 0:
-            st = record_fields(c, p, st, m, n, state, t_old, t_new, delta0, tilt, record_times, record_previous, record)
+        if wp.static(observed.velocity_front):
+            if outputs.velocity_front == 1:
+                st = track_fronts(c, p, st, m, n, K, work, s1, s2, s3, t_old, t_new, arrival, arrival_error,
+                                  outputs.front_direction, outputs.front_threshold, 1 - backward_euler)
+        if wp.static(observed.strength_front):
+            if outputs.strength_front == 1:
+                st = track_strength(c, p, st, m, n, state, t_old, t_new, delta0, tilt, backward_euler, strength,
+                                    arrival, arrival_error)
+        if wp.static(observed.record):
+            if st.record_slot >= 0:
+                st = record_fields(c, p, st, m, n, state, t_old, t_new, delta0, tilt, record_times, record_previous,
+                                   record)
         if backward_euler == 1:
             st.npts = 0
         return friction_point(st, p, t_new, friction, normal, min_normal, cubic)

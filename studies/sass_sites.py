@@ -103,9 +103,12 @@ def main(argv=None):
         cubin = max(glob.glob(os.path.join(wp.config.kernel_cache_dir or os.path.expanduser("~/.cache/warp"),
                                            "**", "*integrate*.cubin"), recursive=True), key=os.path.getmtime)
     else:
+        from warpfric.engine import observer_set
         from warpfric.kernels.integrator import get_integrator
 
-        kernel = get_integrator("float64", model, args.lanes, "tr_bdf2", cuda=True)["integrate"]
+        # the kernel simulate(fronts=None) runs, as on a GPU above
+        kernel = get_integrator("float64", model, args.lanes, "tr_bdf2", cuda=True,
+                                observed=observer_set(None, None))["integrate"]
         kernel.module.options["block_dim"] = args.lanes
         cubin = str(wp.compile_aot_module(kernel.module, arch=args.arch or 90, use_ptx=False,
                                           module_dir=os.path.join(wp.config.kernel_cache_dir, "sass_sites"))[0])

@@ -1,8 +1,9 @@
 """The shape of the integrate kernel's code, where it decides the GPU's speed (docs/performance.md,
 "GPU: where the time goes"): the stage code (Newton solve, stage derivatives) has one call site,
-so that CUDA compiles it once instead of inlining a copy per stage, and the benchmark switches of
-its compilation are validated. Nothing is compiled here: the functions are read from the Python
-source the kernel is built from."""
+so that CUDA compiles it once instead of inlining a copy per stage, the benchmark switches of
+its compilation are validated, and a run compiles only the observers it may use. The call-site
+tests compile nothing (they read the Python source the kernel is built from); the observers' test
+runs the engine on the CPU."""
 
 import ast
 import inspect
@@ -79,3 +80,38 @@ def test_compile_switches_do_not_leak_into_later_builds(monkeypatch):
     monkeypatch.delenv("WARPFRIC_INLINE")
     get_integrator("float64", wf.Model(relaxation_gate="none"), lanes=1)  # cached too: undone again
     assert [fn.func.__name__ for fn in device_functions(thread) if fn.inline_hint is not None] == []
+
+
+def test_a_run_compiles_only_the_observers_it_may_use(monkeypatch):
+    """engine.observer_set: the velocity and strength fronts and the recording are compiled into a
+    run's kernel only where its fronts and recording may use them, and leaving them out changes no
+    output (the same members with every observer compiled in: bit for bit equal, a recorded
+    member and the contact front included)."""
+    import numpy as np
+
+    from warpfric import engine
+    from warpfric.kernels.observers import ObserverSet
+
+    assert engine.observer_set(None, None) == ObserverSet(False, False, False)
+    assert engine.observer_set(wf.Fronts(), None) == ObserverSet(False, False, False)  # contact: kernels/gates.py
+    assert engine.observer_set(wf.Fronts(event="velocity"), None) == ObserverSet(True, False, False)
+    assert engine.observer_set(wf.Fronts(event="strength"), None) == ObserverSet(False, True, False)
+    record = wf.Record.window(20.1, 20.3, 5, members=(1,))
+    assert engine.observer_set(None, record) == ObserverSet(False, False, True)
+    members = {"eccentricity": [0.0, -0.2]}
+
+    def run_with(observed_all):
+        if observed_all:
+            monkeypatch.setattr(engine, "observer_set", lambda fronts, record: ObserverSet())
+        ds = wf.simulate(members, solver=wf.Solver(nodes=12), fronts=wf.Fronts(), record=record, device="cpu",
+                         progress=False)
+        monkeypatch.undo()
+        return ds
+
+    pruned, full = run_with(False), run_with(True)
+    for name in ("mu_s", "mu_s_time", "v_main", "front_start_time", "steps_accepted", "newton_iterations"):
+        np.testing.assert_array_equal(pruned[name].values, full[name].values)
+    recorded = [name for name in full.data_vars if "time" in full[name].dims and "x" in full[name].dims]
+    assert recorded, "the recorded member's fields are in the Dataset"
+    for name in recorded:
+        np.testing.assert_array_equal(pruned[name].values, full[name].values)

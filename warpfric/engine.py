@@ -126,6 +126,16 @@ def output_settings(fronts: Fronts | None, stress_gate: bool = True):
     return out
 
 
+def observer_set(fronts: Fronts | None, record: Record | None):
+    """The observers a run compiles into its kernel (kernels/observers.py ObserverSet): the velocity
+    and strength fronts where its front events include them, the recording where it records."""
+    from warpfric.kernels.observers import ObserverSet
+
+    events = fronts.events if fronts is not None else ()
+    return ObserverSet(velocity_front="velocity" in events, strength_front="strength" in events,
+                       record=record is not None)
+
+
 def arrival_pass_settings(outputs):
     """OutputSettings of the velocity front's arrival pass (pass 2): the velocity front alone; the
     contact and strength fronts of pass 1 stay as they are."""
@@ -342,7 +352,8 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                       "CPU fibers, slowly and for tests only (docs/model.md, 'Time integration'); "
                       "lanes=1 is the CPU's kernel", stacklevel=3)
     t_build = time.perf_counter()
-    kern = get_integrator(solver.dtype, model, lanes, solver.method, cuda=str(device).startswith("cuda"))
+    kern = get_integrator(solver.dtype, model, lanes, solver.method, cuda=str(device).startswith("cuda"),
+                          observed=observer_set(fronts, record))
     with cpu_blocks(team):  # compile or load now, so that it is timed apart
         wp.load_module(kern["integrate"].module, device=device, block_dim=lanes if team else None)
         wp.load_module(kern["evaluate_fields"].module, device=device)
