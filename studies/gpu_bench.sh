@@ -33,6 +33,8 @@
 #   ncu-sources    Nsight Compute's source counters of the one-member launch (line info on)
 #   stalls         Nsight Compute's warp stall reasons and memory traffic of one 10,000-member launch
 #   sass           the integrate kernel's SASS instructions by inlined call site (studies/sass_sites.py)
+#   exchange       the team's lane exchanges, tiles against warp shuffles: outputs (studies/team_exchange.py)
+#                  and 1 / 10,000 members timed with each
 #   dask [SWEEP]   2 GPUs: one process against a local Dask cluster of 1 and 2 workers
 #   figures [ARGS] every figure study at full size (ARGS e.g. --relaxation-gate none)
 set -uo pipefail
@@ -136,6 +138,11 @@ case "$mode" in
       "$OUT/ncu_stress_10k_stalls.txt" | awk '$NF+0 > 0.04 || !/stalled/' | head -30 ;;
   sass)
     python3 studies/sass_sites.py "$@" 2>&1 | tee "$OUT/sass_sites.txt" | head -30 ;;
+  exchange)
+    (cd studies && python3 team_exchange.py --members 1000 "$@") 2>&1 | tee "$OUT/team_exchange.txt" | tail -9
+    WARPFRIC_TEAM_EXCHANGE=tile $E --members 1 10000 --relaxation-gate stress --lanes 32 --out "$OUT/bench_tile.json" 2>&1 \
+      | tail -3
+    $E --members 1 10000 --relaxation-gate stress --lanes 32 --out "$OUT/bench_shuffle.json" 2>&1 | tail -3 ;;
   ncu-sources)
     NCU=$(ncu_bin); echo "ncu: $NCU"
     "$NCU" -k regex:integrate --launch-skip 2 --launch-count 1 --section SourceCounters --section WarpStateStats \
