@@ -650,7 +650,10 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
         ||dV_{k-1}||^2; the affine-invariant estimate of Deuflhard's Newton codes), which
         curvature_in carries from the previous stage or step (0: not known, no prediction). The
         stage equations are nearly linear in V at a fixed gate, so K is small and one iteration
-        often suffices (docs/model.md, "Time integration")."""
+        often suffices (docs/model.md, "Time integration"). Neither is used in float32, nor in a
+        solve where an iteration met a kink (NodeRow.kink, at the iterate before the update: an
+        update that crosses a kink in the one iteration it is accepted after goes unseen), which
+        also returns curvature 0."""
         v_disc = ft(disc_velocity_stage(p, t_stage, t_step))
         force = normal_force_stage(p, t_stage, t_step)
         force_per_depth = ft(force / p.depth)
@@ -701,14 +704,14 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
             elif curvature > ft(0.0):
                 theta = curvature * norm
             if wp.static(ft == wp.float64):
-                if theta < ft(1.0) and theta / (ft(1.0) - theta) * norm <= ft(NEWTON_ERROR_FRACTION) * ft(settings.newton_tol):
+                error_left = theta / (ft(1.0) - theta) * norm
+                if theta < ft(1.0) and error_left <= ft(NEWTON_ERROR_FRACTION) * ft(settings.newton_tol):
                     # not at a kink of the equations, where the contraction says nothing of the
                     # error (a lane's kink reaches the team through the maximum): else the solve
-                    # goes on as without the estimate and forgets the curvature
+                    # goes on as without the estimate
                     if team_max(kinked) == ft(0.0):
                         converged = 1
                         break
-                    curvature = ft(0.0)
             # stagnation inside the error tolerance: an update within the step's tolerance (norm <= 1)
             # that no longer halves has reached the round-off level of the working precision (the
             # case it is meant for is float32; it applies to float64 too, where it is rare)
@@ -716,6 +719,10 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
                 converged = 1
                 break
             prev_norm = norm
+        if wp.static(ft == wp.float64):
+            # a curvature measured where an iteration met a kink is no guide for the next stage
+            if team_max(kinked) != ft(0.0):
+                curvature = ft(0.0)
         return converged, delta0, tilt, iters, non_finite, curvature
 
     return dict(newton_solve=newton_solve)

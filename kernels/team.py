@@ -5,23 +5,29 @@ integration").
 In a team, lane k owns the contiguous nodes [first_node, end_node) = [k*N//P, (k+1)*N//P) of its
 member (P = lanes <= N/2, so every lane owns at least two nodes) and runs every per-node loop of
 the integrator on them alone; what a loop reduces over the nodes (sums, maxima, the error norm) is
-combined over the lanes with Warp's tile primitives, which also give the whole team the same value,
-so that every lane takes the same decisions (step accepted, Newton converged, ...) and keeps an
-identical copy of the member's IntegratorState. A tile operation synchronises the block: the
-reductions double as barriers between a lane's writes and its neighbours' reads of halo nodes;
-``barrier`` is the explicit one where no reduction falls.
+combined over the lanes, and every lane gets the same bits, so that every lane takes the same
+decisions (step accepted, Newton converged, ...) and keeps an identical copy of the member's
+IntegratorState. Team operations synchronise the lanes: the reductions double as barriers between
+a lane's writes and its neighbours' reads of halo nodes; ``barrier`` is the explicit one where no
+reduction falls.
 
-Every reduction ends with ``settle``: a one-element shared tile assignment, which synchronises
-before it writes, so that no lane starts the next tile operation while another still reads this
-one's result. Without it, Warp's CPU reductions (cooperative fibers) write their flags into the
-freed shared memory of the previous result before their first synchronisation, and the lanes of
-a team of 2-8 read different sums (found in review: teams of 7 and 8 lanes failed on a lift-off
-member; tests/test_team.py checks the sums of every lane).
+How the lanes exchange values (``exchange``):
+- "tile": Warp's tile primitives (the CPU's cooperative fibers, and teams of more than 32 lanes).
+  A tile operation synchronises the block. Every reduction ends with ``settle``: a one-element
+  shared tile assignment, which synchronises before it writes, so that no lane starts the next
+  tile operation while another still reads this one's result. Without it, Warp's CPU reductions
+  write their flags into the freed shared memory of the previous result before their first
+  synchronisation, and the lanes of a team of 2-8 read different sums (found in review: teams of
+  7 and 8 lanes failed on a lift-off member; tests/test_team.py checks the sums of every lane).
+  The separator system is solved by each lane's twisted factorisation.
+- "shuffle": warp shuffles, on a GPU, for a team of at most 32 lanes (one warp); below.
+- "emulated": the shuffles' algorithms with each shuffle through a tile, so that the CPU tests
+  them.
 
-``make_team(ft, lanes)`` builds the functions; with lanes = 1 they are the identity (``make_solo``: no
-tile operation is compiled, the thread-per-member kernel is unchanged bit for bit), else the tile
-reductions (``make_tile_reductions``) and the separator exchange of the team's tridiagonal solve
-(``make_separator_exchange``). A team needs
+``make_team(ft, lanes, exchange)`` builds the functions; with lanes = 1 they are the identity
+(``make_solo``: no team operation is compiled, the thread-per-member kernel is unchanged bit for
+bit), else the tile reductions and separator exchange (``make_tile_reductions``,
+``make_separator_exchange``) or their shuffle versions (``make_exchange_team``). A team needs
 float64 (``ft``): the cooperative kernel is compiled for float64 only.
 """
 
@@ -207,8 +213,9 @@ def make_separator_exchange(lanes: int):
 # ---- the lane exchange by value (exchange = "shuffle" or "emulated") ----
 # On a GPU a team of at most 32 lanes is one warp: its lanes read each other's registers with warp
 # shuffles, so nothing goes through shared memory and no block barrier is needed (only __syncwarp,
-# for the lanes' global-memory writes, which every team operation starts with, as the tiles'
-# synchronisation did). Reductions are butterflies (every lane adds its partner's partial sum at
+# for the lanes' global-memory writes, which every team operation but reduced_solve starts with, as
+# the tiles' synchronisation did; reduced_solve works on registers only and follows
+# from_next_lane). Reductions are butterflies (every lane adds its partner's partial sum at
 # distance 16, 8, .., 1; commutativity gives every lane the same bits) for a power-of-two team,
 # else a tree to lane 0 and lane 0's value to every lane; the separators' reduced system is solved
 # by parallel cyclic reduction (make_exchange_team). "emulated" runs the same operations with each
@@ -306,13 +313,14 @@ def _move_snippet(kind: str, clamp: str) -> str:
 
 @wp.func_native(_move_snippet("up", "0"))
 def warp_up_f64(x: wp.float64, delta: int, lanes: int) -> wp.float64:
-    """x of lane - delta (undefined below lane delta: callers mask it)."""
+    """x of lane - delta (a lane below delta gets its own x: callers do not use it)."""
     ...
 
 
 @wp.func_native(_move_snippet("down", "0x1f"))
 def warp_down_f64(x: wp.float64, delta: int, lanes: int) -> wp.float64:
-    """x of lane + delta (undefined from lanes - delta on: callers mask it)."""
+    """x of lane + delta (undefined from lane lanes - delta on, in a partial warp: callers replace
+    it, and never compute with it)."""
     ...
 
 
@@ -536,7 +544,7 @@ def make_exchange_team(lanes: int, exchange: str):
         s = int(1)
         for _level in range(levels):
             # row k - s (up) and row k + s (down); a coupling across the team's edge is zero at
-            # every level, so the rows beyond it are not used
+            # every level
             a_up = up_f64(a, s, lanes)
             b_up = up_f64(b, s, lanes)
             c_up = up_f64(c, s, lanes)
@@ -549,22 +557,34 @@ def make_exchange_team(lanes: int, exchange: str):
             d0_dn = down_f64(d0, s, lanes)
             d1_dn = down_f64(d1, s, lanes)
             d2_dn = down_f64(d2, s, lanes)
-            alpha = wp.float64(0.0)
-            gamma = wp.float64(0.0)
+            # the rows beyond the team's edges are not read, not even multiplied by zero: a
+            # shuffle from beyond a partial warp's last lane returns an undefined value (NaN * 0)
             a_new = wp.float64(0.0)
             c_new = wp.float64(0.0)
+            b_new = b
+            d0_new = d0
+            d1_new = d1
+            d2_new = d2
             if lane - s >= 0:
                 alpha = -a / b_up
                 a_new = alpha * a_up
+                b_new = b_new + alpha * c_up
+                d0_new = d0_new + alpha * d0_up
+                d1_new = d1_new + alpha * d1_up
+                d2_new = d2_new + alpha * d2_up
             if lane + s < lanes:
                 gamma = -c / b_dn
                 c_new = gamma * c_dn
-            b = b + alpha * c_up + gamma * a_dn
-            d0 = d0 + alpha * d0_up + gamma * d0_dn
-            d1 = d1 + alpha * d1_up + gamma * d1_dn
-            d2 = d2 + alpha * d2_up + gamma * d2_dn
+                b_new = b_new + gamma * a_dn
+                d0_new = d0_new + gamma * d0_dn
+                d1_new = d1_new + gamma * d1_dn
+                d2_new = d2_new + gamma * d2_dn
             a = a_new
+            b = b_new
             c = c_new
+            d0 = d0_new
+            d1 = d1_new
+            d2 = d2_new
             s = s * 2
         inv = wp.float64(1.0) / b
         e_self = vec3d(d0 * inv, d1 * inv, d2 * inv)

@@ -83,26 +83,27 @@ def test_compile_switches_do_not_leak_into_later_builds(monkeypatch):
 
 
 def test_a_run_compiles_only_the_observers_it_may_use(monkeypatch):
-    """engine.observer_set: the velocity and strength fronts and the recording are compiled into a
-    run's kernel only where its fronts and recording may use them, and leaving them out changes no
-    output (the same members with every observer compiled in: bit for bit equal, a recorded
-    member and the contact front included)."""
+    """engine.observer_set: the velocity and strength fronts are compiled into a run's kernel only
+    where its front events include them (the recording always: a sweep's chunks with and without
+    recorded members share one kernel), and leaving them out changes no output (the same members
+    with every observer compiled in: bit for bit equal, a recorded member and the contact front
+    included)."""
     import numpy as np
 
     from warpfric import engine
     from warpfric.kernels.observers import ObserverSet
 
-    assert engine.observer_set(None, None) == ObserverSet(False, False, False)
-    assert engine.observer_set(wf.Fronts(), None) == ObserverSet(False, False, False)  # contact: kernels/gates.py
-    assert engine.observer_set(wf.Fronts(event="velocity"), None) == ObserverSet(True, False, False)
-    assert engine.observer_set(wf.Fronts(event="strength"), None) == ObserverSet(False, True, False)
     record = wf.Record.window(20.1, 20.3, 5, members=(1,))
-    assert engine.observer_set(None, record) == ObserverSet(False, False, True)
+    for rec in (None, record):
+        assert engine.observer_set(None, rec) == ObserverSet(False, False, True)
+        assert engine.observer_set(wf.Fronts(), rec) == ObserverSet(False, False, True)  # contact: kernels/gates.py
+        assert engine.observer_set(wf.Fronts(event="velocity"), rec) == ObserverSet(True, False, True)
+        assert engine.observer_set(wf.Fronts(event="strength"), rec) == ObserverSet(False, True, True)
     members = {"eccentricity": [0.0, -0.2]}
 
     def run_with(observed_all):
         if observed_all:
-            monkeypatch.setattr(engine, "observer_set", lambda fronts, record: ObserverSet())
+            monkeypatch.setattr(engine, "observer_set", lambda fronts, record=None: ObserverSet())
         ds = wf.simulate(members, solver=wf.Solver(nodes=12), fronts=wf.Fronts(), record=record, device="cpu",
                          progress=False)
         monkeypatch.undo()

@@ -126,14 +126,15 @@ def output_settings(fronts: Fronts | None, stress_gate: bool = True):
     return out
 
 
-def observer_set(fronts: Fronts | None, record: Record | None):
+def observer_set(fronts: Fronts | None, record: Record | None = None):
     """The observers a run compiles into its kernel (kernels/observers.py ObserverSet): the velocity
-    and strength fronts where its front events include them, the recording where it records."""
+    and strength fronts where its front events include them; the recording always (``record`` is
+    not used), so that a sweep's chunks with and without recorded members, its workers' warm-up,
+    the grid check and the float32 fallback all run the kernel of the same fronts."""
     from warpfric.kernels.observers import ObserverSet
 
     events = fronts.events if fronts is not None else ()
-    return ObserverSet(velocity_front="velocity" in events, strength_front="strength" in events,
-                       record=record is not None)
+    return ObserverSet(velocity_front="velocity" in events, strength_front="strength" in events, record=True)
 
 
 def arrival_pass_settings(outputs):
