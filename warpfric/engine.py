@@ -126,6 +126,15 @@ def output_settings(fronts: Fronts | None, stress_gate: bool = True):
     return out
 
 
+def array_bytes(a) -> int:
+    """Bytes of a Warp array's elements: its capacity, or for a transposed view (a team's
+    member-major arrays, kernels/types.py member_array), whose capacity Warp reports short, its size
+    times the element size."""
+    import warp as wp
+
+    return a.capacity if a.is_contiguous else a.size * wp.types.type_size_in_bytes(a.dtype)
+
+
 def observer_set(fronts: Fronts | None, record: Record | None = None):
     """The observers a run compiles into its kernel (kernels/observers.py ObserverSet): the velocity
     and strength fronts where its front events include them; the recording always (``record`` is
@@ -376,7 +385,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         per_member += [arrays.gates, arrays.yield_time] if stress_gate else []
         per_member += [arrays.arrival, arrays.arrival_error] if fronts is not None else []
         per_member += [arrays.strength] if strength else []
-        n_bytes = sum(a.capacity for a in per_member) + n_members * np.dtype(IntegratorState.numpy_dtype()).itemsize
+        n_bytes = sum(array_bytes(a) for a in per_member) + n_members * np.dtype(IntegratorState.numpy_dtype()).itemsize
         device_bytes_per_member = n_bytes / n_members
         front_max = front_last = event = None
         stall_limit = wp.full(1, NO_STALL_LIMIT, dtype=wp.int32)  # attempts after which a member stalls
