@@ -3,9 +3,10 @@ the friction coefficient and its maximum mu_s, lift-off, the detachment fronts (
 arrival times) and the recorded fields; and the automatic end of a run, which is decided from them.
 
 ``on_accept`` is the one hook the integrator calls after each accepted step (the state already
-advanced); the front and recording observers are compiled in only where the run may need them
-(``ObserverSet``: a run models only what its scene needs, and a smaller kernel leaves the GPU's
-instruction cache and registers to the rest) and run only when the launch asks for them
+advanced); the velocity and strength fronts' observers are compiled in only where the run may
+need them (``ObserverSet``: a run models only what its scene needs, and a smaller kernel leaves
+the GPU's instruction cache and registers to the rest; the recording always, so that a sweep's
+chunks share one kernel) and run only when the launch asks for them
 (OutputSettings.velocity_front / strength_front, IntegratorState.record_slot); the contact front is
 recorded with the gate switches (kernels/gates.py).
 
@@ -327,7 +328,8 @@ def make_recording(ft, terms, team, interface):
 
 class ObserverSet(NamedTuple):
     """The observers compiled into a kernel (the friction point always): all by default; a run
-    compiles those its fronts and recording may use (warpfric/engine.py observer_set)."""
+    compiles the fronts' observers its front events may use, and the recording always
+    (warpfric/engine.py observer_set)."""
 
     velocity_front: bool = True
     strength_front: bool = True
