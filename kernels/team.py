@@ -344,7 +344,7 @@ def lane_index() -> int:
 # ---- the same operations through a tile (exchange = "emulated") ----
 
 @wp.func
-def tile_value_f64(x: wp.float64, source: int):
+def tile_value(x: Any, source: int):
     """Lane ``source``'s x through a tile (the CPU's fibers)."""
     r = wp.tile_extract(wp.tile(x), source)
     settle()
@@ -352,10 +352,18 @@ def tile_value_f64(x: wp.float64, source: int):
 
 
 @wp.func
-def tile_value_i32(x: int, source: int):
-    r = wp.tile_extract(wp.tile(x), source)
-    settle()
-    return r
+def plus(a: Any, b: Any):
+    return a + b
+
+
+@wp.func
+def larger(a: Any, b: Any):
+    return wp.max(a, b)
+
+
+@wp.func
+def smaller(a: Any, b: Any):
+    return wp.min(a, b)
 
 
 def make_emulated_shuffles(lanes: int):
@@ -365,93 +373,53 @@ def make_emulated_shuffles(lanes: int):
     levels = max(1, (lanes - 1).bit_length())  # ceil(log2(lanes))
 
     @wp.func
-    def partner_f64(v: wp.float64, lane: int, s: int):
+    def partner(v: Any, lane: int, s: int):
         """The butterfly's partner lane ^ s, or the tree's lane + s (clamped; masked by callers)."""
         if wp.static(power_of_two):
-            return tile_value_f64(v, lane ^ s)
-        return tile_value_f64(v, wp.min(lane + s, lanes - 1))
-
-    @wp.func
-    def partner_i32(v: int, lane: int, s: int):
-        if wp.static(power_of_two):
-            return tile_value_i32(v, lane ^ s)
-        return tile_value_i32(v, wp.min(lane + s, lanes - 1))
+            return tile_value(v, lane ^ s)
+        return tile_value(v, wp.min(lane + s, lanes - 1))
 
     @wp.func
     def merged(lane: int, s: int):
         """Whether a lane merges its partner's value at stride s."""
         return wp.static(power_of_two) or lane + s < lanes
 
-    @wp.func
-    def sum_f64(x: wp.float64, lanes_: int):
-        lane = lane_index()
-        v = x
-        s = int(1 << (levels - 1))
-        for _level in range(levels):
-            other = partner_f64(v, lane, s)
-            if merged(lane, s):
-                v = v + other
-            s = s // 2
-        if wp.static(not power_of_two):
-            v = tile_value_f64(v, 0)
-        return v
+    def reduction(combine):
+        """The reduction of _reduction_snippet, merging with ``combine``: a butterfly for a
+        power-of-two team, else a tree to lane 0 and lane 0's value to every lane."""
 
-    @wp.func
-    def max_f64(x: wp.float64, lanes_: int):
-        lane = lane_index()
-        v = x
-        s = int(1 << (levels - 1))
-        for _level in range(levels):
-            other = partner_f64(v, lane, s)
-            if merged(lane, s):
-                v = wp.max(v, other)
-            s = s // 2
-        if wp.static(not power_of_two):
-            v = tile_value_f64(v, 0)
-        return v
+        @wp.func
+        def reduce(x: Any, lanes_: int):
+            lane = lane_index()
+            v = x
+            s = int(1 << (levels - 1))
+            for _level in range(levels):
+                other = partner(v, lane, s)
+                if merged(lane, s):
+                    v = combine(v, other)
+                s = s // 2
+            if wp.static(not power_of_two):
+                v = tile_value(v, 0)
+            return v
 
-    @wp.func
-    def min_f64(x: wp.float64, lanes_: int):
-        lane = lane_index()
-        v = x
-        s = int(1 << (levels - 1))
-        for _level in range(levels):
-            other = partner_f64(v, lane, s)
-            if merged(lane, s):
-                v = wp.min(v, other)
-            s = s // 2
-        if wp.static(not power_of_two):
-            v = tile_value_f64(v, 0)
-        return v
+        return reduce
 
-    @wp.func
-    def sum_i32(x: int, lanes_: int):
-        lane = lane_index()
-        v = x
-        s = int(1 << (levels - 1))
-        for _level in range(levels):
-            other = partner_i32(v, lane, s)
-            if merged(lane, s):
-                v = v + other
-            s = s // 2
-        if wp.static(not power_of_two):
-            v = tile_value_i32(v, 0)
-        return v
+    total = reduction(plus)
 
     @wp.func
     def up_f64(x: wp.float64, delta: int, lanes_: int):
-        return tile_value_f64(x, wp.max(lane_index() - delta, 0))
+        return tile_value(x, wp.max(lane_index() - delta, 0))
 
     @wp.func
     def down_f64(x: wp.float64, delta: int, lanes_: int):
-        return tile_value_f64(x, wp.min(lane_index() + delta, lanes - 1))
+        return tile_value(x, wp.min(lane_index() + delta, lanes - 1))
 
     @wp.func
     def sync(lanes_: int):
         settle()
 
-    return dict(sum_f64=sum_f64, max_f64=max_f64, min_f64=min_f64, sum_i32=sum_i32, up_f64=up_f64,
-                down_f64=down_f64, sync=sync)
+    return dict(sum_f64=total, max_f64=reduction(larger), min_f64=reduction(smaller), sum_i32=total,
+                up_f64=up_f64, down_f64=down_f64, sync=sync)
 
 
 def make_exchange_team(lanes: int, exchange: str):
