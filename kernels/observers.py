@@ -327,19 +327,18 @@ def make_recording(ft, terms, team, interface):
 
 
 class ObserverSet(NamedTuple):
-    """The observers compiled into a kernel (the friction point always): all by default; a run
-    compiles the fronts' observers its front events may use, and the recording always
-    (warpfric/engine.py observer_set)."""
+    """The fronts' observers compiled into a kernel (the recording and the friction point always):
+    both by default; a run compiles those its front events may use (warpfric/engine.py
+    observer_set)."""
 
     velocity_front: bool = True
     strength_front: bool = True
-    record: bool = True
 
 
 def make_observers(ft, model, terms, team, method="tr_bdf2", observed=ObserverSet()):
     """The observers for one working precision, model and ObserverSet, composed into on_accept:
-    the velocity front, the strength front, the recording (those of ``observed``) and the friction
-    point."""
+    the velocity front and the strength front (those of ``observed``), the recording and the
+    friction point."""
     # mu_s: TR-BDF2 refines the maximum by a parabola through three accepted points, ESDIRK4 by a
     # cubic through four (its longer steps)
     cubic = 1 if method == "esdirk4" else 0
@@ -371,10 +370,8 @@ def make_observers(ft, model, terms, team, method="tr_bdf2", observed=ObserverSe
             if outputs.strength_front == 1:
                 st = track_strength(c, p, st, m, n, state, t_old, t_new, delta0, tilt, backward_euler, strength,
                                     arrival, arrival_error)
-        if wp.static(observed.record):
-            if st.record_slot >= 0:
-                st = record_fields(c, p, st, m, n, state, t_old, t_new, delta0, tilt, record_times, record_previous,
-                                   record)
+        if st.record_slot >= 0:
+            st = record_fields(c, p, st, m, n, state, t_old, t_new, delta0, tilt, record_times, record_previous, record)
         if backward_euler == 1:
             st.npts = 0
         return friction_point(st, p, t_new, friction, normal, min_normal, cubic)

@@ -108,7 +108,7 @@ def main(argv=None):
 
         # the kernel simulate(fronts=None) runs, as on a GPU above
         kernel = get_integrator("float64", model, args.lanes, "tr_bdf2", cuda=True,
-                                observed=observer_set(None, None))["integrate"]
+                                observed=observer_set(None))["integrate"]
         kernel.module.options["block_dim"] = args.lanes
         cubin = str(wp.compile_aot_module(kernel.module, arch=args.arch or 90, use_ptx=False,
                                           module_dir=os.path.join(wp.config.kernel_cache_dir, "sass_sites"))[0])

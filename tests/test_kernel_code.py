@@ -94,16 +94,15 @@ def test_a_run_compiles_only_the_observers_it_may_use(monkeypatch):
     from warpfric.kernels.observers import ObserverSet
 
     record = wf.Record.window(20.1, 20.3, 5, members=(1,))
-    for rec in (None, record):
-        assert engine.observer_set(None, rec) == ObserverSet(False, False, True)
-        assert engine.observer_set(wf.Fronts(), rec) == ObserverSet(False, False, True)  # contact: kernels/gates.py
-        assert engine.observer_set(wf.Fronts(event="velocity"), rec) == ObserverSet(True, False, True)
-        assert engine.observer_set(wf.Fronts(event="strength"), rec) == ObserverSet(False, True, True)
+    assert engine.observer_set(None) == ObserverSet(False, False)
+    assert engine.observer_set(wf.Fronts()) == ObserverSet(False, False)  # contact: kernels/gates.py
+    assert engine.observer_set(wf.Fronts(event="velocity")) == ObserverSet(True, False)
+    assert engine.observer_set(wf.Fronts(event="strength")) == ObserverSet(False, True)
     members = {"eccentricity": [0.0, -0.2]}
 
     def run_with(observed_all):
         if observed_all:
-            monkeypatch.setattr(engine, "observer_set", lambda fronts, record=None: ObserverSet())
+            monkeypatch.setattr(engine, "observer_set", lambda fronts: ObserverSet())
         ds = wf.simulate(members, solver=wf.Solver(nodes=12), fronts=wf.Fronts(), record=record, device="cpu",
                          progress=False)
         monkeypatch.undo()

@@ -135,15 +135,15 @@ def array_bytes(a) -> int:
     return a.capacity if a.is_contiguous else a.size * wp.types.type_size_in_bytes(a.dtype)
 
 
-def observer_set(fronts: Fronts | None, record: Record | None = None):
-    """The observers a run compiles into its kernel (kernels/observers.py ObserverSet): the velocity
-    and strength fronts where its front events include them; the recording always (``record`` is
-    not used), so that a sweep's chunks with and without recorded members, its workers' warm-up,
-    the grid check and the float32 fallback all run the kernel of the same fronts."""
+def observer_set(fronts: Fronts | None):
+    """The fronts' observers a run compiles into its kernel (kernels/observers.py ObserverSet): the
+    velocity and strength fronts where its front events include them. The recording is compiled
+    always, so that a sweep's chunks with and without recorded members, its workers' warm-up, the
+    grid check and the float32 fallback all run the kernel of the same fronts."""
     from warpfric.kernels.observers import ObserverSet
 
     events = fronts.events if fronts is not None else ()
-    return ObserverSet(velocity_front="velocity" in events, strength_front="strength" in events, record=True)
+    return ObserverSet(velocity_front="velocity" in events, strength_front="strength" in events)
 
 
 def arrival_pass_settings(outputs):
@@ -363,7 +363,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                       "lanes=1 is the CPU's kernel", stacklevel=3)
     t_build = time.perf_counter()
     kern = get_integrator(solver.dtype, model, lanes, solver.method, cuda=str(device).startswith("cuda"),
-                          observed=observer_set(fronts, record))
+                          observed=observer_set(fronts))
     with cpu_blocks(team):  # compile or load now, so that it is timed apart
         wp.load_module(kern["integrate"].module, device=device, block_dim=lanes if team else None)
         wp.load_module(kern["evaluate_fields"].module, device=device)
