@@ -667,6 +667,7 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
         prev_norm = ft(1.0e30)
         curvature = curvature_in
         kinked = ft(0.0)  # whether an iteration of this solve met a kink (this thread's nodes)
+        kink_free = int(0)  # 1: the team's reduction of kinked said none (the contraction ended the solve)
         for it in range(settings.newton_max_iter):
             iters = it + 1
             # ---- pass 1: residuals, Jacobian rows, forward elimination (3 right-hand sides) ----
@@ -711,6 +712,7 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
                     # goes on as without the estimate
                     if team_max(kinked) == ft(0.0):
                         converged = 1
+                        kink_free = 1
                         break
             # stagnation inside the error tolerance: an update within the step's tolerance (norm <= 1)
             # that no longer halves has reached the round-off level of the working precision (the
@@ -721,8 +723,9 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
             prev_norm = norm
         if wp.static(ft == wp.float64):
             # a curvature measured where an iteration met a kink is no guide for the next stage
-            if team_max(kinked) != ft(0.0):
-                curvature = ft(0.0)
+            if kink_free == 0:
+                if team_max(kinked) != ft(0.0):
+                    curvature = ft(0.0)
         return converged, delta0, tilt, iters, non_finite, curvature
 
     return dict(newton_solve=newton_solve)
