@@ -144,14 +144,14 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         into the running maximum err of |e| / (rtol*(scale + max(|y|, |y_new|))), scale the
         component's natural scale; the velocity's e filtered by min(1, |rho H / (g * diag)|); 1e30
         where e is not finite."""
-        scale = c.values[c.m].u_scale
+        scale = c.u_scale
         if comp == C_V:
-            scale = c.values[c.m].v_scale
-            e = e * wp.min(ft(1.0), wp.abs(c.values[c.m].rhoH / (g * work[W_DIAG, i, m])))
+            scale = c.v_scale
+            e = e * wp.min(ft(1.0), wp.abs(c.rhoH / (g * work[W_DIAG, i, m])))
         if comp == C_TAU:
-            scale = c.values[c.m].tau_scale
+            scale = c.tau_scale
         if comp == C_PHI:
-            scale = c.values[c.m].phi_scale
+            scale = c.phi_scale
         wgt = rtol * (scale + wp.max(wp.abs(y), wp.abs(y_new)))
         err = wp.max(err, wp.abs(e) / wgt)
         if not wp.isfinite(e):

@@ -100,13 +100,13 @@ def make_switch_test(ft, model, terms, team, node_sliding):
         work[W_MARGIN, i, m] = z1
         # d(dz/dt)/d(gate) at the end of the step: the gate enters the rates of tau_el and phi (and A
         # through phi); the pad's rates do not depend on it
-        slip = v_disc - c.values[c.m].kif * velocity
-        relax = wp.abs(slip) * c.values[c.m].inv_D
-        darea_dgate = fr.contact * sigma * c.values[c.m].inv_hardness * c.values[c.m].b / (c.values[c.m].phi0 + fr.contact_age) * (-fr.contact_age * relax)
+        slip = v_disc - c.kif * velocity
+        relax = wp.abs(slip) * c.inv_D
+        darea_dgate = fr.contact * sigma * c.inv_hardness * c.b / (c.phi0 + fr.contact_age) * (-fr.contact_age * relax)
         dtau_dgate = -fr.elastic_stress * relax
         if wp.static(viscous):
-            dtau_dgate += c.values[c.m].eta_vstar * wp.sign(slip) * wp.log(ft(1.0) + wp.abs(slip) / c.values[c.m].vstar) * darea_dgate
-        work[W_DMARGIN, i, m] = wp.sign(fr.stress) * dtau_dgate - c.values[c.m].tau_c * darea_dgate
+            dtau_dgate += c.eta_vstar * wp.sign(slip) * wp.log(ft(1.0) + wp.abs(slip) / c.vstar) * darea_dgate
+        work[W_DMARGIN, i, m] = wp.sign(fr.stress) * dtau_dgate - c.tau_c * darea_dgate
         open_now = ft(0.0)
         if z1 > ft(0.0):
             open_now = ft(1.0)
@@ -114,8 +114,8 @@ def make_switch_test(ft, model, terms, team, node_sliding):
             z0 = gates[G_MARGIN, i, m]
             # the switch error per second of wrong gate
             rate = wp.max(
-                wp.abs(fr.elastic_stress) * relax / (rtol * (c.values[c.m].tau_scale + wp.abs(fr.elastic_stress))),
-                fr.contact_age * relax / (rtol * (c.values[c.m].phi_scale + wp.abs(fr.contact_age))),
+                wp.abs(fr.elastic_stress) * relax / (rtol * (c.tau_scale + wp.abs(fr.elastic_stress))),
+                fr.contact_age * relax / (rtol * (c.phi_scale + wp.abs(fr.contact_age))),
             )
             if open_now != fr.gate:
                 theta = ft(0.0)
@@ -313,7 +313,7 @@ def make_gate_update(ft, terms, team):
                         new_sliding = ft(1.0)
                         new_gate = wp.clamp(gate + (-z1 / h - r_obs) / dr, ft(0.0), ft(1.0))  # start value
             if new_gate != gate:
-                relax = (new_gate - gate) * wp.abs(v_disc - c.values[c.m].kif * state[C_V, i, m]) * c.values[c.m].inv_D
+                relax = (new_gate - gate) * wp.abs(v_disc - c.kif * state[C_V, i, m]) * c.inv_D
                 K[slot, C_TAU, i, m] = K[slot, C_TAU, i, m] - state[C_TAU, i, m] * relax
                 K[slot, C_PHI, i, m] = K[slot, C_PHI, i, m] - state[C_PHI, i, m] * relax
             if gate_regime(new_gate, new_sliding) != gate_regime(gate, sliding):

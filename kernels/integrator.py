@@ -170,9 +170,7 @@ def _make_integrator(dtype: str, model, lanes: int, method: str = "tr_bdf2", opt
     acceptance = make_acceptance(ft, model, method, stages)
     integrate = make_integrate_kernel(ft, model, lanes, method, stages, acceptance, options)
     evaluate_fields = make_field_kernel(ft, stages)
-    member_coefficients = make_coefficient_kernel(ft, stages)
-    return dict(integrate=integrate, evaluate_fields=evaluate_fields, member_coefficients=member_coefficients,
-                CoeffValues=stages["terms"]["CoeffValues"], ft=ft, stages=stages,
+    return dict(integrate=integrate, evaluate_fields=evaluate_fields, ft=ft, stages=stages,
                 exchange=(options.exchange or "tile") if lanes > 1 else "none")
 
 
@@ -245,8 +243,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     n_slots = stage_slots(method)
     step_factor = step_factor_for(method)
     stress_gate = model.relaxation_gate == "stress"
-    member_coeffs = stages["terms"]["member_coeffs"]
-    CoeffValues = stages["terms"]["CoeffValues"]
+    make_coeffs = stages["terms"]["make_coeffs"]
     esdirk = stages["esdirk"]
     implicit_step = esdirk["implicit_step"]
     esdirk4_step = esdirk.get("esdirk4_step", implicit_step)
@@ -269,7 +266,6 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     def integrate(
         # inputs
         params: wp.array(dtype=MemberParams),
-        coeff_values: wp.array(dtype=CoeffValues),
         settings: SolverSettings,
         outputs: OutputSettings,
         launch_steps: int,
@@ -301,8 +297,9 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
         st = member_states[m]
         if st.done != 0:
             return
+        p = params[m]
         n = state.shape[1]
-        c = member_coeffs(coeff_values, m, n)
+        c = make_coeffs(p, n)
         if wp.static(team_on):
             c.lane = lane
             first_node, end_node = node_range(lane, lanes, n)
@@ -312,7 +309,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
         tilt = ft(st.tilt)
         attempt_limit = stall_limit[0]
         for _attempt in range(launch_steps):
-            if run_finished(params[m], st, outputs):
+            if run_finished(p, st, outputs):
                 st.done = 1
                 break
             st = out_of_steps(st, settings)
@@ -320,7 +317,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
             if st.done != 0:
                 break
             t = st.t
-            step = propose_step(params[m], st, settings, t)
+            step = propose_step(p, st, settings, t)
             s1 = st.fsal
             s2 = (s1 + 1) % n_slots
             s3 = (s1 + n_slots - 1) % n_slots  # the last stage's slot (TR-BDF2: s1 + 2; ESDIRK4: s1 + 5)
@@ -328,12 +325,12 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
             # ---- stepper ----
             if wp.static(esdirk4):
                 if restart != 0:
-                    res = implicit_step(c, params[m], settings, m, n, state, K, work, gates, s1, s2, s3, t, step.h, step.t_new,
+                    res = implicit_step(c, p, settings, m, n, state, K, work, gates, s1, s2, s3, t, step.h, step.t_new,
                                         delta0, tilt, 1, ft(0.0))
                 else:
-                    res = esdirk4_step(c, params[m], settings, m, n, state, K, work, gates, s1, t, step.h, step.t_new, delta0, tilt)
+                    res = esdirk4_step(c, p, settings, m, n, state, K, work, gates, s1, t, step.h, step.t_new, delta0, tilt)
             else:  # TR-BDF2, or backward Euler at a (re)start: one call, so the stage code is compiled once
-                res = implicit_step(c, params[m], settings, m, n, state, K, work, gates, s1, s2, s3, t, step.h, step.t_new,
+                res = implicit_step(c, p, settings, m, n, state, K, work, gates, s1, s2, s3, t, step.h, step.t_new,
                                     delta0, tilt, restart, ft(st.newton_curvature))
                 # the next step's first Newton iteration is judged with this step's curvature
                 # (kernels/newton.py newton_solve); a failed solve or a restart forgets it
@@ -361,7 +358,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
                     break
                 continue
             # ---- accepted: advance, gates, observers ----
-            st = accept_step(c, params[m], st, settings, outputs, m, n, state, K, work, gates, s1, s2, s3, t, step, factor, res,
+            st = accept_step(c, p, st, settings, outputs, m, n, state, K, work, gates, s1, s2, s3, t, step, factor, res,
                              restart, yield_time, arrival, arrival_error, strength, record_times, record_previous, record)
             delta0 = res.delta0
             tilt = res.tilt
@@ -375,8 +372,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
 
 def make_field_kernel(ft, stages):
     """The evaluate_fields kernel: the interface stresses of the current state."""
-    member_coeffs = stages["terms"]["member_coeffs"]
-    CoeffValues = stages["terms"]["CoeffValues"]
+    make_coeffs = stages["terms"]["make_coeffs"]
     state_displacement = stages["observers"]["state_displacement"]
     state_contact = stages["observers"]["state_contact"]
     array3 = wp.array3d(dtype=ft)
@@ -384,7 +380,6 @@ def make_field_kernel(ft, stages):
     @wp.kernel(module="unique", enable_backward=False)
     def evaluate_fields(
         params: wp.array(dtype=MemberParams),
-        coeff_values: wp.array(dtype=CoeffValues),
         member_states: wp.array(dtype=IntegratorState),
         state: array3,
         normal_stress_out: wp.array2d(dtype=ft),
@@ -396,7 +391,7 @@ def make_field_kernel(ft, stages):
         st = member_states[m]
         p = params[m]
         n = state.shape[1]
-        c = member_coeffs(coeff_values, m, n)
+        c = make_coeffs(p, n)
         delta0 = ft(st.delta0)
         tilt = ft(st.tilt)
         v_disc = ft(disc_velocity_at(p, st.t, st.t))
@@ -411,18 +406,3 @@ def make_field_kernel(ft, stages):
             u_c = u_r
 
     return evaluate_fields
-
-
-def make_coefficient_kernel(ft, stages):
-    """The member_coefficients kernel: each member's CoeffValues (kernels/model_terms.py), which the
-    other kernels read through a Coeffs handle."""
-    make_coeff_values = stages["terms"]["make_coeff_values"]
-    CoeffValues = stages["terms"]["CoeffValues"]
-
-    @wp.kernel(module="unique", enable_backward=False)
-    def member_coefficients(params: wp.array(dtype=MemberParams), n: int, coeff_values: wp.array(dtype=CoeffValues)):
-        """coeff_values[m]: member m's coefficients for a grid of n nodes, (member,)."""
-        m = wp.tid()
-        coeff_values[m] = make_coeff_values(params[m], n)
-
-    return member_coefficients

@@ -39,16 +39,14 @@ _TERM_OUTPUTS = ("sigma", "sigma_ul", "sigma_uc", "sigma_ur", "sigma_d0", "sigma
 def _terms_kernel(model):
     stages = make_stages(f64, model)
     terms = stages["terms"]
-    make_coeff_values, member_coeffs = terms["make_coeff_values"], terms["member_coeffs"]
-    normal_stress = terms["normal_stress"]
+    make_coeffs, normal_stress = terms["make_coeffs"], terms["normal_stress"]
     elastic_force, interface_friction = terms["elastic_force"], terms["interface_friction"]
 
     @wp.kernel(module="unique")
     def evaluate(params: wp.array(dtype=types.MemberParams), nodes: int, node: wp.array(dtype=int),
-                 x: wp.array2d(dtype=f64), coeff_values: wp.array(dtype=terms["CoeffValues"]), out: wp.array2d(dtype=f64)):
+                 x: wp.array2d(dtype=f64), out: wp.array2d(dtype=f64)):
         k = wp.tid()
-        coeff_values[k] = make_coeff_values(params[0], nodes)
-        c = member_coeffs(coeff_values, k, nodes)
+        c = make_coeffs(params[0], nodes)
         i = node[k]
         ns = normal_stress(c, i, nodes, x[k, 0], x[k, 1], x[k, 2], x[k, 3], x[k, 4])
         ef = elastic_force(c, i, nodes, x[k, 0], x[k, 1], x[k, 2], x[k, 3], x[k, 4])
@@ -60,17 +58,15 @@ def _terms_kernel(model):
         for j in range(16):
             out[k, j] = row[j]
 
-    return evaluate, terms["CoeffValues"]
+    return evaluate
 
 
 def _evaluate_terms(kernel, params, nodes, node, x):
-    kernel, coeff_dtype = kernel  # _terms_kernel's
     x = np.atleast_2d(np.asarray(x, dtype=np.float64))
     node = np.broadcast_to(np.asarray(node, dtype=np.int32), (x.shape[0],)).copy()
     out = wp.zeros((x.shape[0], len(_TERM_OUTPUTS)), dtype=f64, device=DEVICE)
-    coeff_values = wp.empty(x.shape[0], dtype=coeff_dtype, device=DEVICE)
     wp.launch(kernel, dim=x.shape[0], inputs=[params, nodes, wp.array(node, dtype=int, device=DEVICE),
-                                               wp.array(x, dtype=f64, device=DEVICE), coeff_values, out], device=DEVICE)
+                                               wp.array(x, dtype=f64, device=DEVICE), out], device=DEVICE)
     return dict(zip(_TERM_OUTPUTS, out.numpy().T))
 
 
@@ -484,20 +480,18 @@ def test_kernel_structs_stay_in_step_with_the_public_parameters():
 def _fronts_kernel():
     stages = make_stages(f64, wf.Model())
     track_fronts = stages["observers"]["track_fronts"]
-    make_coeff_values, member_coeffs = stages["terms"]["make_coeff_values"], stages["terms"]["member_coeffs"]
+    make_coeffs = stages["terms"]["make_coeffs"]
 
     @wp.kernel(module="unique")
     def sweep(params: wp.array(dtype=types.MemberParams), states: wp.array(dtype=types.IntegratorState),
               crossing: wp.array(dtype=f64), slope: wp.array(dtype=f64), curvature: f64, contact: wp.array(dtype=f64),
               h: f64, steps: int, use_stage2: int, K: wp.array4d(dtype=f64), work: wp.array3d(dtype=f64),
-              arrival: wp.array3d(dtype=f64), arrival_error: wp.array3d(dtype=f64),
-              coeff_values: wp.array(dtype=stages["terms"]["CoeffValues"])):
+              arrival: wp.array3d(dtype=f64), arrival_error: wp.array3d(dtype=f64)):
         """Steps of size h from t = 20.5 through a field whose detachment velocity at node i is
         w_i(t) = level + slope_i (t - crossing_i) + curvature (t - crossing_i)^2 (pad velocity -w: the
         disc moves in +x), fed to track_fronts as the FSAL, second-stage and last-stage slots."""
         st = states[0]
         n = crossing.shape[0]
-        coeff_values[0] = make_coeff_values(params[0], n)
         level = st.front_level
         for i in range(n):
             work[types.W_CONTACT, i, 0] = contact[i]
@@ -512,11 +506,11 @@ def _fronts_kernel():
                 K[0, types.C_U, i, 0] = -(level + slope[i] * d0 + curvature * d0 * d0)
                 K[1, types.C_U, i, 0] = -(level + slope[i] * dm + curvature * dm * dm)
                 K[2, types.C_U, i, 0] = -(level + slope[i] * d1 + curvature * d1 * d1)
-            st = track_fronts(member_coeffs(coeff_values, 0, n), params[0], st, 0, n, K, work, 0, 1, 2, t_old, t_new, arrival, arrival_error, 0,
+            st = track_fronts(make_coeffs(params[0], n), params[0], st, 0, n, K, work, 0, 1, 2, t_old, t_new, arrival, arrival_error, 0,
                               f64(0.4), use_stage2)
         states[0] = st
 
-    return sweep, stages["terms"]["CoeffValues"]
+    return sweep
 
 
 @pytest.mark.parametrize("use_stage2", [1, 0])
@@ -540,13 +534,11 @@ def test_front_observer_on_a_synthetic_field(use_stage2):
                   arrival=wp.full((types.N_EVENTS, n, 1), np.nan, dtype=f64, device=DEVICE),
                   arrival_error=wp.full((types.N_EVENTS, n, 1), np.nan, dtype=f64, device=DEVICE))
     states = wp.array(st, dtype=types.IntegratorState, device=DEVICE)
-    sweep, coeff_dtype = _fronts_kernel()
-    wp.launch(sweep, dim=1, device=DEVICE, inputs=[
+    wp.launch(_fronts_kernel(), dim=1, device=DEVICE, inputs=[
         wp.array(member_params(values), dtype=types.MemberParams, device=DEVICE), states,
         wp.array(crossing, dtype=f64, device=DEVICE), wp.array(slope, dtype=f64, device=DEVICE), curvature,
         wp.array(contact, dtype=f64, device=DEVICE), h, steps, use_stage2,
-        arrays["K"], arrays["work"], arrays["arrival"], arrays["arrival_error"],
-        wp.empty(1, dtype=coeff_dtype, device=DEVICE)])
+        arrays["K"], arrays["work"], arrays["arrival"], arrays["arrival_error"]])
     arrival = arrays["arrival"].numpy()[types.EV_VELOCITY, :, 0]
     error = arrays["arrival_error"].numpy()[types.EV_VELOCITY, :, 0]
     assert np.isnan(arrival[5]) and np.isnan(error[5])  # lifted off
@@ -571,24 +563,22 @@ def test_front_observer_on_a_synthetic_field(use_stage2):
 
 def _newton_kernel():
     stages = make_stages(f64, wf.Model())
-    make_coeff_values, member_coeffs = stages["terms"]["make_coeff_values"], stages["terms"]["member_coeffs"]
+    make_coeffs = stages["terms"]["make_coeffs"]
     newton_solve = stages["newton"]["newton_solve"]
 
     @wp.kernel(module="unique")
     def solve(params: wp.array(dtype=types.MemberParams), settings: types.SolverSettings, work: wp.array3d(dtype=f64),
-              gates: wp.array3d(dtype=f64), coeff_values: wp.array(dtype=stages["terms"]["CoeffValues"]),
-              out: wp.array2d(dtype=int)):
+              gates: wp.array3d(dtype=f64), out: wp.array2d(dtype=int)):
         m = wp.tid()
         n = work.shape[1]
-        coeff_values[m] = make_coeff_values(params[m], n)
-        c = member_coeffs(coeff_values, m, n)
+        c = make_coeffs(params[m], n)
         ok, d0, a, iters, bad, _curvature = newton_solve(c, params[m], settings, m, n, work, gates, f64(1e-6),
                                                          f64(10.0), f64(10.0), f64(6e-6), f64(0.0), f64(0.0))
         out[m, 0] = ok
         out[m, 1] = bad
         out[m, 2] = iters
 
-    return solve, stages["terms"]["CoeffValues"]
+    return solve
 
 
 def test_newton_flags_a_non_finite_update():
@@ -603,11 +593,9 @@ def test_newton_flags_a_non_finite_update():
     gates = np.ones((types.N_GATE, nodes, 2))
     gates[types.G_SLIDE] = 0.0
     out = wp.zeros((2, 3), dtype=int, device=DEVICE)
-    solve, coeff_dtype = _newton_kernel()
-    wp.launch(solve, dim=2, device=DEVICE, inputs=[
+    wp.launch(_newton_kernel(), dim=2, device=DEVICE, inputs=[
         wp.array(member_params(values), dtype=types.MemberParams, device=DEVICE), solver_settings(wf.Solver()),
-        wp.array(work, dtype=f64, device=DEVICE), wp.array(gates, dtype=f64, device=DEVICE),
-        wp.empty(2, dtype=coeff_dtype, device=DEVICE), out])
+        wp.array(work, dtype=f64, device=DEVICE), wp.array(gates, dtype=f64, device=DEVICE), out])
     result = out.numpy()
     assert result[0, 0] == 0 and result[0, 1] == 1 and result[0, 2] == 1  # stopped at the first NaN update
     assert result[1, 1] == 0
@@ -631,6 +619,5 @@ def test_device_memory_per_member_is_reported(dtype, gate, fronts, lanes):
     expected = (size * n * (4 + 12 + types.N_WORK) + (size * types.N_GATE * n + 8 * n if gate == "stress" else 0)
                 + (2 * types.N_EVENTS * 8 * n if fronts else 0))
     expected += np.dtype(types.MemberParams.numpy_dtype()).itemsize + np.dtype(types.IntegratorState.numpy_dtype()).itemsize
-    expected += size * 27  # the member's coefficients (kernels/model_terms.py CoeffValues: 27 in the working precision)
     assert ds.attrs["device_bytes_per_member"] == expected
     assert ds.attrs["kernel_build_time_s"] >= 0 and ds.attrs["wall_time_s"] > 0

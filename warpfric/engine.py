@@ -367,7 +367,6 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     with cpu_blocks(team):  # compile or load now, so that it is timed apart
         wp.load_module(kern["integrate"].module, device=device, block_dim=lanes if team else None)
         wp.load_module(kern["evaluate_fields"].module, device=device)
-        wp.load_module(kern["member_coefficients"].module, device=device)
     kernel_build_s = time.perf_counter() - t_build
     ft = kern["ft"]
     np_dtype = np.float64 if solver.dtype == "float64" else np.float32
@@ -382,9 +381,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         arrays = allocate(ft, params_np, n, stress_gate, fronts is not None,
                           record.times if record is not None else None, len(record.members) if record is not None else 0,
                           member_major=team, method=solver.method, strength=strength)
-        coeff_values = wp.empty(n_members, dtype=kern["CoeffValues"])  # read by the kernels, never by the host
-        wp.launch(kern["member_coefficients"], dim=n_members, inputs=[arrays.params, n], outputs=[coeff_values])
-        per_member = [arrays.params, coeff_values, arrays.state, arrays.stages, arrays.work]  # not the (.., 1, 1) placeholders
+        per_member = [arrays.params, arrays.state, arrays.stages, arrays.work]  # not the (.., 1, 1) placeholders
         per_member += [arrays.gates, arrays.yield_time] if stress_gate else []
         per_member += [arrays.arrival, arrays.arrival_error] if fronts is not None else []
         per_member += [arrays.strength] if strength else []
@@ -422,7 +419,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             bar.start_pass(pass_index)
             stall_limit.fill_(NO_STALL_LIMIT)
             last_limit = NO_STALL_LIMIT
-            inputs = [arrays.params, coeff_values, settings, outputs if pass_index == 0 else arrival_pass_settings(outputs),
+            inputs = [arrays.params, settings, outputs if pass_index == 0 else arrival_pass_settings(outputs),
                       launch_steps(solver, n_members, device), stall_limit, arrays.record_times,
                       member_states, arrays.state, arrays.stages, arrays.work, arrays.gates, arrays.record_previous]
             outputs_ = [arrays.arrival, arrays.arrival_error, arrays.strength, arrays.yield_time, arrays.record]
@@ -454,7 +451,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                 event = real_event(front_max, front_last, values, fronts) if fronts is not None else None
                 sigma_out = wp.zeros((n, n_members), dtype=ft)
                 tau_out = wp.zeros((n, n_members), dtype=ft)
-                wp.launch(kern["evaluate_fields"], dim=n_members, inputs=[arrays.params, coeff_values, member_states, arrays.state],
+                wp.launch(kern["evaluate_fields"], dim=n_members, inputs=[arrays.params, member_states, arrays.state],
                           outputs=[sigma_out, tau_out])
                 fields = arrays.state.numpy()
                 sigma = sigma_out.numpy()
