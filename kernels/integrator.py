@@ -23,7 +23,7 @@ from .gates import make_gates
 from .model_terms import disc_velocity_at, make_model_terms
 from .newton import make_newton
 from .observers import ObserverSet, make_observers, run_finished
-from .team import EXCHANGES, lane_nodes3, lane_nodes4, make_team, node_range
+from .team import EXCHANGES, make_team, node_range
 from .types import IntegratorState, MemberParams, OutputSettings, SolverSettings, stage_slots
 
 _CACHE: dict = {}
@@ -305,13 +305,6 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
             first_node, end_node = node_range(lane, lanes, n)
             c.first_node = first_node
             c.end_node = end_node
-            # the lane's views of the member's nodes (kernels/team.py node_positions): its k-th node
-            # at k * lanes + lane, so that the team's lanes access neighbouring addresses
-            offset = lane - first_node * lanes
-            state = lane_nodes3(state, 1, offset, lanes)
-            K = lane_nodes4(K, 2, offset, lanes)
-            work = lane_nodes3(work, 1, offset, lanes)
-            gates = lane_nodes3(gates, 1, offset, lanes)
         delta0 = ft(st.delta0)
         tilt = ft(st.tilt)
         attempt_limit = stall_limit[0]

@@ -483,7 +483,6 @@ def make_newton_system(ft, model, terms, team, equations, solver, team_solver):
     team_on = team["lanes"] > 1
     team_sum_vec12 = team.get("team_sum_vec12", None)
     from_neighbour_lanes = team.get("from_neighbour_lanes", None)
-    neighbour_ends = team.get("neighbour_ends", None)
     start_rows = team_solver.get("start_rows", None)
     lane_row = team_solver.get("lane_row", None)
     team_solve = team_solver.get("team_solve", None)
@@ -533,18 +532,12 @@ def make_newton_system(ft, model, terms, team, equations, solver, team_solver):
         to_previous_c2 = ft(0.0)
         if wp.static(team_on):
             rows = start_rows()
-        # the displacements next to the lane's nodes: u_{lo-1} and u_hi from the neighbouring lanes
-        # (0 past the pad's ends)
         u_l = ft(0.0)
-        u_after = ft(0.0)
-        if wp.static(team_on):
-            u_l, u_after = neighbour_ends(stage_displacement(work, lo, n, m, g), stage_displacement(work, hi - 1, n, m, g),
-                                          c.lane)
+        if lo > 0:
+            u_l = stage_displacement(work, lo - 1, n, m, g)
         u_c = stage_displacement(work, lo, n, m, g)
         for i in range(lo, hi):
-            u_r = u_after
-            if i + 1 < hi:
-                u_r = stage_displacement(work, i + 1, n, m, g)
+            u_r = stage_displacement(work, i + 1, n, m, g)
             row = node_row(c, settings, m, n, work, gates, i, u_l, u_c, u_r, delta0, tilt, v_disc, g)
             if wp.static(inertia):
                 work[W_DIAG, i, m] = row.jac_center
@@ -754,7 +747,6 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
     team_switch_test = gates["team_switch_test"]
     team_min = team["team_min"]
     team_sum = team["team_sum"]
-    neighbour_ends = team.get("neighbour_ends", None)
     disc_velocity_stage = equations["disc_velocity_stage"]
     stage_displacement = equations["stage_displacement"]
     array3 = wp.array3d(dtype=ft)
@@ -786,15 +778,11 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
         sums.min_normal = wp.float64(1.0e300)
         test = no_switch()
         u_l = ft(0.0)
-        u_after = ft(0.0)  # u of the node after the lane's last (another lane's; 0 past the pad's end)
-        if wp.static(team_on):
-            u_l, u_after = neighbour_ends(stage_displacement(work, c.first_node, n, m, g),
-                                          stage_displacement(work, c.end_node - 1, n, m, g), c.lane)
+        if c.first_node > 0:
+            u_l = stage_displacement(work, c.first_node - 1, n, m, g)
         u_c = stage_displacement(work, c.first_node, n, m, g)
         for i in range(c.first_node, c.end_node):
-            u_r = u_after
-            if i + 1 < c.end_node:
-                u_r = stage_displacement(work, i + 1, n, m, g)
+            u_r = stage_displacement(work, i + 1, n, m, g)
             vel = work[W_V, i, m]
             ns, fr = contact_terms(c, i, n, u_l, u_c, u_r, delta0, tilt, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m],
                                    g, node_gate(gates, i, m), node_sliding(gates, i, m), ft(settings.sliding_width))

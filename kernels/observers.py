@@ -107,13 +107,11 @@ def run_finished(p: MemberParams, st: IntegratorState, outputs: OutputSettings):
     return False
 
 
-def make_state_interface(ft, terms, team):
+def make_state_interface(ft, terms):
     """The interface of the state itself (the friction law at the state, g = 0), node by node along
     a lane's nodes: the displacement stencil's start and each node's normal stress and friction."""
     Coeffs = terms["Coeffs"]
     contact_terms = terms["contact_terms"]
-    team_on = team["lanes"] > 1
-    neighbour_ends = team.get("neighbour_ends", None)
     array3 = wp.array3d(dtype=ft)
 
     @wp.func
@@ -125,14 +123,11 @@ def make_state_interface(ft, terms, team):
 
     @wp.func
     def lane_stencil_start(c: Coeffs, state: array3, n: int, m: int):
-        """(u of the node left of the lane's first node, u of its first node, u of the node right of
-        its last node); the outer two are other lanes' (0 past the pad's ends)."""
-        u_first = state_displacement(state, c.first_node, n, m)
+        """(u of the node left of the lane's first node (0 at the pad's left end), u of its first node)."""
         u_l = ft(0.0)
-        u_after = ft(0.0)
-        if wp.static(team_on):
-            u_l, u_after = neighbour_ends(u_first, state_displacement(state, c.end_node - 1, n, m), c.lane)
-        return u_l, u_first, u_after
+        if c.first_node > 0:
+            u_l = state_displacement(state, c.first_node - 1, n, m)
+        return u_l, state_displacement(state, c.first_node, n, m)
 
     @wp.func
     def state_contact(c: Coeffs, state: array3, i: int, n: int, m: int, u_l: ft, u_c: ft, u_r: ft, delta0: ft, tilt: ft,
@@ -236,11 +231,9 @@ def make_strength_front(ft, terms, team, interface):
         in_window = t_new > p.rest_until and t_old < p.stop_time
         refine = backward_euler == 0 and st.npts >= 2 and t_old > st.t2 and st.t2 >= p.rest_until
         rising = int(0)
-        u_l, u_c, u_after = lane_stencil_start(c, state, n, m)
+        u_l, u_c = lane_stencil_start(c, state, n, m)
         for i in range(c.first_node, c.end_node):
-            u_r = u_after
-            if i + 1 < c.end_node:
-                u_r = state_displacement(state, i + 1, n, m)
+            u_r = state_displacement(state, i + 1, n, m)
             ns, fr = state_contact(c, state, i, n, m, u_l, u_c, u_r, delta0, tilt, v_disc)
             u_l = u_c
             u_c = u_r
@@ -310,11 +303,9 @@ def make_recording(ft, terms, team, interface):
             k_end += 1
         v_disc = ft(disc_velocity_at(p, t_new, t_old))
         span = t_new - t_old
-        u_l, u_c, u_after = lane_stencil_start(c, state, n, m)
+        u_l, u_c = lane_stencil_start(c, state, n, m)
         for i in range(c.first_node, c.end_node):
-            u_r = u_after
-            if i + 1 < c.end_node:
-                u_r = state_displacement(state, i + 1, n, m)
+            u_r = state_displacement(state, i + 1, n, m)
             vel = state[C_V, i, m]
             ns, fr = state_contact(c, state, i, n, m, u_l, u_c, u_r, delta0, tilt, v_disc)
             sigma = ns.value
@@ -352,7 +343,7 @@ def make_observers(ft, model, terms, team, method="tr_bdf2", observed=ObserverSe
     # cubic through four (its longer steps)
     cubic = 1 if method == "esdirk4" else 0
     Coeffs = terms["Coeffs"]
-    interface = make_state_interface(ft, terms, team)
+    interface = make_state_interface(ft, terms)
     track_fronts = make_velocity_front(ft, terms, team)["track_fronts"]
     track_strength = make_strength_front(ft, terms, team, interface)["track_strength"]
     record_fields = make_recording(ft, terms, team, interface)["record_fields"]

@@ -33,7 +33,6 @@ float64 (``ft``): the cooperative kernel is compiled for float64 only.
 
 from typing import Any
 
-import numpy as np
 import warp as wp
 
 # vector types the team exchanges (float64): the border-row entries a lane's end nodes give its
@@ -49,51 +48,8 @@ vec12d = wp.types.vector(length=12, dtype=wp.float64)
 
 @wp.func
 def node_range(lane: int, lanes: int, n: int):
-    """The nodes [first, end) of lane ``lane`` of ``lanes``: n // lanes each, one more for each of
-    the first n % lanes lanes (all n for a team of one)."""
-    base = n // lanes
-    extra = n - base * lanes
-    first = lane * base + wp.min(lane, extra)
-    end = first + base
-    if lane < extra:
-        end = end + 1
-    return first, end
-
-
-def node_positions(n: int, lanes: int) -> np.ndarray:
-    """Where each node of a member sits along the node axis of a team's state, stages, work and
-    gates arrays (int array (n,)): lane L's k-th node at k * lanes + L, so that the lanes of a team
-    that work on their k-th nodes read and write neighbouring addresses (one coalesced access
-    instead of one memory sector per lane); a bijection of 0..n-1 (node_range). The identity for a
-    team of one."""
-    base, extra = divmod(n, lanes)
-    lane = np.repeat(np.arange(lanes), base + (np.arange(lanes) < extra))
-    first = lane * base + np.minimum(lane, extra)
-    return (np.arange(n) - first) * lanes + lane
-
-
-# a lane's view of a team's member-major array (kernels/types.py member_array): indexed by node i
-# of the lane's own nodes [first, end), it addresses position (i - first) * lanes + lane
-# (node_positions); ``offset`` = lane - first * lanes, ``axis`` the node axis. Other lanes' nodes are
-# not addressed through it: their values come by the team's exchanges.
-_LANE_VIEW = r"""
-    auto out = a;
-    out.data = (double*)((char*)a.data + (long long)offset * a.strides[axis]);
-    out.strides[axis] = a.strides[axis] * lanes;
-    return out;
-"""
-
-
-@wp.func_native(_LANE_VIEW)
-def lane_nodes3(a: wp.array3d(dtype=wp.float64), axis: int, offset: int, lanes: int) -> wp.array3d(dtype=wp.float64):
-    """A lane's view of a 3-d member-major array (node axis ``axis``)."""
-    ...
-
-
-@wp.func_native(_LANE_VIEW)
-def lane_nodes4(a: wp.array4d(dtype=wp.float64), axis: int, offset: int, lanes: int) -> wp.array4d(dtype=wp.float64):
-    """A lane's view of a 4-d member-major array (node axis ``axis``)."""
-    ...
+    """The nodes [first, end) of lane ``lane`` of ``lanes`` (all n for a team of one)."""
+    return (lane * n) // lanes, ((lane + 1) * n) // lanes
 
 
 @wp.func
@@ -624,19 +580,7 @@ def make_team(ft, lanes: int, exchange: str = "tile"):
     if exchange not in EXCHANGES:
         raise ValueError(f"team exchange {exchange!r} is invalid; valid: {', '.join(EXCHANGES)}")
     if exchange == "tile":
-        team = dict(lanes=lanes, exchange=exchange, **make_tile_reductions(lanes), **make_separator_exchange(lanes))
-    elif lanes > 32:
+        return dict(lanes=lanes, exchange=exchange, **make_tile_reductions(lanes), **make_separator_exchange(lanes))
+    if lanes > 32:
         raise ValueError(f"a team exchange {exchange!r} of {lanes} lanes is invalid: at most 32 lanes (one warp)")
-    else:
-        team = dict(lanes=lanes, exchange=exchange, **make_exchange_team(lanes, exchange))
-    from_neighbour_lanes = team["from_neighbour_lanes"]
-
-    @wp.func
-    def neighbour_ends(first: wp.float64, last: wp.float64, lane: int):
-        """A node sweep's halo: (the previous lane's ``last``, the next lane's ``first``), 0 beyond
-        the team's ends (the pad's ends: no node there)."""
-        prev, nxt = from_neighbour_lanes(vec4d(first, last, wp.float64(0.0), wp.float64(0.0)), lane)
-        return prev[1], nxt[0]
-
-    team["neighbour_ends"] = neighbour_ends
-    return team
+    return dict(lanes=lanes, exchange=exchange, **make_exchange_team(lanes, exchange))

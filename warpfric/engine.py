@@ -351,7 +351,6 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     import warp as wp
 
     from warpfric.kernels.integrator import get_integrator
-    from warpfric.kernels.team import node_positions
     from warpfric.kernels.types import C_PHI, IntegratorState, allocate, member_array
 
     n_members = values["normal_force"].shape[0]
@@ -382,10 +381,6 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         arrays = allocate(ft, params_np, n, stress_gate, fronts is not None,
                           record.times if record is not None else None, len(record.members) if record is not None else 0,
                           member_major=team, method=solver.method, strength=strength)
-        # a team's state, stages, work and gates arrays hold the nodes in the team's order:
-        # node i at node_index[i] (kernels/team.py node_positions; the identity for lanes = 1)
-        node_index = node_positions(n, lanes)
-        node_order = np.argsort(node_index)  # the node at each position
         per_member = [arrays.params, arrays.state, arrays.stages, arrays.work]  # not the (.., 1, 1) placeholders
         per_member += [arrays.gates, arrays.yield_time] if stress_gate else []
         per_member += [arrays.arrival, arrays.arrival_error] if fronts is not None else []
@@ -413,7 +408,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             state_np = np.zeros(arrays.state.shape, dtype=np_dtype)
             state_np[C_PHI] = values["initial_age"][None, :]
             member_states = wp.array(states_np, dtype=IntegratorState)
-            arrays.state = member_array(state_np[:, node_order], ft, team)  # a team's node order (node_positions)
+            arrays.state = member_array(state_np, ft, team)
             arrays.stages.zero_()  # K[fsal] holds f(y) of the state: zero for the state at rest
             arrays.gates.zero_()  # every gate closed: no friction stress at the start
             if pass_index == 0:
@@ -454,15 +449,15 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                 st = st_now
                 front_max, front_last = st["front_max"], st["front_last"]
                 event = real_event(front_max, front_last, values, fronts) if fronts is not None else None
-                fields = arrays.state.numpy()[:, node_index]
                 sigma_out = wp.zeros((n, n_members), dtype=ft)
                 tau_out = wp.zeros((n, n_members), dtype=ft)
-                wp.launch(kern["evaluate_fields"], dim=n_members,
-                          inputs=[arrays.params, member_states, wp.array(fields, dtype=ft)], outputs=[sigma_out, tau_out])
+                wp.launch(kern["evaluate_fields"], dim=n_members, inputs=[arrays.params, member_states, arrays.state],
+                          outputs=[sigma_out, tau_out])
+                fields = arrays.state.numpy()
                 sigma = sigma_out.numpy()
                 tau = tau_out.numpy()
                 yield_np = arrays.yield_time.numpy() if stress_gate else None
-                gate_np = arrays.gates.numpy()[0][node_index] if stress_gate else None
+                gate_np = arrays.gates.numpy()[0] if stress_gate else None
         arrival = arrival_error = strength_peak = None
         if fronts is not None:
             arrival, arrival_error = arrays.arrival.numpy(), arrays.arrival_error.numpy()
