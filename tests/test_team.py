@@ -56,6 +56,27 @@ def test_a_team_gives_the_thread_per_member_outputs(gate, lanes, fronts, nodes, 
             np.testing.assert_allclose(team[name].values, ref[name].values, rtol=1e-6, equal_nan=True)
 
 
+@pytest.mark.filterwarnings("ignore:Solver\\(lanes=:UserWarning")  # a team on the CPU's fibers
+@pytest.mark.parametrize("lanes, nodes", [(8, 30), (7, 30)])
+def test_a_team_gives_the_thread_per_member_fields(lanes, nodes):
+    """The final fields of a team equal the thread-per-member kernel's node by node (each lane
+    writes its own nodes of the member's arrays; the host reads them in node order). The run ends
+    at a fixed time (20.05 s: the load ramped, the disc started, the interface still stuck; the
+    eccentric load and the disc's drag make the fields vary along the pad), so both kernels take
+    the same steps; they differ by the order of their sums only. 7 lanes of 30 nodes: lanes of 5
+    and 4 nodes."""
+    scene = wf.Parameters(end_time=20.05)
+    ref = run(MEMBERS, scene=scene, nodes=nodes, rtol=1e-6, lanes=1)
+    team = run(MEMBERS, scene=scene, nodes=nodes, rtol=1e-6, lanes=lanes)
+    for name in ("displacement", "velocity", "elastic_stress", "contact_age", "normal_stress", "friction_stress"):
+        r, t = ref[name].values, team[name].values
+        scale = np.abs(r).max(axis=1, keepdims=True)
+        np.testing.assert_allclose(t / scale, r / scale, rtol=0, atol=1e-7, err_msg=name)
+    # the fields vary along the pad: a wrong node order could not pass
+    u = ref["displacement"].values
+    assert np.all(np.abs(np.diff(u, axis=1)).max(axis=1) > 1e-3 * np.abs(u).max(axis=1))
+
+
 def _reductions_kernel(lanes, exchange):
     from warpfric.kernels.team import make_team, vec12d
 
