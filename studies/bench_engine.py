@@ -19,7 +19,8 @@ largest relative error of mu_s over the first 16 members against a converged flo
 kernel, float64 only; default: the automatic choice). --predict-switches: Solver.predict_switches
 values to time (stress gate; default: on). --methods: Solver.method values to time. --steps-per-launch: Solver.steps_per_launch values.
 --launch-log: where the kernel time goes, launch by launch (one more, synchronised run per timing).
---cuda-profile-range: only the timed runs are profiled by `ncu --profile-from-start off`. Compilation is excluded (a warm-up run compiles each kernel first). float32 is skipped with the stress
+--cuda-profile-range: only the timed runs are profiled by `ncu --profile-from-start off`.
+--lineinfo: the kernels carry line information (for Nsight Compute's source view). Compilation is excluded (a warm-up run compiles each kernel first). float32 is skipped with the stress
 gate, which refuses it (docs/model.md, "Precision").
 """
 
@@ -129,7 +130,14 @@ def main(argv=None):
     ap.add_argument("--launch-log", default=None,
                     help="after each timing, run the same ensemble once more with every launch synchronised and "
                          "timed (warpfric.engine.LAUNCH_LOG) and append its launches as JSON lines to this file")
+    ap.add_argument("--lineinfo", action="store_true",
+                    help="compile the kernels with line information (wp.config.lineinfo: Nsight Compute's source "
+                         "view, studies/stall_sites.py); a kernel of its own, same code")
     args = ap.parse_args(argv)
+    if args.lineinfo:
+        import warp as wp
+
+        wp.config.lineinfo = True
     device = args.device or wf.default_device()
     n_check = 16
     model = wf.Model(relaxation_gate=args.relaxation_gate)

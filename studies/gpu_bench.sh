@@ -32,6 +32,8 @@
 #   ncu-one        Nsight Compute's warp stall reasons of the one-member launch
 #   ncu-sources    Nsight Compute's source counters of the one-member launch (line info on)
 #   stalls         Nsight Compute's warp stall reasons and memory traffic of one 10,000-member launch
+#   stall-sites    the same launch's warp samples by SASS instruction (line-info kernel), summed by Python
+#                  call site and source line (studies/stall_sites.py)
 #   sass           the integrate kernel's SASS instructions by inlined call site (studies/sass_sites.py)
 #   exchange       the team's lane exchanges, tiles against warp shuffles: outputs (studies/team_exchange.py)
 #                  and 1 / 10,000 members timed with each
@@ -136,6 +138,19 @@ case "$mode" in
       --cuda-profile-range --out "$OUT/stalls_bench.json" > "$OUT/ncu_stress_10k_stalls.txt" 2>&1
     grep -E "Duration|Warp Cycles Per Issued|Issued Ipc|Achieved Active|stalled_.*ratio|inst_executed.sum|Hit Rate|Stack" \
       "$OUT/ncu_stress_10k_stalls.txt" | awk '$NF+0 > 0.04 || !/stalled/' | head -30 ;;
+  stall-sites)
+    NCU=$(ncu_bin); echo "ncu: $NCU"
+    python3 studies/bench_engine.py --device cuda:0 --members 1 --dtypes float64 --lanes 32 --lineinfo \
+      --out "$OUT/stall_sites_warm.json" > /dev/null 2>&1  # compile outside the profiler
+    "$NCU" --profile-from-start off -k regex:integrate --launch-skip 1 --launch-count 1 --section SourceCounters \
+      --section WarpStateStats --import-source yes -o "$OUT/stall_sites" python3 studies/bench_engine.py \
+      --device cuda:0 --dtypes float64 --members 10000 --lanes 32 --lineinfo --steps-per-launch 100 \
+      --cuda-profile-range --out "$OUT/stall_sites_bench.json" > "$OUT/ncu_stall_sites.log" 2>&1
+    "$NCU" -i "$OUT/stall_sites.ncu-rep" --page source --csv --print-source sass | gzip -9 > "$OUT/stall_sass.csv.gz"
+    cubin=$(ls -t $(find "${WARP_CACHE_PATH:-$HOME/.cache/warp}" -name "*integrate*.cubin") | head -1)
+    cp "$cubin" "$OUT/integrate.cubin"
+    python3 studies/stall_sites.py --csv "$OUT/stall_sass.csv.gz" --cubin "$OUT/integrate.cubin" "$@" 2>&1 \
+      | tee "$OUT/stall_sites.txt" | head -40 ;;
   sass)
     python3 studies/sass_sites.py "$@" 2>&1 | tee "$OUT/sass_sites.txt" | head -30 ;;
   exchange)

@@ -50,12 +50,11 @@ def kind_of(line: str):
     return None
 
 
-def call_sites(sass: str) -> tuple:
-    """(total instructions, Counter of (file, line) of the inlined calls each instruction sits in,
-    {kind: Counter of the same sites for that kind's instructions}, {kind: total})."""
-    sites, counts, total, comment, group = frozenset(), collections.Counter(), 0, False, []
-    by_kind = {k: collections.Counter() for k in KINDS}
-    kind_totals = collections.Counter()
+def instructions(sass: str):
+    """Each instruction of nvdisasm -g -gi output, in order, as (line, sites, where): sites, the
+    frozenset of (file, line) of the inlined calls it sits in (Python files only); where, the
+    (file, line) of the Python source line it belongs to (the innermost .py location), or None."""
+    sites, where, comment, group = frozenset(), None, False, []
     for line in sass.splitlines():
         m = SITE.search(line)
         if m:
@@ -66,14 +65,26 @@ def call_sites(sass: str) -> tuple:
         if comment:
             sites = frozenset((os.path.basename(g.group(3)), int(g.group(4))) for g in group
                               if g.group(3) and g.group(3).endswith(".py"))
+            own = [g for g in group if g.group(1).endswith(".py")]
+            where = (os.path.basename(own[0].group(1)), int(own[0].group(2))) if own else None
             comment = False
         if INSTRUCTION.search(line):
-            total += 1
-            counts.update(sites)
-            kind = kind_of(line)
-            if kind:
-                kind_totals[kind] += 1
-                by_kind[kind].update(sites)
+            yield line, sites, where
+
+
+def call_sites(sass: str) -> tuple:
+    """(total instructions, Counter of (file, line) of the inlined calls each instruction sits in,
+    {kind: Counter of the same sites for that kind's instructions}, {kind: total})."""
+    counts, total = collections.Counter(), 0
+    by_kind = {k: collections.Counter() for k in KINDS}
+    kind_totals = collections.Counter()
+    for line, sites, _where in instructions(sass):
+        total += 1
+        counts.update(sites)
+        kind = kind_of(line)
+        if kind:
+            kind_totals[kind] += 1
+            by_kind[kind].update(sites)
     return total, counts, by_kind, kind_totals
 
 

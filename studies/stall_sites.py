@@ -1,0 +1,120 @@
+"""Where the integrate kernel's warps wait, by Python source: Nsight Compute's warp-state samples of
+each SASS instruction, summed over the instructions of each call site and each source line of
+kernels/ (the instructions' sites come from the cubin's line info, as in studies/sass_sites.py).
+
+    python studies/stall_sites.py --csv stall_sass.csv[.gz] --cubin integrate.cubin[.gz] [--top 25]
+
+The two inputs come from a GPU host (`bash studies/gpu_bench.sh stall-sites`): the SASS source page
+of an `ncu --section SourceCounters --section WarpStateStats --import-source yes` profile of one
+launch of the line-info kernel (`ncu -i REPORT --page source --csv --print-source sass`), and that
+kernel's cubin from Warp's kernel cache. nvdisasm comes from $CUDA_BIN, the PATH or
+/usr/local/cuda/bin (the PyPI wheel nvidia-cuda-nvdisasm carries it). Prints the samples by stall
+reason in all, then the call sites (an instruction counts in every call that inlines it) and the
+source lines (each instruction counts once, at its own line) with the most samples.
+"""
+
+import argparse
+import collections
+import csv
+import gzip
+import io
+import os
+import subprocess
+import sys
+import tempfile
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from sass_sites import OPCODE, instructions, tool  # noqa: E402
+
+# stall reasons shown apart (ncu's column names, "stall_" dropped); the rest is summed as "other"
+REASONS = ("long_sb", "no_inst", "wait", "short_sb", "branch_resolving", "selected", "math", "lg", "mio")
+
+
+def read_samples(path: str) -> list:
+    """[(opcode, {reason: samples}, total samples)] per SASS instruction, in address order, from
+    ncu's source page (CSV; gzip if the name ends in .gz). The first line names the kernel."""
+    raw = gzip.open(path, "rt") if path.endswith(".gz") else open(path)
+    with raw:
+        lines = raw.read().splitlines()
+    rows = list(csv.DictReader(io.StringIO("\n".join(lines[1:]))))
+    out = []
+    for row in rows:
+        reasons = {k[len("stall_"):]: float(v) for k, v in row.items()
+                   if k.startswith("stall_") and "Not Issued" not in k and v not in ("", "-")}
+        op = row["Source"].split()
+        op = [t for t in op if not t.startswith("@")]
+        out.append((op[0] if op else "", reasons, float(row["Warp Stall Sampling (All Samples)"] or 0)))
+    return out
+
+
+def stall_tables(instr: list, samples: list) -> tuple:
+    """(totals, by call site, by source line): Counters of samples per stall reason (REASONS,
+    "other" for the rest), "all" and "instructions", from instructions() of the cubin and
+    read_samples() of the profile, matched by position."""
+    total = collections.Counter()
+    by_site = collections.defaultdict(collections.Counter)
+    by_line = collections.defaultdict(collections.Counter)
+    for (line, sites, where), (_op, reasons, all_samples) in zip(instr, samples):
+        row = collections.Counter({r: reasons.get(r, 0.0) for r in REASONS})
+        row["other"] = all_samples - sum(row.values())
+        row["all"] = all_samples
+        row["instructions"] = 1
+        total.update(row)
+        for site in sites:
+            by_site[site].update(row)
+        if where is not None:
+            by_line[where].update(row)
+    return total, by_site, by_line
+
+
+def opcode_of(line: str) -> str:
+    m = OPCODE.search(line)
+    return m.group(1) if m else ""
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--csv", required=True, help="ncu's SASS source page of the profiled launch (CSV, .gz allowed)")
+    ap.add_argument("--cubin", required=True, help="the profiled kernel's cubin (line info on; .gz allowed)")
+    ap.add_argument("--top", type=int, default=25)
+    args = ap.parse_args(argv)
+    samples = read_samples(args.csv)
+    cubin = args.cubin
+    if cubin.endswith(".gz"):
+        with gzip.open(cubin, "rb") as packed, tempfile.NamedTemporaryFile(suffix=".cubin", delete=False) as plain:
+            plain.write(packed.read())
+        cubin = plain.name
+    sass = subprocess.run([tool("nvdisasm"), "-g", "-gi", cubin], capture_output=True, text=True, check=True).stdout
+    if cubin != args.cubin:
+        os.unlink(cubin)
+    instr = list(instructions(sass))
+    if len(instr) != len(samples):
+        raise SystemExit(f"the cubin has {len(instr)} instructions, the profile {len(samples)}: not the same kernel")
+    mismatched = sum(1 for (line, _s, _w), (op, _r, _t) in zip(instr, samples)
+                     if opcode_of(line).split(".")[0] != op.split(".")[0])
+    if mismatched > len(instr) // 100:
+        raise SystemExit(f"{mismatched} of {len(instr)} opcodes differ between the cubin and the profile")
+    total, by_site, by_line = stall_tables(instr, samples)
+    grand = total["all"]
+    print(f"{len(instr)} instructions, {grand:.0f} warp samples ({mismatched} opcodes differ); "
+          + ", ".join(f"{r} {100 * total[r] / grand:.1f} %" for r in REASONS + ("other",)))
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    columns = ("all",) + REASONS[:5] + ("other",)
+    head = f"{'instr':>6s} " + " ".join(f"{c[:8]:>8s}" for c in columns) + "  (% of all samples)  site"
+
+    def show(title, table):
+        print(f"\n{title}\n{head}")
+        for (name, lineno), row in sorted(table.items(), key=lambda kv: -kv[1]["all"])[:args.top]:
+            path = os.path.join(root, "kernels", name)
+            src = open(path).read().splitlines()[lineno - 1].strip()[:70] if os.path.exists(path) else ""
+            other = row["all"] - sum(row[r] for r in REASONS[:5])
+            cells = [row["all"]] + [row[r] for r in REASONS[:5]] + [other]
+            print(f"{row['instructions']:6.0f} " + " ".join(f"{100 * v / grand:8.1f}" for v in cells)
+                  + f"  {name}:{lineno}  {src}")
+
+    show("call sites (an instruction counts in every inlined call it sits in)", by_site)
+    show("source lines (each instruction once, at its own line)", by_line)
+
+
+if __name__ == "__main__":
+    main()

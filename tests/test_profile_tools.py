@@ -1,0 +1,65 @@
+"""The profile readers of studies/ (sass_sites.py, stall_sites.py) on small hand-written inputs:
+nvdisasm's line-info comments give each instruction its call sites and its own source line, and
+Nsight Compute's per-instruction warp samples are summed over them. The real inputs need a GPU
+host (docs/performance.md, "Where the warps wait")."""
+
+import gzip
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "studies"))
+import sass_sites  # noqa: E402
+import stall_sites  # noqa: E402
+
+# three instructions: the first in newton.py line 10 called from integrator.py line 5, the second
+# in model_terms.py line 20 called from newton.py line 12 called from integrator.py line 5, the
+# third with no Python location
+SASS = """\
+        //## File "/x/kernels/newton.py", line 10 inlined at "/x/kernels/integrator.py", line 5
+        /*0000*/                   DFMA R2, R4, R6, R2 ;
+        //## File "/x/kernels/model_terms.py", line 20 inlined at "/x/kernels/newton.py", line 12
+        //## File "/x/kernels/newton.py", line 12 inlined at "/x/kernels/integrator.py", line 5
+        /*0010*/              @!P0 LDG.E.64 R8, desc[UR4][R10.64] ;
+        //## File "/tmp/site/warp/native/builtin.h", line 3
+        /*0020*/                   EXIT ;
+"""
+
+CSV = """\
+"Kernel Name","integrate",
+"Address","Source","Warp Stall Sampling (All Samples)","stall_long_sb","stall_no_inst","stall_wait","stall_long_sb (Not Issued)"
+"0x10","      DFMA R2, R4, R6, R2","10","0","4","6","0"
+"0x20","  @!P0 LDG.E.64 R8, desc[UR4][R10.64]","30","25","5","0","25"
+"0x30","      EXIT","2","0","0","0","0"
+"""
+
+
+def test_instructions_carry_their_call_sites_and_source_line():
+    got = list(sass_sites.instructions(SASS))
+    assert [w for _l, _s, w in got] == [("newton.py", 10), ("model_terms.py", 20), None]
+    assert got[0][1] == {("integrator.py", 5)}
+    assert got[1][1] == {("newton.py", 12), ("integrator.py", 5)}
+    assert got[2][1] == frozenset()
+    total, counts, _by_kind, _kinds = sass_sites.call_sites(SASS)
+    assert total == 3 and counts[("integrator.py", 5)] == 2 and counts[("newton.py", 12)] == 1
+
+
+@pytest.mark.parametrize("packed", [False, True])
+def test_warp_samples_are_summed_by_site_and_line(tmp_path, packed):
+    path = tmp_path / ("s.csv.gz" if packed else "s.csv")
+    if packed:
+        with gzip.open(path, "wt") as f:
+            f.write(CSV)
+    else:
+        path.write_text(CSV)
+    samples = stall_sites.read_samples(str(path))
+    assert [op for op, _r, _a in samples] == ["DFMA", "LDG.E.64", "EXIT"]
+    # the "(Not Issued)" columns are a subset of the samples, not more of them
+    assert samples[1][1] == {"long_sb": 25.0, "no_inst": 5.0, "wait": 0.0}
+    total, by_site, by_line = stall_sites.stall_tables(list(sass_sites.instructions(SASS)), samples)
+    assert total["all"] == 42 and total["long_sb"] == 25 and total["no_inst"] == 9 and total["wait"] == 6
+    assert total["other"] == 2  # EXIT's samples, under no named reason
+    assert by_site[("integrator.py", 5)]["all"] == 40 and by_site[("newton.py", 12)]["long_sb"] == 25
+    assert by_line[("newton.py", 10)]["all"] == 10 and by_line[("model_terms.py", 20)]["all"] == 30
+    assert sum(row["instructions"] for row in by_line.values()) == 2
