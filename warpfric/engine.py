@@ -69,6 +69,20 @@ def choose_lanes(solver: Solver, device: str) -> int:
     return 1
 
 
+def slower_float32(solver: Solver, device: str) -> str | None:
+    """Why float32 is the slower precision for this run, or None: on a CUDA device float32 runs the
+    thread-per-member kernel (the cooperative kernel is compiled for float64 only), where float64
+    would run the faster cooperative kernel (docs/performance.md, "float32 with the float64
+    fallback")."""
+    if solver.dtype != "float32" or not str(device).startswith("cuda"):
+        return None
+    if choose_lanes(dataclasses.replace(solver, dtype="float64"), device) == 1:
+        return None
+    return (f"Solver(dtype='float32') on {device} runs the thread-per-member kernel, which is slower here than "
+            "float64's cooperative kernel (an H100, 10,000 gate-less members at N = 200: 1.14 s in float32, "
+            "0.62 s in float64; docs/performance.md); float64 is also the more robust precision")
+
+
 class cpu_blocks:
     """Let a launch on the CPU run blocks of several threads (Warp's cooperative CPU fibers; needed
     by the cooperative kernel there, e.g. in the tests)."""
@@ -361,6 +375,9 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         warnings.warn(f"Solver(lanes={lanes}) on {device}: the cooperative kernel runs there on Warp's experimental "
                       "CPU fibers, slowly and for tests only (docs/model.md, 'Time integration'); "
                       "lanes=1 is the CPU's kernel", stacklevel=3)
+    note = slower_float32(solver, device)
+    if note is not None:
+        warnings.warn(note, stacklevel=3)
     t_build = time.perf_counter()
     kern = get_integrator(solver.dtype, model, lanes, solver.method, cuda=str(device).startswith("cuda"),
                           observed=observer_set(fronts))
