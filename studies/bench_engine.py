@@ -196,6 +196,7 @@ def main(argv=None):
                 team_exchange=ds.attrs.get("team_exchange", "none"), rtol=args.rtol, fronts=event,
                 integration_passes=int(ds.attrs.get("integration_passes", 1)), commit=commit, mu_s_error=err,
                 relaxation_gate=args.relaxation_gate, predict_switches=predict, method=method,
+                lineinfo=bool(args.lineinfo),
                 mean_newton_iterations=float(ds.newton_iterations.values.mean()),
                 wall_s=best,
                 realisations_per_s=m / best, node_steps_per_s=float(steps.sum()) * args.nodes / best,

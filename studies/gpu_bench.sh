@@ -140,15 +140,18 @@ case "$mode" in
       "$OUT/ncu_stress_10k_stalls.txt" | awk '$NF+0 > 0.04 || !/stalled/' | head -30 ;;
   stall-sites)
     NCU=$(ncu_bin); echo "ncu: $NCU"
+    # a kernel cache of its own: the line-info kernel is then the one integrate cubin in it
+    export WARP_CACHE_PATH=$(mktemp -d)
     python3 studies/bench_engine.py --device cuda:0 --members 1 --dtypes float64 --lanes 32 --lineinfo \
-      --out "$OUT/stall_sites_warm.json" > /dev/null 2>&1  # compile outside the profiler
+      --out "$OUT/stall_sites_warm.json" > "$OUT/stall_sites_warm.log" 2>&1 || { tail "$OUT/stall_sites_warm.log"; exit 1; }
     "$NCU" --profile-from-start off -k regex:integrate --launch-skip 1 --launch-count 1 --section SourceCounters \
       --section WarpStateStats --import-source yes -o "$OUT/stall_sites" python3 studies/bench_engine.py \
       --device cuda:0 --dtypes float64 --members 10000 --lanes 32 --lineinfo --steps-per-launch 100 \
       --cuda-profile-range --out "$OUT/stall_sites_bench.json" > "$OUT/ncu_stall_sites.log" 2>&1
     "$NCU" -i "$OUT/stall_sites.ncu-rep" --page source --csv --print-source sass | gzip -9 > "$OUT/stall_sass.csv.gz"
-    cubin=$(ls -t $(find "${WARP_CACHE_PATH:-$HOME/.cache/warp}" -name "*integrate*.cubin") | head -1)
-    cp "$cubin" "$OUT/integrate.cubin"
+    cubins=$(find "$WARP_CACHE_PATH" -name "*integrate*.cubin")
+    [ "$(echo "$cubins" | wc -w)" = 1 ] || { echo "expected one integrate cubin, found: $cubins"; exit 1; }
+    cp $cubins "$OUT/integrate.cubin"
     python3 studies/stall_sites.py --csv "$OUT/stall_sass.csv.gz" --cubin "$OUT/integrate.cubin" "$@" 2>&1 \
       | tee "$OUT/stall_sites.txt" | head -40 ;;
   sass)

@@ -43,7 +43,8 @@ def read_samples(path: str) -> list:
                    if k.startswith("stall_") and "Not Issued" not in k and v not in ("", "-")}
         op = row["Source"].split()
         op = [t for t in op if not t.startswith("@")]
-        out.append((op[0] if op else "", reasons, float(row["Warp Stall Sampling (All Samples)"] or 0)))
+        all_samples = row["Warp Stall Sampling (All Samples)"]
+        out.append((op[0] if op else "", reasons, float(all_samples) if all_samples not in ("", "-") else 0.0))
     return out
 
 
@@ -94,12 +95,15 @@ def main(argv=None):
                      if opcode_of(line).split(".")[0] != op.split(".")[0])
     if mismatched > len(instr) // 100:
         raise SystemExit(f"{mismatched} of {len(instr)} opcodes differ between the cubin and the profile")
+    if not any(where for _line, _sites, where in instr):
+        raise SystemExit("the cubin has no Python line information: not the line-info build (bench_engine.py --lineinfo)")
     total, by_site, by_line = stall_tables(instr, samples)
     grand = total["all"]
     print(f"{len(instr)} instructions, {grand:.0f} warp samples ({mismatched} opcodes differ); "
           + ", ".join(f"{r} {100 * total[r] / grand:.1f} %" for r in REASONS + ("other",)))
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    columns = ("all",) + REASONS[:5] + ("other",)
+    # the table shows the first five reasons; "rest" is every other reason (selected included)
+    columns = ("all",) + REASONS[:5] + ("rest",)
     head = f"{'instr':>6s} " + " ".join(f"{c[:8]:>8s}" for c in columns) + "  (% of all samples)  site"
 
     def show(title, table):

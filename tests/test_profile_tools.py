@@ -13,16 +13,21 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "studies"))
 import sass_sites  # noqa: E402
 import stall_sites  # noqa: E402
 
-# three instructions: the first in newton.py line 10 called from integrator.py line 5, the second
-# in model_terms.py line 20 called from newton.py line 12 called from integrator.py line 5, the
-# third with no Python location
+# three instructions, with nvdisasm -g -gi's comments (innermost frame first, the kernel's own line
+# last, without "inlined at"): the first in newton.py line 10 called from integrator.py line 5; the
+# second in a Warp header inlined at model_terms.py line 20, called from newton.py line 12, called
+# from integrator.py line 5 (its own source line is model_terms.py 20, past the header frame); the
+# third at the kernel's own line only
 SASS = """\
-        //## File "/x/kernels/newton.py", line 10 inlined at "/x/kernels/integrator.py", line 5
+\t//## File "/x/kernels/newton.py", line 10 inlined at "/x/kernels/integrator.py", line 5
+\t//## File "/x/kernels/integrator.py", line 5
         /*0000*/                   DFMA R2, R4, R6, R2 ;
-        //## File "/x/kernels/model_terms.py", line 20 inlined at "/x/kernels/newton.py", line 12
-        //## File "/x/kernels/newton.py", line 12 inlined at "/x/kernels/integrator.py", line 5
+\t//## File "/tmp/site/warp/native/builtin.h", line 3 inlined at "/x/kernels/model_terms.py", line 20
+\t//## File "/x/kernels/model_terms.py", line 20 inlined at "/x/kernels/newton.py", line 12
+\t//## File "/x/kernels/newton.py", line 12 inlined at "/x/kernels/integrator.py", line 5
+\t//## File "/x/kernels/integrator.py", line 5
         /*0010*/              @!P0 LDG.E.64 R8, desc[UR4][R10.64] ;
-        //## File "/tmp/site/warp/native/builtin.h", line 3
+\t//## File "/x/kernels/integrator.py", line 7
         /*0020*/                   EXIT ;
 """
 
@@ -37,12 +42,13 @@ CSV = """\
 
 def test_instructions_carry_their_call_sites_and_source_line():
     got = list(sass_sites.instructions(SASS))
-    assert [w for _l, _s, w in got] == [("newton.py", 10), ("model_terms.py", 20), None]
+    assert [w for _l, _s, w in got] == [("newton.py", 10), ("model_terms.py", 20), ("integrator.py", 7)]
     assert got[0][1] == {("integrator.py", 5)}
-    assert got[1][1] == {("newton.py", 12), ("integrator.py", 5)}
+    assert got[1][1] == {("model_terms.py", 20), ("newton.py", 12), ("integrator.py", 5)}
     assert got[2][1] == frozenset()
     total, counts, _by_kind, _kinds = sass_sites.call_sites(SASS)
     assert total == 3 and counts[("integrator.py", 5)] == 2 and counts[("newton.py", 12)] == 1
+    assert counts[("model_terms.py", 20)] == 1
 
 
 @pytest.mark.parametrize("packed", [False, True])
@@ -62,4 +68,34 @@ def test_warp_samples_are_summed_by_site_and_line(tmp_path, packed):
     assert total["other"] == 2  # EXIT's samples, under no named reason
     assert by_site[("integrator.py", 5)]["all"] == 40 and by_site[("newton.py", 12)]["long_sb"] == 25
     assert by_line[("newton.py", 10)]["all"] == 10 and by_line[("model_terms.py", 20)]["all"] == 30
-    assert sum(row["instructions"] for row in by_line.values()) == 2
+    assert by_line[("integrator.py", 7)]["all"] == 2
+    assert sum(row["instructions"] for row in by_line.values()) == 3
+
+
+def _fake_nvdisasm(tmp_path, text):
+    """A CUDA_BIN folder whose nvdisasm prints ``text`` (the cubin is not read)."""
+    (tmp_path / "sass.txt").write_text(text)
+    tool = tmp_path / "nvdisasm"
+    tool.write_text(f"#!/bin/sh\ncat {tmp_path / 'sass.txt'}\n")
+    tool.chmod(0o755)
+    return str(tmp_path)
+
+
+def test_stall_sites_prints_the_tables_and_refuses_another_kernel(tmp_path, monkeypatch, capsys):
+    (tmp_path / "s.csv").write_text(CSV)
+    (tmp_path / "k.cubin").write_bytes(b"")
+    monkeypatch.setenv("CUDA_BIN", _fake_nvdisasm(tmp_path, SASS))
+    stall_sites.main(["--csv", str(tmp_path / "s.csv"), "--cubin", str(tmp_path / "k.cubin")])
+    out = capsys.readouterr().out
+    assert out.startswith("3 instructions, 42 warp samples (0 opcodes differ); long_sb 59.5 %")
+    # integrator.py:5 holds 40 of the 42 samples
+    assert any(line.split()[1:2] == ["95.2"] and "integrator.py:5" in line for line in out.splitlines())
+    # a cubin with one instruction fewer is another kernel
+    monkeypatch.setenv("CUDA_BIN", _fake_nvdisasm(tmp_path, SASS.rsplit("\t//##", 1)[0]))
+    with pytest.raises(SystemExit, match="not the same kernel"):
+        stall_sites.main(["--csv", str(tmp_path / "s.csv"), "--cubin", str(tmp_path / "k.cubin")])
+    # a build without line information has no Python locations
+    bare = "\n".join(line for line in SASS.splitlines() if "//##" not in line)
+    monkeypatch.setenv("CUDA_BIN", _fake_nvdisasm(tmp_path, bare))
+    with pytest.raises(SystemExit, match="no Python line information"):
+        stall_sites.main(["--csv", str(tmp_path / "s.csv"), "--cubin", str(tmp_path / "k.cubin")])

@@ -148,8 +148,18 @@ def test_float32_on_a_gpu_says_it_is_the_slower_precision():
     Nothing is said on the CPU (both precisions run the thread kernel), for float64, or where
     float64 would not run a team either (too few nodes, or lanes=1 asked for)."""
     note = slower_float32(wf.Solver(nodes=200, dtype="float32"), "cuda:0")
-    assert note is not None and "float32" in note and "cuda:0" in note and "slower" in note
+    assert note is not None and "float32" in note and "cuda:0" in note and "faster" in note
     assert slower_float32(wf.Solver(nodes=200, dtype="float32"), "cpu") is None
     assert slower_float32(wf.Solver(nodes=200), "cuda:0") is None
     assert slower_float32(wf.Solver(nodes=AUTO_MIN_NODES - 1, dtype="float32"), "cuda:0") is None
     assert slower_float32(wf.Solver(nodes=200, dtype="float32", lanes=1), "cuda:0") is None
+
+
+def test_a_run_warns_with_the_float32_note(monkeypatch):
+    """engine.run passes slower_float32's note on as a warning (the note itself needs a GPU to be
+    given, so it is forced here)."""
+    import warpfric.engine as engine
+
+    monkeypatch.setattr(engine, "slower_float32", lambda solver, device: "float32 is the slower one here (test)")
+    with pytest.warns(UserWarning, match="float32 is the slower one here"):
+        run({"eccentricity": [0.0]}, nodes=12, rtol=1e-4, lanes=1)

@@ -78,9 +78,9 @@ def slower_float32(solver: Solver, device: str) -> str | None:
         return None
     if choose_lanes(dataclasses.replace(solver, dtype="float64"), device) == 1:
         return None
-    return (f"Solver(dtype='float32') on {device} runs the thread-per-member kernel, which is slower here than "
-            "float64's cooperative kernel (an H100, 10,000 gate-less members at N = 200: 1.14 s in float32, "
-            "0.62 s in float64; docs/performance.md); float64 is also the more robust precision")
+    return (f"Solver(dtype='float32') on {device} runs the thread-per-member kernel, where float64 would run "
+            "the cooperative kernel, which was the faster on an H100 (10,000 gate-less members at N = 200: "
+            "0.62 s in float64, 1.14 s in float32; docs/performance.md); float64 is also the more robust precision")
 
 
 class cpu_blocks:

@@ -224,8 +224,8 @@ class Solver:
 
     nodes:            N, grid nodes along the pad (>= 3), spacing L/(N-1).
     dtype:            'float64' or 'float32' for the state and the arithmetic (time is always float64).
-                      float64 is the robust choice and, on a GPU, the faster one (float32 runs the
-                      thread-per-member kernel there; docs/performance.md).
+                      float64 is the robust choice and, on a GPU, was the faster one at N = 200 (float32
+                      runs the thread-per-member kernel there; docs/performance.md).
     method:           the time integrator (docs/model.md, "Time integration"): 'tr_bdf2' (default; order 2,
                       3 stages) or 'esdirk4' (ESDIRK4(3)6L[2]SA of Kennedy & Carpenter 2016: order 4,
                       6 stages, fewer Newton iterations at tight tolerances). 'esdirk4' runs
