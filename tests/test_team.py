@@ -126,8 +126,8 @@ def test_every_lane_reads_the_same_team_reductions(lanes, exchange):
 
 def test_lanes_is_validated_and_chosen():
     """Solver.lanes: None, 1 or 2..nodes//2, float64 only; None picks the cooperative kernel on a
-    CUDA device in float64 (the largest power of two <= min(32, nodes // 2) lanes, from 16 nodes),
-    the thread-per-member kernel otherwise."""
+    CUDA device in float64 (min(32, nodes // 2) lanes, from 16 nodes), the thread-per-member
+    kernel otherwise."""
     for bad in (0, 51, 2.0, True):
         with pytest.raises(ValueError, match="lanes"):
             wf.Solver(nodes=100, lanes=bad)
@@ -136,7 +136,9 @@ def test_lanes_is_validated_and_chosen():
     assert choose_lanes(wf.Solver(nodes=100, lanes=8), "cpu") == 8
     assert choose_lanes(wf.Solver(nodes=100), "cpu") == 1
     assert choose_lanes(wf.Solver(nodes=200), "cuda:0") == AUTO_LANES == 32
-    assert choose_lanes(wf.Solver(nodes=40), "cuda:0") == 16  # a power of two, >= 2 nodes per lane
+    assert choose_lanes(wf.Solver(nodes=40), "cuda:0") == 20  # >= 2 nodes per lane
+    assert choose_lanes(wf.Solver(nodes=25), "cuda:0") == 12  # lanes of 2 and one of 3 nodes
+    assert choose_lanes(wf.Solver(nodes=64), "cuda:0") == choose_lanes(wf.Solver(nodes=65), "cuda:0") == 32
     assert choose_lanes(wf.Solver(nodes=AUTO_MIN_NODES), "cuda:0") == 8
     assert choose_lanes(wf.Solver(nodes=AUTO_MIN_NODES - 1), "cuda:0") == 1
     assert choose_lanes(wf.Solver(nodes=100, dtype="float32"), "cuda:0") == 1

@@ -59,13 +59,15 @@ AUTO_MIN_NODES = 16
 
 def choose_lanes(solver: Solver, device: str) -> int:
     """Threads per member: Solver.lanes, or for None, on a CUDA device in float64 with at least
-    AUTO_MIN_NODES nodes, the cooperative kernel with the largest power of two <= min(AUTO_LANES,
-    nodes // 2) lanes; else 1 (the thread-per-member kernel: on the CPU a team's lanes run one
-    after the other on Warp's fibers, which only costs)."""
+    AUTO_MIN_NODES nodes, the cooperative kernel with min(AUTO_LANES, nodes // 2) lanes (the most
+    lanes of at least two nodes each, one warp at most: a lane's time grows with its nodes; at
+    N = 40 on the H100, 20 lanes beat the 16 of a power of two by 3 % for one member and 9 % for
+    100, docs/performance.md); else 1 (the thread-per-member kernel: on the CPU a team's lanes run
+    one after the other on Warp's fibers, which only costs)."""
     if solver.lanes is not None:
         return solver.lanes
     if str(device).startswith("cuda") and solver.dtype == "float64" and solver.nodes >= AUTO_MIN_NODES:
-        return 1 << (min(AUTO_LANES, solver.nodes // 2).bit_length() - 1)
+        return min(AUTO_LANES, solver.nodes // 2)
     return 1
 
 
