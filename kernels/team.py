@@ -435,6 +435,24 @@ def make_exchange_team(lanes: int, exchange: str):
     up_f64, down_f64, sync = ops["up_f64"], ops["down_f64"], ops["sync"]
     levels = max(1, (lanes - 1).bit_length())  # ceil(log2(lanes)): the cyclic reduction's levels
 
+    def vector_move(vector, length: int, move):
+        """The vector x of lane -/+ delta, component by component through ``move`` (up_f64 or
+        down_f64: what they say of lanes beyond the team's edges holds here)."""
+
+        @wp.func
+        def moved(x: vector, delta: int):
+            out = vector()
+            for k in range(length):
+                out[k] = move(x[k], delta, lanes)
+            return out
+
+        return moved
+
+    up3 = vector_move(vec3d, 3, up_f64)
+    up4, down4 = vector_move(vec4d, 4, up_f64), vector_move(vec4d, 4, down_f64)
+    down5 = vector_move(vec5d, 5, down_f64)
+    up6, down6 = vector_move(vec6d, 6, up_f64), vector_move(vec6d, 6, down_f64)
+
     @wp.func
     def team_sum(x: wp.float64):
         sync(lanes)
@@ -472,8 +490,7 @@ def make_exchange_team(lanes: int, exchange: str):
     def from_next_lane(x: vec5d, lane: int):
         """The value of lane + 1 (zero for the last lane)."""
         sync(lanes)
-        out = vec5d(down_f64(x[0], 1, lanes), down_f64(x[1], 1, lanes), down_f64(x[2], 1, lanes),
-                    down_f64(x[3], 1, lanes), down_f64(x[4], 1, lanes))
+        out = down5(x, 1)
         if lane + 1 >= lanes:
             out = vec5d()
         return out
@@ -482,9 +499,8 @@ def make_exchange_team(lanes: int, exchange: str):
     def from_neighbour_lanes(x: vec4d, lane: int):
         """The values of lane - 1 and lane + 1 (zero beyond the first and the last lane)."""
         sync(lanes)
-        prev = vec4d(up_f64(x[0], 1, lanes), up_f64(x[1], 1, lanes), up_f64(x[2], 1, lanes), up_f64(x[3], 1, lanes))
-        nxt = vec4d(down_f64(x[0], 1, lanes), down_f64(x[1], 1, lanes), down_f64(x[2], 1, lanes),
-                    down_f64(x[3], 1, lanes))
+        prev = up4(x, 1)
+        nxt = down4(x, 1)
         if lane == 0:
             prev = vec4d()
         if lane + 1 >= lanes:
@@ -499,64 +515,37 @@ def make_exchange_team(lanes: int, exchange: str):
         k + s with those rows, which couples it to rows k - 2s and k + 2s, until no coupling is
         left inside the team; then E_k = D_k / B_k. Diagonal dominance (the Newton matrix has it)
         keeps it stable without pivoting, as it does the Thomas algorithm."""
-        a = row[0]
-        b = row[1]
-        c = row[2]
-        d0 = row[3]
-        d1 = row[4]
-        d2 = row[5]
+        r = row
         if lane == 0:
-            a = wp.float64(0.0)
+            r[0] = wp.float64(0.0)
         if lane + 1 >= lanes:
-            c = wp.float64(0.0)
+            r[2] = wp.float64(0.0)
         s = int(1)
         for _level in range(levels):
             # row k - s (up) and row k + s (down); a coupling across the team's edge is zero at
             # every level
-            a_up = up_f64(a, s, lanes)
-            b_up = up_f64(b, s, lanes)
-            c_up = up_f64(c, s, lanes)
-            d0_up = up_f64(d0, s, lanes)
-            d1_up = up_f64(d1, s, lanes)
-            d2_up = up_f64(d2, s, lanes)
-            a_dn = down_f64(a, s, lanes)
-            b_dn = down_f64(b, s, lanes)
-            c_dn = down_f64(c, s, lanes)
-            d0_dn = down_f64(d0, s, lanes)
-            d1_dn = down_f64(d1, s, lanes)
-            d2_dn = down_f64(d2, s, lanes)
+            up = up6(r, s)
+            dn = down6(r, s)
             # the rows beyond the team's edges are not read, not even multiplied by zero: a
             # shuffle from beyond a partial warp's last lane returns an undefined value (NaN * 0)
-            a_new = wp.float64(0.0)
-            c_new = wp.float64(0.0)
-            b_new = b
-            d0_new = d0
-            d1_new = d1
-            d2_new = d2
+            new = vec6d(wp.float64(0.0), r[1], wp.float64(0.0), r[3], r[4], r[5])
             if lane - s >= 0:
-                alpha = -a / b_up
-                a_new = alpha * a_up
-                b_new = b_new + alpha * c_up
-                d0_new = d0_new + alpha * d0_up
-                d1_new = d1_new + alpha * d1_up
-                d2_new = d2_new + alpha * d2_up
+                alpha = -r[0] / up[1]
+                new[0] = alpha * up[0]
+                new[1] = new[1] + alpha * up[2]
+                for k in range(3, 6):
+                    new[k] = new[k] + alpha * up[k]
             if lane + s < lanes:
-                gamma = -c / b_dn
-                c_new = gamma * c_dn
-                b_new = b_new + gamma * a_dn
-                d0_new = d0_new + gamma * d0_dn
-                d1_new = d1_new + gamma * d1_dn
-                d2_new = d2_new + gamma * d2_dn
-            a = a_new
-            b = b_new
-            c = c_new
-            d0 = d0_new
-            d1 = d1_new
-            d2 = d2_new
+                gamma = -r[2] / dn[1]
+                new[2] = gamma * dn[2]
+                new[1] = new[1] + gamma * dn[0]
+                for k in range(3, 6):
+                    new[k] = new[k] + gamma * dn[k]
+            r = new
             s = s * 2
-        inv = wp.float64(1.0) / b
-        e_self = vec3d(d0 * inv, d1 * inv, d2 * inv)
-        e_prev = vec3d(up_f64(e_self[0], 1, lanes), up_f64(e_self[1], 1, lanes), up_f64(e_self[2], 1, lanes))
+        inv = wp.float64(1.0) / r[1]
+        e_self = vec3d(r[3] * inv, r[4] * inv, r[5] * inv)
+        e_prev = up3(e_self, 1)
         if lane == 0:
             e_prev = vec3d()
         return e_prev, e_self
