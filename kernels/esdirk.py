@@ -118,20 +118,6 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
     error_increment = tableau["error_increment"]
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
-    vec4 = wp.types.vector(length=N_COMPONENTS, dtype=ft)
-
-    # The loops below read every value of a node before they write any: the compiler may not move a
-    # load past a store to an array that could be the same, so a load after a store waits a memory
-    # round trip of its own (on a GPU: the long-scoreboard stalls of docs/performance.md).
-    @wp.func
-    def node_state(state: array3, i: int, m: int):
-        """The components (u, v, tau_el, phi) of node i of state."""
-        return vec4(state[C_U, i, m], state[C_V, i, m], state[C_TAU, i, m], state[C_PHI, i, m])
-
-    @wp.func
-    def node_stage(K: array4, s: int, i: int, m: int):
-        """The stage derivatives K[s] of node i, by component."""
-        return vec4(K[s, C_U, i, m], K[s, C_V, i, m], K[s, C_TAU, i, m], K[s, C_PHI, i, m])
 
     @wp.func
     def prepare_stage(
@@ -143,15 +129,12 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         nodes; the Newton solve that follows reads the stage displacement of the neighbouring lanes'
         end nodes: a barrier.)"""
         for i in range(c.first_node, c.end_node):
-            y = node_state(state, i, m)
-            k1 = node_stage(K, s1, i, m)
-            k2 = node_stage(K, s2, i, m)
             for comp in range(N_COMPONENTS):
-                work[comp, i, m] = stage_constant(y[comp], h, a1, k1[comp], a2, k2[comp], n_terms)
-            v = y[C_V]
+                work[comp, i, m] = stage_constant(state[comp, i, m], h, a1, K[s1, comp, i, m], a2, K[s2, comp, i, m], n_terms)
+            v = state[C_V, i, m]
             guess = v
             if n_terms >= 2:
-                guess = v + extrapolate * (k2[C_U] - v)
+                guess = v + extrapolate * (K[s2, C_U, i, m] - v)
             work[W_V, i, m] = guess
         barrier()
 
@@ -205,18 +188,15 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         """y_{n+1} = y_n + h * sum_j b_j K_j (backward Euler: y_n + h*K[s3]); the velocity is the last
         stage's (stiffly accurate, and algebraic without inertia). The lane's nodes."""
         for i in range(c.first_node, c.end_node):
-            y = node_state(state, i, m)
-            k1 = node_stage(K, s1, i, m)
-            k2 = node_stage(K, s2, i, m)
-            k3 = node_stage(K, s3, i, m)
             for comp in range(N_COMPONENTS):
                 if comp == C_V:
-                    state[comp, i, m] = k3[C_U]
+                    state[comp, i, m] = K[s3, C_U, i, m]
                 else:
+                    k3 = K[s3, comp, i, m]
                     if backward_euler == 1:
-                        state[comp, i, m] = y[comp] + h * k3[comp]
+                        state[comp, i, m] = state[comp, i, m] + h * k3
                     else:
-                        state[comp, i, m] = y[comp] + solution_increment(h, k1[comp], k2[comp], k3[comp])
+                        state[comp, i, m] = state[comp, i, m] + solution_increment(h, K[s1, comp, i, m], K[s2, comp, i, m], k3)
 
     return dict(prepare_stage=prepare_stage, fold_error=fold_error, error_norm=error_norm, advance_state=advance_state)
 

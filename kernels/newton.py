@@ -261,19 +261,6 @@ def make_lane_solve(ft, team, LaneRows):
     reduced_solve = team["reduced_solve"]
 
     @wp.func
-    def interior_row(work: array3, i: int, m: int):
-        """Row i's cp and its five right-hand sides after the forward sweep (lane_row)."""
-        return work[W_CP, i, m], vec5d(work[W_R0, i, m], work[W_R1, i, m], work[W_R2, i, m], work[W_RL, i, m],
-                                       work[W_RR, i, m])
-
-    @wp.func
-    def solved_row(work: array3, i: int, m: int):
-        """Row i's y0, y1, y2 after the interior back substitution, its two coupling columns and its
-        border-row entries C1, C2."""
-        return (vec3d(work[W_R0, i, m], work[W_R1, i, m], work[W_R2, i, m]), work[W_RL, i, m], work[W_RR, i, m],
-                work[W_C1, i, m], work[W_C2, i, m])
-
-    @wp.func
     def interior_back_substitution(work: array3, lo: int, hi: int, m: int):
         """Back substitution of the interior rows lo..hi-2 (five right-hand sides, in place). Returns
         x_lo and x_{hi-2} as (xP0, xP1, xP2, xL, xR); with no interior row (a lane of one node) the
@@ -281,19 +268,10 @@ def make_lane_solve(ft, team, LaneRows):
         first = vec5d(0.0, 0.0, 0.0, 0.0, 1.0)
         last = vec5d(0.0, 0.0, 0.0, 1.0, 0.0)
         nxt = vec5d()
-        # each row's values are read one row ahead, before the row above is written: a load after
-        # a store to work waits a memory round trip of its own (docs/performance.md)
-        cp_row = ft(0.0)
-        r_row = vec5d()
-        if hi - 1 - lo > 0:
-            cp_row, r_row = interior_row(work, hi - 2, m)
         for k in range(hi - 1 - lo):
             i = hi - 2 - k
-            cp = cp_row
-            r = r_row
-            if i > lo:
-                cp_row, r_row = interior_row(work, i - 1, m)
-            y = r - cp * nxt
+            cp = work[W_CP, i, m]
+            y = vec5d(work[W_R0, i, m], work[W_R1, i, m], work[W_R2, i, m], work[W_RL, i, m], work[W_RR, i, m]) - cp * nxt
             work[W_R0, i, m] = y[0]
             work[W_R1, i, m] = y[1]
             work[W_R2, i, m] = y[2]
@@ -325,21 +303,16 @@ def make_lane_solve(ft, team, LaneRows):
         )
         e_prev, e_self = reduced_solve(row, lane)
         sums = vec6d()
-        r_n, rl_n, rr_n, c1_n, c2_n = solved_row(work, lo, m)  # read a node ahead of the writes
         for i in range(lo, hi):
-            r = r_n
-            rl = rl_n
-            rr = rr_n
-            c1 = c1_n
-            c2 = c2_n
-            if i + 1 < hi:
-                r_n, rl_n, rr_n, c1_n, c2_n = solved_row(work, i + 1, m)
             y = e_self
             if i < hi - 1:
-                y = r + rl * e_prev + rr * e_self
+                y = vec3d(work[W_R0, i, m], work[W_R1, i, m], work[W_R2, i, m])
+                y = y + work[W_RL, i, m] * e_prev + work[W_RR, i, m] * e_self
             work[W_R0, i, m] = y[0]
             work[W_R1, i, m] = y[1]
             work[W_R2, i, m] = y[2]
+            c1 = work[W_C1, i, m]
+            c2 = work[W_C2, i, m]
             sums = sums + vec6d(c1 * y[0], c1 * y[1], c1 * y[2], c2 * y[0], c2 * y[1], c2 * y[2])
         return sums
 
@@ -401,15 +374,6 @@ def make_stage_equations(ft, model, terms, gates, method="tr_bdf2"):
         return work[W_ZU, i, m] + g * work[W_V, i, m]
 
     @wp.func
-    def displacement_terms(work: array3, i: int, n: int, m: int):
-        """z_u and V of node i (0, 0 beyond the last node): its stage displacement is z_u + g*V. A
-        node sweep reads them two nodes ahead, before it writes the node before (a load after a
-        store to work waits a memory round trip of its own: docs/performance.md)."""
-        if i >= n:
-            return ft(0.0), ft(0.0)
-        return work[W_ZU, i, m], work[W_V, i, m]
-
-    @wp.func
     def node_row(
         c: Coeffs, settings: SolverSettings, m: int, n: int, work: array3, gates: array3, i: int, u_l: ft,
         u_c: ft, u_r: ft, delta0: ft, tilt: ft, v_disc: ft, g: ft,
@@ -462,7 +426,7 @@ def make_stage_equations(ft, model, terms, gates, method="tr_bdf2"):
         return row
 
     return dict(NodeRow=NodeRow, disc_velocity_stage=disc_velocity_stage, normal_force_stage=normal_force_stage,
-                stage_displacement=stage_displacement, displacement_terms=displacement_terms, node_row=node_row)
+                stage_displacement=stage_displacement, node_row=node_row)
 
 
 def make_bordered_system(ft):
@@ -525,7 +489,6 @@ def make_newton_system(ft, model, terms, team, equations, solver, team_solver):
     forward_row = solver["forward_row"]
     back_substitution = solver["back_substitution"]
     stage_displacement = equations["stage_displacement"]
-    displacement_terms = equations["displacement_terms"]
     node_row = equations["node_row"]
     bordered_system = make_bordered_system(ft)["bordered_system"]
     array3 = wp.array3d(dtype=ft)
@@ -573,10 +536,8 @@ def make_newton_system(ft, model, terms, team, equations, solver, team_solver):
         if lo > 0:
             u_l = stage_displacement(work, lo - 1, n, m, g)
         u_c = stage_displacement(work, lo, n, m, g)
-        zu_ahead, v_ahead = displacement_terms(work, lo + 1, n, m)
         for i in range(lo, hi):
-            u_r = zu_ahead + g * v_ahead
-            zu_ahead, v_ahead = displacement_terms(work, i + 2, n, m)
+            u_r = stage_displacement(work, i + 1, n, m, g)
             row = node_row(c, settings, m, n, work, gates, i, u_l, u_c, u_r, delta0, tilt, v_disc, g)
             if wp.static(inertia):
                 work[W_DIAG, i, m] = row.jac_center
@@ -788,7 +749,6 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
     team_sum = team["team_sum"]
     disc_velocity_stage = equations["disc_velocity_stage"]
     stage_displacement = equations["stage_displacement"]
-    displacement_terms = equations["displacement_terms"]
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
 
@@ -821,10 +781,8 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
         if c.first_node > 0:
             u_l = stage_displacement(work, c.first_node - 1, n, m, g)
         u_c = stage_displacement(work, c.first_node, n, m, g)
-        zu_ahead, v_ahead = displacement_terms(work, c.first_node + 1, n, m)
         for i in range(c.first_node, c.end_node):
-            u_r = zu_ahead + g * v_ahead
-            zu_ahead, v_ahead = displacement_terms(work, i + 2, n, m)
+            u_r = stage_displacement(work, i + 1, n, m, g)
             vel = work[W_V, i, m]
             ns, fr = contact_terms(c, i, n, u_l, u_c, u_r, delta0, tilt, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m],
                                    g, node_gate(gates, i, m), node_sliding(gates, i, m), ft(settings.sliding_width))
