@@ -38,6 +38,8 @@ class TeamCompileOptions(NamedTuple):
     smem_spilling: bool = False  # let CUDA 13 spill registers to shared memory
     out_of_line: tuple = ()  # names of device functions kept out of line
     exchange: str | None = None  # the team's lane exchange, kernels/team.py (None: the automatic choice)
+    block_members: int = 1  # members per thread block, in step at each attempt (a block barrier; shuffles only)
+    block_sync: str = "attempt"  # where a block's members wait for each other: 'attempt', or also 'newton' (each iteration)
 
 
 def team_compile_options() -> TeamCompileOptions:
@@ -53,9 +55,16 @@ def team_compile_options() -> TeamCompileOptions:
     exchange = os.environ.get("WARPFRIC_TEAM_EXCHANGE", "") or None
     if exchange not in (None,) + EXCHANGES:
         raise ValueError(f"WARPFRIC_TEAM_EXCHANGE={exchange!r} is invalid; valid: {', '.join(EXCHANGES)} or unset")
+    block_members = int(os.environ.get("WARPFRIC_TEAM_BLOCK_MEMBERS", "1"))
+    if block_members < 1 or block_members > 8:
+        raise ValueError(f"WARPFRIC_TEAM_BLOCK_MEMBERS={block_members} is invalid; valid: 1 to 8")
+    block_sync = os.environ.get("WARPFRIC_TEAM_BLOCK_SYNC", "attempt")
+    if block_sync not in ("attempt", "newton"):
+        raise ValueError(f"WARPFRIC_TEAM_BLOCK_SYNC={block_sync!r} is invalid; valid: 'attempt' or 'newton'")
     return TeamCompileOptions(max_registers=registers if registers > 0 else None, inline=inline,
                               smem_spilling=os.environ.get("WARPFRIC_TEAM_SMEM_SPILLING", "0") == "1",
-                              out_of_line=out_of_line, exchange=exchange)
+                              out_of_line=out_of_line, exchange=exchange, block_members=block_members,
+                              block_sync=block_sync)
 
 
 def team_exchange(lanes: int, cuda: bool, requested: str | None = None) -> str:
@@ -107,6 +116,9 @@ def get_integrator(dtype: str, model, lanes: int = 1, method: str = "tr_bdf2", c
     options = team_compile_options() if lanes > 1 else TeamCompileOptions()
     if lanes > 1:
         options = options._replace(exchange=team_exchange(lanes, cuda, options.exchange))
+        if options.block_members > 1 and (options.exchange != "shuffle" or lanes != 32):
+            raise ValueError(f"WARPFRIC_TEAM_BLOCK_MEMBERS={options.block_members} needs teams of 32 lanes that "
+                             f"exchange by warp shuffles; got {lanes} lanes, exchange {options.exchange!r}")
     key = (dtype, model, lanes, method, options, observed)
     if key not in _CACHE:
         _CACHE[key] = _make_integrator(dtype, model, lanes, method, options, observed)
@@ -148,11 +160,12 @@ def _apply_inline_hints(kernel, inline, out_of_line) -> None:
 
 
 def make_stages(ft, model, lanes: int = 1, method: str = "tr_bdf2", exchange: str = "tile",
-                observed: ObserverSet = ObserverSet()) -> dict:
+                observed: ObserverSet = ObserverSet(), newton_sync: bool = False) -> dict:
     """Every device function of the integrator for scalar type ``ft``, ``model``, a team of
     ``lanes`` threads per member with its lane exchange (kernels/team.py), an integrator method and
     the observers compiled in, by stage."""
     team = make_team(ft, lanes, exchange)
+    team = dict(team, newton_sync=newton_sync)
     terms = make_model_terms(ft, model)
     gates = make_gates(ft, model, terms, team)
     newton = make_newton(ft, model, terms, gates, team, method)
@@ -166,12 +179,14 @@ def _make_integrator(dtype: str, model, lanes: int, method: str = "tr_bdf2", opt
     """The integrate and evaluate_fields kernels for one working precision, model, team size,
     method and observer set (get_integrator caches them)."""
     ft = wp.float64 if dtype == "float64" else wp.float32
-    stages = make_stages(ft, model, lanes, method, options.exchange or "tile", observed)
+    newton_sync = options.block_members > 1 and options.block_sync == "newton"
+    stages = make_stages(ft, model, lanes, method, options.exchange or "tile", observed, newton_sync)
     acceptance = make_acceptance(ft, model, method, stages)
     integrate = make_integrate_kernel(ft, model, lanes, method, stages, acceptance, options)
     evaluate_fields = make_field_kernel(ft, stages)
     return dict(integrate=integrate, evaluate_fields=evaluate_fields, ft=ft, stages=stages,
-                exchange=(options.exchange or "tile") if lanes > 1 else "none")
+                exchange=(options.exchange or "tile") if lanes > 1 else "none",
+                block_members=options.block_members if lanes > 1 else 1)
 
 
 def make_acceptance(ft, model, method, stages):
@@ -251,6 +266,8 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     accept_step = acceptance["accept_step"]
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
+    block_members = options.block_members
+    block_barrier = stages["team"].get("block_barrier", None)
 
     # enable_backward=False: no adjoint code is generated (nothing differentiates through the
     # integrator); the forward code is the same, and the first compile takes a third of the time
@@ -290,8 +307,18 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
         Shapes and units: kernels/types.py. A team: every lane keeps the same IntegratorState; lane
         0 stores it."""
         lane = int(0)
+        m = int(0)
         if wp.static(team_on):
-            m, lane = wp.tid()
+            block, thread = wp.tid()
+            if wp.static(block_members > 1):
+                # several members per block, each a warp, starting every attempt together (benchmark switch)
+                m = block * block_members + thread // lanes
+                lane = thread % lanes
+                if m >= member_states.shape[0]:
+                    return
+            else:
+                m = block
+                lane = thread
         else:
             m = wp.tid()
         st = member_states[m]
@@ -309,6 +336,8 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
         tilt = ft(st.tilt)
         attempt_limit = stall_limit[0]
         for _attempt in range(launch_steps):
+            if wp.static(block_members > 1):
+                block_barrier()
             if run_finished(p, st, outputs):
                 st.done = 1
                 break

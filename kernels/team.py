@@ -335,6 +335,23 @@ def warp_sync(lanes: int):
     ...
 
 
+@wp.func_native(r"""
+#if defined(__CUDA_ARCH__)
+#if __CUDA_ARCH__ >= 700
+    asm volatile("barrier.sync 0;" ::: "memory");
+#else
+    __syncthreads();
+#endif
+#endif
+""")
+def block_barrier():
+    """The warps of a thread block wait for each other: PTX barrier.sync 0 without .aligned, which
+    may be reached from different places and waits for the non-exited threads only (a warp that
+    has left the kernel no longer counts). It orders nothing the kernel relies on: it only keeps a
+    block's members at the same place in the code (docs/performance.md)."""
+    ...
+
+
 @wp.func_native("return (int)WP_TILE_THREAD_IDX;")
 def lane_index() -> int:
     """This thread's lane in its team (the thread's index in its tile block; CPU fibers included)."""
@@ -572,4 +589,4 @@ def make_team(ft, lanes: int, exchange: str = "tile"):
         return dict(lanes=lanes, exchange=exchange, **make_tile_reductions(lanes), **make_separator_exchange(lanes))
     if lanes > 32:
         raise ValueError(f"a team exchange {exchange!r} of {lanes} lanes is invalid: at most 32 lanes (one warp)")
-    return dict(lanes=lanes, exchange=exchange, **make_exchange_team(lanes, exchange))
+    return dict(lanes=lanes, exchange=exchange, block_barrier=block_barrier, **make_exchange_team(lanes, exchange))

@@ -384,7 +384,8 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     kern = get_integrator(solver.dtype, model, lanes, solver.method, cuda=str(device).startswith("cuda"),
                           observed=observer_set(fronts))
     with cpu_blocks(team):  # compile or load now, so that it is timed apart
-        wp.load_module(kern["integrate"].module, device=device, block_dim=lanes if team else None)
+        block_dim = lanes * kern["block_members"]  # several members per block: a benchmark switch (kernels/integrator.py)
+        wp.load_module(kern["integrate"].module, device=device, block_dim=block_dim if team else None)
         wp.load_module(kern["evaluate_fields"].module, device=device)
     kernel_build_s = time.perf_counter() - t_build
     ft = kern["ft"]
@@ -413,7 +414,8 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         def launch_integrate(inputs, outputs_):
             if team:
                 with cpu_blocks(True):
-                    wp.launch_tiled(kern["integrate"], dim=[n_members], inputs=inputs, outputs=outputs_, block_dim=lanes)
+                    blocks = -(-n_members // kern["block_members"])
+                    wp.launch_tiled(kern["integrate"], dim=[blocks], inputs=inputs, outputs=outputs_, block_dim=block_dim)
             else:
                 wp.launch(kern["integrate"], dim=n_members, inputs=inputs, outputs=outputs_)
 
