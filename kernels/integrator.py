@@ -38,8 +38,7 @@ class TeamCompileOptions(NamedTuple):
     smem_spilling: bool = False  # let CUDA 13 spill registers to shared memory
     out_of_line: tuple = ()  # names of device functions kept out of line
     exchange: str | None = None  # the team's lane exchange, kernels/team.py (None: the automatic choice)
-    block_members: int = 1  # members per thread block, in step at each attempt (a block barrier; shuffles only)
-    block_sync: str = "attempt"  # where a block's members wait for each other: 'attempt', or also 'newton' (each iteration)
+    block_members: int | None = None  # members per thread block (None: the automatic choice, block_members_for)
 
 
 def team_compile_options() -> TeamCompileOptions:
@@ -55,16 +54,37 @@ def team_compile_options() -> TeamCompileOptions:
     exchange = os.environ.get("WARPFRIC_TEAM_EXCHANGE", "") or None
     if exchange not in (None,) + EXCHANGES:
         raise ValueError(f"WARPFRIC_TEAM_EXCHANGE={exchange!r} is invalid; valid: {', '.join(EXCHANGES)} or unset")
-    block_members = int(os.environ.get("WARPFRIC_TEAM_BLOCK_MEMBERS", "1"))
-    if block_members < 1 or block_members > 8:
-        raise ValueError(f"WARPFRIC_TEAM_BLOCK_MEMBERS={block_members} is invalid; valid: 1 to 8")
-    block_sync = os.environ.get("WARPFRIC_TEAM_BLOCK_SYNC", "attempt")
-    if block_sync not in ("attempt", "newton"):
-        raise ValueError(f"WARPFRIC_TEAM_BLOCK_SYNC={block_sync!r} is invalid; valid: 'attempt' or 'newton'")
+    block_members = os.environ.get("WARPFRIC_TEAM_BLOCK_MEMBERS", "") or None
+    if block_members is not None:
+        if not block_members.isdigit() or not 1 <= int(block_members) <= MAX_BLOCK_MEMBERS:
+            raise ValueError(f"WARPFRIC_TEAM_BLOCK_MEMBERS={block_members!r} is invalid; valid: an integer from 1 to "
+                             f"{MAX_BLOCK_MEMBERS}, or unset")
+        block_members = int(block_members)
     return TeamCompileOptions(max_registers=registers if registers > 0 else None, inline=inline,
                               smem_spilling=os.environ.get("WARPFRIC_TEAM_SMEM_SPILLING", "0") == "1",
-                              out_of_line=out_of_line, exchange=exchange, block_members=block_members,
-                              block_sync=block_sync)
+                              out_of_line=out_of_line, exchange=exchange, block_members=block_members)
+
+
+# a thread block of the team kernel holds this many members (one warp of 32 lanes each) where the
+# lanes exchange by warp shuffles; they wait for each other at the start of every attempt, so that
+# an SM's warps run the same code at the same time and its instruction cache serves them all
+# (docs/performance.md, "Members in step"). 8: the registers of one SM hold 8 warps of this kernel
+# (255 registers per thread), so a block of 8 fills an SM as 8 blocks of one did
+AUTO_BLOCK_MEMBERS = 8
+MAX_BLOCK_MEMBERS = 8
+
+
+def block_members_for(lanes: int, exchange: str, requested: int | None = None) -> int:
+    """Members per thread block of a team of ``lanes`` with its lane exchange: ``requested``
+    (WARPFRIC_TEAM_BLOCK_MEMBERS), else AUTO_BLOCK_MEMBERS for one warp of 32 lanes exchanging by
+    shuffles and 1 otherwise (tiles and the emulated exchange hold a block per member)."""
+    warp_team = exchange == "shuffle" and lanes == 32
+    if requested is None:
+        return AUTO_BLOCK_MEMBERS if warp_team else 1
+    if requested > 1 and not warp_team:
+        raise ValueError(f"WARPFRIC_TEAM_BLOCK_MEMBERS={requested} needs teams of 32 lanes that exchange by warp "
+                         f"shuffles; got {lanes} lanes, exchange {exchange!r}")
+    return requested
 
 
 def team_exchange(lanes: int, cuda: bool, requested: str | None = None) -> str:
@@ -116,9 +136,7 @@ def get_integrator(dtype: str, model, lanes: int = 1, method: str = "tr_bdf2", c
     options = team_compile_options() if lanes > 1 else TeamCompileOptions()
     if lanes > 1:
         options = options._replace(exchange=team_exchange(lanes, cuda, options.exchange))
-        if options.block_members > 1 and (options.exchange != "shuffle" or lanes != 32):
-            raise ValueError(f"WARPFRIC_TEAM_BLOCK_MEMBERS={options.block_members} needs teams of 32 lanes that "
-                             f"exchange by warp shuffles; got {lanes} lanes, exchange {options.exchange!r}")
+        options = options._replace(block_members=block_members_for(lanes, options.exchange, options.block_members))
     key = (dtype, model, lanes, method, options, observed)
     if key not in _CACHE:
         _CACHE[key] = _make_integrator(dtype, model, lanes, method, options, observed)
@@ -160,12 +178,11 @@ def _apply_inline_hints(kernel, inline, out_of_line) -> None:
 
 
 def make_stages(ft, model, lanes: int = 1, method: str = "tr_bdf2", exchange: str = "tile",
-                observed: ObserverSet = ObserverSet(), newton_sync: bool = False) -> dict:
+                observed: ObserverSet = ObserverSet()) -> dict:
     """Every device function of the integrator for scalar type ``ft``, ``model``, a team of
     ``lanes`` threads per member with its lane exchange (kernels/team.py), an integrator method and
     the observers compiled in, by stage."""
     team = make_team(ft, lanes, exchange)
-    team = dict(team, newton_sync=newton_sync)
     terms = make_model_terms(ft, model)
     gates = make_gates(ft, model, terms, team)
     newton = make_newton(ft, model, terms, gates, team, method)
@@ -179,14 +196,13 @@ def _make_integrator(dtype: str, model, lanes: int, method: str = "tr_bdf2", opt
     """The integrate and evaluate_fields kernels for one working precision, model, team size,
     method and observer set (get_integrator caches them)."""
     ft = wp.float64 if dtype == "float64" else wp.float32
-    newton_sync = options.block_members > 1 and options.block_sync == "newton"
-    stages = make_stages(ft, model, lanes, method, options.exchange or "tile", observed, newton_sync)
+    stages = make_stages(ft, model, lanes, method, options.exchange or "tile", observed)
     acceptance = make_acceptance(ft, model, method, stages)
     integrate = make_integrate_kernel(ft, model, lanes, method, stages, acceptance, options)
     evaluate_fields = make_field_kernel(ft, stages)
     return dict(integrate=integrate, evaluate_fields=evaluate_fields, ft=ft, stages=stages,
                 exchange=(options.exchange or "tile") if lanes > 1 else "none",
-                block_members=options.block_members if lanes > 1 else 1)
+                block_members=options.block_members or 1)
 
 
 def make_acceptance(ft, model, method, stages):
@@ -266,7 +282,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     accept_step = acceptance["accept_step"]
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
-    block_members = options.block_members
+    block_members = options.block_members or 1
     block_barrier = stages["team"].get("block_barrier", None)
 
     # enable_backward=False: no adjoint code is generated (nothing differentiates through the
@@ -311,7 +327,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
         if wp.static(team_on):
             block, thread = wp.tid()
             if wp.static(block_members > 1):
-                # several members per block, each a warp, starting every attempt together (benchmark switch)
+                # several members per block, a warp each, in step at every attempt (AUTO_BLOCK_MEMBERS)
                 m = block * block_members + thread // lanes
                 lane = thread % lanes
                 if m >= member_states.shape[0]:

@@ -608,8 +608,6 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
     Coeffs = terms["Coeffs"]
     team_on = team["lanes"] > 1
     team_max = team["team_max"]
-    newton_sync = bool(team.get("newton_sync", False))
-    block_barrier = team.get("block_barrier", None)
     schur_solve = solver["schur_solve"]
     solution_row = solver["solution_row"]
     disc_velocity_stage = equations["disc_velocity_stage"]
@@ -671,8 +669,6 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
         kinked = ft(0.0)  # whether an iteration of this solve met a kink (this thread's nodes)
         kink_free = int(0)  # 1: the team's reduction of kinked said none (the contraction ended the solve)
         for it in range(settings.newton_max_iter):
-            if wp.static(newton_sync):
-                block_barrier()
             iters = it + 1
             # ---- pass 1: residuals, Jacobian rows, forward elimination (3 right-hand sides) ----
             # ---- pass 2: back substitution and the border products ----

@@ -47,6 +47,7 @@ class EngineResult:
     # fields, the front segmentation and the read-back copies not included)
     lanes: int  # threads per member (1: the thread-per-member kernel; > 1: the cooperative kernel)
     team_exchange: str  # how a team's lanes exchange values (kernels/team.py; "none" for one lane)
+    block_members: int  # members per thread block of the cooperative kernel, in step at each attempt (1: one)
     passes: int  # integration passes (2 with the velocity front, else 1)
 
 
@@ -384,7 +385,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     kern = get_integrator(solver.dtype, model, lanes, solver.method, cuda=str(device).startswith("cuda"),
                           observed=observer_set(fronts))
     with cpu_blocks(team):  # compile or load now, so that it is timed apart
-        block_dim = lanes * kern["block_members"]  # several members per block: a benchmark switch (kernels/integrator.py)
+        block_dim = lanes * kern["block_members"]  # members per block: kernels/integrator.py block_members_for
         wp.load_module(kern["integrate"].module, device=device, block_dim=block_dim if team else None)
         wp.load_module(kern["evaluate_fields"].module, device=device)
     kernel_build_s = time.perf_counter() - t_build
@@ -489,7 +490,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             arrival=arrival, arrival_error=arrival_error, strength_peak=strength_peak,
             event=event, record=arrays.record.numpy() if record is not None else None,
             kernel_build_s=kernel_build_s, device_bytes_per_member=device_bytes_per_member, lanes=lanes,
-            team_exchange=kern["exchange"], passes=n_passes,
+            team_exchange=kern["exchange"], block_members=kern["block_members"], passes=n_passes,
         )
         wp.synchronize_device(device)
     return result
