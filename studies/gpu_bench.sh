@@ -37,6 +37,9 @@
 #   sass           the integrate kernel's SASS instructions by inlined call site (studies/sass_sites.py)
 #   exchange       the team's lane exchanges, tiles against warp shuffles: outputs (studies/team_exchange.py)
 #                  and 1 / 10,000 members timed with each
+#   blocks         members per thread block, 8 (automatic) against 1 (WARPFRIC_TEAM_BLOCK_MEMBERS=1):
+#                  1 / 1,000 / 10,000 members, the contact front, the gate-less law, two rounds; then the
+#                  GPU tests of tests/test_team.py (outputs bit for bit equal)
 #   dask [SWEEP]   2 GPUs: one process against a local Dask cluster of 1 and 2 workers
 #   figures [ARGS] every figure study at full size (ARGS e.g. --relaxation-gate none)
 set -uo pipefail
@@ -156,6 +159,17 @@ case "$mode" in
       | tee "$OUT/stall_sites.txt" | head -40 ;;
   sass)
     python3 studies/sass_sites.py "$@" 2>&1 | tee "$OUT/sass_sites.txt" | head -30 ;;
+  blocks)
+    for round in 1 2; do
+      for k in 1 8; do
+        export WARPFRIC_TEAM_BLOCK_MEMBERS=$k
+        $E --lanes 32 --members 1 1000 10000 --out "$OUT/bench_blocks.json" "$@" 2>&1 | grep 'cuda:0' | grep -v '{' | sed "s/^/block $k: /"
+        $E --lanes 32 --members 10000 --front-events contact --out "$OUT/bench_blocks.json" "$@" 2>&1 | grep 'cuda:0' | grep -v '{' | sed "s/^/block $k: /"
+        $E --lanes 32 --members 10000 --relaxation-gate none --out "$OUT/bench_blocks.json" "$@" 2>&1 | grep 'cuda:0' | grep -v '{' | sed "s/^/block $k: /"
+      done
+    done
+    unset WARPFRIC_TEAM_BLOCK_MEMBERS
+    WARPFRIC_TEST_DEVICE=cuda:0 python3 -m pytest -q -p no:cacheprovider tests/test_team.py 2>&1 | tee "$OUT/tests_team_cuda.log" | tail -3 ;;
   exchange)
     (cd studies && python3 team_exchange.py --members 1000 "$@") 2>&1 | tee "$OUT/team_exchange.txt" | tail -9
     WARPFRIC_TEAM_EXCHANGE=tile $E --members 1 10000 --relaxation-gate stress --lanes 32 --out "$OUT/bench_tile.json" 2>&1 \
