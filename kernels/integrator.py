@@ -65,8 +65,9 @@ def team_compile_options() -> TeamCompileOptions:
                               out_of_line=out_of_line, exchange=exchange, block_members=block_members)
 
 
-# a thread block of the team kernel holds this many members (one warp of 32 lanes each) where the
-# lanes exchange by warp shuffles; they wait for each other at the start of every attempt, so that
+# a thread block of the team kernel holds this many members (one warp each: a team of at most 32
+# lanes, the warp's other threads idle) where the lanes exchange by warp shuffles; they wait for
+# each other at the start of every attempt, so that
 # an SM's warps run the same code at the same time and its instruction cache serves them all
 # (docs/performance.md, "Members in step"). 8: the registers of one SM hold 8 warps of this kernel
 # (255 registers per thread), so a block of 8 fills an SM as 8 blocks of one did
@@ -74,17 +75,26 @@ AUTO_BLOCK_MEMBERS = 8
 MAX_BLOCK_MEMBERS = 8
 
 
+WARP_SIZE = 32
+
+
 def block_members_for(lanes: int, exchange: str, requested: int | None = None) -> int:
     """Members per thread block of a team of ``lanes`` with its lane exchange: ``requested``
-    (WARPFRIC_TEAM_BLOCK_MEMBERS), else AUTO_BLOCK_MEMBERS for one warp of 32 lanes exchanging by
-    shuffles and 1 otherwise (tiles and the emulated exchange hold a block per member)."""
-    warp_team = exchange == "shuffle" and lanes == 32
+    (WARPFRIC_TEAM_BLOCK_MEMBERS), else AUTO_BLOCK_MEMBERS for a team that exchanges by warp shuffles
+    (one warp, at most 32 lanes) and 1 otherwise (tiles and the emulated exchange span a block)."""
+    warp_team = exchange == "shuffle" and 2 <= lanes <= WARP_SIZE
     if requested is None:
         return AUTO_BLOCK_MEMBERS if warp_team else 1
     if requested > 1 and not warp_team:
-        raise ValueError(f"WARPFRIC_TEAM_BLOCK_MEMBERS={requested} needs teams of 32 lanes that exchange by warp "
-                         f"shuffles; got {lanes} lanes, exchange {exchange!r}")
+        raise ValueError(f"WARPFRIC_TEAM_BLOCK_MEMBERS={requested} needs teams that exchange by warp shuffles "
+                         f"(at most {WARP_SIZE} lanes); got {lanes} lanes, exchange {exchange!r}")
     return requested
+
+
+def block_threads(lanes: int, block_members: int) -> int:
+    """Threads per block of the team kernel: a team's lanes, or a warp per member where a block
+    holds several."""
+    return lanes if block_members == 1 else WARP_SIZE * block_members
 
 
 def team_exchange(lanes: int, cuda: bool, requested: str | None = None) -> str:
@@ -327,10 +337,11 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
         if wp.static(team_on):
             block, thread = wp.tid()
             if wp.static(block_members > 1):
-                # several members per block, a warp each, in step at every attempt (AUTO_BLOCK_MEMBERS)
-                m = block * block_members + thread // lanes
-                lane = thread % lanes
-                if m >= member_states.shape[0]:
+                # several members per block, a warp each, in step at every attempt (AUTO_BLOCK_MEMBERS);
+                # a warp's threads beyond the team's lanes have nothing to do
+                m = block * block_members + thread // WARP_SIZE
+                lane = thread % WARP_SIZE
+                if m >= member_states.shape[0] or lane >= lanes:
                     return
             else:
                 m = block

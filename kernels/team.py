@@ -253,7 +253,7 @@ def _reduction_snippet(ctype: str, combine: str) -> str:
             v = {combine};
         }}
     }} else {{
-        const int lane = threadIdx.x;
+        const int lane = threadIdx.x & 31;  // the lane in its warp (a block may hold a member per warp)
         int top = 1;
         while (top * 2 < lanes) top *= 2;
         for (int s = top; s > 0; s >>= 1) {{

@@ -169,17 +169,19 @@ def test_a_run_warns_with_the_float32_note(monkeypatch):
 
 def test_members_per_block_choice(monkeypatch):
     """A thread block holds AUTO_BLOCK_MEMBERS members (8) only where each member is one warp whose
-    lanes exchange by shuffles (32 lanes on a GPU); tiles and the emulated exchange hold a block per
-    member (their exchange spans the block). WARPFRIC_TEAM_BLOCK_MEMBERS forces it, 1 to 8, and is
+    lanes exchange by shuffles (at most 32 lanes, on a GPU); tiles and the emulated exchange hold a
+    block per member (their exchange spans the block). WARPFRIC_TEAM_BLOCK_MEMBERS forces it, 1 to 8, and is
     refused where members would share a block they cannot, naming the variable and the valid values."""
-    from warpfric.kernels.integrator import AUTO_BLOCK_MEMBERS, block_members_for, team_compile_options
+    from warpfric.kernels.integrator import AUTO_BLOCK_MEMBERS, block_members_for, block_threads, team_compile_options
 
-    assert block_members_for(32, "shuffle") == AUTO_BLOCK_MEMBERS == 8
-    assert block_members_for(20, "shuffle") == block_members_for(32, "tile") == block_members_for(8, "emulated") == 1
-    assert block_members_for(32, "shuffle", 1) == 1 and block_members_for(32, "shuffle", 4) == 4
+    assert block_members_for(32, "shuffle") == block_members_for(20, "shuffle") == AUTO_BLOCK_MEMBERS == 8
+    assert block_members_for(32, "tile") == block_members_for(64, "tile") == block_members_for(8, "emulated") == 1
+    assert block_members_for(32, "shuffle", 1) == 1 and block_members_for(12, "shuffle", 4) == 4
     assert block_members_for(32, "tile", 1) == 1
-    with pytest.raises(ValueError, match="WARPFRIC_TEAM_BLOCK_MEMBERS=2 .*32 lanes.*shuffles"):
-        block_members_for(16, "shuffle", 2)
+    with pytest.raises(ValueError, match="WARPFRIC_TEAM_BLOCK_MEMBERS=2 needs teams that exchange by warp shuffles"):
+        block_members_for(16, "tile", 2)
+    # a warp per member where a block holds several (the threads beyond a team's lanes idle)
+    assert block_threads(20, 1) == 20 and block_threads(20, 8) == block_threads(32, 8) == 256
     monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "3")
     assert team_compile_options().block_members == 3
     for bad in ("0", "9", "two", "-1"):
@@ -194,12 +196,16 @@ def test_members_per_block_choice(monkeypatch):
 def test_members_in_one_block_give_the_outputs_of_one_member_per_block(monkeypatch):
     """Members that share a thread block wait for each other at every attempt; nothing else changes,
     so every output equals, bit for bit, the one-member-per-block kernel's: 11 members (a block of 8
-    and one of 3 with 5 empty warps), the default law with the contact front, N = 200."""
+    and one of 3 with 5 empty warps), the default law with the contact front, at N = 200 (32
+    lanes) and N = 40 (20 lanes: each warp's last 12 threads idle)."""
     values = {"eccentricity": np.linspace(-0.3, 0.3, 11), "normal_force": np.geomspace(300.0, 3000.0, 11)}
-    shared = run(values, nodes=200, rtol=1e-5, fronts=wf.Fronts())
-    monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "1")
-    alone = run(values, nodes=200, rtol=1e-5, fronts=wf.Fronts())
-    assert shared.attrs["block_members"] == 8 and alone.attrs["block_members"] == 1
-    assert (alone.status.values == 0).all()
-    for name, var in alone.data_vars.items():
-        np.testing.assert_array_equal(shared[name].values, var.values, err_msg=name)
+    for nodes, lanes in ((200, 32), (40, 20)):
+        monkeypatch.delenv("WARPFRIC_TEAM_BLOCK_MEMBERS", raising=False)
+        shared = run(values, nodes=nodes, rtol=1e-5, fronts=wf.Fronts())
+        monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "1")
+        alone = run(values, nodes=nodes, rtol=1e-5, fronts=wf.Fronts())
+        assert shared.attrs["lanes"] == alone.attrs["lanes"] == lanes
+        assert shared.attrs["block_members"] == 8 and alone.attrs["block_members"] == 1
+        assert (alone.status.values == 0).all()
+        for name, var in alone.data_vars.items():
+            np.testing.assert_array_equal(shared[name].values, var.values, err_msg=f"N = {nodes}: {name}")

@@ -367,7 +367,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     parameters (name -> (member,) float64); a progress line on stderr when show_progress."""
     import warp as wp
 
-    from warpfric.kernels.integrator import get_integrator
+    from warpfric.kernels.integrator import block_threads, get_integrator
     from warpfric.kernels.types import C_PHI, IntegratorState, allocate, member_array
 
     n_members = values["normal_force"].shape[0]
@@ -385,7 +385,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     kern = get_integrator(solver.dtype, model, lanes, solver.method, cuda=str(device).startswith("cuda"),
                           observed=observer_set(fronts))
     with cpu_blocks(team):  # compile or load now, so that it is timed apart
-        block_dim = lanes * kern["block_members"]  # members per block: kernels/integrator.py block_members_for
+        block_dim = block_threads(lanes, kern["block_members"])  # kernels/integrator.py block_members_for
         wp.load_module(kern["integrate"].module, device=device, block_dim=block_dim if team else None)
         wp.load_module(kern["evaluate_fields"].module, device=device)
     kernel_build_s = time.perf_counter() - t_build
