@@ -38,7 +38,7 @@ class TeamCompileOptions(NamedTuple):
     smem_spilling: bool = False  # let CUDA 13 spill registers to shared memory
     out_of_line: tuple = ()  # names of device functions kept out of line
     exchange: str | None = None  # the team's lane exchange, kernels/team.py (None: the automatic choice)
-    block_members: int | None = None  # members per thread block (None: the automatic choice, block_members_for)
+    block_members: int | None = None  # members per thread block (None: per run, block_members_for; 1: a block each)
 
 
 def team_compile_options() -> TeamCompileOptions:
@@ -65,36 +65,36 @@ def team_compile_options() -> TeamCompileOptions:
                               out_of_line=out_of_line, exchange=exchange, block_members=block_members)
 
 
-# a thread block of the team kernel holds this many members (one warp each: a team of at most 32
-# lanes, the warp's other threads idle) where the lanes exchange by warp shuffles; they wait for
-# each other at the start of every attempt, so that
-# an SM's warps run the same code at the same time and its instruction cache serves them all
-# (docs/performance.md, "Members in step"). 8: the registers of one SM hold 8 warps of this kernel
-# (255 registers per thread), so a block of 8 fills an SM as 8 blocks of one did
-AUTO_BLOCK_MEMBERS = 8
+# Where a team's lanes exchange by warp shuffles (a team of at most 32 lanes: one warp), a thread
+# block of the team kernel has MAX_BLOCK_MEMBERS warps, one member each (the warp's threads beyond
+# the team's lanes idle), and a run puts block_members_for(...) members into each block; they wait
+# for each other at the start of every attempt, so that an SM's warps run the same code at the
+# same time and its instruction cache serves them all (docs/performance.md, "Members in step").
+# 8: the registers of one SM hold 8 warps of this kernel (255 registers per thread), so one block
+# fills an SM as 8 blocks of one member did.
+WARP_SIZE = 32
 MAX_BLOCK_MEMBERS = 8
 
 
-WARP_SIZE = 32
-
-
-def block_members_for(lanes: int, exchange: str, requested: int | None = None) -> int:
-    """Members per thread block of a team of ``lanes`` with its lane exchange: ``requested``
-    (WARPFRIC_TEAM_BLOCK_MEMBERS), else AUTO_BLOCK_MEMBERS for a team that exchanges by warp shuffles
-    (one warp, at most 32 lanes) and 1 otherwise (tiles and the emulated exchange span a block)."""
+def blocked_layout(lanes: int, exchange: str, requested: int | None = None) -> bool:
+    """Whether the team kernel of ``lanes`` lanes with its lane exchange runs blocks of several
+    members: teams that exchange by warp shuffles, unless WARPFRIC_TEAM_BLOCK_MEMBERS (``requested``)
+    is 1 (tiles and the emulated exchange span their block: one member each)."""
     warp_team = exchange == "shuffle" and 2 <= lanes <= WARP_SIZE
-    if requested is None:
-        return AUTO_BLOCK_MEMBERS if warp_team else 1
-    if requested > 1 and not warp_team:
+    if requested is not None and requested > 1 and not warp_team:
         raise ValueError(f"WARPFRIC_TEAM_BLOCK_MEMBERS={requested} needs teams that exchange by warp shuffles "
                          f"(at most {WARP_SIZE} lanes); got {lanes} lanes, exchange {exchange!r}")
-    return requested
+    return warp_team and requested != 1
 
 
-def block_threads(lanes: int, block_members: int) -> int:
-    """Threads per block of the team kernel: a team's lanes, or a warp per member where a block
-    holds several."""
-    return lanes if block_members == 1 else WARP_SIZE * block_members
+def block_members_for(n_members: int, sm_count: int, requested: int | None = None) -> int:
+    """Members per block of a run of n_members in the blocked layout on a GPU of sm_count SMs:
+    ``requested`` (WARPFRIC_TEAM_BLOCK_MEMBERS), else min(MAX_BLOCK_MEMBERS, ceil(n_members /
+    sm_count)): the blocks then number at most the SMs while members are few (one member alone on
+    an SM runs faster than eight sharing it), and an SM's eight warps are one block's beyond."""
+    if requested is not None:
+        return requested
+    return max(1, min(MAX_BLOCK_MEMBERS, -(-n_members // max(sm_count, 1))))
 
 
 def team_exchange(lanes: int, cuda: bool, requested: str | None = None) -> str:
@@ -146,7 +146,6 @@ def get_integrator(dtype: str, model, lanes: int = 1, method: str = "tr_bdf2", c
     options = team_compile_options() if lanes > 1 else TeamCompileOptions()
     if lanes > 1:
         options = options._replace(exchange=team_exchange(lanes, cuda, options.exchange))
-        options = options._replace(block_members=block_members_for(lanes, options.exchange, options.block_members))
     key = (dtype, model, lanes, method, options, observed)
     if key not in _CACHE:
         _CACHE[key] = _make_integrator(dtype, model, lanes, method, options, observed)
@@ -212,7 +211,8 @@ def _make_integrator(dtype: str, model, lanes: int, method: str = "tr_bdf2", opt
     evaluate_fields = make_field_kernel(ft, stages)
     return dict(integrate=integrate, evaluate_fields=evaluate_fields, ft=ft, stages=stages,
                 exchange=(options.exchange or "tile") if lanes > 1 else "none",
-                block_members=options.block_members or 1)
+                blocked=lanes > 1 and blocked_layout(lanes, options.exchange, options.block_members),
+                block_members_requested=options.block_members)
 
 
 def make_acceptance(ft, model, method, stages):
@@ -292,7 +292,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     accept_step = acceptance["accept_step"]
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
-    block_members = options.block_members or 1
+    blocked = team_on and blocked_layout(lanes, options.exchange, options.block_members)
     block_barrier = stages["team"].get("block_barrier", None)
 
     # enable_backward=False: no adjoint code is generated (nothing differentiates through the
@@ -312,6 +312,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
         settings: SolverSettings,
         outputs: OutputSettings,
         launch_steps: int,
+        block_members: int,
         stall_limit: wp.array(dtype=wp.int32),
         record_times: wp.array(dtype=wp.float64),
         # state, read and written (persists between launches)
@@ -336,12 +337,13 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
         m = int(0)
         if wp.static(team_on):
             block, thread = wp.tid()
-            if wp.static(block_members > 1):
-                # several members per block, a warp each, in step at every attempt (AUTO_BLOCK_MEMBERS);
-                # a warp's threads beyond the team's lanes have nothing to do
-                m = block * block_members + thread // WARP_SIZE
+            if wp.static(blocked):
+                # block_members members per block, a warp each, in step at every attempt (blocked_layout);
+                # the block's other warps and a warp's threads beyond the team's lanes have nothing to do
+                warp = thread // WARP_SIZE
+                m = block * block_members + warp
                 lane = thread % WARP_SIZE
-                if m >= member_states.shape[0] or lane >= lanes:
+                if warp >= block_members or m >= member_states.shape[0] or lane >= lanes:
                     return
             else:
                 m = block
@@ -363,7 +365,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
         tilt = ft(st.tilt)
         attempt_limit = stall_limit[0]
         for _attempt in range(launch_steps):
-            if wp.static(block_members > 1):
+            if wp.static(blocked):
                 block_barrier()
             if run_finished(p, st, outputs):
                 st.done = 1

@@ -168,20 +168,24 @@ def test_a_run_warns_with_the_float32_note(monkeypatch):
 
 
 def test_members_per_block_choice(monkeypatch):
-    """A thread block holds AUTO_BLOCK_MEMBERS members (8) only where each member is one warp whose
-    lanes exchange by shuffles (at most 32 lanes, on a GPU); tiles and the emulated exchange hold a
-    block per member (their exchange spans the block). WARPFRIC_TEAM_BLOCK_MEMBERS forces it, 1 to 8, and is
-    refused where members would share a block they cannot, naming the variable and the valid values."""
-    from warpfric.kernels.integrator import AUTO_BLOCK_MEMBERS, block_members_for, block_threads, team_compile_options
+    """Teams whose lanes exchange by warp shuffles (at most 32 lanes: one warp, on a GPU) run blocks
+    of up to 8 members; tiles and the emulated exchange span their block (one member each). A run
+    puts min(8, ceil(members / SMs)) members into a block: while there are fewer members than SMs,
+    one per SM, as before. WARPFRIC_TEAM_BLOCK_MEMBERS forces the number (1: the layout of a block
+    per member), 1 to 8, and is refused where members cannot share a block, naming the variable
+    and the valid values."""
+    from warpfric.kernels.integrator import MAX_BLOCK_MEMBERS, block_members_for, blocked_layout, team_compile_options
 
-    assert block_members_for(32, "shuffle") == block_members_for(20, "shuffle") == AUTO_BLOCK_MEMBERS == 8
-    assert block_members_for(32, "tile") == block_members_for(64, "tile") == block_members_for(8, "emulated") == 1
-    assert block_members_for(32, "shuffle", 1) == 1 and block_members_for(12, "shuffle", 4) == 4
-    assert block_members_for(32, "tile", 1) == 1
+    assert blocked_layout(32, "shuffle") and blocked_layout(20, "shuffle") and blocked_layout(2, "shuffle")
+    assert not blocked_layout(32, "tile") and not blocked_layout(64, "tile") and not blocked_layout(8, "emulated")
+    assert not blocked_layout(32, "shuffle", 1) and blocked_layout(12, "shuffle", 4)
     with pytest.raises(ValueError, match="WARPFRIC_TEAM_BLOCK_MEMBERS=2 needs teams that exchange by warp shuffles"):
-        block_members_for(16, "tile", 2)
-    # a warp per member where a block holds several (the threads beyond a team's lanes idle)
-    assert block_threads(20, 1) == 20 and block_threads(20, 8) == block_threads(32, 8) == 256
+        blocked_layout(16, "tile", 2)
+    # an H100 has 132 SMs
+    assert block_members_for(1, 132) == block_members_for(100, 132) == block_members_for(132, 132) == 1
+    assert block_members_for(133, 132) == 2 and block_members_for(500, 132) == 4
+    assert block_members_for(1000, 132) == block_members_for(100_000, 132) == MAX_BLOCK_MEMBERS == 8
+    assert block_members_for(100, 132, requested=8) == 8
     monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "3")
     assert team_compile_options().block_members == 3
     for bad in ("0", "9", "two", "-1"):
@@ -195,12 +199,17 @@ def test_members_per_block_choice(monkeypatch):
 @pytest.mark.skipif(not DEVICE.startswith("cuda"), reason="warp shuffles, and so several members per block, need a GPU")
 def test_members_in_one_block_give_the_outputs_of_one_member_per_block(monkeypatch):
     """Members that share a thread block wait for each other at every attempt; nothing else changes,
-    so every output equals, bit for bit, the one-member-per-block kernel's: 11 members (a block of 8
-    and one of 3 with 5 empty warps), the default law with the contact front, at N = 200 (32
-    lanes) and N = 40 (20 lanes: each warp's last 12 threads idle)."""
+    so every output equals, bit for bit, the one-member-per-block kernel's: 11 members in blocks of
+    8 (WARPFRIC_TEAM_BLOCK_MEMBERS: one block of 8 and one of 3 with 5 idle warps), the default law
+    with the contact front, at N = 200 (32 lanes) and N = 40 (20 lanes: each warp's last 12 threads
+    idle, and the team's reductions are trees, not butterflies). The automatic choice gives 11
+    members a block each on a GPU of 11 SMs or more (min(8, ceil(11 / SMs)))."""
     values = {"eccentricity": np.linspace(-0.3, 0.3, 11), "normal_force": np.geomspace(300.0, 3000.0, 11)}
+    monkeypatch.delenv("WARPFRIC_TEAM_BLOCK_MEMBERS", raising=False)
+    sms = wp.get_device(DEVICE).sm_count
+    assert run(values, nodes=40, rtol=1e-4).attrs["block_members"] == min(8, -(-11 // sms))
     for nodes, lanes in ((200, 32), (40, 20)):
-        monkeypatch.delenv("WARPFRIC_TEAM_BLOCK_MEMBERS", raising=False)
+        monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "8")
         shared = run(values, nodes=nodes, rtol=1e-5, fronts=wf.Fronts())
         monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "1")
         alone = run(values, nodes=nodes, rtol=1e-5, fronts=wf.Fronts())

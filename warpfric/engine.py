@@ -367,7 +367,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     parameters (name -> (member,) float64); a progress line on stderr when show_progress."""
     import warp as wp
 
-    from warpfric.kernels.integrator import block_threads, get_integrator
+    from warpfric.kernels.integrator import MAX_BLOCK_MEMBERS, WARP_SIZE, block_members_for, get_integrator
     from warpfric.kernels.types import C_PHI, IntegratorState, allocate, member_array
 
     n_members = values["normal_force"].shape[0]
@@ -385,10 +385,15 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     kern = get_integrator(solver.dtype, model, lanes, solver.method, cuda=str(device).startswith("cuda"),
                           observed=observer_set(fronts))
     with cpu_blocks(team):  # compile or load now, so that it is timed apart
-        block_dim = block_threads(lanes, kern["block_members"])  # kernels/integrator.py block_members_for
+        # a block of the team kernel: the team's lanes, or a warp for each of up to MAX_BLOCK_MEMBERS
+        # members (kernels/integrator.py blocked_layout)
+        block_dim = WARP_SIZE * MAX_BLOCK_MEMBERS if kern["blocked"] else lanes
         wp.load_module(kern["integrate"].module, device=device, block_dim=block_dim if team else None)
         wp.load_module(kern["evaluate_fields"].module, device=device)
     kernel_build_s = time.perf_counter() - t_build
+    block_members = 1  # members per block (kernels/integrator.py block_members_for)
+    if kern["blocked"]:
+        block_members = block_members_for(n_members, wp.get_device(device).sm_count, kern["block_members_requested"])
     ft = kern["ft"]
     np_dtype = np.float64 if solver.dtype == "float64" else np.float32
     params_np = member_params(values)
@@ -415,7 +420,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         def launch_integrate(inputs, outputs_):
             if team:
                 with cpu_blocks(True):
-                    blocks = -(-n_members // kern["block_members"])
+                    blocks = -(-n_members // block_members)
                     wp.launch_tiled(kern["integrate"], dim=[blocks], inputs=inputs, outputs=outputs_, block_dim=block_dim)
             else:
                 wp.launch(kern["integrate"], dim=n_members, inputs=inputs, outputs=outputs_)
@@ -442,7 +447,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             stall_limit.fill_(NO_STALL_LIMIT)
             last_limit = NO_STALL_LIMIT
             inputs = [arrays.params, settings, outputs if pass_index == 0 else arrival_pass_settings(outputs),
-                      launch_steps(solver, n_members, device), stall_limit, arrays.record_times,
+                      launch_steps(solver, n_members, device), block_members, stall_limit, arrays.record_times,
                       member_states, arrays.state, arrays.stages, arrays.work, arrays.gates, arrays.record_previous]
             outputs_ = [arrays.arrival, arrays.arrival_error, arrays.strength, arrays.yield_time, arrays.record]
             # the launches are queued one ahead of the host: while chunk k + 1 runs, the host reads the
@@ -490,7 +495,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             arrival=arrival, arrival_error=arrival_error, strength_peak=strength_peak,
             event=event, record=arrays.record.numpy() if record is not None else None,
             kernel_build_s=kernel_build_s, device_bytes_per_member=device_bytes_per_member, lanes=lanes,
-            team_exchange=kern["exchange"], block_members=kern["block_members"], passes=n_passes,
+            team_exchange=kern["exchange"], block_members=block_members, passes=n_passes,
         )
         wp.synchronize_device(device)
     return result
