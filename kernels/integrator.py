@@ -97,21 +97,6 @@ def block_members_for(n_members: int, sm_count: int, requested: int | None = Non
     return max(1, min(MAX_BLOCK_MEMBERS, -(-n_members // max(sm_count, 1))))
 
 
-# every NVIDIA GPU since sm_30: 64 K 32-bit registers and at most 64 warps per SM; a warp's
-# registers are allocated in units of 256 (8 per thread)
-REGISTERS_PER_SM = 65536
-WARPS_PER_SM = 64
-
-
-def resident_blocks(register_count: int, sm_count: int) -> int:
-    """How many blocks of MAX_BLOCK_MEMBERS warps the GPU runs at once at register_count registers
-    per thread: the blocks a blocked launch needs at most, since its teams take further members
-    from the queue (at 255 registers, one block per SM)."""
-    warp_registers = -(-max(register_count, 1) // 8) * 8 * WARP_SIZE
-    per_sm = min(WARPS_PER_SM // MAX_BLOCK_MEMBERS, REGISTERS_PER_SM // (warp_registers * MAX_BLOCK_MEMBERS))
-    return max(1, per_sm) * sm_count
-
-
 def team_exchange(lanes: int, cuda: bool, requested: str | None = None) -> str:
     """The lane exchange of a team of ``lanes`` on a CUDA device (cuda) or the CPU: ``requested``
     (WARPFRIC_TEAM_EXCHANGE), else warp shuffles on a GPU for a team of one warp (<= 32 lanes) and
@@ -309,7 +294,6 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     array4 = wp.array4d(dtype=ft)
     blocked = team_on and blocked_layout(lanes, options.exchange, options.block_members)
     block_barrier = stages["team"].get("block_barrier", None)
-    team_count = stages["team"]["team_count"]
 
     # enable_backward=False: no adjoint code is generated (nothing differentiates through the
     # integrator); the forward code is the same, and the first compile takes a third of the time
@@ -321,16 +305,51 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     else:
         limits = dict(cuda_max_registers=options.max_registers)
 
-    @wp.func
-    def advance_member(
-        m: int, lane: int, params: wp.array(dtype=MemberParams), settings: SolverSettings, outputs: OutputSettings,
-        launch_steps: int, stall_limit: wp.array(dtype=wp.int32), record_times: wp.array(dtype=wp.float64),
-        member_states: wp.array(dtype=IntegratorState), state: array3, K: array4, work: array3, gates: array3,
-        record_previous: array3, arrival: wp.array3d(dtype=wp.float64), arrival_error: wp.array3d(dtype=wp.float64),
-        strength: wp.array3d(dtype=wp.float64), yield_time: wp.array2d(dtype=wp.float64), record: array4,
+    @wp.kernel(module="unique", enable_backward=False, **limits)
+    def integrate(
+        # inputs
+        params: wp.array(dtype=MemberParams),
+        settings: SolverSettings,
+        outputs: OutputSettings,
+        launch_steps: int,
+        block_members: int,
+        stall_limit: wp.array(dtype=wp.int32),
+        record_times: wp.array(dtype=wp.float64),
+        # state, read and written (persists between launches)
+        member_states: wp.array(dtype=IntegratorState),
+        state: array3,
+        K: array4,
+        work: array3,
+        gates: array3,
+        record_previous: array3,
+        # outputs
+        arrival: wp.array3d(dtype=wp.float64),
+        arrival_error: wp.array3d(dtype=wp.float64),
+        strength: wp.array3d(dtype=wp.float64),
+        yield_time: wp.array2d(dtype=wp.float64),
+        record: array4,
     ):
-        """Advance member m (this thread: lane ``lane`` of its team) by at most ``launch_steps``
-        attempted steps (or to its end, or until its attempts exceed stall_limit[0])."""
+        """Advance each member by at most ``launch_steps`` attempted steps (or to its end, or until its
+        attempts exceed stall_limit[0]).
+        Shapes and units: kernels/types.py. A team: every lane keeps the same IntegratorState; lane
+        0 stores it."""
+        lane = int(0)
+        m = int(0)
+        if wp.static(team_on):
+            block, thread = wp.tid()
+            if wp.static(blocked):
+                # block_members members per block, a warp each, in step at every attempt (blocked_layout);
+                # the block's other warps and a warp's threads beyond the team's lanes have nothing to do
+                warp = thread // WARP_SIZE
+                m = block * block_members + warp
+                lane = thread % WARP_SIZE
+                if warp >= block_members or m >= member_states.shape[0] or lane >= lanes:
+                    return
+            else:
+                m = block
+                lane = thread
+        else:
+            m = wp.tid()
         st = member_states[m]
         if st.done != 0:
             return
@@ -405,66 +424,6 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
         st.tilt = wp.float64(tilt)
         if lane == 0:
             member_states[m] = st
-
-
-    @wp.kernel(module="unique", enable_backward=False, **limits)
-    def integrate(
-        # inputs
-        params: wp.array(dtype=MemberParams),
-        settings: SolverSettings,
-        outputs: OutputSettings,
-        launch_steps: int,
-        block_members: int,
-        member_queue: wp.array(dtype=wp.int32),
-        stall_limit: wp.array(dtype=wp.int32),
-        record_times: wp.array(dtype=wp.float64),
-        # state, read and written (persists between launches)
-        member_states: wp.array(dtype=IntegratorState),
-        state: array3,
-        K: array4,
-        work: array3,
-        gates: array3,
-        record_previous: array3,
-        # outputs
-        arrival: wp.array3d(dtype=wp.float64),
-        arrival_error: wp.array3d(dtype=wp.float64),
-        strength: wp.array3d(dtype=wp.float64),
-        yield_time: wp.array2d(dtype=wp.float64),
-        record: array4,
-    ):
-        """Advance each member by at most ``launch_steps`` attempted steps (advance_member). Blocked
-        layout: member_queue[0] is the next member no team has taken (the host sets it to blocks x
-        block_members before each launch). Shapes and units: kernels/types.py. A team: every lane
-        keeps the same IntegratorState; lane 0 stores it."""
-        if wp.static(team_on):
-            block, thread = wp.tid()
-            if wp.static(blocked):
-                # block_members members per block, a warp each, in step at every attempt (blocked_layout);
-                # the block's other warps and a warp's threads beyond the team's lanes have nothing to do.
-                # A team that is through with its member takes the next one from member_queue, so that
-                # no warp of a block idles while another still runs (a block's registers are held until
-                # its last warp ends)
-                warp = thread // WARP_SIZE
-                lane = thread % WARP_SIZE
-                if warp >= block_members or lane >= lanes:
-                    return
-                m = block * block_members + warp
-                while m < member_states.shape[0]:
-                    advance_member(m, lane, params, settings, outputs, launch_steps, stall_limit, record_times,
-                                   member_states, state, K, work, gates, record_previous, arrival, arrival_error,
-                                   strength, yield_time, record)
-                    taken = int(0)
-                    if lane == 0:
-                        taken = wp.atomic_add(member_queue, 0, 1)
-                    m = team_count(taken)  # lane 0's: the same member in every lane
-            else:
-                advance_member(block, thread, params, settings, outputs, launch_steps, stall_limit, record_times,
-                               member_states, state, K, work, gates, record_previous, arrival, arrival_error,
-                               strength, yield_time, record)
-        else:
-            advance_member(wp.tid(), 0, params, settings, outputs, launch_steps, stall_limit, record_times,
-                           member_states, state, K, work, gates, record_previous, arrival, arrival_error, strength,
-                           yield_time, record)
 
     return integrate
 

@@ -174,8 +174,7 @@ def test_members_per_block_choice(monkeypatch):
     one per SM, as before. WARPFRIC_TEAM_BLOCK_MEMBERS forces the number (1: the layout of a block
     per member), 1 to 8, and is refused where members cannot share a block, naming the variable
     and the valid values."""
-    from warpfric.kernels.integrator import (MAX_BLOCK_MEMBERS, block_members_for, blocked_layout, resident_blocks,
-                                            team_compile_options)
+    from warpfric.kernels.integrator import MAX_BLOCK_MEMBERS, block_members_for, blocked_layout, team_compile_options
 
     assert blocked_layout(32, "shuffle") and blocked_layout(20, "shuffle") and blocked_layout(2, "shuffle")
     assert not blocked_layout(32, "tile") and not blocked_layout(64, "tile") and not blocked_layout(8, "emulated")
@@ -187,9 +186,6 @@ def test_members_per_block_choice(monkeypatch):
     assert block_members_for(133, 132) == 2 and block_members_for(500, 132) == 4
     assert block_members_for(1000, 132) == block_members_for(100_000, 132) == MAX_BLOCK_MEMBERS == 8
     assert block_members_for(100, 132, requested=8) == 8
-    # the blocks a launch needs at most: those the GPU runs at once (64 K registers and 64 warps per SM)
-    assert resident_blocks(255, 132) == resident_blocks(256, 132) == 132
-    assert resident_blocks(128, 132) == 264 and resident_blocks(64, 132) == 528 and resident_blocks(32, 132) == 1056
     monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "3")
     assert team_compile_options().block_members == 3
     for bad in ("0", "9", "two", "-1"):
@@ -222,21 +218,3 @@ def test_members_in_one_block_give_the_outputs_of_one_member_per_block(monkeypat
         assert (alone.status.values == 0).all()
         for name, var in alone.data_vars.items():
             np.testing.assert_array_equal(shared[name].values, var.values, err_msg=f"N = {nodes}: {name}")
-
-
-@pytest.mark.skipif(not DEVICE.startswith("cuda"), reason="warp shuffles, and so several members per block, need a GPU")
-def test_teams_that_take_members_from_the_queue_give_the_same_outputs(monkeypatch):
-    """More members than the blocks the GPU runs at once hold (8 per block, one block per SM at
-    255 registers): the teams take the others from the launch's queue as they finish theirs. Every
-    output equals, bit for bit, the one-member-per-block kernel's: N = 40 (20 lanes), the gate-less
-    law, rtol 1e-4, 8 x SMs + 100 members, each a warp of its own or taken from the queue."""
-    m = 8 * wp.get_device(DEVICE).sm_count + 100
-    rng = np.random.default_rng(0)
-    values = {"eccentricity": rng.uniform(-0.2, 0.2, m), "normal_force": np.exp(rng.uniform(np.log(500.0), np.log(5000.0), m))}
-    queued = run(values, nodes=40, rtol=1e-4, model=wf.Model(relaxation_gate="none"))
-    monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "1")
-    alone = run(values, nodes=40, rtol=1e-4, model=wf.Model(relaxation_gate="none"))
-    assert queued.attrs["block_members"] == 8 and alone.attrs["block_members"] == 1
-    assert (alone.status.values == 0).all()
-    for name, var in alone.data_vars.items():
-        np.testing.assert_array_equal(queued[name].values, var.values, err_msg=name)

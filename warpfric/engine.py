@@ -367,8 +367,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     parameters (name -> (member,) float64); a progress line on stderr when show_progress."""
     import warp as wp
 
-    from warpfric.kernels.integrator import (MAX_BLOCK_MEMBERS, WARP_SIZE, block_members_for, get_integrator,
-                                             resident_blocks)
+    from warpfric.kernels.integrator import MAX_BLOCK_MEMBERS, WARP_SIZE, block_members_for, get_integrator
     from warpfric.kernels.types import C_PHI, IntegratorState, allocate, member_array
 
     n_members = values["normal_force"].shape[0]
@@ -393,13 +392,8 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         wp.load_module(kern["evaluate_fields"].module, device=device)
     kernel_build_s = time.perf_counter() - t_build
     block_members = 1  # members per block (kernels/integrator.py block_members_for)
-    blocks = n_members  # blocks per launch (a team kernel's; the thread kernel's threads)
-    if team and kern["blocked"]:
-        sm_count = wp.get_device(device).sm_count
-        block_members = block_members_for(n_members, sm_count, kern["block_members_requested"])
-        # no more blocks than run at once: their teams take the other members from the queue
-        registers = wp.get_cuda_kernel_properties(kern["integrate"], device, block_dim)["register_count"]
-        blocks = min(-(-n_members // block_members), resident_blocks(registers, sm_count))
+    if kern["blocked"]:
+        block_members = block_members_for(n_members, wp.get_device(device).sm_count, kern["block_members_requested"])
     ft = kern["ft"]
     np_dtype = np.float64 if solver.dtype == "float64" else np.float32
     params_np = member_params(values)
@@ -423,12 +417,10 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         stall_limit = wp.full(1, NO_STALL_LIMIT, dtype=wp.int32)  # attempts after which a member stalls
         snapshot = StateSnapshots(n_members, device)
 
-        member_queue = wp.zeros(1, dtype=wp.int32)  # the next member no team has taken (blocked layout)
-
         def launch_integrate(inputs, outputs_):
             if team:
-                member_queue.fill_(blocks * block_members)
                 with cpu_blocks(True):
+                    blocks = -(-n_members // block_members)
                     wp.launch_tiled(kern["integrate"], dim=[blocks], inputs=inputs, outputs=outputs_, block_dim=block_dim)
             else:
                 wp.launch(kern["integrate"], dim=n_members, inputs=inputs, outputs=outputs_)
@@ -455,8 +447,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             stall_limit.fill_(NO_STALL_LIMIT)
             last_limit = NO_STALL_LIMIT
             inputs = [arrays.params, settings, outputs if pass_index == 0 else arrival_pass_settings(outputs),
-                      launch_steps(solver, n_members, device), block_members, member_queue, stall_limit,
-                      arrays.record_times,
+                      launch_steps(solver, n_members, device), block_members, stall_limit, arrays.record_times,
                       member_states, arrays.state, arrays.stages, arrays.work, arrays.gates, arrays.record_previous]
             outputs_ = [arrays.arrival, arrays.arrival_error, arrays.strength, arrays.yield_time, arrays.record]
             # the launches are queued one ahead of the host: while chunk k + 1 runs, the host reads the
