@@ -37,7 +37,8 @@
 #   sass           the integrate kernel's SASS instructions by inlined call site (studies/sass_sites.py)
 #   exchange       the team's lane exchanges, tiles against warp shuffles: outputs (studies/team_exchange.py)
 #                  and 1 / 10,000 members timed with each
-#   blocks         members per thread block, 8 (automatic) against 1 (WARPFRIC_TEAM_BLOCK_MEMBERS=1):
+#   blocks         members per thread block, chosen per run (min(8, ceil(members / SMs))) against 1
+#                  (WARPFRIC_TEAM_BLOCK_MEMBERS=1):
 #                  1 / 1,000 / 10,000 members, the contact front, the gate-less law, two rounds; then the
 #                  GPU tests of tests/test_team.py (outputs bit for bit equal)
 #   dask [SWEEP]   2 GPUs: one process against a local Dask cluster of 1 and 2 workers
@@ -161,8 +162,8 @@ case "$mode" in
     python3 studies/sass_sites.py "$@" 2>&1 | tee "$OUT/sass_sites.txt" | head -30 ;;
   blocks)
     for round in 1 2; do
-      for k in 1 8; do
-        export WARPFRIC_TEAM_BLOCK_MEMBERS=$k
+      for k in 1 auto; do
+        if [ "$k" = auto ]; then unset WARPFRIC_TEAM_BLOCK_MEMBERS; else export WARPFRIC_TEAM_BLOCK_MEMBERS=$k; fi
         $E --lanes 32 --members 1 1000 10000 --out "$OUT/bench_blocks.json" "$@" 2>&1 | grep 'cuda:0' | grep -v '{' | sed "s/^/block $k: /"
         $E --lanes 32 --members 10000 --front-events contact --out "$OUT/bench_blocks.json" "$@" 2>&1 | grep 'cuda:0' | grep -v '{' | sed "s/^/block $k: /"
         $E --lanes 32 --members 10000 --relaxation-gate none --out "$OUT/bench_blocks.json" "$@" 2>&1 | grep 'cuda:0' | grep -v '{' | sed "s/^/block $k: /"
