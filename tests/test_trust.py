@@ -1,7 +1,7 @@
 """Outputs a user can trust: stragglers are stopped and flagged, inputs that cannot run are refused."""
 
 import numpy as np
-from conftest import run
+from conftest import DEVICE, run
 
 
 def test_a_straggler_is_stopped_within_a_bounded_factor_of_its_peers():
@@ -45,7 +45,6 @@ def test_every_accepted_eccentricity_runs_up_to_heavy_lift_off():
     """|2e/L| up to 0.6 is accepted (beyond, refused: tests/test_inputs.py): at 0.6 about half of the
     pad has lifted off, the run ends ok with its contact zone inside the pad, and the fronts stay in
     the contact zone (lifted-off nodes never arrive)."""
-    from conftest import DEVICE  # noqa: F401  (the run helper uses it)
     import warpfric as wf
 
     ds = run({"eccentricity": [-0.6, 0.6], "normal_force": [300.0, 3000.0]}, nodes=40, rtol=1e-5,
@@ -88,8 +87,9 @@ def test_float32_members_that_stall_are_rerun_in_float64():
     at the end of the force ramp, and the error control then needs ~1e-8 s steps (docs/model.md,
     "Precision"): members 0 and 2 below end max_steps_reached in float32 at t ~ 10.0001 s. With the
     default float32_fallback they are run again in float64: status ok, working_precision 64, and
-    exactly the outputs of a float64 run of the same members; the healthy float32 member keeps its
-    float32 result (within 1e-6 of float64)."""
+    exactly the outputs of a float64 run of the same members; a healthy float32 member keeps its
+    float32 result (within 1e-6 of float64). Member 1 is healthy on the CPU; on an H100 its float32
+    round-off (another compiler's) stalls it as well, and it is then rerun like the others."""
     import warpfric as wf
 
     members = {"viscous_coefficient": [0.0, 0.0, 0.0], "normal_force": [1000.0, 100.0, 316.0],
@@ -99,19 +99,25 @@ def test_float32_members_that_stall_are_rerun_in_float64():
     kw = dict(model=model, nodes=100, rtol=1e-5, max_steps=3000, record=record)
     plain = run(members, dtype="float32", float32_fallback=False, **kw)
     meanings = plain.status.attrs["flag_meanings"].split()
-    assert [meanings[s] for s in plain.status.values] == ["max_steps_reached", "ok", "max_steps_reached"]
-    assert np.isnan(plain.mu_s.values[[0, 2]]).all() and (plain.final_time.values[[0, 2]] < 10.001).all()
+    statuses = [meanings[s] for s in plain.status.values]
+    assert set(statuses) <= {"max_steps_reached", "ok"} and statuses[0] == statuses[2] == "max_steps_reached"
+    if not DEVICE.startswith("cuda"):
+        assert statuses[1] == "ok"
+    stalled = np.array([s == "max_steps_reached" for s in statuses])
+    assert np.isnan(plain.mu_s.values[stalled]).all() and (plain.final_time.values[stalled] < 10.001).all()
     ds = run(members, dtype="float32", **kw)
     f64 = run(members, dtype="float64", **kw)
     assert (ds.status.values == 0).all()
-    assert ds.working_precision.values.tolist() == [64, 32, 64]
+    assert ds.working_precision.values.tolist() == [64 if s else 32 for s in stalled]
     assert f64.working_precision.values.tolist() == [64, 64, 64]
     for name in ("mu_s", "mu_s_time", "steps_accepted", "final_time"):
-        np.testing.assert_array_equal(ds[name].values[[0, 2]], f64[name].values[[0, 2]])
-    np.testing.assert_array_equal(ds.friction_stress.values[[0, 2]], f64.friction_stress.values[[0, 2]].astype(np.float32))
-    np.testing.assert_array_equal(ds.velocity_history.values[1], f64.velocity_history.values[1].astype(np.float32))
-    np.testing.assert_array_equal(ds.velocity_history.values[0], plain.velocity_history.values[0])  # float32 member kept
-    assert abs(ds.mu_s.values[1] - f64.mu_s.values[1]) < 1e-6
+        np.testing.assert_array_equal(ds[name].values[stalled], f64[name].values[stalled])
+    np.testing.assert_array_equal(ds.friction_stress.values[stalled], f64.friction_stress.values[stalled].astype(np.float32))
+    for slot, member in enumerate(record.members):  # the recorded members 1 and 2
+        source = f64.velocity_history.values[slot].astype(np.float32) if stalled[member] else plain.velocity_history.values[slot]
+        np.testing.assert_array_equal(ds.velocity_history.values[slot], source)
+    kept = ~stalled
+    assert (np.abs(ds.mu_s.values[kept] - f64.mu_s.values[kept]) < 1e-6).all()
 
 
 def test_grid_check_needs_a_grid_to_halve():
