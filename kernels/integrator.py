@@ -44,8 +44,9 @@ class TeamCompileOptions(NamedTuple):
 def team_compile_options() -> TeamCompileOptions:
     """The benchmark switches from the environment: WARPFRIC_TEAM_MAX_REGISTERS (an integer > 0),
     WARPFRIC_INLINE ('force' or 'never'), WARPFRIC_TEAM_SMEM_SPILLING (1), WARPFRIC_NOINLINE
-    (comma-separated function names) and WARPFRIC_TEAM_EXCHANGE ('tile', 'shuffle' or 'emulated':
-    kernels/team.py)."""
+    (comma-separated function names), WARPFRIC_TEAM_EXCHANGE ('tile', 'shuffle' or 'emulated':
+    kernels/team.py) and WARPFRIC_TEAM_BLOCK_MEMBERS (1 to 8: members per thread block,
+    blocked_layout)."""
     registers = int(os.environ.get("WARPFRIC_TEAM_MAX_REGISTERS", "0"))
     inline = os.environ.get("WARPFRIC_INLINE", "") or None
     if inline not in (None, "force", "never"):
@@ -83,7 +84,8 @@ def blocked_layout(lanes: int, exchange: str, requested: int | None = None) -> b
     warp_team = exchange == "shuffle" and 2 <= lanes <= WARP_SIZE
     if requested is not None and requested > 1 and not warp_team:
         raise ValueError(f"WARPFRIC_TEAM_BLOCK_MEMBERS={requested} needs teams that exchange by warp shuffles "
-                         f"(at most {WARP_SIZE} lanes); got {lanes} lanes, exchange {exchange!r}")
+                         f"(at most {WARP_SIZE} lanes); got {lanes} lanes, exchange {exchange!r}; valid here: 1, "
+                         f"or unset")
     return warp_team and requested != 1
 
 
@@ -137,9 +139,9 @@ def _filled(cell) -> bool:
 def get_integrator(dtype: str, model, lanes: int = 1, method: str = "tr_bdf2", cuda: bool = False,
                    observed: ObserverSet = ObserverSet()) -> dict:
     """Compiled kernels for one working precision, one set of model switches, one team size
-    (lanes = 1: one thread per member; > 1: the cooperative kernel, launched with block_dim = lanes,
-    float64 only; kernels/team.py), one time integrator (Solver.method: 'tr_bdf2' or 'esdirk4'),
-    the kind of device they run on (cuda: a team's lane exchange, team_exchange) and the observers
+    (lanes = 1: one thread per member; > 1: the cooperative kernel, float64 only, launched with
+    block_dim = lanes, or WARP_SIZE * MAX_BLOCK_MEMBERS in the blocked layout; kernels/team.py),
+    one time integrator (Solver.method: 'tr_bdf2' or 'esdirk4'), the kind of device they run on (cuda: a team's lane exchange, team_exchange) and the observers
     compiled in (kernels/observers.py ObserverSet; all by default) (cached)."""
     if method not in ("tr_bdf2", "esdirk4"):
         raise ValueError(f"integrator method {method!r} is invalid; valid: 'tr_bdf2' or 'esdirk4'")
@@ -300,8 +302,8 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     # (CPU, default law: 13.2 s -> 4.7 s)
     # the benchmark switches (team_compile_options): shared-memory spilling needs launch bounds
     # instead of a register cap
-    if options.smem_spilling:
-        limits = dict(enable_cuda_smem_spilling=True, launch_bounds=lanes)
+    if options.smem_spilling:  # the launch bounds: the threads of a block (engine.py)
+        limits = dict(enable_cuda_smem_spilling=True, launch_bounds=WARP_SIZE * MAX_BLOCK_MEMBERS if blocked else lanes)
     else:
         limits = dict(cuda_max_registers=options.max_registers)
 

@@ -1,6 +1,7 @@
 """Who works on a member: one thread (the thread-per-member kernel) or a team of ``lanes`` threads
-(one Warp tile block per member, the cooperative kernel; docs/model.md, "Time
-integration").
+(the cooperative kernel: a Warp tile block per member, or, where the lanes exchange by warp
+shuffles, a warp per member and up to eight members per block: kernels/integrator.py
+blocked_layout; docs/model.md, "Time integration").
 
 In a team, lane k owns the contiguous nodes [first_node, end_node) = [k*N//P, (k+1)*N//P) of its
 member (P = lanes <= N/2, so every lane owns at least two nodes) and runs every per-node loop of

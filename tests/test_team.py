@@ -202,12 +202,13 @@ def test_members_in_one_block_give_the_outputs_of_one_member_per_block(monkeypat
     so every output equals, bit for bit, the one-member-per-block kernel's: 11 members in blocks of
     8 (WARPFRIC_TEAM_BLOCK_MEMBERS: one block of 8 and one of 3 with 5 idle warps), the default law
     with the contact front, at N = 200 (32 lanes) and N = 40 (20 lanes: each warp's last 12 threads
-    idle, and the team's reductions are trees, not butterflies). The automatic choice gives 11
-    members a block each on a GPU of 11 SMs or more (min(8, ceil(11 / SMs)))."""
+    idle, and the team's reductions are trees, not butterflies). The automatic choice is
+    min(8, ceil(members / SMs)): one member more than the GPU has SMs runs two per block."""
     values = {"eccentricity": np.linspace(-0.3, 0.3, 11), "normal_force": np.geomspace(300.0, 3000.0, 11)}
     monkeypatch.delenv("WARPFRIC_TEAM_BLOCK_MEMBERS", raising=False)
     sms = wp.get_device(DEVICE).sm_count
-    assert run(values, nodes=40, rtol=1e-4).attrs["block_members"] == min(8, -(-11 // sms))
+    many = {"eccentricity": np.linspace(-0.3, 0.3, sms + 1)}
+    assert run(many, nodes=40, rtol=1e-4).attrs["block_members"] == 2
     for nodes, lanes in ((200, 32), (40, 20)):
         monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "8")
         shared = run(values, nodes=nodes, rtol=1e-5, fronts=wf.Fronts())
