@@ -23,7 +23,7 @@ from .gates import make_gates
 from .model_terms import disc_velocity_at, make_model_terms
 from .newton import make_newton
 from .observers import ObserverSet, make_observers, run_finished
-from .team import EXCHANGES, make_team, node_range
+from .team import EXCHANGES, WARP_SIZE, make_team, node_range
 from .types import IntegratorState, MemberParams, OutputSettings, SolverSettings, stage_slots
 
 _CACHE: dict = {}
@@ -73,7 +73,6 @@ def team_compile_options() -> TeamCompileOptions:
 # same time and its instruction cache serves them all (docs/performance.md, "Members in step").
 # 8: the registers of one SM hold 8 warps of this kernel (255 registers per thread), so one block
 # fills an SM as 8 blocks of one member did.
-WARP_SIZE = 32
 MAX_BLOCK_MEMBERS = 8
 
 
@@ -99,17 +98,23 @@ def block_members_for(n_members: int, sm_count: int, requested: int | None = Non
     return max(1, min(MAX_BLOCK_MEMBERS, -(-n_members // max(sm_count, 1))))
 
 
+def block_threads(lanes: int, blocked: bool) -> int:
+    """Threads per block of the team kernel (its launches and its launch bounds): the team's lanes,
+    or in the blocked layout a warp for each of MAX_BLOCK_MEMBERS members."""
+    return WARP_SIZE * MAX_BLOCK_MEMBERS if blocked else lanes
+
+
 def team_exchange(lanes: int, cuda: bool, requested: str | None = None) -> str:
     """The lane exchange of a team of ``lanes`` on a CUDA device (cuda) or the CPU: ``requested``
     (WARPFRIC_TEAM_EXCHANGE), else warp shuffles on a GPU for a team of one warp (<= 32 lanes) and
     Warp's tiles otherwise (docs/performance.md, "Warp shuffles")."""
     if requested is None:
-        return "shuffle" if cuda and lanes <= 32 else "tile"
-    if requested == "shuffle" and not (cuda and lanes <= 32):
-        raise ValueError(f"WARPFRIC_TEAM_EXCHANGE='shuffle' needs a CUDA device and at most 32 lanes; "
+        return "shuffle" if cuda and lanes <= WARP_SIZE else "tile"
+    if requested == "shuffle" and not (cuda and lanes <= WARP_SIZE):
+        raise ValueError(f"WARPFRIC_TEAM_EXCHANGE='shuffle' needs a CUDA device and at most {WARP_SIZE} lanes; "
                          f"got {'a CUDA device' if cuda else 'the CPU'} and {lanes} lanes")
-    if requested == "emulated" and lanes > 32:
-        raise ValueError(f"WARPFRIC_TEAM_EXCHANGE='emulated' needs at most 32 lanes; got {lanes}")
+    if requested == "emulated" and lanes > WARP_SIZE:
+        raise ValueError(f"WARPFRIC_TEAM_EXCHANGE='emulated' needs at most {WARP_SIZE} lanes; got {lanes}")
     return requested
 
 
@@ -140,8 +145,8 @@ def get_integrator(dtype: str, model, lanes: int = 1, method: str = "tr_bdf2", c
                    observed: ObserverSet = ObserverSet()) -> dict:
     """Compiled kernels for one working precision, one set of model switches, one team size
     (lanes = 1: one thread per member; > 1: the cooperative kernel, float64 only, launched with
-    block_dim = lanes, or WARP_SIZE * MAX_BLOCK_MEMBERS in the blocked layout; kernels/team.py),
-    one time integrator (Solver.method: 'tr_bdf2' or 'esdirk4'), the kind of device they run on (cuda: a team's lane exchange, team_exchange) and the observers
+    block_threads; kernels/team.py), one time integrator (Solver.method: 'tr_bdf2' or 'esdirk4'),
+    the kind of device they run on (cuda: a team's lane exchange, team_exchange) and the observers
     compiled in (kernels/observers.py ObserverSet; all by default) (cached)."""
     if method not in ("tr_bdf2", "esdirk4"):
         raise ValueError(f"integrator method {method!r} is invalid; valid: 'tr_bdf2' or 'esdirk4'")
@@ -209,12 +214,12 @@ def _make_integrator(dtype: str, model, lanes: int, method: str = "tr_bdf2", opt
     ft = wp.float64 if dtype == "float64" else wp.float32
     stages = make_stages(ft, model, lanes, method, options.exchange or "tile", observed)
     acceptance = make_acceptance(ft, model, method, stages)
-    integrate = make_integrate_kernel(ft, model, lanes, method, stages, acceptance, options)
+    blocked = lanes > 1 and blocked_layout(lanes, options.exchange, options.block_members)
+    integrate = make_integrate_kernel(ft, model, lanes, method, stages, acceptance, options, blocked)
     evaluate_fields = make_field_kernel(ft, stages)
     return dict(integrate=integrate, evaluate_fields=evaluate_fields, ft=ft, stages=stages,
                 exchange=(options.exchange or "tile") if lanes > 1 else "none",
-                blocked=lanes > 1 and blocked_layout(lanes, options.exchange, options.block_members),
-                block_members_requested=options.block_members)
+                blocked=blocked, block_members_requested=options.block_members)
 
 
 def make_acceptance(ft, model, method, stages):
@@ -279,8 +284,10 @@ def make_acceptance(ft, model, method, stages):
     return dict(accept_step=accept_step)
 
 
-def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, options=TeamCompileOptions()):
-    """The integrate kernel: the loop of attempted steps (stepper, controller, accept_step)."""
+def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, options=TeamCompileOptions(),
+                          blocked: bool = False):
+    """The integrate kernel: the loop of attempted steps (stepper, controller, accept_step); blocked:
+    the team kernel's blocked layout (blocked_layout)."""
     team_on = lanes > 1
     esdirk4 = method == "esdirk4"
     n_slots = stage_slots(method)
@@ -294,7 +301,6 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     accept_step = acceptance["accept_step"]
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
-    blocked = team_on and blocked_layout(lanes, options.exchange, options.block_members)
     block_barrier = stages["team"].get("block_barrier", None)
 
     # enable_backward=False: no adjoint code is generated (nothing differentiates through the
@@ -303,7 +309,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     # the benchmark switches (team_compile_options): shared-memory spilling needs launch bounds
     # instead of a register cap
     if options.smem_spilling:  # the launch bounds: the threads of a block (engine.py)
-        limits = dict(enable_cuda_smem_spilling=True, launch_bounds=WARP_SIZE * MAX_BLOCK_MEMBERS if blocked else lanes)
+        limits = dict(enable_cuda_smem_spilling=True, launch_bounds=block_threads(lanes, blocked))
     else:
         limits = dict(cuda_max_registers=options.max_registers)
 

@@ -574,6 +574,7 @@ def make_exchange_team(lanes: int, exchange: str):
 
 
 EXCHANGES = ("tile", "shuffle", "emulated")
+WARP_SIZE = 32  # threads of a warp: the most lanes of a team that exchanges by shuffles
 
 
 def make_team(ft, lanes: int, exchange: str = "tile"):
@@ -588,6 +589,6 @@ def make_team(ft, lanes: int, exchange: str = "tile"):
         raise ValueError(f"team exchange {exchange!r} is invalid; valid: {', '.join(EXCHANGES)}")
     if exchange == "tile":
         return dict(lanes=lanes, exchange=exchange, **make_tile_reductions(lanes), **make_separator_exchange(lanes))
-    if lanes > 32:
-        raise ValueError(f"a team exchange {exchange!r} of {lanes} lanes is invalid: at most 32 lanes (one warp)")
+    if lanes > WARP_SIZE:
+        raise ValueError(f"a team exchange {exchange!r} of {lanes} lanes is invalid: at most {WARP_SIZE} lanes (one warp)")
     return dict(lanes=lanes, exchange=exchange, block_barrier=block_barrier, **make_exchange_team(lanes, exchange))

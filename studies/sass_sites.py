@@ -115,13 +115,13 @@ def main(argv=None):
                                            "**", "*integrate*.cubin"), recursive=True), key=os.path.getmtime)
     else:
         from warpfric.engine import observer_set
-        from warpfric.kernels.integrator import MAX_BLOCK_MEMBERS, WARP_SIZE, get_integrator
+        from warpfric.kernels.integrator import block_threads, get_integrator
 
         # the kernel simulate(fronts=None) runs, as on a GPU above
         built = get_integrator("float64", model, args.lanes, "tr_bdf2", cuda=True, observed=observer_set(None))
         kernel = built["integrate"]
         # as the engine launches it (warpfric/engine.py)
-        kernel.module.options["block_dim"] = WARP_SIZE * MAX_BLOCK_MEMBERS if built["blocked"] else args.lanes
+        kernel.module.options["block_dim"] = block_threads(args.lanes, built["blocked"])
         cubin = str(wp.compile_aot_module(kernel.module, arch=args.arch or 90, use_ptx=False,
                                           module_dir=os.path.join(wp.config.kernel_cache_dir, "sass_sites"))[0])
     sass = subprocess.run([nvdisasm, "-g", "-gi", cubin], capture_output=True, text=True, check=True).stdout

@@ -367,7 +367,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     parameters (name -> (member,) float64); a progress line on stderr when show_progress."""
     import warp as wp
 
-    from warpfric.kernels.integrator import MAX_BLOCK_MEMBERS, WARP_SIZE, block_members_for, get_integrator
+    from warpfric.kernels.integrator import block_members_for, block_threads, get_integrator
     from warpfric.kernels.types import C_PHI, IntegratorState, allocate, member_array
 
     n_members = values["normal_force"].shape[0]
@@ -385,15 +385,14 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     kern = get_integrator(solver.dtype, model, lanes, solver.method, cuda=str(device).startswith("cuda"),
                           observed=observer_set(fronts))
     with cpu_blocks(team):  # compile or load now, so that it is timed apart
-        # a block of the team kernel: the team's lanes, or a warp for each of up to MAX_BLOCK_MEMBERS
-        # members (kernels/integrator.py blocked_layout)
-        block_dim = WARP_SIZE * MAX_BLOCK_MEMBERS if kern["blocked"] else lanes
+        block_dim = block_threads(lanes, kern["blocked"])
         wp.load_module(kern["integrate"].module, device=device, block_dim=block_dim if team else None)
         wp.load_module(kern["evaluate_fields"].module, device=device)
     kernel_build_s = time.perf_counter() - t_build
     block_members = 1  # members per block (kernels/integrator.py block_members_for)
     if kern["blocked"]:
         block_members = block_members_for(n_members, wp.get_device(device).sm_count, kern["block_members_requested"])
+    blocks = -(-n_members // block_members)  # of a team kernel's launch
     ft = kern["ft"]
     np_dtype = np.float64 if solver.dtype == "float64" else np.float32
     params_np = member_params(values)
@@ -420,7 +419,6 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         def launch_integrate(inputs, outputs_):
             if team:
                 with cpu_blocks(True):
-                    blocks = -(-n_members // block_members)
                     wp.launch_tiled(kern["integrate"], dim=[blocks], inputs=inputs, outputs=outputs_, block_dim=block_dim)
             else:
                 wp.launch(kern["integrate"], dim=n_members, inputs=inputs, outputs=outputs_)
