@@ -39,7 +39,6 @@ class TeamCompileOptions(NamedTuple):
     out_of_line: tuple = ()  # names of device functions kept out of line
     exchange: str | None = None  # the team's lane exchange, kernels/team.py (None: the automatic choice)
     block_members: int | None = None  # members per thread block (None: per run, block_members_for; 1: a block each)
-    warp_members: int = 1  # members per warp (teams of a power of two <= 16 lanes; warp_members_valid)
 
 
 def team_compile_options() -> TeamCompileOptions:
@@ -62,13 +61,9 @@ def team_compile_options() -> TeamCompileOptions:
             raise ValueError(f"WARPFRIC_TEAM_BLOCK_MEMBERS={block_members!r} is invalid; valid: an integer from 1 to "
                              f"{MAX_BLOCK_MEMBERS}, or unset")
         block_members = int(block_members)
-    warp_members = os.environ.get("WARPFRIC_TEAM_WARP_MEMBERS", "1")
-    if warp_members not in ("1", "2", "4"):
-        raise ValueError(f"WARPFRIC_TEAM_WARP_MEMBERS={warp_members!r} is invalid; valid: 1, 2 or 4, or unset")
     return TeamCompileOptions(max_registers=registers if registers > 0 else None, inline=inline,
                               smem_spilling=os.environ.get("WARPFRIC_TEAM_SMEM_SPILLING", "0") == "1",
-                              out_of_line=out_of_line, exchange=exchange, block_members=block_members,
-                              warp_members=int(warp_members))
+                              out_of_line=out_of_line, exchange=exchange, block_members=block_members)
 
 
 # Where a team's lanes exchange by warp shuffles (a team of at most 32 lanes: one warp), a thread
@@ -220,17 +215,11 @@ def _make_integrator(dtype: str, model, lanes: int, method: str = "tr_bdf2", opt
     stages = make_stages(ft, model, lanes, method, options.exchange or "tile", observed)
     acceptance = make_acceptance(ft, model, method, stages)
     blocked = lanes > 1 and blocked_layout(lanes, options.exchange, options.block_members)
-    if options.warp_members > 1 and not (blocked and lanes * options.warp_members <= WARP_SIZE
-                                         and lanes & (lanes - 1) == 0):
-        raise ValueError(f"WARPFRIC_TEAM_WARP_MEMBERS={options.warp_members} needs the blocked layout and a team of a "
-                         f"power of two lanes with lanes * members <= {WARP_SIZE}; got {lanes} lanes, exchange "
-                         f"{options.exchange!r}")
     integrate = make_integrate_kernel(ft, model, lanes, method, stages, acceptance, options, blocked)
     evaluate_fields = make_field_kernel(ft, stages)
     return dict(integrate=integrate, evaluate_fields=evaluate_fields, ft=ft, stages=stages,
                 exchange=(options.exchange or "tile") if lanes > 1 else "none",
-                blocked=blocked, block_members_requested=options.block_members,
-                warp_members=options.warp_members if blocked else 1)
+                blocked=blocked, block_members_requested=options.block_members)
 
 
 def make_acceptance(ft, model, method, stages):
@@ -313,7 +302,6 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
     block_barrier = stages["team"].get("block_barrier", None)
-    warp_members = options.warp_members
 
     # enable_backward=False: no adjoint code is generated (nothing differentiates through the
     # integrator); the forward code is the same, and the first compile takes a third of the time
@@ -361,14 +349,8 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
                 # block_members members per block, a warp each, in step at every attempt (blocked_layout);
                 # the block's other warps and a warp's threads beyond the team's lanes have nothing to do
                 warp = thread // WARP_SIZE
-                if wp.static(warp_members > 1):
-                    # warp_members members per warp, each on its own segment of lanes
-                    slot = (thread % WARP_SIZE) // lanes
-                    m = (block * block_members + warp) * warp_members + slot
-                    lane = (thread % WARP_SIZE) % lanes
-                else:
-                    m = block * block_members + warp
-                    lane = thread % WARP_SIZE
+                m = block * block_members + warp
+                lane = thread % WARP_SIZE
                 if warp >= block_members or m >= member_states.shape[0] or lane >= lanes:
                     return
             else:

@@ -224,15 +224,12 @@ def make_separator_exchange(lanes: int):
 
 # the CUDA side of the shuffles: the lanes' mask, a double as two 32-bit halves, one shuffle of each
 _SHUFFLE_PRELUDE = r"""
-    const unsigned base_ = lanes >= 32 ? 0u : ((threadIdx.x & 31u) / lanes) * lanes;
-    const unsigned mask = lanes >= 32 ? 0xffffffffu : (((1u << lanes) - 1u) << base_);
-    const unsigned segment_ = (lanes < 32 && (lanes & (lanes - 1)) == 0) ? ((32u - lanes) << 8) : 0u;
+    const unsigned mask = lanes >= 32 ? 0xffffffffu : ((1u << lanes) - 1u);
     #define WF_SHFL64(kind, clamp, value, lane_arg, out) { \
         unsigned lo_, hi_; \
-        const unsigned control_ = segment_ | (clamp); \
         asm("mov.b64 {%0, %1}, %2;" : "=r"(lo_), "=r"(hi_) : "d"(value)); \
-        asm volatile("shfl.sync." kind ".b32 %0, %1, %2, %3, %4;" : "=r"(lo_) : "r"(lo_), "r"(lane_arg), "r"(control_), "r"(mask)); \
-        asm volatile("shfl.sync." kind ".b32 %0, %1, %2, %3, %4;" : "=r"(hi_) : "r"(hi_), "r"(lane_arg), "r"(control_), "r"(mask)); \
+        asm volatile("shfl.sync." kind ".b32 %0, %1, %2, " clamp ", %3;" : "=r"(lo_) : "r"(lo_), "r"(lane_arg), "r"(mask)); \
+        asm volatile("shfl.sync." kind ".b32 %0, %1, %2, " clamp ", %3;" : "=r"(hi_) : "r"(hi_), "r"(lane_arg), "r"(mask)); \
         asm("mov.b64 %0, {%1, %2};" : "=d"(out) : "r"(lo_), "r"(hi_)); }
 """
 
@@ -242,11 +239,10 @@ def _reduction_snippet(ctype: str, combine: str) -> str:
     power-of-two team, else a tree to lane 0 and lane 0's value to every lane. ``combine`` merges
     v and other."""
     if ctype == "double":
-        shfl = lambda kind, clamp, lane, out: f'WF_SHFL64("{kind}", {clamp}, v, {lane}, {out});'  # noqa: E731
+        shfl = lambda kind, clamp, lane, out: f'WF_SHFL64("{kind}", "{clamp}", v, {lane}, {out});'  # noqa: E731
     else:
         shfl = lambda kind, clamp, lane, out: (  # noqa: E731
-            f'asm volatile("shfl.sync.{kind}.b32 %0, %1, %2, %3, %4;" : "=r"({out}) : "r"(v), "r"({lane}), '
-            f'"r"(segment_ | ({clamp})), "r"(mask));')
+            f'asm volatile("shfl.sync.{kind}.b32 %0, %1, %2, {clamp}, %3;" : "=r"({out}) : "r"(v), "r"({lane}), "r"(mask));')
     return (r"""
 #if defined(__CUDA_ARCH__)
 """ + _SHUFFLE_PRELUDE + f"""
@@ -258,7 +254,7 @@ def _reduction_snippet(ctype: str, combine: str) -> str:
             v = {combine};
         }}
     }} else {{
-        const int lane = (int)((threadIdx.x & 31u) - base_);  // the lane in its team (a block may hold a member per warp)
+        const int lane = threadIdx.x & 31;  // the lane in its warp (a block may hold a member per warp)
         int top = 1;
         while (top * 2 < lanes) top *= 2;
         for (int s = top; s > 0; s >>= 1) {{
@@ -308,7 +304,7 @@ def _move_snippet(kind: str, clamp: str) -> str:
 """ + _SHUFFLE_PRELUDE + f"""
     double v = x;
     double out;
-    WF_SHFL64("{kind}", {clamp}, v, delta, out);
+    WF_SHFL64("{kind}", "{clamp}", v, delta, out);
     return out;
 #else
     return x;  // never used: the shuffle team is built for CUDA devices only
@@ -331,7 +327,7 @@ def warp_down_f64(x: wp.float64, delta: int, lanes: int) -> wp.float64:
 
 @wp.func_native(r"""
 #if defined(__CUDA_ARCH__)
-    __syncwarp(lanes >= 32 ? 0xffffffffu : (((1u << lanes) - 1u) << (((threadIdx.x & 31u) / lanes) * lanes)));
+    __syncwarp(lanes >= 32 ? 0xffffffffu : ((1u << lanes) - 1u));
 #endif
 """)
 def warp_sync(lanes: int):

@@ -391,9 +391,8 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     kernel_build_s = time.perf_counter() - t_build
     block_members = 1  # members per block (kernels/integrator.py block_members_for)
     if kern["blocked"]:
-        warps = -(-n_members // kern["warp_members"])
-        block_members = block_members_for(warps, wp.get_device(device).sm_count, kern["block_members_requested"])
-    blocks = -(-n_members // (block_members * kern.get("warp_members", 1)))  # of a team kernel's launch
+        block_members = block_members_for(n_members, wp.get_device(device).sm_count, kern["block_members_requested"])
+    blocks = -(-n_members // block_members)  # of a team kernel's launch
     ft = kern["ft"]
     np_dtype = np.float64 if solver.dtype == "float64" else np.float32
     params_np = member_params(values)
