@@ -1,6 +1,7 @@
 """Outputs a user can trust: stragglers are stopped and flagged, inputs that cannot run are refused."""
 
 import numpy as np
+import warp as wp
 from conftest import DEVICE, run
 
 
@@ -144,3 +145,28 @@ def test_device_none_keeps_small_ensembles_on_the_cpu():
     assert wf.default_device(17) == ("cuda:0" if wp.get_cuda_device_count() > 0 else "cpu")
     ds = wf.simulate({"eccentricity": [0.0]}, solver=wf.Solver(nodes=11), fronts=None, device=None, progress=False)
     assert ds.attrs["device"] == "cpu"
+
+
+def test_state_read_back_buffer_is_pinned_and_reused_on_a_gpu_only():
+    """The member states are read back through a host buffer. On a CUDA device it is pinned
+    (asynchronous copies) and, being costly to allocate (~1 ms, 7 % of a one-member run:
+    docs/performance.md), kept in a pool: the next run of as many members takes that very buffer
+    and its outputs are bit for bit the first's; a run of another size gets its own. On the CPU
+    nothing is pinned and the pool stays empty."""
+    from warpfric import engine
+
+    engine._PINNED_POOL.clear()
+    members = {"eccentricity": [0.0, 0.15]}
+    first = run(members, rtol=1e-4)
+    key = (str(wp.get_device(DEVICE)), 2)
+    if not DEVICE.startswith("cuda"):
+        assert engine._PINNED_POOL == {}
+        return
+    (buffer,) = engine._PINNED_POOL[key]
+    assert buffer.pinned
+    second = run(members, rtol=1e-4)
+    assert len(engine._PINNED_POOL[key]) == 1 and engine._PINNED_POOL[key][0] is buffer
+    for name, var in first.data_vars.items():
+        np.testing.assert_array_equal(second[name].values, var.values, err_msg=name)
+    run({"eccentricity": [0.0]}, rtol=1e-4)
+    assert len(engine._PINNED_POOL[(str(wp.get_device(DEVICE)), 1)]) == 1

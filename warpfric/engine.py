@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import threading
 import time
 import warnings
 
@@ -299,11 +300,21 @@ def real_event(front_max, front_last, values, fronts: Fronts) -> np.ndarray:
     return (front_max > 0) & (front_max >= floor) & np.isfinite(front_last)
 
 
+# pinned host buffers of the state read-back kept between runs, (device, members) -> free buffers:
+# allocating and freeing pinned memory costs ~1 ms, 7 % of a one-member run at N = 40 on the H100
+# (docs/performance.md, "One member's host time"); only small ones are kept
+_PINNED_POOL: dict = {}
+_PINNED_LOCK = threading.Lock()
+PINNED_POOL_MAX_BYTES = 1 << 20  # per buffer kept
+
+
 class StateSnapshots:
     """Read-back of the member states that does not stall the launch queue: ``take`` queues a copy
     into a host buffer (pinned on a CUDA device) behind the launches queued so far and returns a
     ticket; ``wait`` blocks until that copy has landed and returns the states (a numpy copy, so that
-    the next ``take`` may reuse the buffer: takes and waits alternate)."""
+    the next ``take`` may reuse the buffer: takes and waits alternate). ``close`` gives a small
+    pinned buffer back to a pool that the next run of as many members on the device takes (the
+    buffer is only ever used by one run at a time)."""
 
     def __init__(self, n_members: int, device):
         import warp as wp
@@ -311,7 +322,22 @@ class StateSnapshots:
         from warpfric.kernels.types import IntegratorState
 
         self.cuda = wp.get_device(device).is_cuda
-        self.buffer = wp.empty(n_members, dtype=IntegratorState, device="cpu", pinned=self.cuda)
+        self.key = (str(wp.get_device(device)), n_members)
+        self.buffer = None
+        if self.cuda:
+            with _PINNED_LOCK:
+                free = _PINNED_POOL.get(self.key)
+                if free:
+                    self.buffer = free.pop()
+        if self.buffer is None:
+            self.buffer = wp.empty(n_members, dtype=IntegratorState, device="cpu", pinned=self.cuda)
+
+    def close(self):
+        """After the last ``wait``: a small pinned buffer goes back to the pool."""
+        if self.cuda and self.buffer is not None and self.buffer.capacity <= PINNED_POOL_MAX_BYTES:
+            with _PINNED_LOCK:
+                _PINNED_POOL.setdefault(self.key, []).append(self.buffer)
+        self.buffer = None
 
     def take(self, member_states):
         import warp as wp
@@ -483,6 +509,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                 tau = tau_out.numpy()
                 yield_np = arrays.yield_time.numpy() if stress_gate else None
                 gate_np = arrays.gates.numpy()[0] if stress_gate else None
+        snapshot.close()
         arrival = arrival_error = strength_peak = None
         if fronts is not None:
             arrival, arrival_error = arrays.arrival.numpy(), arrays.arrival_error.numpy()
