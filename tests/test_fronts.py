@@ -329,3 +329,33 @@ def test_contact_front_speed_converges_with_the_grid_on_a_hard_case():
     assert all(abs(v / ref - 1) < 0.2 for v in speeds.values()), speeds
     tight = run({"eccentricity": [-0.2]}, nodes=100, rtol=1e-7, fronts=wf.Fronts())
     assert abs(speeds[100] / float(tight.v_main.values[0]) - 1) < 0.01
+
+
+def test_speed_error_estimate_by_hand():
+    """fronts.speed_errors on hand-made arrival times, checked against dv = v dT / (T - dT) worked out
+    here (11 nodes over L = 1 m, dx = 0.1 m; the middle segment from node 2 to node 8): a front from
+    the left edge (T = t_8 - t_2, dT = e_2 + e_8), one nucleating at node 5 inside the segment (two
+    branches: T = (t_2 - t_5) + (t_8 - t_5), dT = e_2 + e_8 + 2 e_5), an end node never reached
+    (inf), errors as large as the time spent (inf: not resolved), no segment (NaN)."""
+    from warpfric.fronts import speed_errors
+
+    j = np.arange(11.0)
+    ta = np.stack([1 + 0.01 * j, 1 + 0.01 * np.abs(j - 5), 1 + 0.01 * j, 1 + 0.01 * j, 1 + 0.01 * j])
+    ta[2, 8] = np.nan
+    err = np.tile(1e-4 * (1 + j), (5, 1))
+    err[3] = 0.05
+    nan5 = np.full(5, np.nan)
+    metrics = {"nucleation_position": np.array([-0.5, 0.0, -0.5, -0.5, -0.5]),
+               "nucleation_edge": np.array([-1.0, 0.0, -1.0, -1.0, -1.0]),
+               "middle_front_start": np.full(5, -0.3), "middle_front_end": np.full(5, 0.3),
+               "v_middle": np.array([10.0, 10.0, 10.0, 10.0, np.nan])}
+    for seg in ("left", "right"):
+        metrics.update({f"{seg}_front_start": nan5, f"{seg}_front_end": nan5, f"v_{seg}": nan5})
+    out = speed_errors(metrics, ta, err, 1.0)
+    e = err[0]
+    expected = [10 * (e[2] + e[8]) / (0.06 - (e[2] + e[8])),
+                10 * (e[2] + e[8] + 2 * e[5]) / (0.06 - (e[2] + e[8] + 2 * e[5])), np.inf, np.inf, np.nan]
+    np.testing.assert_allclose(out["v_middle_error"], expected, rtol=1e-12)
+    np.testing.assert_array_equal(out["v_main_error"], out["v_middle_error"])
+    assert np.isnan(out["v_left_error"]).all() and np.isnan(out["v_precursor_error"]).all()
+    assert np.isnan(out["arrival_time_error"][2, 8]) and out["arrival_time_error"][0, 3] == e[3]

@@ -142,19 +142,21 @@ def speed_errors(metrics: dict, arrival_time, arrival_error, length) -> dict:
     for seg in POSITION_SEGMENTS:
         error = np.full(n_members, np.nan)
         start, end, v = metrics[f"{seg}_front_start"], metrics[f"{seg}_front_end"], metrics[f"v_{seg}"]
-        for m in np.flatnonzero(np.isfinite(v) & np.isfinite(start) & np.isfinite(end)):
-            a = int(round((start[m] + 0.5 * length[m]) / dx[m]))
-            b = int(round((end[m] + 0.5 * length[m]) / dx[m]))
-            if not (0 <= a < b < n) or not (np.isfinite(ta[m, a]) and np.isfinite(ta[m, b])):
-                error[m] = np.inf  # an end never arrived: the speed comes from the interval sums
-                continue
-            spent = abs(ta[m, b] - ta[m, a])
-            slack = dt[m, a] + dt[m, b]
-            k = int(nuc[m]) if np.isfinite(nuc[m]) else -1
-            if a < k < b and np.isfinite(ta[m, k]):
-                spent = (ta[m, a] - ta[m, k]) + (ta[m, b] - ta[m, k])
-                slack += 2 * dt[m, k]
-            error[m] = v[m] * slack / (spent - slack) if spent > slack else np.inf
+        sel = np.flatnonzero(np.isfinite(v) & np.isfinite(start) & np.isfinite(end))
+        # the segment's end nodes a < b and the nucleation node k, member by member (whole arrays)
+        a = np.rint((start[sel] + 0.5 * length[sel]) / dx[sel]).astype(np.int64)
+        b = np.rint((end[sel] + 0.5 * length[sel]) / dx[sel]).astype(np.int64)
+        k = np.where(np.isfinite(nuc[sel]), nuc[sel], -1.0).astype(np.int64)
+        ta_a, ta_b, ta_k = (ta[sel, np.clip(j, 0, n - 1)] for j in (a, b, k))
+        dt_a, dt_b, dt_k = (dt[sel, np.clip(j, 0, n - 1)] for j in (a, b, k))
+        # an end that never arrived: the speed comes from the interval sums (inf)
+        arrived = (0 <= a) & (a < b) & (b < n) & np.isfinite(ta_a) & np.isfinite(ta_b)
+        inside = (a < k) & (k < b) & np.isfinite(ta_k)  # the two branches from an inner nucleation
+        spent = np.where(inside, (ta_a - ta_k) + (ta_b - ta_k), np.abs(ta_b - ta_a))
+        slack = np.where(inside, (dt_a + dt_b) + 2 * dt_k, dt_a + dt_b)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            resolved = np.where(spent > slack, v[sel] * slack / (spent - slack), np.inf)
+        error[sel] = np.where(arrived, resolved, np.inf)
         out[f"v_{seg}_error"] = error
     edge = np.asarray(metrics["nucleation_edge"], dtype=np.float64)
     out["v_precursor_error"] = np.where(edge == -1, out["v_left_error"], np.where(edge == 1, out["v_right_error"], np.nan))
