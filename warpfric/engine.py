@@ -38,8 +38,8 @@ class EngineResult:
     friction_stress: np.ndarray
     yield_time: np.ndarray | None
     yield_gate: np.ndarray | None
-    arrival: np.ndarray | None
-    arrival_error: np.ndarray | None
+    arrival: dict | None  # front event row (kernels/types.py EV_*) -> (node, member) s, the events asked for
+    arrival_error: dict | None
     strength_peak: np.ndarray | None
     event: np.ndarray | None
     record: np.ndarray | None
@@ -185,7 +185,7 @@ def confirmed_strength_peaks(strength: np.ndarray, arrival: np.ndarray, arrival_
     came before the end; elsewhere (still rising at the end: the peak lies beyond the run) the
     arrival and its error become NaN, in place. Returns the peaks (node, member), NaN where not
     confirmed. strength: (strength_slot, node, member); arrival, arrival_error: (front_event, node,
-    member) s; final_time: (member,) s."""
+    member) s, or a dict of the events' rows; final_time: (member,) s."""
     from warpfric.kernels.observers import STRENGTH_PEAK_DROP
     from warpfric.kernels.types import EV_STRENGTH, S_MAX, S_RATIO1
 
@@ -394,7 +394,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     import warp as wp
 
     from warpfric.kernels.integrator import block_members_for, block_threads, get_integrator
-    from warpfric.kernels.types import C_PHI, IntegratorState, allocate, member_array
+    from warpfric.kernels.types import C_PHI, FRONT_EVENTS, G_GATE, IntegratorState, allocate, member_array
 
     n_members = values["normal_force"].shape[0]
     n = solver.nodes
@@ -508,11 +508,13 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                 sigma = sigma_out.numpy()
                 tau = tau_out.numpy()
                 yield_np = arrays.yield_time.numpy() if stress_gate else None
-                gate_np = arrays.gates.numpy()[0] if stress_gate else None
+                gate_np = arrays.gates[G_GATE].numpy() if stress_gate else None
         snapshot.close()
         arrival = arrival_error = strength_peak = None
         if fronts is not None:
-            arrival, arrival_error = arrays.arrival.numpy(), arrays.arrival_error.numpy()
+            rows = sorted({FRONT_EVENTS.index(name) for name in fronts.events})  # only what is asked for is read
+            arrival = {row: arrays.arrival[row].numpy() for row in rows}
+            arrival_error = {row: arrays.arrival_error[row].numpy() for row in rows}
             if strength:
                 strength_peak = confirmed_strength_peaks(arrays.strength.numpy(), arrival, arrival_error, st["t"])
         result = EngineResult(
