@@ -10,8 +10,6 @@ end-of-step test), ``make_switch_location`` (retries and predicted step ends) an
 ``make_gate_update`` (the regimes after an accepted step, with ``make_contact_arrival``).
 """
 
-import os
-
 import warp as wp
 
 from .controller import STEP_AT_SWITCH
@@ -30,9 +28,6 @@ MAX_SWITCH_RETRIES = 8
 # predictions stop until the next switch; the "no prediction" value of SwitchTest.next_switch (s)
 MAX_PREDICTION_MISSES = 2
 NO_PREDICTION = 1.0e30
-# EXPERIMENT: 2 = a located switch's missed relaxation is added to the node's state after the step
-# (first order in the wrong-gate interval), so the switch test measures the second-order rest
-SWITCH_ORDER = int(os.environ.get("WARPFRIC_SWITCH_ORDER", "1"))
 
 
 def make_node_gates(ft, model):
@@ -122,36 +117,21 @@ def make_switch_test(ft, model, terms, team, node_sliding):
                 wp.abs(fr.elastic_stress) * relax / (rtol * (c.tau_scale + wp.abs(fr.elastic_stress))),
                 fr.contact_age * relax / (rtol * (c.phi_scale + wp.abs(fr.contact_age))),
             )
-            # second order: the error left after the correction, per second squared of wrong gate
-            rate2 = relax * wp.max(
-                (wp.abs(fr.elastic_stress_rate) + wp.abs(fr.elastic_stress) * relax) / (rtol * (c.tau_scale + wp.abs(fr.elastic_stress))),
-                (wp.abs(fr.contact_age_rate) + fr.contact_age * relax) / (rtol * (c.phi_scale + wp.abs(fr.contact_age))),
-            ) * ft(0.5)
             if open_now != fr.gate:
                 theta = ft(0.0)
                 if z0 != z1:
                     theta = wp.clamp(z0 / (z0 - z1), ft(0.0), ft(1.0))
-                if wp.static(SWITCH_ORDER == 2):
-                    dl = (ft(1.0) - theta) * h
-                    e = dl * dl * rate2
-                    test.error = wp.max(test.error, e)
-                    if e > ft(1.0):
-                        test.retry_fraction = wp.min(test.retry_fraction, theta + (ft(1.0) - theta) * wp.sqrt(ft(0.5) / e))
-                else:
-                    e = (ft(1.0) - theta) * h * rate
-                    test.error = wp.max(test.error, e)
-                    if e > ft(1.0):
-                        test.retry_fraction = wp.min(test.retry_fraction, theta + ft(0.5) * (ft(1.0) - theta) / e)
+                e = (ft(1.0) - theta) * h * rate
+                test.error = wp.max(test.error, e)
+                if e > ft(1.0):
+                    test.retry_fraction = wp.min(test.retry_fraction, theta + ft(0.5) * (ft(1.0) - theta) / e)
             elif rate > ft(0.0) and h > ft(0.0) and z0 != z1:
                 # no switch in this step: where the margin's secant over the step reaches 0, the node
                 # will switch; a step that ends 0.5/rate after that (a switch error of 0.5, where a
                 # located retry would end) takes the switch without a rejected step
                 slope = (z1 - z0) / h
                 if (z1 < ft(0.0) and slope > ft(0.0)) or (z1 > ft(0.0) and slope < ft(0.0)):
-                    if wp.static(SWITCH_ORDER == 2):
-                        test.next_switch = wp.min(test.next_switch, -z1 / slope + wp.sqrt(ft(0.5) / rate2))
-                    else:
-                        test.next_switch = wp.min(test.next_switch, -z1 / slope + ft(0.5) / rate)
+                    test.next_switch = wp.min(test.next_switch, -z1 / slope + ft(0.5) / rate)
         return test
 
     @wp.func
@@ -333,26 +313,9 @@ def make_gate_update(ft, terms, team):
                         new_sliding = ft(1.0)
                         new_gate = wp.clamp(gate + (-z1 / h - r_obs) / dr, ft(0.0), ft(1.0))  # start value
             if new_gate != gate:
-                rho = wp.abs(v_disc - c.kif * state[C_V, i, m]) * c.inv_D
-                tau_old = state[C_TAU, i, m]
-                phi_old = state[C_PHI, i, m]
-                if wp.static(SWITCH_ORDER == 2):
-                    if sliding == ft(0.0) and new_sliding == ft(0.0) and z0 != z1 and backward_euler == 0:
-                        # the relaxation missed (or run in excess) over the wrong-gate part of the step
-                        wrong = (ft(1.0) - wp.clamp(z0 / (z0 - z1), ft(0.0), ft(1.0))) * h
-                        dtau = -wrong * (new_gate - gate) * rho * tau_old
-                        dphi = -wrong * (new_gate - gate) * rho * phi_old
-                        state[C_TAU, i, m] = tau_old + dtau
-                        state[C_PHI, i, m] = phi_old + dphi
-                        if c.rhoH > ft(0.0):
-                            state[C_V, i, m] = state[C_V, i, m] + ft(0.5) * wrong * dtau / c.rhoH
-                            K[slot, C_V, i, m] = K[slot, C_V, i, m] + dtau / c.rhoH
-                    K[slot, C_TAU, i, m] = K[slot, C_TAU, i, m] + gate * rho * tau_old - new_gate * rho * state[C_TAU, i, m]
-                    K[slot, C_PHI, i, m] = K[slot, C_PHI, i, m] + gate * rho * phi_old - new_gate * rho * state[C_PHI, i, m]
-                else:
-                    relax = (new_gate - gate) * rho
-                    K[slot, C_TAU, i, m] = K[slot, C_TAU, i, m] - state[C_TAU, i, m] * relax
-                    K[slot, C_PHI, i, m] = K[slot, C_PHI, i, m] - state[C_PHI, i, m] * relax
+                relax = (new_gate - gate) * wp.abs(v_disc - c.kif * state[C_V, i, m]) * c.inv_D
+                K[slot, C_TAU, i, m] = K[slot, C_TAU, i, m] - state[C_TAU, i, m] * relax
+                K[slot, C_PHI, i, m] = K[slot, C_PHI, i, m] - state[C_PHI, i, m] * relax
             if gate_regime(new_gate, new_sliding) != gate_regime(gate, sliding):
                 switches += 1
             if new_gate > ft(0.0) and not wp.isfinite(yield_time[i, m]):
