@@ -10,15 +10,13 @@ end-of-step test), ``make_switch_location`` (retries and predicted step ends) an
 ``make_gate_update`` (the regimes after an accepted step, with ``make_contact_arrival``).
 """
 
-import os
-
 import warp as wp
 
 from .controller import STEP_AT_SWITCH
 from .model_terms import disc_velocity_at
 from .reductions import crossing_time_quadratic
 from .types import (
-    C_PHI, C_TAU, C_V, EV_CONTACT, G_GATE, G_MARGIN, G_MARGIN_OLD, G_SLIDE, G_SWITCH_TIME, W_DMARGIN, W_GATE_END, W_MARGIN, IntegratorState,
+    C_PHI, C_TAU, C_V, EV_CONTACT, G_GATE, G_MARGIN, G_MARGIN_OLD, G_SLIDE, W_DMARGIN, W_GATE_END, W_MARGIN, IntegratorState,
     MemberParams, OutputSettings, SolverSettings,
 )
 
@@ -30,29 +28,19 @@ MAX_SWITCH_RETRIES = 8
 # predictions stop until the next switch; the "no prediction" value of SwitchTest.next_switch (s)
 MAX_PREDICTION_MISSES = 2
 NO_PREDICTION = 1.0e30
-# EXPERIMENT: a switch inside a step is taken by holding the node's gate at the fraction of the step
-# after the switch (predicted, or located by a retry of the same step), not by ending a step there
-SWITCH_FRACTION = os.environ.get("WARPFRIC_SWITCH_FRACTION", "0") == "1"
-SF_PREDICT = os.environ.get("WARPFRIC_SF_PREDICT", "1") == "1"
 
 
-def make_node_gates(ft, model, Coeffs):
+def make_node_gates(ft, model):
     """Each node's yield gate and sliding flag over the current step, read from the gates array
     (constants 1 and 0 for the gate-less and velocity laws)."""
     stress_gate = model.relaxation_gate == "stress"
     array3 = wp.array3d(dtype=ft)
 
     @wp.func
-    def node_gate(c: Coeffs, gates: array3, i: int, m: int):
+    def node_gate(gates: array3, i: int, m: int):
         """The yield gate of node i over the current step (1 for the gate-less and velocity laws)."""
         if wp.static(stress_gate):
-            g0 = gates[G_GATE, i, m]
-            if wp.static(SWITCH_FRACTION):
-                ts = gates[G_SWITCH_TIME, i, m]
-                if ts > ft(0.0) and ts < c.step_end and gates[G_SLIDE, i, m] == ft(0.0):
-                    frac = wp.clamp((c.step_end - ts) / (c.step_end - c.step_start), ft(0.0), ft(1.0))
-                    return g0 + frac * (ft(1.0) - ft(2.0) * g0)
-            return g0
+            return gates[G_GATE, i, m]
         return ft(1.0)
 
     @wp.func
@@ -65,7 +53,7 @@ def make_node_gates(ft, model, Coeffs):
     return dict(node_gate=node_gate, node_sliding=node_sliding)
 
 
-def make_switch_test(ft, model, terms, team, node_sliding, node_gate):
+def make_switch_test(ft, model, terms, team, node_sliding):
     """The gate-switch test at the end of a step: each node's yield margin against the gate it held
     (test_switch), combined over the team (team_switch_test), as a SwitchTest."""
     viscous = bool(model.viscous_friction)
@@ -122,51 +110,6 @@ def make_switch_test(ft, model, terms, team, node_sliding, node_gate):
         open_now = ft(0.0)
         if z1 > ft(0.0):
             open_now = ft(1.0)
-        if wp.static(SWITCH_FRACTION):
-            if node_sliding(gates, i, m) == ft(0.0):
-                z0 = gates[G_MARGIN, i, m]
-                g0 = gates[G_GATE, i, m]
-                # the fraction of the step this node held the other gate (0: none)
-                f_used = (fr.gate - g0) * (ft(1.0) - ft(2.0) * g0)
-                rate = wp.max(
-                    wp.abs(fr.elastic_stress) * relax / (rtol * (c.tau_scale + wp.abs(fr.elastic_stress))),
-                    fr.contact_age * relax / (rtol * (c.phi_scale + wp.abs(fr.contact_age))),
-                )
-                rate2 = relax * wp.max(
-                    (wp.abs(fr.elastic_stress_rate) + wp.abs(fr.elastic_stress) * relax) / (rtol * (c.tau_scale + wp.abs(fr.elastic_stress))),
-                    (wp.abs(fr.contact_age_rate) + fr.contact_age * relax) / (rtol * (c.phi_scale + wp.abs(fr.contact_age))),
-                ) * ft(0.5)
-                if open_now != g0:
-                    dr = work[W_DMARGIN, i, m]
-                    # the margin's change over the step with the held gate g0 alone (the other gate's
-                    # share f_used*dr removed), crossing 0 at theta
-                    dz_held = z1 - z0 - f_used * h * dr * (ft(1.0) - ft(2.0) * g0)
-                    theta = ft(0.0)
-                    if dz_held != ft(0.0):
-                        theta = wp.clamp(-z0 / dz_held, ft(0.0), ft(1.0))
-                    f_true = ft(1.0) - theta
-                    # a node that would slide on the yield surface: located as before (step ended there)
-                    r_obs = (z1 - z0) / h
-                    rate_far = r_obs + (ft(1.0) - ft(2.0) * g0) * dr
-                    slides = dr < ft(0.0) and ((g0 == ft(0.0) and rate_far < ft(0.0)) or (g0 == ft(1.0) and rate_far > ft(0.0)))
-                    e = wp.abs(f_true - f_used) * h * rate
-                    if slides:
-                        gates[G_SWITCH_TIME, i, m] = ft(0.0)
-                        if e > ft(1.0):
-                            test.retry_fraction = wp.min(test.retry_fraction, theta + ft(0.5) * (ft(1.0) - theta) / e)
-                    else:
-                        e = e + rate2 * h * h * theta * f_true
-                        gates[G_SWITCH_TIME, i, m] = c.step_start + theta * h  # a retry holds the other gate from here
-                    test.error = wp.max(test.error, e)
-                else:
-                    test.error = wp.max(test.error, f_used * h * rate)
-                    ts = ft(0.0)
-                    if wp.static(SF_PREDICT) and rate > ft(0.0) and h > ft(0.0) and z0 != z1:
-                        slope = (z1 - z0) / h
-                        if (z1 < ft(0.0) and slope > ft(0.0)) or (z1 > ft(0.0) and slope < ft(0.0)):
-                            ts = c.step_end - z1 / slope
-                    gates[G_SWITCH_TIME, i, m] = ts
-            return test
         if node_sliding(gates, i, m) == ft(0.0):
             z0 = gates[G_MARGIN, i, m]
             # the switch error per second of wrong gate
@@ -302,7 +245,7 @@ def make_contact_arrival(ft):
     return dict(contact_arrival=contact_arrival)
 
 
-def make_gate_update(ft, terms, team, node_gate):
+def make_gate_update(ft, terms, team):
     """After an accepted step: each node's gate regime for the next step, the FSAL correction, the
     first opening time and the contact front's arrival (switch_gates)."""
     Coeffs = terms["Coeffs"]
@@ -369,13 +312,8 @@ def make_gate_update(ft, terms, team, node_gate):
                     if (gate == ft(0.0) and rate_far < ft(0.0)) or (gate == ft(1.0) and rate_far > ft(0.0)):
                         new_sliding = ft(1.0)
                         new_gate = wp.clamp(gate + (-z1 / h - r_obs) / dr, ft(0.0), ft(1.0))  # start value
-            held = gate  # the gate the step held
-            if wp.static(SWITCH_FRACTION):
-                held = work[W_GATE_END, i, m]  # the last stage's gate (test_switch has set the next one)
-                if gate_regime(new_gate, new_sliding) != gate_regime(gate, sliding):
-                    gates[G_SWITCH_TIME, i, m] = ft(0.0)
-            if new_gate != held:
-                relax = (new_gate - held) * wp.abs(v_disc - c.kif * state[C_V, i, m]) * c.inv_D
+            if new_gate != gate:
+                relax = (new_gate - gate) * wp.abs(v_disc - c.kif * state[C_V, i, m]) * c.inv_D
                 K[slot, C_TAU, i, m] = K[slot, C_TAU, i, m] - state[C_TAU, i, m] * relax
                 K[slot, C_PHI, i, m] = K[slot, C_PHI, i, m] - state[C_PHI, i, m] * relax
             if gate_regime(new_gate, new_sliding) != gate_regime(gate, sliding):
@@ -404,10 +342,10 @@ def make_gate_update(ft, terms, team, node_gate):
 def make_gates(ft, model, terms, team):
     """The stress gate's functions for one working precision and model, by part: the node gates,
     the switch test, the switch location and the gate update."""
-    node_gates = make_node_gates(ft, model, terms["Coeffs"])
-    test = make_switch_test(ft, model, terms, team, node_gates["node_sliding"], node_gates["node_gate"])
+    node_gates = make_node_gates(ft, model)
+    test = make_switch_test(ft, model, terms, team, node_gates["node_sliding"])
     location = make_switch_location(ft, test["SwitchTest"])
-    update = make_gate_update(ft, terms, team, node_gates["node_gate"])
+    update = make_gate_update(ft, terms, team)
     return dict(SwitchTest=test["SwitchTest"], drop_stale_limit=location["drop_stale_limit"],
                 no_switch=test["no_switch"], team_switch_test=test["team_switch_test"],
                 node_gate=node_gates["node_gate"], node_sliding=node_gates["node_sliding"],

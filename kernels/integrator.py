@@ -388,9 +388,6 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
             s2 = (s1 + 1) % n_slots
             s3 = (s1 + n_slots - 1) % n_slots  # the last stage's slot (TR-BDF2: s1 + 2; ESDIRK4: s1 + 5)
             restart = st.restart
-            if wp.static(stress_gate):
-                c.step_start = ft(t)
-                c.step_end = ft(step.t_new)
             # ---- stepper ----
             if wp.static(esdirk4):
                 if restart != 0:
@@ -407,10 +404,6 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
                 if res.ok == 1 and restart == 0:
                     st.newton_curvature = wp.float64(res.newton_curvature)
             st.newton_iterations = st.newton_iterations + res.iterations
-            if wp.static(os.environ.get("WARPFRIC_TRACE", "0") == "1"):
-                if t > wp.float64(20.12) and t < wp.float64(20.135):
-                    wp.printf("ATT t=%.9f h=%.3e ok=%d err=%.3e sw=%.3e rf=%.3f\n", t, step.h, res.ok, res.error,
-                              wp.float64(res.switch_test.error), wp.float64(res.switch_test.retry_fraction))
             # ---- controller ----
             if res.ok != 1:
                 st.rejected_newton = st.rejected_newton + 1

@@ -159,9 +159,6 @@ def make_coefficients(ft):
         first_node: wp.int32
         end_node: wp.int32
         lane: wp.int32
-        # the attempted step [step_start, step_end] (s; the stress gate's switch fractions)
-        step_start: ft
-        step_end: ft
 
     @wp.func
     def make_coeffs(p: MemberParams, n: int):
@@ -207,8 +204,6 @@ def make_coefficients(ft):
         c.first_node = 0
         c.end_node = n
         c.lane = 0
-        c.step_start = ft(0.0)
-        c.step_end = ft(0.0)
         return c
 
     return dict(Coeffs=Coeffs, make_coeffs=make_coeffs)

@@ -382,7 +382,7 @@ def make_stage_equations(ft, model, terms, gates, method="tr_bdf2"):
         (m) and plate state delta0 (m), tilt (rad); g = gamma*h (s)."""
         vel = work[W_V, i, m]
         ns, fr = contact_terms(c, i, n, u_l, u_c, u_r, delta0, tilt, vel, v_disc, work[W_ZT, i, m],
-                               work[W_ZP, i, m], g, node_gate(c, gates, i, m), node_sliding(gates, i, m),
+                               work[W_ZP, i, m], g, node_gate(gates, i, m), node_sliding(gates, i, m),
                                ft(settings.sliding_width))
         sigma = ns.value
         ef = elastic_force(c, i, n, u_l, u_c, u_r, delta0, tilt)
@@ -785,7 +785,7 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
             u_r = stage_displacement(work, i + 1, n, m, g)
             vel = work[W_V, i, m]
             ns, fr = contact_terms(c, i, n, u_l, u_c, u_r, delta0, tilt, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m],
-                                   g, node_gate(c, gates, i, m), node_sliding(gates, i, m), ft(settings.sliding_width))
+                                   g, node_gate(gates, i, m), node_sliding(gates, i, m), ft(settings.sliding_width))
             sigma = ns.value
             if end_of_step == 1:
                 work[W_CONTACT, i, m] = fr.contact  # at the end of the step: fronts skip lifted-off nodes

@@ -52,8 +52,7 @@ N_WORK = 18
 # (Pa) at the last accepted point, the sliding flag (1: solved on the yield surface each stage), and
 # the margin at the accepted point before (Pa; the contact front's quadratic crossing)
 G_GATE, G_MARGIN, G_SLIDE, G_MARGIN_OLD = 0, 1, 2, 3
-G_SWITCH_TIME = 4
-N_GATE = 5
+N_GATE = 4
 # front events (first index of ``arrival``; docs/model.md, "Fronts"): each node's stick-to-slip
 # transition (its first gate opening after the disc starts; stress gate only), its peak of
 # tau_f/sigma_n (its own static friction), and the threshold crossing of the pad velocity
