@@ -452,8 +452,7 @@ def make_field_kernel(ft, stages):
         friction_stress_out: wp.array2d(dtype=ft),
     ):
         """Interface normal stress (Pa, contact part max(sigma_n, 0)) and friction stress (Pa) of
-        the current state of each member, (member, node): each member's nodes together, as the
-        Dataset holds them."""
+        the current state of each member, (node, member)."""
         m = wp.tid()
         st = member_states[m]
         p = params[m]
@@ -467,8 +466,8 @@ def make_field_kernel(ft, stages):
         for i in range(n):
             u_r = state_displacement(state, i + 1, n, m)
             ns, fr = state_contact(c, state, i, n, m, u_l, u_c, u_r, delta0, tilt, v_disc)
-            normal_stress_out[m, i] = fr.contact * ns.value
-            friction_stress_out[m, i] = fr.stress
+            normal_stress_out[i, m] = fr.contact * ns.value
+            friction_stress_out[i, m] = fr.stress
             u_l = u_c
             u_c = u_r
 

@@ -236,17 +236,6 @@ def member_array(values, ft, member_major: bool):
     return wp.array(np.ascontiguousarray(values.transpose(order)), dtype=ft).transpose(back)
 
 
-def member_numpy(a, member_major: bool) -> np.ndarray:
-    """The host copy of a device array laid out as :func:`member_array` says, indexed (.., node,
-    member). With member_major the memory is copied as it lies (no gather on the device) and the
-    result is a transposed view: each member's values stay together, so that the Dataset's
-    (member, node) arrays are row copies."""
-    if not member_major:
-        return a.numpy()
-    order, back = _member_first(a.ndim)
-    return a.transpose(order).numpy().transpose(back)
-
-
 def member_zeros(shape, ft, member_major: bool):
     """Zeros of ``shape`` (.., node, member) laid out as :func:`member_array` says."""
     if not member_major:

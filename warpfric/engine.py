@@ -394,7 +394,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     import warp as wp
 
     from warpfric.kernels.integrator import block_members_for, block_threads, get_integrator
-    from warpfric.kernels.types import C_PHI, FRONT_EVENTS, G_GATE, IntegratorState, allocate, member_array, member_numpy
+    from warpfric.kernels.types import C_PHI, FRONT_EVENTS, G_GATE, IntegratorState, allocate, member_array
 
     n_members = values["normal_force"].shape[0]
     n = solver.nodes
@@ -500,19 +500,15 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                 st = st_now
                 front_max, front_last = st["front_max"], st["front_last"]
                 event = real_event(front_max, front_last, values, fronts) if fronts is not None else None
-                sigma_out = wp.zeros((n_members, n), dtype=ft)
-                tau_out = wp.zeros((n_members, n), dtype=ft)
+                sigma_out = wp.zeros((n, n_members), dtype=ft)
+                tau_out = wp.zeros((n, n_members), dtype=ft)
                 wp.launch(kern["evaluate_fields"], dim=n_members, inputs=[arrays.params, member_states, arrays.state],
                           outputs=[sigma_out, tau_out])
-                # (node, member) views of (member, node) copies where the device holds members together:
-                # the Dataset's (member, x) arrays then need no transpose on the host
-                fields = member_numpy(arrays.state, team)
-                sigma = sigma_out.numpy().T
-                tau = tau_out.numpy().T
+                fields = arrays.state.numpy()
+                sigma = sigma_out.numpy()
+                tau = tau_out.numpy()
                 yield_np = arrays.yield_time.numpy() if stress_gate else None
-                gate_np = None
-                if stress_gate:
-                    gate_np = arrays.gates[G_GATE].numpy() if not team else member_numpy(arrays.gates, True)[G_GATE]
+                gate_np = arrays.gates[G_GATE].numpy() if stress_gate else None
         snapshot.close()
         arrival = arrival_error = strength_peak = None
         if fronts is not None:
