@@ -10,8 +10,6 @@ end-of-step test), ``make_switch_location`` (retries and predicted step ends) an
 ``make_gate_update`` (the regimes after an accepted step, with ``make_contact_arrival``).
 """
 
-import os
-
 import warp as wp
 
 from .controller import STEP_AT_SWITCH
@@ -30,7 +28,6 @@ MAX_SWITCH_RETRIES = 8
 # predictions stop until the next switch; the "no prediction" value of SwitchTest.next_switch (s)
 MAX_PREDICTION_MISSES = 2
 NO_PREDICTION = 1.0e30
-QUAD_PREDICT = os.environ.get("WARPFRIC_QUAD_PREDICT", "0") == "1"
 
 
 def make_node_gates(ft, model):
@@ -133,36 +130,8 @@ def make_switch_test(ft, model, terms, team, node_sliding):
                 # will switch; a step that ends 0.5/rate after that (a switch error of 0.5, where a
                 # located retry would end) takes the switch without a rejected step
                 slope = (z1 - z0) / h
-                done = False
-                if wp.static(QUAD_PREDICT):
-                    if c.h_prev > ft(0.0):
-                        zp = gates[G_MARGIN_OLD, i, m]
-                        d1 = (z0 - zp) / c.h_prev
-                        curv = (slope - d1) / (h + c.h_prev)
-                        b = slope + curv * h  # the quadratic's slope at the step's end
-                        # z1 + b*tau + curv*tau^2 = 0, the first root tau > 0
-                        tau = ft(-1.0)
-                        if wp.abs(curv) * h <= ft(1.0e-9) * wp.abs(b):
-                            if b != ft(0.0):
-                                tau = -z1 / b
-                        else:
-                            disc = b * b - ft(4.0) * curv * z1
-                            if disc >= ft(0.0):
-                                sq = wp.sqrt(disc)
-                                r1 = (-b - sq) / (ft(2.0) * curv)
-                                r2 = (-b + sq) / (ft(2.0) * curv)
-                                lo = wp.min(r1, r2)
-                                hi = wp.max(r1, r2)
-                                if lo > ft(0.0):
-                                    tau = lo
-                                elif hi > ft(0.0):
-                                    tau = hi
-                        done = True
-                        if tau > ft(0.0):
-                            test.next_switch = wp.min(test.next_switch, tau + ft(0.5) / rate)
-                if not done:
-                    if (z1 < ft(0.0) and slope > ft(0.0)) or (z1 > ft(0.0) and slope < ft(0.0)):
-                        test.next_switch = wp.min(test.next_switch, -z1 / slope + ft(0.5) / rate)
+                if (z1 < ft(0.0) and slope > ft(0.0)) or (z1 > ft(0.0) and slope < ft(0.0)):
+                    test.next_switch = wp.min(test.next_switch, -z1 / slope + ft(0.5) / rate)
         return test
 
     @wp.func

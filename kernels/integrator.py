@@ -388,10 +388,6 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
             s2 = (s1 + 1) % n_slots
             s3 = (s1 + n_slots - 1) % n_slots  # the last stage's slot (TR-BDF2: s1 + 2; ESDIRK4: s1 + 5)
             restart = st.restart
-            if wp.static(stress_gate):
-                c.h_prev = ft(0.0)
-                if st.npts >= 2 and st.t1 == t and st.t2 < t and restart == 0:
-                    c.h_prev = ft(t - st.t2)
             # ---- stepper ----
             if wp.static(esdirk4):
                 if restart != 0:

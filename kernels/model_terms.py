@@ -159,7 +159,6 @@ def make_coefficients(ft):
         first_node: wp.int32
         end_node: wp.int32
         lane: wp.int32
-        h_prev: ft  # EXPERIMENT: the accepted step before this one (s; 0: none)
 
     @wp.func
     def make_coeffs(p: MemberParams, n: int):
@@ -205,7 +204,6 @@ def make_coefficients(ft):
         c.first_node = 0
         c.end_node = n
         c.lane = 0
-        c.h_prev = ft(0.0)
         return c
 
     return dict(Coeffs=Coeffs, make_coeffs=make_coeffs)
