@@ -126,7 +126,7 @@ def main(argv=None):
                          "(the warm-up's compile run is then not profiled)")
     ap.add_argument("--host-profile", action="store_true",
                     help="after each timing, profile one more run with cProfile and print its 20 costliest calls "
-                         "(cumulative): where the host time around the kernels goes")
+                         "(cumulative) and 15 costliest functions (own time): where the host time around the kernels goes")
     ap.add_argument("--launch-log", default=None,
                     help="after each timing, run the same ensemble once more with every launch synchronised and "
                          "timed (warpfric.engine.LAUNCH_LOG) and append its launches as JSON lines to this file")
@@ -221,6 +221,7 @@ def main(argv=None):
                 with cProfile.Profile() as prof:
                     wf.simulate(members(m), model=model, solver=solver, fronts=fronts, device=device, progress=False)
                 pstats.Stats(prof).sort_stats("cumulative").print_stats(20)
+                pstats.Stats(prof).sort_stats("tottime").print_stats(15)
             if args.launch_log:
                 write_launch_log(args.launch_log, row, members(m), model, solver, fronts, device)
             if args.jsonl:
