@@ -24,7 +24,7 @@ from .model_terms import disc_velocity_at, make_model_terms
 from .newton import make_newton
 from .observers import ObserverSet, make_observers, run_finished
 from .team import EXCHANGES, WARP_SIZE, make_team, node_range
-from .types import IntegratorState, MemberParams, OutputSettings, SolverSettings, stage_slots
+from .types import C_PHI, IntegratorState, MemberParams, OutputSettings, SolverSettings, stage_slots
 
 _CACHE: dict = {}
 
@@ -218,6 +218,7 @@ def _make_integrator(dtype: str, model, lanes: int, method: str = "tr_bdf2", opt
     integrate = make_integrate_kernel(ft, model, lanes, method, stages, acceptance, options, blocked)
     evaluate_fields = make_field_kernel(ft, stages)
     return dict(integrate=integrate, evaluate_fields=evaluate_fields, ft=ft, stages=stages,
+                layout=make_layout_kernels(ft),
                 exchange=(options.exchange or "tile") if lanes > 1 else "none",
                 blocked=blocked, block_members_requested=options.block_members)
 
@@ -436,6 +437,32 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     return integrate
 
 
+def make_layout_kernels(ft):
+    """The state's layout between host and device, done on the device so that the host touches
+    each value once: ``initial_state`` (the pad at rest) and ``member_rows`` ((slot, node, member)
+    -> (slot, member, node) copies, the Dataset's (member, x) order)."""
+    array3 = wp.array3d(dtype=ft)
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def initial_state(initial_age: wp.array(dtype=wp.float64), state: array3):
+        """The pad at rest: every component 0 but the contact age phi = initial_age[m] (s) at every
+        node. state: (component, node, member), any layout."""
+        comp, i, m = wp.tid()
+        value = ft(0.0)
+        if comp == C_PHI:
+            value = ft(initial_age[m])
+        state[comp, i, m] = value
+
+    @wp.kernel(module="unique", enable_backward=False)
+    def member_rows(source: array3, rows: array3):
+        """rows[k, m, i] = source[k, i, m]: (slot, node, member) -> (slot, member, node); launched
+        over rows' shape, so a leading part of source's slots."""
+        k, m, i = wp.tid()
+        rows[k, m, i] = source[k, i, m]
+
+    return dict(initial_state=initial_state, member_rows=member_rows)
+
+
 def make_field_kernel(ft, stages):
     """The evaluate_fields kernel: the interface stresses of the current state."""
     make_coeffs = stages["terms"]["make_coeffs"]
@@ -452,7 +479,7 @@ def make_field_kernel(ft, stages):
         friction_stress_out: wp.array2d(dtype=ft),
     ):
         """Interface normal stress (Pa, contact part max(sigma_n, 0)) and friction stress (Pa) of
-        the current state of each member, (node, member)."""
+        the current state of each member, (member, node): the Dataset's order."""
         m = wp.tid()
         st = member_states[m]
         p = params[m]
@@ -466,8 +493,8 @@ def make_field_kernel(ft, stages):
         for i in range(n):
             u_r = state_displacement(state, i + 1, n, m)
             ns, fr = state_contact(c, state, i, n, m, u_l, u_c, u_r, delta0, tilt, v_disc)
-            normal_stress_out[i, m] = fr.contact * ns.value
-            friction_stress_out[i, m] = fr.stress
+            normal_stress_out[m, i] = fr.contact * ns.value
+            friction_stress_out[m, i] = fr.stress
             u_l = u_c
             u_c = u_r
 

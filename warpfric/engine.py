@@ -33,11 +33,11 @@ class EngineResult:
     front's event was real."""
 
     member_states: np.ndarray
-    fields: np.ndarray
-    normal_stress: np.ndarray
-    friction_stress: np.ndarray
-    yield_time: np.ndarray | None
-    yield_gate: np.ndarray | None
+    fields: np.ndarray  # (component, member, node): the final state
+    normal_stress: np.ndarray  # (member, node) Pa
+    friction_stress: np.ndarray  # (member, node) Pa
+    yield_time: np.ndarray | None  # (member, node) s
+    yield_gate: np.ndarray | None  # (member, node)
     arrival: dict | None  # front event row (kernels/types.py EV_*) -> (node, member) s, the events asked for
     arrival_error: dict | None
     strength_peak: np.ndarray | None
@@ -308,6 +308,16 @@ _PINNED_LOCK = threading.Lock()
 PINNED_POOL_MAX_BYTES = 1 << 20  # per buffer kept
 
 
+def member_rows(layout: dict, source, slots: int) -> np.ndarray:
+    """The first ``slots`` slots of a (slot, node, member) device array (any layout) on the host as
+    (slot, member, node), arranged by the layout kernels' member_rows on the device."""
+    import warp as wp
+
+    rows = wp.empty((slots, source.shape[2], source.shape[1]), dtype=source.dtype, device=source.device)
+    wp.launch(layout["member_rows"], dim=rows.shape, inputs=[source, rows], device=source.device)
+    return rows.numpy()
+
+
 class StateSnapshots:
     """Read-back of the member states that does not stall the launch queue: ``take`` queues a copy
     into a host buffer (pinned on a CUDA device) behind the launches queued so far and returns a
@@ -394,7 +404,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     import warp as wp
 
     from warpfric.kernels.integrator import block_members_for, block_threads, get_integrator
-    from warpfric.kernels.types import C_PHI, FRONT_EVENTS, G_GATE, IntegratorState, allocate, member_array
+    from warpfric.kernels.types import FRONT_EVENTS, G_GATE, N_COMPONENTS, IntegratorState, allocate
 
     n_members = values["normal_force"].shape[0]
     n = solver.nodes
@@ -414,13 +424,14 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         block_dim = block_threads(lanes, kern["blocked"])
         wp.load_module(kern["integrate"].module, device=device, block_dim=block_dim if team else None)
         wp.load_module(kern["evaluate_fields"].module, device=device)
+        for layout_kernel in kern["layout"].values():
+            wp.load_module(layout_kernel.module, device=device)
     kernel_build_s = time.perf_counter() - t_build
     block_members = 1  # members per block (kernels/integrator.py block_members_for)
     if kern["blocked"]:
         block_members = block_members_for(n_members, wp.get_device(device).sm_count, kern["block_members_requested"])
     blocks = -(-n_members // block_members)  # of a team kernel's launch
     ft = kern["ft"]
-    np_dtype = np.float64 if solver.dtype == "float64" else np.float32
     params_np = member_params(values)
     settings = solver_settings(solver)
     stress_gate = model.relaxation_gate == "stress"
@@ -441,6 +452,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         front_max = front_last = event = None
         stall_limit = wp.full(1, NO_STALL_LIMIT, dtype=wp.int32)  # attempts after which a member stalls
         snapshot = StateSnapshots(n_members, device)
+        initial_age = wp.array(values["initial_age"], dtype=wp.float64)
 
         def launch_integrate(inputs, outputs_):
             if team:
@@ -456,10 +468,8 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                 # the velocity front's arrival pass: the contact and strength fronts (pass 1's) are kept
                 states_np["front_level"] = np.where(event, fronts.threshold * front_max, np.inf)
                 states_np["front_until"] = np.where(event, front_last, -np.inf)  # no event: nothing to redo
-            state_np = np.zeros(arrays.state.shape, dtype=np_dtype)
-            state_np[C_PHI] = values["initial_age"][None, :]
             member_states = wp.array(states_np, dtype=IntegratorState)
-            arrays.state = member_array(state_np, ft, team)
+            wp.launch(kern["layout"]["initial_state"], dim=arrays.state.shape, inputs=[initial_age, arrays.state])
             arrays.stages.zero_()  # K[fsal] holds f(y) of the state: zero for the state at rest
             arrays.gates.zero_()  # every gate closed: no friction stress at the start
             if pass_index == 0:
@@ -500,15 +510,19 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                 st = st_now
                 front_max, front_last = st["front_max"], st["front_last"]
                 event = real_event(front_max, front_last, values, fronts) if fronts is not None else None
-                sigma_out = wp.zeros((n, n_members), dtype=ft)
-                tau_out = wp.zeros((n, n_members), dtype=ft)
+                sigma_out = wp.zeros((n_members, n), dtype=ft)
+                tau_out = wp.zeros((n_members, n), dtype=ft)
                 wp.launch(kern["evaluate_fields"], dim=n_members, inputs=[arrays.params, member_states, arrays.state],
                           outputs=[sigma_out, tau_out])
-                fields = arrays.state.numpy()
+                # read back in the Dataset's (member, node) order, arranged on the device: the host
+                # writes each value once (docs/performance.md, "Host time around the kernel")
+                fields = member_rows(kern["layout"], arrays.state, N_COMPONENTS)
                 sigma = sigma_out.numpy()
                 tau = tau_out.numpy()
-                yield_np = arrays.yield_time.numpy() if stress_gate else None
-                gate_np = arrays.gates[G_GATE].numpy() if stress_gate else None
+                yield_np = gate_np = None
+                if stress_gate:  # float64 (the stress gate refuses float32), like yield_time
+                    yield_np = member_rows(kern["layout"], arrays.yield_time.reshape((1, n, n_members)), 1)[0]
+                    gate_np = member_rows(kern["layout"], arrays.gates, G_GATE + 1)[G_GATE]
         snapshot.close()
         arrival = arrival_error = strength_peak = None
         if fronts is not None:

@@ -130,13 +130,13 @@ def simulate(
     ds.attrs["integration_passes"] = result.passes
     if yield_np is not None:
         broken = (ds.status.values != 0) & (ds.status.values != STATUS_MEANINGS.index("no_peak"))
-        yt = np.where(broken[:, None], np.nan, yield_np.T)  # a run cut short still has real opening times
+        yt = np.where(broken[:, None], np.nan, yield_np)  # a run cut short still has real opening times
         # one update, one merge of the Dataset (each assignment is a merge over every variable)
         ds.update({
-            "yield_time": xr.DataArray(np.ascontiguousarray(yt), dims=("member", "x"), attrs={
+            "yield_time": xr.DataArray(yt, dims=("member", "x"), attrs={
                 "units": "s", "long_name": "time at which the asperity-level stress |tau_f|/A first reached tau_c "
                 "(the yield gate opened; NaN: never)"}),
-            "yield_gate": xr.DataArray(np.ascontiguousarray(gate_np.T), dims=("member", "x"), attrs={
+            "yield_gate": xr.DataArray(gate_np, dims=("member", "x"), attrs={
                 "units": "1", "long_name": "yield gate at the final time: 0 closed (stuck, ageing), 1 open "
                 "(sliding, rejuvenating), in between: held on the yield surface |tau_f|/A = tau_c"}),
         })
@@ -441,7 +441,7 @@ def _to_dataset(values, varying, st, fields, sigma, tau, model, solver, device, 
     }
     for name, arr in per_node.items():
         units, long_name = _OUTPUT_ATTRS[name]
-        data[name] = (("member", "x"), np.ascontiguousarray(arr.T), {"units": units, "long_name": long_name})
+        data[name] = (("member", "x"), arr, {"units": units, "long_name": long_name})  # (member, node) arrays
     coords = {"member": member, "x": _x_coordinate(length, n)}
     attrs = {
         "title": "warpfric ensemble",
