@@ -224,20 +224,11 @@ def _member_first(ndim: int):
     return (ndim - 1,) + tuple(range(ndim - 1)), tuple(range(1, ndim)) + (0,)
 
 
-def member_array(values, ft, member_major: bool):
-    """A device array (.., node, member) from ``values`` (a numpy array of that shape). With
-    member_major the memory holds each member's block contiguously, member slowest (the cooperative
-    kernel: a member's lanes read neighbouring nodes); the array is a transposed view, indexed the
-    same way as the member-fastest one."""
-    values = np.asarray(values)
-    if not member_major:
-        return wp.array(values, dtype=ft)
-    order, back = _member_first(values.ndim)
-    return wp.array(np.ascontiguousarray(values.transpose(order)), dtype=ft).transpose(back)
-
-
 def member_zeros(shape, ft, member_major: bool):
-    """Zeros of ``shape`` (.., node, member) laid out as :func:`member_array` says."""
+    """Zeros of ``shape`` (.., node, member) on the device. With member_major the memory holds each
+    member's block contiguously, member slowest (the cooperative kernel: a member's lanes read
+    neighbouring nodes); the array is a transposed view, indexed the same way as the member-fastest
+    one."""
     if not member_major:
         return wp.zeros(shape, dtype=ft)
     order, back = _member_first(len(shape))
@@ -250,7 +241,7 @@ def allocate(ft, params_np: np.ndarray, n_nodes: int, stress_gate: bool, fronts:
     """Allocate the arrays of a launch on the current Warp device. ``params_np``: MemberParams as a
     numpy structured array (member,); arrays a scene does not need get a (.., 1, 1) placeholder;
     member_major: the state, stages, work and gates arrays hold each member contiguously
-    (:func:`member_array`); method: the integrator, which sets the stage slots of K (:func:`stage_slots`);
+    (:func:`member_zeros`); method: the integrator, which sets the stage slots of K (:func:`stage_slots`);
     strength: the strength front's per-node reductions."""
     n_members = params_np.shape[0]
     times = np.asarray(record_times if n_recorded else [0.0], dtype=np.float64)

@@ -146,7 +146,7 @@ def output_settings(fronts: Fronts | None, stress_gate: bool = True):
 
 def array_bytes(a) -> int:
     """Bytes of a Warp array's elements: its capacity, or for a transposed view (a team's
-    member-major arrays, kernels/types.py member_array), whose capacity Warp reports short, its size
+    member-major arrays, kernels/types.py member_zeros), whose capacity Warp reports short, its size
     times the element size."""
     import warp as wp
 
