@@ -308,6 +308,19 @@ _PINNED_LOCK = threading.Lock()
 PINNED_POOL_MAX_BYTES = 1 << 20  # per buffer kept
 
 
+def host_copy(a) -> np.ndarray:
+    """A contiguous float device array copied into a new numpy array. Like ``a.numpy()`` (on the
+    default stream, so synchronous), but into memory numpy allocates, which the OS backs with huge
+    pages where it can: writing 64 MB there costs half the page faults' time of Warp's own host
+    allocation (docs/performance.md, "Host time around the kernel")."""
+    import warp as wp
+
+    out = np.empty(a.shape, dtype=wp.dtype_to_numpy(a.dtype))
+    with wp.ScopedStream(a.device.null_stream):
+        wp.copy(wp.array(out, dtype=a.dtype, device="cpu", copy=False), a)
+    return out
+
+
 def member_rows(layout: dict, source, slots: int) -> np.ndarray:
     """The first ``slots`` slots of a (slot, node, member) device array (any layout) on the host as
     (slot, member, node), arranged by the layout kernels' member_rows on the device."""
@@ -315,7 +328,7 @@ def member_rows(layout: dict, source, slots: int) -> np.ndarray:
 
     rows = wp.empty((slots, source.shape[2], source.shape[1]), dtype=source.dtype, device=source.device)
     wp.launch(layout["member_rows"], dim=rows.shape, inputs=[source, rows], device=source.device)
-    return rows.numpy()
+    return host_copy(rows)
 
 
 class StateSnapshots:
@@ -517,8 +530,8 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                 # read back in the Dataset's (member, node) order, arranged on the device: the host
                 # writes each value once (docs/performance.md, "Host time around the kernel")
                 fields = member_rows(kern["layout"], arrays.state, N_COMPONENTS)
-                sigma = sigma_out.numpy()
-                tau = tau_out.numpy()
+                sigma = host_copy(sigma_out)
+                tau = host_copy(tau_out)
                 yield_np = gate_np = None
                 if stress_gate:  # float64 (the stress gate refuses float32), like yield_time
                     yield_np = member_rows(kern["layout"], arrays.yield_time.reshape((1, n, n_members)), 1)[0]
@@ -527,8 +540,8 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         arrival = arrival_error = strength_peak = None
         if fronts is not None:
             rows = sorted({FRONT_EVENTS.index(name) for name in fronts.events})  # only what is asked for is read
-            arrival = {row: arrays.arrival[row].numpy() for row in rows}
-            arrival_error = {row: arrays.arrival_error[row].numpy() for row in rows}
+            arrival = {row: host_copy(arrays.arrival[row]) for row in rows}
+            arrival_error = {row: host_copy(arrays.arrival_error[row]) for row in rows}
             if strength:
                 strength_peak = confirmed_strength_peaks(arrays.strength.numpy(), arrival, arrival_error, st["t"])
         result = EngineResult(
