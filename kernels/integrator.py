@@ -209,8 +209,9 @@ def make_stages(ft, model, lanes: int = 1, method: str = "tr_bdf2", exchange: st
 
 def _make_integrator(dtype: str, model, lanes: int, method: str = "tr_bdf2", options=TeamCompileOptions(),
                      observed: ObserverSet = ObserverSet()):
-    """The integrate and evaluate_fields kernels for one working precision, model, team size,
-    method and observer set (get_integrator caches them)."""
+    """The integrate and evaluate_fields kernels, and the layout kernels of the state's transfers
+    (make_layout_kernels), for one working precision, model, team size, method and observer set
+    (get_integrator caches them)."""
     ft = wp.float64 if dtype == "float64" else wp.float32
     stages = make_stages(ft, model, lanes, method, options.exchange or "tile", observed)
     acceptance = make_acceptance(ft, model, method, stages)

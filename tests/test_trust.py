@@ -149,7 +149,7 @@ def test_device_none_keeps_small_ensembles_on_the_cpu():
 
 def test_state_read_back_buffer_is_pinned_and_reused_on_a_gpu_only():
     """The member states are read back through a host buffer. On a CUDA device it is pinned
-    (asynchronous copies) and, being costly to allocate (~1 ms, 7 % of a one-member run:
+    (asynchronous copies) and, being costly to allocate (~1.3 ms, 9 % of a one-member run:
     docs/performance.md), kept in a pool: the next run of as many members takes that very buffer
     and its outputs are bit for bit the first's; a run of another size gets its own. On the CPU
     nothing is pinned and the pool stays empty."""
@@ -170,3 +170,33 @@ def test_state_read_back_buffer_is_pinned_and_reused_on_a_gpu_only():
         np.testing.assert_array_equal(second[name].values, var.values, err_msg=name)
     run({"eccentricity": [0.0]}, rtol=1e-4)
     assert len(engine._PINNED_POOL[(str(wp.get_device(DEVICE)), 1)]) == 1
+
+
+def test_pinned_pool_keeps_at_most_its_total_newest_first(monkeypatch):
+    """The pool of pinned read-back buffers keeps at most PINNED_POOL_MAX_TOTAL bytes: a buffer
+    handed back beyond it evicts the member counts used longest ago, whole; buffers above
+    PINNED_POOL_MAX_BYTES are never kept. (Fake buffers: the pool's bookkeeping alone.)"""
+    from warpfric import engine
+
+    class Buffer:
+        def __init__(self, capacity):
+            self.capacity = capacity
+
+    def hand_back(key, capacity):
+        snapshot = engine.StateSnapshots.__new__(engine.StateSnapshots)
+        snapshot.cuda, snapshot.key, snapshot.buffer = True, key, Buffer(capacity)
+        snapshot.close()
+        assert snapshot.buffer is None
+
+    monkeypatch.setattr(engine, "_PINNED_POOL", {})
+    monkeypatch.setattr(engine, "PINNED_POOL_MAX_BYTES", 400)
+    monkeypatch.setattr(engine, "PINNED_POOL_MAX_TOTAL", 1000)
+    hand_back(("cuda:0", 1), 300)
+    hand_back(("cuda:0", 2), 300)
+    hand_back(("cuda:0", 1), 300)  # member count 1 used again: now the newest
+    assert list(engine._PINNED_POOL) == [("cuda:0", 2), ("cuda:0", 1)]
+    hand_back(("cuda:0", 3), 300)  # 1,200 bytes: member count 2 (the oldest) goes
+    assert list(engine._PINNED_POOL) == [("cuda:0", 1), ("cuda:0", 3)]
+    assert sum(b.capacity for free in engine._PINNED_POOL.values() for b in free) == 900
+    hand_back(("cuda:0", 4), 500)  # above PINNED_POOL_MAX_BYTES: not kept
+    assert ("cuda:0", 4) not in engine._PINNED_POOL

@@ -25,9 +25,10 @@ from .progress import Progress, launch_steps
 
 @dataclasses.dataclass
 class EngineResult:
-    """What the passes produced, on the host. Shapes: member_states (member,); fields (component, node,
-    member); normal_stress, friction_stress, yield_time, yield_gate (node, member); arrival,
-    arrival_error (front_event, node, member), NaN where a node never arrived (a strength peak not
+    """What the passes produced, on the host. Shapes: member_states (member,); fields (component,
+    member, node); normal_stress, friction_stress, yield_time, yield_gate (member, node) (the
+    Dataset's order); arrival, arrival_error: {front event row (kernels/types.py EV_*): (node,
+    member) s} for the events asked for, NaN where a node never arrived (a strength peak not
     confirmed by the end of the run included); strength_peak (node, member): each node's peak of
     tau_f/sigma_n; record (record_field, time, node, recorded); event (member,) bool: the velocity
     front's event was real."""
@@ -178,14 +179,14 @@ def arrival_pass_settings(outputs):
     return out
 
 
-def confirmed_strength_peaks(strength: np.ndarray, arrival: np.ndarray, arrival_error: np.ndarray,
-                             final_time: np.ndarray) -> np.ndarray:
+def confirmed_strength_peaks(strength, arrival, arrival_error, final_time: np.ndarray) -> np.ndarray:
     """The strength front's peaks that the run confirmed: a node's maximum of tau_f/sigma_n counts
     when the ratio at the last accepted point has fallen STRENGTH_PEAK_DROP below it and the maximum
     came before the end; elsewhere (still rising at the end: the peak lies beyond the run) the
     arrival and its error become NaN, in place. Returns the peaks (node, member), NaN where not
-    confirmed. strength: (strength_slot, node, member); arrival, arrival_error: (front_event, node,
-    member) s, or a dict of the events' rows; final_time: (member,) s."""
+    confirmed. strength: (strength_slot, node, member), or a dict of the slots S_MAX and S_RATIO1;
+    arrival, arrival_error: (front_event, node, member) s, or a dict of the events' rows;
+    final_time: (member,) s."""
     from warpfric.kernels.observers import STRENGTH_PEAK_DROP
     from warpfric.kernels.types import EV_STRENGTH, S_MAX, S_RATIO1
 
@@ -301,11 +302,13 @@ def real_event(front_max, front_last, values, fronts: Fronts) -> np.ndarray:
 
 
 # pinned host buffers of the state read-back kept between runs, (device, members) -> free buffers:
-# allocating and freeing pinned memory costs ~1 ms, 7 % of a one-member run at N = 40 on the H100
-# (docs/performance.md, "One member's host time"); only small ones are kept
+# allocating and freeing pinned memory costs ~1.3 ms, 9 % of a one-member run at N = 40 on the H100
+# (docs/performance.md, "One member's host time"); only small ones are kept, and at most
+# PINNED_POOL_MAX_TOTAL bytes in all (the oldest member counts go first)
 _PINNED_POOL: dict = {}
 _PINNED_LOCK = threading.Lock()
 PINNED_POOL_MAX_BYTES = 1 << 20  # per buffer kept
+PINNED_POOL_MAX_TOTAL = 16 << 20  # all buffers kept
 
 
 def host_copy(a) -> np.ndarray:
@@ -359,7 +362,9 @@ class StateSnapshots:
         """After the last ``wait``: a small pinned buffer goes back to the pool."""
         if self.cuda and self.buffer is not None and self.buffer.capacity <= PINNED_POOL_MAX_BYTES:
             with _PINNED_LOCK:
-                _PINNED_POOL.setdefault(self.key, []).append(self.buffer)
+                _PINNED_POOL[self.key] = _PINNED_POOL.pop(self.key, []) + [self.buffer]  # the newest key last
+                while sum(b.capacity for free in _PINNED_POOL.values() for b in free) > PINNED_POOL_MAX_TOTAL:
+                    del _PINNED_POOL[next(iter(_PINNED_POOL))]
         self.buffer = None
 
     def take(self, member_states):
@@ -417,7 +422,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     import warp as wp
 
     from warpfric.kernels.integrator import block_members_for, block_threads, get_integrator
-    from warpfric.kernels.types import FRONT_EVENTS, G_GATE, N_COMPONENTS, IntegratorState, allocate
+    from warpfric.kernels.types import FRONT_EVENTS, G_GATE, N_COMPONENTS, S_MAX, S_RATIO1, IntegratorState, allocate
 
     n_members = values["normal_force"].shape[0]
     n = solver.nodes
@@ -523,13 +528,14 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                 st = st_now
                 front_max, front_last = st["front_max"], st["front_last"]
                 event = real_event(front_max, front_last, values, fronts) if fronts is not None else None
+                # read back in the Dataset's (member, node) order, arranged on the device: the host
+                # writes each value once (docs/performance.md, "Host time around the kernel"); the
+                # fields' device copy is freed before the stresses are allocated
+                fields = member_rows(kern["layout"], arrays.state, N_COMPONENTS)
                 sigma_out = wp.zeros((n_members, n), dtype=ft)
                 tau_out = wp.zeros((n_members, n), dtype=ft)
                 wp.launch(kern["evaluate_fields"], dim=n_members, inputs=[arrays.params, member_states, arrays.state],
                           outputs=[sigma_out, tau_out])
-                # read back in the Dataset's (member, node) order, arranged on the device: the host
-                # writes each value once (docs/performance.md, "Host time around the kernel")
-                fields = member_rows(kern["layout"], arrays.state, N_COMPONENTS)
                 sigma = host_copy(sigma_out)
                 tau = host_copy(tau_out)
                 yield_np = gate_np = None
@@ -543,7 +549,8 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             arrival = {row: host_copy(arrays.arrival[row]) for row in rows}
             arrival_error = {row: host_copy(arrays.arrival_error[row]) for row in rows}
             if strength:
-                strength_peak = confirmed_strength_peaks(arrays.strength.numpy(), arrival, arrival_error, st["t"])
+                strength_rows = {slot: host_copy(arrays.strength[slot]) for slot in (S_MAX, S_RATIO1)}
+                strength_peak = confirmed_strength_peaks(strength_rows, arrival, arrival_error, st["t"])
         result = EngineResult(
             member_states=st, fields=fields, normal_stress=sigma, friction_stress=tau, yield_time=yield_np, yield_gate=gate_np,
             arrival=arrival, arrival_error=arrival_error, strength_peak=strength_peak,
