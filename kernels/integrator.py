@@ -438,10 +438,16 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     return integrate
 
 
+_LAYOUT_KERNELS: dict = {}
+
+
 def make_layout_kernels(ft):
     """The state's layout between host and device, done on the device so that the host touches
     each value once: ``initial_state`` (the pad at rest) and ``member_rows`` ((slot, node, member)
-    -> (slot, member, node) copies, the Dataset's (member, x) order)."""
+    -> (slot, member, node) copies, the Dataset's (member, x) order). One set per scalar type,
+    shared by every integrator of that type (cached)."""
+    if ft in _LAYOUT_KERNELS:
+        return _LAYOUT_KERNELS[ft]
     array3 = wp.array3d(dtype=ft)
 
     @wp.kernel(module="unique", enable_backward=False)
@@ -461,7 +467,8 @@ def make_layout_kernels(ft):
         k, m, i = wp.tid()
         rows[k, m, i] = source[k, i, m]
 
-    return dict(initial_state=initial_state, member_rows=member_rows)
+    _LAYOUT_KERNELS[ft] = dict(initial_state=initial_state, member_rows=member_rows)
+    return _LAYOUT_KERNELS[ft]
 
 
 def make_field_kernel(ft, stages):
