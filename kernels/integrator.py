@@ -24,7 +24,7 @@ from .model_terms import disc_velocity_at, make_model_terms
 from .newton import make_newton
 from .observers import ObserverSet, make_observers, run_finished
 from .team import EXCHANGES, WARP_SIZE, make_team, node_range
-from .types import C_PHI, IntegratorState, MemberParams, OutputSettings, SolverSettings, stage_slots
+from .types import C_PHI, N_WORK, IntegratorState, MemberParams, OutputSettings, SolverSettings, stage_slots
 
 _CACHE: dict = {}
 
@@ -39,14 +39,16 @@ class TeamCompileOptions(NamedTuple):
     out_of_line: tuple = ()  # names of device functions kept out of line
     exchange: str | None = None  # the team's lane exchange, kernels/team.py (None: the automatic choice)
     block_members: int | None = None  # members per thread block (None: per run, block_members_for; 1: a block each)
+    shared_work: bool = True  # the blocked kernel's work array in shared memory where it fits (team_layout)
 
 
 def team_compile_options() -> TeamCompileOptions:
     """The benchmark switches from the environment: WARPFRIC_TEAM_MAX_REGISTERS (an integer > 0),
     WARPFRIC_INLINE ('force' or 'never'), WARPFRIC_TEAM_SMEM_SPILLING (1), WARPFRIC_NOINLINE
     (comma-separated function names), WARPFRIC_TEAM_EXCHANGE ('tile', 'shuffle' or 'emulated':
-    kernels/team.py) and WARPFRIC_TEAM_BLOCK_MEMBERS (1 to 8: members per thread block,
-    blocked_layout)."""
+    kernels/team.py), WARPFRIC_TEAM_BLOCK_MEMBERS (1 to 8: members per thread block,
+    blocked_layout; at most shared_work_members where the work is in shared memory) and
+    WARPFRIC_TEAM_SHARED_WORK (0: the blocked kernel's work array in global memory; team_layout)."""
     registers = int(os.environ.get("WARPFRIC_TEAM_MAX_REGISTERS", "0"))
     inline = os.environ.get("WARPFRIC_INLINE", "") or None
     if inline not in (None, "force", "never"):
@@ -61,9 +63,13 @@ def team_compile_options() -> TeamCompileOptions:
             raise ValueError(f"WARPFRIC_TEAM_BLOCK_MEMBERS={block_members!r} is invalid; valid: an integer from 1 to "
                              f"{MAX_BLOCK_MEMBERS}, or unset")
         block_members = int(block_members)
+    shared_work = os.environ.get("WARPFRIC_TEAM_SHARED_WORK", "1")
+    if shared_work not in ("0", "1"):
+        raise ValueError(f"WARPFRIC_TEAM_SHARED_WORK={shared_work!r} is invalid; valid: 0, 1 or unset")
     return TeamCompileOptions(max_registers=registers if registers > 0 else None, inline=inline,
                               smem_spilling=os.environ.get("WARPFRIC_TEAM_SMEM_SPILLING", "0") == "1",
-                              out_of_line=out_of_line, exchange=exchange, block_members=block_members)
+                              out_of_line=out_of_line, exchange=exchange, block_members=block_members,
+                              shared_work=shared_work == "1")
 
 
 # Where a team's lanes exchange by warp shuffles (a team of at most 32 lanes: one warp), a thread
@@ -88,14 +94,88 @@ def blocked_layout(lanes: int, exchange: str, requested: int | None = None) -> b
     return warp_team and requested != 1
 
 
-def block_members_for(n_members: int, sm_count: int, requested: int | None = None) -> int:
+def block_members_for(n_members: int, sm_count: int, requested: int | None = None,
+                      most: int = MAX_BLOCK_MEMBERS) -> int:
     """Members per block of a run of n_members in the blocked layout on a GPU of sm_count SMs:
-    ``requested`` (WARPFRIC_TEAM_BLOCK_MEMBERS), else min(MAX_BLOCK_MEMBERS, ceil(n_members /
-    sm_count)): the blocks then number at most the SMs while members are few (one member alone on
-    an SM runs faster than eight sharing it), and an SM's eight warps are one block's beyond."""
+    ``requested`` (WARPFRIC_TEAM_BLOCK_MEMBERS), else min(most, ceil(n_members / sm_count)): the
+    blocks then number at most the SMs while members are few (one member alone on an SM runs faster
+    than eight sharing it), and an SM's eight warps are one block's beyond. ``most``: the most a
+    block holds (MAX_BLOCK_MEMBERS, or shared_work_members); a request above it gets it."""
     if requested is not None:
-        return requested
-    return max(1, min(MAX_BLOCK_MEMBERS, -(-n_members // max(sm_count, 1))))
+        return min(requested, most)
+    return max(1, min(most, -(-n_members // max(sm_count, 1))))
+
+
+# The blocked kernel's work array (kernels/types.py: the scratch of one attempted step, nothing in it
+# outlives the attempt) is kept in the block's shared memory where it fits (docs/performance.md,
+# "The work array in shared memory"): (N_WORK, N, stride) float64, member fastest, with an odd
+# member stride >= the block's members, so that the lanes of a warp, each on its own nodes, fall
+# into different banks (at most two lanes a bank at N = 200 and N = 40). Every stride gives the
+# same outputs bit for bit (tests/test_team.py); the global work array's do not: the compiler
+# fuses a few multiply-adds differently (round-off, within 2e-12 of mu_s on the H100).
+SHARED_WORK_RESERVE = 4096  # bytes of a block's opt-in shared memory left to the kernel's static shared memory
+
+
+def shared_work_stride(n_nodes: int, block_members: int, max_shared: int) -> int:
+    """The member stride of a block's shared work array: the smallest odd number >= block_members,
+    or 0 where (N_WORK, n_nodes, stride) float64 does not fit into max_shared bytes (the device's
+    opt-in shared memory per block) less SHARED_WORK_RESERVE."""
+    stride = block_members | 1
+    return stride if N_WORK * n_nodes * stride * 8 <= max_shared - SHARED_WORK_RESERVE else 0
+
+
+def shared_work_members(n_nodes: int, max_shared: int) -> int:
+    """The most members of a block whose work is in shared memory: MAX_BLOCK_MEMBERS (8) where the
+    stride 9 fits, 7 where only 7 does (a member fewer per block: on the H100, 176 < N <= 226), else
+    0: the work stays in global memory (N > 226 on the H100). Fewer members per block than 7 were not
+    measured, so they are not chosen."""
+    if shared_work_stride(n_nodes, MAX_BLOCK_MEMBERS, max_shared):
+        return MAX_BLOCK_MEMBERS
+    if shared_work_stride(n_nodes, MAX_BLOCK_MEMBERS - 1, max_shared):
+        return MAX_BLOCK_MEMBERS - 1
+    return 0
+
+
+class TeamLayout(NamedTuple):
+    """How a run's members map onto the cooperative kernel's blocks (team_layout)."""
+
+    blocked: bool  # several members per block, a warp each (blocked_layout)
+    block_members: int  # members per block (1 unless blocked)
+    shared_work: tuple | None  # (nodes, member stride) of the work array in shared memory; None: global memory
+
+
+def team_layout(lanes: int, n_nodes: int, n_members: int, cuda: bool, sm_count: int = 1,
+                max_shared: int = 0) -> TeamLayout:
+    """The layout of a run of n_members at n_nodes with ``lanes`` lanes per member on a CUDA device of
+    sm_count SMs and max_shared bytes of opt-in shared memory per block, or the CPU (cuda False).
+    The work array goes into shared memory wherever the blocked kernel runs and a block of 7
+    members' work fits (shared_work_members), whatever n_members: a member's outputs then do not
+    depend on the ensemble it runs in. Not with Warp's debug mode, whose bounds checks reject the
+    shared view's indexing by member (make_integrate_kernel), nor with WARPFRIC_TEAM_SHARED_WORK=0."""
+    options = team_compile_options()
+    if lanes <= 1 or not blocked_layout(lanes, team_exchange(lanes, cuda, options.exchange), options.block_members):
+        return TeamLayout(False, 1, None)
+    most = 0
+    if options.shared_work and wp.config.mode != "debug":
+        most = shared_work_members(n_nodes, max_shared)
+    block_members = block_members_for(n_members, sm_count, options.block_members, most or MAX_BLOCK_MEMBERS)
+    if not most:
+        return TeamLayout(True, block_members, None)
+    return TeamLayout(True, block_members, (n_nodes, shared_work_stride(n_nodes, block_members, max_shared)))
+
+
+@wp.func_native(r"""
+#if defined(__CUDA_ARCH__)
+    extern __shared__ char wf_dynamic_shared[];
+    return (uint64_t)(wf_dynamic_shared);
+#else
+    return 0;
+#endif
+""")
+def dynamic_shared_base() -> wp.uint64:
+    """The address of the block's dynamic shared memory, where Warp puts the kernel's first shared
+    tile (kernels/integrator.py make_integrate_kernel: the reservation of the shared work array)."""
+    ...
 
 
 def block_threads(lanes: int, blocked: bool) -> int:
@@ -142,20 +222,22 @@ def _filled(cell) -> bool:
 
 
 def get_integrator(dtype: str, model, lanes: int = 1, method: str = "tr_bdf2", cuda: bool = False,
-                   observed: ObserverSet = ObserverSet()) -> dict:
+                   observed: ObserverSet = ObserverSet(), shared_work: tuple | None = None) -> dict:
     """Compiled kernels for one working precision, one set of model switches, one team size
     (lanes = 1: one thread per member; > 1: the cooperative kernel, float64 only, launched with
     block_threads; kernels/team.py), one time integrator (Solver.method: 'tr_bdf2' or 'esdirk4'),
-    the kind of device they run on (cuda: a team's lane exchange, team_exchange) and the observers
-    compiled in (kernels/observers.py ObserverSet; all by default) (cached)."""
+    the kind of device they run on (cuda: a team's lane exchange, team_exchange), the observers
+    compiled in (kernels/observers.py ObserverSet; all by default) and, for the blocked kernel, the
+    work array in shared memory (shared_work: (nodes, member stride), team_layout; None: in global
+    memory) (cached)."""
     if method not in ("tr_bdf2", "esdirk4"):
         raise ValueError(f"integrator method {method!r} is invalid; valid: 'tr_bdf2' or 'esdirk4'")
     options = team_compile_options() if lanes > 1 else TeamCompileOptions()
     if lanes > 1:
         options = options._replace(exchange=team_exchange(lanes, cuda, options.exchange))
-    key = (dtype, model, lanes, method, options, observed)
+    key = (dtype, model, lanes, method, options, observed, shared_work)
     if key not in _CACHE:
-        _CACHE[key] = _make_integrator(dtype, model, lanes, method, options, observed)
+        _CACHE[key] = _make_integrator(dtype, model, lanes, method, options, observed, shared_work)
     # on every call, cached kernels included: Warp compiles a kernel at its first launch, with the
     # hints the functions have then
     _apply_inline_hints(_CACHE[key]["integrate"], options.inline, options.out_of_line)
@@ -208,7 +290,7 @@ def make_stages(ft, model, lanes: int = 1, method: str = "tr_bdf2", exchange: st
 
 
 def _make_integrator(dtype: str, model, lanes: int, method: str = "tr_bdf2", options=TeamCompileOptions(),
-                     observed: ObserverSet = ObserverSet()):
+                     observed: ObserverSet = ObserverSet(), shared_work: tuple | None = None):
     """The integrate and evaluate_fields kernels, and the layout kernels of the state's transfers
     (make_layout_kernels), for one working precision, model, team size, method and observer set
     (get_integrator caches them)."""
@@ -216,12 +298,14 @@ def _make_integrator(dtype: str, model, lanes: int, method: str = "tr_bdf2", opt
     stages = make_stages(ft, model, lanes, method, options.exchange or "tile", observed)
     acceptance = make_acceptance(ft, model, method, stages)
     blocked = lanes > 1 and blocked_layout(lanes, options.exchange, options.block_members)
-    integrate = make_integrate_kernel(ft, model, lanes, method, stages, acceptance, options, blocked)
+    if shared_work is not None and not blocked:
+        raise ValueError(f"shared_work={shared_work} needs the blocked layout of the team kernel (team_layout)")
+    integrate = make_integrate_kernel(ft, model, lanes, method, stages, acceptance, options, blocked, shared_work)
     evaluate_fields = make_field_kernel(ft, stages)
     return dict(integrate=integrate, evaluate_fields=evaluate_fields, ft=ft, stages=stages,
                 layout=make_layout_kernels(ft),
                 exchange=(options.exchange or "tile") if lanes > 1 else "none",
-                blocked=blocked, block_members_requested=options.block_members)
+                blocked=blocked, shared_work=shared_work)
 
 
 def make_acceptance(ft, model, method, stages):
@@ -287,9 +371,11 @@ def make_acceptance(ft, model, method, stages):
 
 
 def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, options=TeamCompileOptions(),
-                          blocked: bool = False):
+                          blocked: bool = False, shared_work: tuple | None = None):
     """The integrate kernel: the loop of attempted steps (stepper, controller, accept_step); blocked:
-    the team kernel's blocked layout (blocked_layout)."""
+    the team kernel's blocked layout (blocked_layout); shared_work: (nodes, member stride) of the
+    work array in the block's shared memory (team_layout; the kernel's ``work`` argument is then
+    not used), None: in global memory."""
     team_on = lanes > 1
     esdirk4 = method == "esdirk4"
     n_slots = stage_slots(method)
@@ -304,6 +390,9 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
     block_barrier = stages["team"].get("block_barrier", None)
+    shared_on = shared_work is not None
+    shared_nodes, shared_stride = shared_work if shared_on else (1, 1)
+    shared_len = N_WORK * shared_nodes * shared_stride
 
     # enable_backward=False: no adjoint code is generated (nothing differentiates through the
     # integrator); the forward code is the same, and the first compile takes a third of the time
@@ -343,8 +432,11 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
         attempts exceed stall_limit[0]).
         Shapes and units: kernels/types.py. A team: every lane keeps the same IntegratorState; lane
         0 stores it."""
+        if wp.static(shared_on):  # the first tile: reserves the block's dynamic shared memory for the work view below
+            wp.tile_empty(shape=(shared_len,), dtype=ft, storage="shared")
         lane = int(0)
         m = int(0)
+        work_view = work
         if wp.static(team_on):
             block, thread = wp.tid()
             if wp.static(blocked):
@@ -355,6 +447,12 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
                 lane = thread % WARP_SIZE
                 if warp >= block_members or m >= member_states.shape[0] or lane >= lanes:
                     return
+                if wp.static(shared_on):
+                    # (N_WORK, N, stride), member fastest, indexed by the member m as ``work`` is: the
+                    # base is offset by the block's first member (no bounds check: Warp's release mode)
+                    first = wp.uint64(block * block_members) * wp.uint64(8)
+                    work_view = wp.array(ptr=dynamic_shared_base() - first, shape=(N_WORK, shared_nodes, shared_stride),
+                                         dtype=ft)
             else:
                 m = block
                 lane = thread
@@ -393,12 +491,12 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
             # ---- stepper ----
             if wp.static(esdirk4):
                 if restart != 0:
-                    res = implicit_step(c, p, settings, m, n, state, K, work, gates, s1, s2, s3, t, step.h, step.t_new,
+                    res = implicit_step(c, p, settings, m, n, state, K, work_view, gates, s1, s2, s3, t, step.h, step.t_new,
                                         delta0, tilt, 1, ft(0.0))
                 else:
-                    res = esdirk4_step(c, p, settings, m, n, state, K, work, gates, s1, t, step.h, step.t_new, delta0, tilt)
+                    res = esdirk4_step(c, p, settings, m, n, state, K, work_view, gates, s1, t, step.h, step.t_new, delta0, tilt)
             else:  # TR-BDF2, or backward Euler at a (re)start: one call, so the stage code is compiled once
-                res = implicit_step(c, p, settings, m, n, state, K, work, gates, s1, s2, s3, t, step.h, step.t_new,
+                res = implicit_step(c, p, settings, m, n, state, K, work_view, gates, s1, s2, s3, t, step.h, step.t_new,
                                     delta0, tilt, restart, ft(st.newton_curvature))
                 # the next step's first Newton iteration is judged with this step's curvature
                 # (kernels/newton.py newton_solve); a failed solve or a restart forgets it
@@ -426,7 +524,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
                     break
                 continue
             # ---- accepted: advance, gates, observers ----
-            st = accept_step(c, p, st, settings, outputs, m, n, state, K, work, gates, s1, s2, s3, t, step, factor, res,
+            st = accept_step(c, p, st, settings, outputs, m, n, state, K, work_view, gates, s1, s2, s3, t, step, factor, res,
                              restart, yield_time, arrival, arrival_error, strength, record_times, record_previous, record)
             delta0 = res.delta0
             tilt = res.tilt

@@ -115,10 +115,13 @@ def main(argv=None):
                                            "**", "*integrate*.cubin"), recursive=True), key=os.path.getmtime)
     else:
         from warpfric.engine import observer_set
-        from warpfric.kernels.integrator import block_threads, get_integrator
+        from warpfric.kernels.integrator import block_threads, get_integrator, team_layout
 
-        # the kernel simulate(fronts=None) runs, as on a GPU above
-        built = get_integrator("float64", model, args.lanes, "tr_bdf2", cuda=True, observed=observer_set(None))
+        # the kernel simulate(fronts=None) of 10,000 members runs on an H100 (132 SMs, 227 KB of
+        # shared memory a block), as on a GPU above
+        layout = team_layout(args.lanes, args.nodes, 10_000, True, 132, 227 * 1024)
+        built = get_integrator("float64", model, args.lanes, "tr_bdf2", cuda=True, observed=observer_set(None),
+                               shared_work=layout.shared_work)
         kernel = built["integrate"]
         # as the engine launches it (warpfric/engine.py)
         kernel.module.options["block_dim"] = block_threads(args.lanes, built["blocked"])

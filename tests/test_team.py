@@ -186,6 +186,7 @@ def test_members_per_block_choice(monkeypatch):
     assert block_members_for(133, 132) == 2 and block_members_for(500, 132) == 4
     assert block_members_for(1000, 132) == block_members_for(100_000, 132) == MAX_BLOCK_MEMBERS == 8
     assert block_members_for(100, 132, requested=8) == 8
+    assert block_members_for(10_000, 132, most=7) == 7 and block_members_for(100, 132, requested=8, most=7) == 7
     monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "3")
     assert team_compile_options().block_members == 3
     for bad in ("0", "9", "two", "-1"):
@@ -196,26 +197,96 @@ def test_members_per_block_choice(monkeypatch):
     assert team_compile_options().block_members is None  # the automatic choice
 
 
+def test_work_array_memory_choice(monkeypatch):
+    """The blocked kernel keeps its work array in the block's shared memory where a block of 7
+    members' work fits, (N_WORK = 18, N, stride) float64 with the smallest odd stride >= the block's
+    members: on an H100 (232,448 bytes a block, 4,096 kept back) 9 fits to N = 176 (8 members), 7 to
+    N = 226 (7 members a block at most), else the work stays in global memory with 8 members a
+    block. The choice does not depend on the member count (a member's outputs do not depend on its
+    ensemble), only the stride does, and every stride gives the same outputs (the GPU test below).
+    WARPFRIC_TEAM_SHARED_WORK=0 keeps the work in global memory; other values are refused."""
+    from warpfric.kernels.integrator import shared_work_members, shared_work_stride, team_layout
+
+    h100 = 232_448
+    assert 18 * 176 * 9 * 8 <= h100 - 4096 < 18 * 177 * 9 * 8 and 18 * 226 * 7 * 8 <= h100 - 4096 < 18 * 227 * 7 * 8
+    assert [shared_work_stride(200, k, h100) for k in range(1, 9)] == [1, 3, 3, 5, 5, 7, 7, 0]
+    assert [shared_work_stride(40, k, h100) for k in range(1, 9)] == [1, 3, 3, 5, 5, 7, 7, 9]
+    assert shared_work_members(176, h100) == 8 and shared_work_members(177, h100) == 7
+    assert shared_work_members(226, h100) == 7 and shared_work_members(227, h100) == 0
+    monkeypatch.delenv("WARPFRIC_TEAM_BLOCK_MEMBERS", raising=False)
+    monkeypatch.delenv("WARPFRIC_TEAM_EXCHANGE", raising=False)
+    layouts = {(n, m): team_layout(32, n, m, True, 132, h100) for n in (200, 300) for m in (1, 300, 1000, 10_000)}
+    assert [layouts[200, m] for m in (1, 300, 1000, 10_000)] == [(True, 1, (200, 1)), (True, 3, (200, 3)),
+                                                                  (True, 7, (200, 7)), (True, 7, (200, 7))]
+    assert [layouts[300, m] for m in (1, 300, 1000, 10_000)] == [(True, 1, None), (True, 3, None), (True, 8, None),
+                                                                  (True, 8, None)]
+    assert team_layout(20, 40, 10_000, True, 132, h100) == (True, 8, (40, 9))
+    assert team_layout(32, 200, 10_000, False) == (False, 1, None)  # the CPU: tiles, a block per member
+    assert team_layout(1, 200, 10_000, True, 132, h100) == (False, 1, None)  # the thread-per-member kernel
+    monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "8")  # a request above what fits gets what fits
+    assert team_layout(32, 200, 10_000, True, 132, h100) == (True, 7, (200, 7))
+    monkeypatch.delenv("WARPFRIC_TEAM_BLOCK_MEMBERS")
+    monkeypatch.setenv("WARPFRIC_TEAM_SHARED_WORK", "0")
+    assert team_layout(32, 200, 10_000, True, 132, h100) == (True, 8, None)
+    monkeypatch.setenv("WARPFRIC_TEAM_SHARED_WORK", "yes")
+    with pytest.raises(ValueError, match="WARPFRIC_TEAM_SHARED_WORK='yes' is invalid; valid: 0, 1 or unset"):
+        team_layout(32, 200, 10_000, True, 132, h100)
+
+
 @pytest.mark.skipif(not DEVICE.startswith("cuda"), reason="warp shuffles, and so several members per block, need a GPU")
 def test_members_in_one_block_give_the_outputs_of_one_member_per_block(monkeypatch):
     """Members that share a thread block wait for each other at every attempt; nothing else changes,
     so every output equals, bit for bit, the one-member-per-block kernel's: 11 members in blocks of
-    8 (WARPFRIC_TEAM_BLOCK_MEMBERS: one block of 8 and one of 3 with 5 idle warps), the default law
-    with the contact front, at N = 200 (32 lanes) and N = 40 (20 lanes: each warp's last 12 threads
-    idle, and the team's reductions are trees, not butterflies). The automatic choice is
-    min(8, ceil(members / SMs)): one member more than the GPU has SMs runs two per block."""
+    8 (WARPFRIC_TEAM_BLOCK_MEMBERS: one block of 8 and one of 3 with 5 idle warps; 7 at N = 200,
+    where the shared work array holds 7 members at most), the default law with the contact front,
+    at N = 200 (32 lanes) and N = 40 (20 lanes: each warp's last 12 threads idle, and the team's
+    reductions are trees, not butterflies). The shared work array's member stride follows the
+    block's members (1 against 7 or 9), so this also checks that the stride changes nothing. The
+    automatic choice is min(8, ceil(members / SMs)): one member more than the GPU has SMs runs two
+    per block."""
     values = {"eccentricity": np.linspace(-0.3, 0.3, 11), "normal_force": np.geomspace(300.0, 3000.0, 11)}
     monkeypatch.delenv("WARPFRIC_TEAM_BLOCK_MEMBERS", raising=False)
+    monkeypatch.delenv("WARPFRIC_TEAM_SHARED_WORK", raising=False)
     sms = wp.get_device(DEVICE).sm_count
     many = {"eccentricity": np.linspace(-0.3, 0.3, sms + 1)}
     assert run(many, nodes=40, rtol=1e-4).attrs["block_members"] == 2
+    big_blocks = {200: 7, 40: 8} if wp.get_device(DEVICE).max_shared_memory_per_block >= 232_448 else {}
     for nodes, lanes in ((200, 32), (40, 20)):
         monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "8")
         shared = run(values, nodes=nodes, rtol=1e-5, fronts=wf.Fronts())
         monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "1")
         alone = run(values, nodes=nodes, rtol=1e-5, fronts=wf.Fronts())
         assert shared.attrs["lanes"] == alone.attrs["lanes"] == lanes
-        assert shared.attrs["block_members"] == 8 and alone.attrs["block_members"] == 1
+        assert shared.attrs["block_members"] == big_blocks.get(nodes, shared.attrs["block_members"])
+        assert alone.attrs["block_members"] == 1
+        assert shared.attrs["work_memory"] == alone.attrs["work_memory"]
         assert (alone.status.values == 0).all()
         for name, var in alone.data_vars.items():
             np.testing.assert_array_equal(shared[name].values, var.values, err_msg=f"N = {nodes}: {name}")
+
+
+@pytest.mark.skipif(not DEVICE.startswith("cuda"), reason="the blocked kernel's shared work array needs a GPU")
+def test_shared_work_array_gives_the_global_work_array_outputs(monkeypatch):
+    """The work array in shared memory (the default where it fits) against the same kernel with its
+    work in global memory (WARPFRIC_TEAM_SHARED_WORK=0): the same arithmetic, but the compiler fuses a
+    few multiply-adds differently (1,643 against 1,640 DFMA at N = 200 on sm_90), so equal to
+    round-off, not bit for bit: the same statuses, steps, rejections and Newton iterations, mu_s
+    and mu_s_time within 1e-11 relative (2e-12 seen on the H100, 300 members with the contact
+    front). The 11 members of the test above, default law with the contact front, N = 200 and 40."""
+    values = {"eccentricity": np.linspace(-0.3, 0.3, 11), "normal_force": np.geomspace(300.0, 3000.0, 11)}
+    monkeypatch.delenv("WARPFRIC_TEAM_BLOCK_MEMBERS", raising=False)
+    for nodes in (200, 40):
+        monkeypatch.delenv("WARPFRIC_TEAM_SHARED_WORK", raising=False)
+        shared = run(values, nodes=nodes, rtol=1e-5, fronts=wf.Fronts())
+        monkeypatch.setenv("WARPFRIC_TEAM_SHARED_WORK", "0")
+        global_ = run(values, nodes=nodes, rtol=1e-5, fronts=wf.Fronts())
+        assert global_.attrs["work_memory"] == "global"
+        if shared.attrs["work_memory"] != "shared":
+            pytest.skip(f"the work array of N = {nodes} does not fit this GPU's shared memory")
+        assert (shared.status.values == 0).all()
+        for name, var in global_.data_vars.items():
+            if var.dtype.kind in "iu":
+                np.testing.assert_array_equal(shared[name].values, var.values, err_msg=f"N = {nodes}: {name}")
+        for name in ("mu_s", "mu_s_time"):
+            np.testing.assert_allclose(shared[name].values, global_[name].values, rtol=1e-11, atol=0,
+                                       err_msg=f"N = {nodes}: {name}")

@@ -50,6 +50,7 @@ class EngineResult:
     lanes: int  # threads per member (1: the thread-per-member kernel; > 1: the cooperative kernel)
     team_exchange: str  # how a team's lanes exchange values (kernels/team.py; "none" for one lane)
     block_members: int  # members per thread block of the cooperative kernel, in step at each attempt (1: one)
+    work_memory: str  # where the integrator's work array lives: "shared" (the blocked kernel's, where it fits) or "global"
     passes: int  # integration passes (2 with the velocity front, else 1)
 
 
@@ -421,7 +422,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     parameters (name -> (member,) float64); a progress line on stderr when show_progress."""
     import warp as wp
 
-    from warpfric.kernels.integrator import block_members_for, block_threads, get_integrator
+    from warpfric.kernels.integrator import block_threads, get_integrator, team_layout
     from warpfric.kernels.types import FRONT_EVENTS, G_GATE, N_COMPONENTS, S_MAX, S_RATIO1, IntegratorState, allocate
 
     n_members = values["normal_force"].shape[0]
@@ -435,9 +436,14 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     note = slower_float32(solver, device)
     if note is not None:
         warnings.warn(note, stacklevel=3)
+    cuda = str(device).startswith("cuda")
+    gpu = wp.get_device(device) if cuda else None
+    # members per block and the work array's memory (kernels/integrator.py team_layout)
+    layout = team_layout(lanes, n, n_members, cuda, gpu.sm_count if cuda else 1,
+                         gpu.max_shared_memory_per_block if cuda else 0)
     t_build = time.perf_counter()
-    kern = get_integrator(solver.dtype, model, lanes, solver.method, cuda=str(device).startswith("cuda"),
-                          observed=observer_set(fronts))
+    kern = get_integrator(solver.dtype, model, lanes, solver.method, cuda=cuda, observed=observer_set(fronts),
+                          shared_work=layout.shared_work)
     with cpu_blocks(team):  # compile or load now, so that it is timed apart
         block_dim = block_threads(lanes, kern["blocked"])
         wp.load_module(kern["integrate"].module, device=device, block_dim=block_dim if team else None)
@@ -445,9 +451,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         for layout_kernel in kern["layout"].values():
             wp.load_module(layout_kernel.module, device=device)
     kernel_build_s = time.perf_counter() - t_build
-    block_members = 1  # members per block (kernels/integrator.py block_members_for)
-    if kern["blocked"]:
-        block_members = block_members_for(n_members, wp.get_device(device).sm_count, kern["block_members_requested"])
+    block_members = layout.block_members
     blocks = -(-n_members // block_members)  # of a team kernel's launch
     ft = kern["ft"]
     params_np = member_params(values)
@@ -460,8 +464,10 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     with wp.ScopedDevice(device):
         arrays = allocate(ft, params_np, n, stress_gate, fronts is not None,
                           record.times if record is not None else None, len(record.members) if record is not None else 0,
-                          member_major=team, method=solver.method, strength=strength)
-        per_member = [arrays.params, arrays.state, arrays.stages, arrays.work]  # not the (.., 1, 1) placeholders
+                          member_major=team, method=solver.method, strength=strength,
+                          global_work=layout.shared_work is None)
+        per_member = [arrays.params, arrays.state, arrays.stages]  # not the (.., 1, 1) placeholders
+        per_member += [arrays.work] if layout.shared_work is None else []
         per_member += [arrays.gates, arrays.yield_time] if stress_gate else []
         per_member += [arrays.arrival, arrays.arrival_error] if fronts is not None else []
         per_member += [arrays.strength] if strength else []
@@ -557,6 +563,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             event=event, record=arrays.record.numpy() if record is not None else None,
             kernel_build_s=kernel_build_s, device_bytes_per_member=device_bytes_per_member, lanes=lanes,
             team_exchange=kern["exchange"], block_members=block_members, passes=n_passes,
+            work_memory="global" if layout.shared_work is None else "shared",
         )
         wp.synchronize_device(device)
     return result
