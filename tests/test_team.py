@@ -236,12 +236,15 @@ def test_work_array_memory_choice(monkeypatch):
 @pytest.mark.skipif(not DEVICE.startswith("cuda"), reason="warp shuffles, and so several members per block, need a GPU")
 def test_members_in_one_block_give_the_outputs_of_one_member_per_block(monkeypatch):
     """Members that share a thread block wait for each other at every attempt; nothing else changes,
-    so every output equals, bit for bit, the one-member-per-block kernel's: 11 members in blocks of
-    8 (WARPFRIC_TEAM_BLOCK_MEMBERS: one block of 8 and one of 3 with 5 idle warps; 7 at N = 200,
-    where the shared work array holds 7 members at most), the default law with the contact front,
-    at N = 200 (32 lanes) and N = 40 (20 lanes: each warp's last 12 threads idle, and the team's
-    reductions are trees, not butterflies). The shared work array's member stride follows the
-    block's members (1 against 7 or 9), so this also checks that the stride changes nothing. The
+    so every output equals, bit for bit, that of one member per block: 11 members in blocks of 8
+    (WARPFRIC_TEAM_BLOCK_MEMBERS: one block of 8 and one of 3 with 5 idle warps; 7 at N = 200, where
+    the shared work array holds 7 members at most), the default law with the contact front, at
+    N = 200 (32 lanes) and N = 40 (20 lanes: each warp's last 12 threads idle, and the team's
+    reductions are trees, not butterflies). With the work in shared memory (the default) against
+    the automatic choice for 11 members, one member per block, whose shared work array has the member
+    stride 1 instead of 7 or 9: so the stride changes nothing either. With the work in global memory
+    (WARPFRIC_TEAM_SHARED_WORK=0) against the layout of a block per member
+    (WARPFRIC_TEAM_BLOCK_MEMBERS=1: one team of lanes a block, its work in global memory). The
     automatic choice is min(8, ceil(members / SMs)): one member more than the GPU has SMs runs two
     per block."""
     values = {"eccentricity": np.linspace(-0.3, 0.3, 11), "normal_force": np.geomspace(300.0, 3000.0, 11)}
@@ -251,18 +254,30 @@ def test_members_in_one_block_give_the_outputs_of_one_member_per_block(monkeypat
     many = {"eccentricity": np.linspace(-0.3, 0.3, sms + 1)}
     assert run(many, nodes=40, rtol=1e-4).attrs["block_members"] == 2
     big_blocks = {200: 7, 40: 8} if wp.get_device(DEVICE).max_shared_memory_per_block >= 232_448 else {}
+
+    def outputs(nodes, block_members, shared_work):
+        for name, value in (("WARPFRIC_TEAM_BLOCK_MEMBERS", block_members), ("WARPFRIC_TEAM_SHARED_WORK", shared_work)):
+            if value is None:
+                monkeypatch.delenv(name, raising=False)
+            else:
+                monkeypatch.setenv(name, value)
+        return run(values, nodes=nodes, rtol=1e-5, fronts=wf.Fronts())
+
     for nodes, lanes in ((200, 32), (40, 20)):
-        monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "8")
-        shared = run(values, nodes=nodes, rtol=1e-5, fronts=wf.Fronts())
-        monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "1")
-        alone = run(values, nodes=nodes, rtol=1e-5, fronts=wf.Fronts())
-        assert shared.attrs["lanes"] == alone.attrs["lanes"] == lanes
-        assert shared.attrs["block_members"] == big_blocks.get(nodes, shared.attrs["block_members"])
-        assert alone.attrs["block_members"] == 1
-        assert shared.attrs["work_memory"] == alone.attrs["work_memory"]
-        assert (alone.status.values == 0).all()
-        for name, var in alone.data_vars.items():
-            np.testing.assert_array_equal(shared[name].values, var.values, err_msg=f"N = {nodes}: {name}")
+        for shared_work in (None, "0"):
+            together = outputs(nodes, "8", shared_work)
+            alone = outputs(nodes, None if shared_work is None else "1", shared_work)
+            assert together.attrs["lanes"] == alone.attrs["lanes"] == lanes
+            assert together.attrs["work_memory"] == alone.attrs["work_memory"]
+            if shared_work is None:
+                assert together.attrs["block_members"] == big_blocks.get(nodes, together.attrs["block_members"])
+            else:
+                assert together.attrs["work_memory"] == "global" and together.attrs["block_members"] == 8
+            assert alone.attrs["block_members"] == 1
+            assert (alone.status.values == 0).all()
+            for name, var in alone.data_vars.items():
+                np.testing.assert_array_equal(together[name].values, var.values,
+                                              err_msg=f"N = {nodes}, shared work {shared_work}: {name}")
 
 
 @pytest.mark.skipif(not DEVICE.startswith("cuda"), reason="the blocked kernel's shared work array needs a GPU")
