@@ -38,9 +38,10 @@ import numpy as np
 
 import warpfric as wf
 
-def reference_path(gate: str) -> str:
-    """The gate-less reference keeps its original name (made before the gate existed)."""
-    suffix = "" if gate == "none" else f"_{gate}"
+def reference_path(gate: str, nodes: int = 200) -> str:
+    """The gate-less reference keeps its original name (made before the gate existed); N other than
+    200 adds _n{N}."""
+    suffix = ("" if gate == "none" else f"_{gate}") + ("" if nodes == 200 else f"_n{nodes}")
     return str(Path(__file__).with_name("reference") / f"bench_members_mu_s{suffix}.json")
 
 
@@ -141,7 +142,7 @@ def main(argv=None):
     device = args.device or wf.default_device()
     n_check = 16
     model = wf.Model(relaxation_gate=args.relaxation_gate)
-    args.reference = args.reference or reference_path(args.relaxation_gate)
+    args.reference = args.reference or reference_path(args.relaxation_gate, args.nodes)
 
     if args.make_reference:
         t0 = time.perf_counter()
