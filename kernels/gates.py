@@ -16,7 +16,7 @@ from .controller import STEP_AT_SWITCH
 from .model_terms import disc_velocity_at
 from .reductions import crossing_time_quadratic
 from .types import (
-    C_PHI, C_TAU, C_V, EV_CONTACT, G_GATE, G_MARGIN, G_MARGIN_OLD, G_SLIDE, W_DMARGIN, W_GATE_END, W_MARGIN, IntegratorState,
+    C_PHI, C_TAU, C_V, EV_CONTACT, G_GATE, G_MARGIN, G_MARGIN_OLD, G_SLIDE, G_MARGIN_END, G_DMARGIN, G_GATE_END, IntegratorState,
     MemberParams, OutputSettings, SolverSettings,
 )
 
@@ -84,11 +84,12 @@ def make_switch_test(ft, model, terms, team, node_sliding):
 
     @wp.func
     def test_switch(
-        c: Coeffs, settings: SolverSettings, gates: array3, work: array3, i: int, m: int, fr: Friction, sigma: ft,
+        c: Coeffs, settings: SolverSettings, gates: array3, i: int, m: int, fr: Friction, sigma: ft,
         velocity: ft, v_disc: ft, h: ft, test: SwitchTest,
     ):
-        """At the end of a step of size h, node i: store the yield margin z1 (work[W_MARGIN]) and its
-        slope with respect to the gate (work[W_DMARGIN]), and fold the node into the step's switch test.
+        """At the end of a step of size h, node i: store the yield margin z1 (gates[G_MARGIN_END]) and
+        its slope with respect to the gate (gates[G_DMARGIN]), and fold the node into the step's switch
+        test.
 
         Where z1 has the other sign than the gate held, the switch happened inside the step, at the
         fraction theta = z0/(z0 - z1) (linear in time); the relaxation then ran with the wrong gate
@@ -97,7 +98,7 @@ def make_switch_test(ft, model, terms, team, node_sliding):
         ends where that error is 0.5."""
         rtol = ft(wp.min(settings.switch_rtol, wp.float64(1.0e30)))
         z1 = yield_margin(c, fr.stress, fr.area)
-        work[W_MARGIN, i, m] = z1
+        gates[G_MARGIN_END, i, m] = z1
         # d(dz/dt)/d(gate) at the end of the step: the gate enters the rates of tau_el and phi (and A
         # through phi); the pad's rates do not depend on it
         slip = v_disc - c.kif * velocity
@@ -106,7 +107,7 @@ def make_switch_test(ft, model, terms, team, node_sliding):
         dtau_dgate = -fr.elastic_stress * relax
         if wp.static(viscous):
             dtau_dgate += c.eta_vstar * wp.sign(slip) * wp.log(ft(1.0) + wp.abs(slip) / c.vstar) * darea_dgate
-        work[W_DMARGIN, i, m] = wp.sign(fr.stress) * dtau_dgate - c.tau_c * darea_dgate
+        gates[G_DMARGIN, i, m] = wp.sign(fr.stress) * dtau_dgate - c.tau_c * darea_dgate
         open_now = ft(0.0)
         if z1 > ft(0.0):
             open_now = ft(1.0)
@@ -266,7 +267,7 @@ def make_gate_update(ft, terms, team):
     @wp.func
     def switch_gates(
         c: Coeffs, p: MemberParams, st: IntegratorState, outputs: OutputSettings, m: int, n: int, state: array3,
-        K: array4, slot: int, gates: array3, work: array3, t_old: wp.float64, t_new: wp.float64,
+        K: array4, slot: int, gates: array3, t_old: wp.float64, t_new: wp.float64,
         backward_euler: int, yield_time: wp.array2d(dtype=wp.float64), arrival: wp.array3d(dtype=wp.float64),
         arrival_error: wp.array3d(dtype=wp.float64),
     ):
@@ -278,7 +279,7 @@ def make_gate_update(ft, terms, team):
         A closed or open node takes the Heaviside theta(z1), unless it crossed the yield surface
         z = 0 into a side whose field points back (Filippov sliding): the margin's rate is affine in
         the gate, dz/dt(g) = r_obs + (g - g_old)*dr, r_obs seen over the step and dr = d(dz/dt)/dg
-        at its end (work[W_DMARGIN]); with dr < 0 and the far side's rate of opposite sign the node
+        at its end (gates[G_DMARGIN]); with dr < 0 and the far side's rate of opposite sign the node
         slides. A sliding node's gate is solved in every stage from |tau_f| = tau_c*A
         (interface_friction), pinned at 1 or 0 where that cannot hold; the node keeps that implicit
         regime for the rest of the run. With the contact front (outputs.contact_front), a node whose
@@ -289,7 +290,7 @@ def make_gate_update(ft, terms, team):
         h = ft(t_new - t_old)
         switches = int(0)
         for i in range(c.first_node, c.end_node):
-            z1 = work[W_MARGIN, i, m]
+            z1 = gates[G_MARGIN_END, i, m]
             z0 = gates[G_MARGIN, i, m]
             sliding = gates[G_SLIDE, i, m]
             gate = gates[G_GATE, i, m]
@@ -299,13 +300,13 @@ def make_gate_update(ft, terms, team):
                 # a sliding node stays in the implicit regime: where |tau_f| = tau_c*A cannot hold, its
                 # solved gate is pinned at 1 (open) or 0 (closed), which is the Heaviside value; leaving
                 # the regime would only trade the implicit gate for repeated located switches
-                gate = work[W_GATE_END, i, m]  # the last stage's solved gate: K[slot] is consistent with it
+                gate = gates[G_GATE_END, i, m]  # the last stage's solved gate: K[slot] is consistent with it
                 new_gate = gate
                 new_sliding = ft(1.0)
             else:
                 if z1 > ft(0.0):
                     new_gate = ft(1.0)
-                dr = work[W_DMARGIN, i, m]
+                dr = gates[G_DMARGIN, i, m]
                 if dr < ft(0.0) and h > ft(0.0) and new_gate != gate:
                     r_obs = (z1 - z0) / h
                     rate_far = r_obs + (ft(1.0) - ft(2.0) * gate) * dr  # the rate with the other gate value

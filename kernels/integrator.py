@@ -108,11 +108,13 @@ def block_members_for(n_members: int, sm_count: int, requested: int | None = Non
 
 # The blocked kernel's work array (kernels/types.py: the scratch of one attempted step, nothing in it
 # outlives the attempt) is kept in the block's shared memory where it fits (docs/performance.md,
-# "The work array in shared memory"): (N_WORK, N, stride) float64, member fastest, with an odd
+# "The work array in shared memory"): (N_WORK = 15, N, stride) float64, member fastest, with an odd
 # member stride >= the block's members, so that the lanes of a warp, each on its own nodes, fall
 # into different banks (at most two lanes a bank at N = 200 and N = 40). Every stride gives the
 # same outputs bit for bit (tests/test_team.py); the global work array's do not: the compiler
-# fuses a few multiply-adds differently (round-off, within 2e-12 of mu_s on the H100).
+# fuses a few multiply-adds differently (round-off, within 2e-12 of mu_s on the H100). The stress
+# gate's end-of-step margins and gate, which only the step's acceptance reads, are in ``gates``
+# (kernels/types.py), so that 8 members' work fits at N = 200.
 SHARED_WORK_RESERVE = 4096  # bytes of a block's opt-in shared memory left to the kernel's static shared memory
 
 
@@ -126,8 +128,8 @@ def shared_work_stride(n_nodes: int, block_members: int, max_shared: int) -> int
 
 def shared_work_members(n_nodes: int, max_shared: int) -> int:
     """The most members of a block whose work is in shared memory: MAX_BLOCK_MEMBERS (8) where the
-    stride 9 fits, 7 where only 7 does (a member fewer per block: on the H100, 176 < N <= 226), else
-    0: the work stays in global memory (N > 226 on the H100). Fewer members per block than 7 were not
+    stride 9 fits (N <= 211 on the H100), 7 where only 7 does (a member fewer per block: 211 < N <=
+    271), else 0: the work stays in global memory (N > 271). Fewer members per block than 7 were not
     measured, so they are not chosen."""
     if shared_work_stride(n_nodes, MAX_BLOCK_MEMBERS, max_shared):
         return MAX_BLOCK_MEMBERS
@@ -346,7 +348,7 @@ def make_acceptance(ft, model, method, stages):
             advance_state(c, m, n, state, K, s1, s2, s3, ft(step.h), restart)
         if wp.static(stress_gate):
             switches_before = st.gate_switches
-            st = switch_gates(c, p, st, outputs, m, n, state, K, s3, gates, work, t, step.t_new, restart, yield_time,
+            st = switch_gates(c, p, st, outputs, m, n, state, K, s3, gates, t, step.t_new, restart, yield_time,
                               arrival, arrival_error)
             if restart == 0:
                 st = after_accept(st, settings, switches_before, res.switch_test, step.t_new, step.clipped)

@@ -34,12 +34,12 @@ from .types import (
     C_TAU,
     C_U,
     C_V,
+    G_GATE_END,
     W_C1,
     W_C2,
     W_CONTACT,
     W_CP,
     W_DIAG,
-    W_GATE_END,
     W_R0,
     W_R1,
     W_R2,
@@ -789,9 +789,9 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
             sigma = ns.value
             if end_of_step == 1:
                 work[W_CONTACT, i, m] = fr.contact  # at the end of the step: fronts skip lifted-off nodes
-                work[W_GATE_END, i, m] = fr.gate
                 if wp.static(stress_gate):
-                    test = test_switch(c, settings, gates, work, i, m, fr, sigma, vel, v_disc, h, test)
+                    gates[G_GATE_END, i, m] = fr.gate
+                    test = test_switch(c, settings, gates, i, m, fr, sigma, vel, v_disc, h, test)
             K[slot, C_U, i, m] = vel
             if wp.static(inertia):
                 K[slot, C_V, i, m] = (vel - work[W_ZV, i, m]) / g

@@ -16,7 +16,7 @@ states             (member,)                           struct IntegratorState (p
 state              (component, node, member)           ft     y = (u m, u_t m/s, tau_el Pa, phi s) at time t
 stages             (stage_slot, component, node, mbr)  ft     stage derivatives K = f(Y) (per s); FSAL slot
 work               (work_slot, node, member)           ft     stage constants, Newton iterate, Thomas rows
-gates              (gate_slot, node, member)           ft     stress gate: gate (1), margin (Pa), sliding (1);
+gates              (gate_slot, node, member)           ft     stress gate: gate (1), margin (Pa), sliding (1), ...;
                                                               (gate_slot, 1, 1) for the other laws
 yield_time         (node, member)                      f64    first gate opening (s); (1, 1) unless stress gate
 arrival            (front_event, node, member)         f64    front arrival time t_a of each event (FRONT_EVENTS)
@@ -39,20 +39,24 @@ import warp as wp
 # state components (first index of ``state``, second of ``stages``)
 C_U, C_V, C_TAU, C_PHI = 0, 1, 2, 3
 N_COMPONENTS = 4
-# work slots (first index of ``work``): the stage constants z (in the order of the components), the
-# Newton iterate of the pad velocity, the Thomas sweep's rows (cp, three right-hand sides), the two
-# border rows of the plate balance, the Jacobian diagonal (velocity error filter), and the
-# end-of-step margin, its gate slope, contact and solved gate of the stress gate; last, the
-# cooperative kernel's two coupling columns of a lane's interior rows (kernels/team.py)
-W_ZU, W_ZV, W_ZT, W_ZP, W_V, W_CP, W_R0, W_R1, W_R2, W_C1, W_C2, W_DIAG, W_MARGIN, W_DMARGIN, W_CONTACT, W_GATE_END = range(16)
-W_RL, W_RR = 16, 17
-N_WORK = 18
+# work slots (first index of ``work``: the scratch of one attempted step, which the blocked GPU
+# kernel keeps in shared memory, kernels/integrator.py team_layout): the stage constants z (in the
+# order of the components), the Newton iterate of the pad velocity, the Thomas sweep's rows (cp,
+# three right-hand sides), the two border rows of the plate balance, the Jacobian diagonal
+# (velocity error filter), the end-of-step contact; last, the cooperative kernel's two coupling
+# columns of a lane's interior rows (kernels/team.py)
+W_ZU, W_ZV, W_ZT, W_ZP, W_V, W_CP, W_R0, W_R1, W_R2, W_C1, W_C2, W_DIAG, W_CONTACT = range(13)
+W_RL, W_RR = 13, 14
+N_WORK = 15
 # gate slots (stress gate, first index of ``gates``): the gate held over the next step (0 closed,
 # 1 open; for a sliding node the start of its implicit solve), the yield margin |tau_f| - tau_c*A
-# (Pa) at the last accepted point, the sliding flag (1: solved on the yield surface each stage), and
-# the margin at the accepted point before (Pa; the contact front's quadratic crossing)
-G_GATE, G_MARGIN, G_SLIDE, G_MARGIN_OLD = 0, 1, 2, 3
-N_GATE = 4
+# (Pa) at the last accepted point, the sliding flag (1: solved on the yield surface each stage), the
+# margin at the accepted point before (Pa; the contact front's quadratic crossing); then what an
+# attempted step leaves for its acceptance: the margin at its end (Pa), that margin's slope with
+# respect to the gate (Pa per unit gate) and the last stage's solved gate (kept out of ``work`` so
+# that the shared work array is smaller)
+G_GATE, G_MARGIN, G_SLIDE, G_MARGIN_OLD, G_MARGIN_END, G_DMARGIN, G_GATE_END = range(7)
+N_GATE = 7
 # front events (first index of ``arrival``; docs/model.md, "Fronts"): each node's stick-to-slip
 # transition (its first gate opening after the disc starts; stress gate only), its peak of
 # tau_f/sigma_n (its own static friction), and the threshold crossing of the pad velocity

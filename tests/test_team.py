@@ -199,32 +199,36 @@ def test_members_per_block_choice(monkeypatch):
 
 def test_work_array_memory_choice(monkeypatch):
     """The blocked kernel keeps its work array in the block's shared memory where a block of 7
-    members' work fits, (N_WORK = 18, N, stride) float64 with the smallest odd stride >= the block's
-    members: on an H100 (232,448 bytes a block, 4,096 kept back) 9 fits to N = 176 (8 members), 7 to
-    N = 226 (7 members a block at most), else the work stays in global memory with 8 members a
+    members' work fits, (N_WORK = 15, N, stride) float64 with the smallest odd stride >= the block's
+    members: on an H100 (232,448 bytes a block, 4,096 kept back) 9 fits to N = 211 (8 members), 7 to
+    N = 271 (7 members a block at most), else the work stays in global memory with 8 members a
     block. The choice does not depend on the member count (a member's outputs do not depend on its
     ensemble), only the stride does, and every stride gives the same outputs (the GPU test below).
     WARPFRIC_TEAM_SHARED_WORK=0 keeps the work in global memory; other values are refused."""
     from warpfric.kernels.integrator import shared_work_members, shared_work_stride, team_layout
+    from warpfric.kernels.types import N_WORK
 
     h100 = 232_448
-    assert 18 * 176 * 9 * 8 <= h100 - 4096 < 18 * 177 * 9 * 8 and 18 * 226 * 7 * 8 <= h100 - 4096 < 18 * 227 * 7 * 8
-    assert [shared_work_stride(200, k, h100) for k in range(1, 9)] == [1, 3, 3, 5, 5, 7, 7, 0]
-    assert [shared_work_stride(40, k, h100) for k in range(1, 9)] == [1, 3, 3, 5, 5, 7, 7, 9]
-    assert shared_work_members(176, h100) == 8 and shared_work_members(177, h100) == 7
-    assert shared_work_members(226, h100) == 7 and shared_work_members(227, h100) == 0
+    assert N_WORK == 15
+    assert 15 * 211 * 9 * 8 <= h100 - 4096 < 15 * 212 * 9 * 8 and 15 * 271 * 7 * 8 <= h100 - 4096 < 15 * 272 * 7 * 8
+    assert [shared_work_stride(200, k, h100) for k in range(1, 9)] == [1, 3, 3, 5, 5, 7, 7, 9]
+    assert [shared_work_stride(250, k, h100) for k in range(1, 9)] == [1, 3, 3, 5, 5, 7, 7, 0]
+    assert shared_work_members(211, h100) == 8 and shared_work_members(212, h100) == 7
+    assert shared_work_members(271, h100) == 7 and shared_work_members(272, h100) == 0
     monkeypatch.delenv("WARPFRIC_TEAM_BLOCK_MEMBERS", raising=False)
     monkeypatch.delenv("WARPFRIC_TEAM_EXCHANGE", raising=False)
-    layouts = {(n, m): team_layout(32, n, m, True, 132, h100) for n in (200, 300) for m in (1, 300, 1000, 10_000)}
-    assert [layouts[200, m] for m in (1, 300, 1000, 10_000)] == [(True, 1, (200, 1)), (True, 3, (200, 3)),
-                                                                  (True, 7, (200, 7)), (True, 7, (200, 7))]
-    assert [layouts[300, m] for m in (1, 300, 1000, 10_000)] == [(True, 1, None), (True, 3, None), (True, 8, None),
-                                                                  (True, 8, None)]
+    members = (1, 300, 1000, 10_000)
+    assert [team_layout(32, 200, m, True, 132, h100) for m in members] == [
+        (True, 1, (200, 1)), (True, 3, (200, 3)), (True, 8, (200, 9)), (True, 8, (200, 9))]
+    assert [team_layout(32, 250, m, True, 132, h100) for m in members] == [
+        (True, 1, (250, 1)), (True, 3, (250, 3)), (True, 7, (250, 7)), (True, 7, (250, 7))]
+    assert [team_layout(32, 300, m, True, 132, h100) for m in members] == [
+        (True, 1, None), (True, 3, None), (True, 8, None), (True, 8, None)]
     assert team_layout(20, 40, 10_000, True, 132, h100) == (True, 8, (40, 9))
     assert team_layout(32, 200, 10_000, False) == (False, 1, None)  # the CPU: tiles, a block per member
     assert team_layout(1, 200, 10_000, True, 132, h100) == (False, 1, None)  # the thread-per-member kernel
     monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "8")  # a request above what fits gets what fits
-    assert team_layout(32, 200, 10_000, True, 132, h100) == (True, 7, (200, 7))
+    assert team_layout(32, 250, 10_000, True, 132, h100) == (True, 7, (250, 7))
     monkeypatch.delenv("WARPFRIC_TEAM_BLOCK_MEMBERS")
     monkeypatch.setenv("WARPFRIC_TEAM_SHARED_WORK", "0")
     assert team_layout(32, 200, 10_000, True, 132, h100) == (True, 8, None)
@@ -237,12 +241,11 @@ def test_work_array_memory_choice(monkeypatch):
 def test_members_in_one_block_give_the_outputs_of_one_member_per_block(monkeypatch):
     """Members that share a thread block wait for each other at every attempt; nothing else changes,
     so every output equals, bit for bit, that of one member per block: 11 members in blocks of 8
-    (WARPFRIC_TEAM_BLOCK_MEMBERS: one block of 8 and one of 3 with 5 idle warps; 7 at N = 200, where
-    the shared work array holds 7 members at most), the default law with the contact front, at
+    (WARPFRIC_TEAM_BLOCK_MEMBERS: one block of 8 and one of 3 with 5 idle warps), the default law with the contact front, at
     N = 200 (32 lanes) and N = 40 (20 lanes: each warp's last 12 threads idle, and the team's
     reductions are trees, not butterflies). With the work in shared memory (the default) against
     the automatic choice for 11 members, one member per block, whose shared work array has the member
-    stride 1 instead of 7 or 9: so the stride changes nothing either. With the work in global memory
+    stride 1 instead of 9: so the stride changes nothing either. With the work in global memory
     (WARPFRIC_TEAM_SHARED_WORK=0) against the layout of a block per member
     (WARPFRIC_TEAM_BLOCK_MEMBERS=1: one team of lanes a block, its work in global memory). The
     automatic choice is min(8, ceil(members / SMs)): one member more than the GPU has SMs runs two
@@ -253,7 +256,7 @@ def test_members_in_one_block_give_the_outputs_of_one_member_per_block(monkeypat
     sms = wp.get_device(DEVICE).sm_count
     many = {"eccentricity": np.linspace(-0.3, 0.3, sms + 1)}
     assert run(many, nodes=40, rtol=1e-4).attrs["block_members"] == 2
-    big_blocks = {200: 7, 40: 8} if wp.get_device(DEVICE).max_shared_memory_per_block >= 232_448 else {}
+    big_blocks = {200: 8, 40: 8} if wp.get_device(DEVICE).max_shared_memory_per_block >= 232_448 else {}
 
     def outputs(nodes, block_members, shared_work):
         for name, value in (("WARPFRIC_TEAM_BLOCK_MEMBERS", block_members), ("WARPFRIC_TEAM_SHARED_WORK", shared_work)):
