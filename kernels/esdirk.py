@@ -29,7 +29,7 @@ import math
 
 import warp as wp
 
-from .types import C_PHI, C_TAU, C_U, C_V, N_COMPONENTS, W_DIAG, W_V, MemberParams, SolverSettings
+from .types import C_PHI, C_TAU, C_U, C_V, E_DIAG, N_COMPONENTS, W_V, MemberParams, SolverSettings
 
 GAMMA = 1.0 - math.sqrt(2.0) / 2.0
 W_TRB = math.sqrt(2.0) / 4.0
@@ -139,15 +139,16 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         barrier()
 
     @wp.func
-    def fold_error(c: Coeffs, work: array3, comp: int, i: int, m: int, e: ft, y: ft, y_new: ft, g: ft, rtol: ft, err: ft):
+    def fold_error(c: Coeffs, step_end: array3, comp: int, i: int, m: int, e: ft, y: ft, y_new: ft, g: ft, rtol: ft,
+                   err: ft):
         """Fold the local error estimate e of component comp at node i (from y to y_new; g = gamma*h)
         into the running maximum err of |e| / (rtol*(scale + max(|y|, |y_new|))), scale the
-        component's natural scale; the velocity's e filtered by min(1, |rho H / (g * diag)|); 1e30
-        where e is not finite."""
+        component's natural scale; the velocity's e filtered by min(1, |rho H / (g * diag)|) (diag:
+        step_end[E_DIAG]); 1e30 where e is not finite."""
         scale = c.u_scale
         if comp == C_V:
             scale = c.v_scale
-            e = e * wp.min(ft(1.0), wp.abs(c.rhoH / (g * work[W_DIAG, i, m])))
+            e = e * wp.min(ft(1.0), wp.abs(c.rhoH / (g * step_end[E_DIAG, i, m])))
         if comp == C_TAU:
             scale = c.tau_scale
         if comp == C_PHI:
@@ -160,7 +161,7 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
 
     @wp.func
     def error_norm(
-        c: Coeffs, s: SolverSettings, m: int, n: int, state: array3, K: array4, work: array3,
+        c: Coeffs, s: SolverSettings, m: int, n: int, state: array3, K: array4, step_end: array3,
         s1: int, s2: int, s3: int, h: ft,
     ):
         """Max over nodes and differential components of |h*sum (b - b_hat) K| / (rtol*(scale + |y|)).
@@ -179,7 +180,7 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
                     k3 = K[s3, comp, i, m]
                     y = state[comp, i, m]
                     y_new = y + solution_increment(h, k1, k2, k3)
-                    err = fold_error(c, work, comp, i, m, error_increment(h, k1, k2, k3), y, y_new, g, rtol, err)
+                    err = fold_error(c, step_end, comp, i, m, error_increment(h, k1, k2, k3), y, y_new, g, rtol, err)
         return team_max(err)
 
     @wp.func
@@ -239,7 +240,7 @@ def make_tr_bdf2_steps(ft, terms, newton, StepResult, arrays):
     @wp.func
     def implicit_step(
         c: Coeffs, p: MemberParams, settings: SolverSettings, m: int, n: int, state: array3, K: array4,
-        work: array3, gates: array3, s1: int, s2: int, s3: int, t: wp.float64, h: wp.float64,
+        work: array3, gates: array3, step_end: array3, s1: int, s2: int, s3: int, t: wp.float64, h: wp.float64,
         t_new: wp.float64, delta0: ft, tilt: ft, backward_euler: int, newton_curvature: ft,
     ):
         """One step of size h from t (ending at t_new). TR-BDF2 (backward_euler = 0): stage 2
@@ -278,21 +279,21 @@ def make_tr_bdf2_steps(ft, terms, newton, StepResult, arrays):
                 prepare_stage(c, m, n, state, K, work, ft(h), ft(GAMMA), s1, ft(0.0), s1, 1, ft(0.0))
             else:
                 prepare_stage(c, m, n, state, K, work, ft(h), ft(W_TRB), s1, ft(W_TRB), s2, 2, ft(EXTRAPOLATE_STAGE3))
-            ok, d0, a, iters, bad, curvature = newton_solve(c, p, settings, m, n, work, gates, g, t_stage, t, d0, a,
-                                                            curvature)
+            ok, d0, a, iters, bad, curvature = newton_solve(c, p, settings, m, n, work, gates, step_end, g, t_stage, t,
+                                                            d0, a, curvature)
             iterations = iterations + iters
             if ok != 1:
                 break
             end_of_step = int(0)
             if last:
                 end_of_step = 1
-            sums, test = stage_derivatives(c, p, settings, m, n, work, gates, K, slot, g, t_stage, t, d0, a, ft(h),
+            sums, test = stage_derivatives(c, p, settings, m, n, work, gates, step_end, K, slot, g, t_stage, t, d0, a, ft(h),
                                            end_of_step)
             if last:
                 res.sums = sums
                 res.switch_test = test
         if ok == 1 and backward_euler == 0:  # TR-BDF2 only: backward Euler has no error estimate
-            res.error = wp.float64(error_norm(c, settings, m, n, state, K, work, s1, s2, s3, ft(h)))
+            res.error = wp.float64(error_norm(c, settings, m, n, state, K, step_end, s1, s2, s3, ft(h)))
         res.ok = ok
         res.iterations = iterations
         res.non_finite = bad
@@ -369,7 +370,8 @@ def make_esdirk4_arrays(ft, model, terms, team, fold_error):
         barrier()
 
     @wp.func
-    def error_norm4(c: Coeffs, s: SolverSettings, m: int, n: int, state: array3, K: array4, work: array3, s1: int, h: ft):
+    def error_norm4(c: Coeffs, s: SolverSettings, m: int, n: int, state: array3, K: array4, step_end: array3, s1: int,
+                    h: ft):
         """As error_norm (max norm, natural scales, the velocity's estimate filtered by the diagonal of
         (I - gamma*h*J)^-1) with h*sum (b - b_hat) K over the six stages."""
         g = ft(E4_GAMMA) * h
@@ -387,7 +389,7 @@ def make_esdirk4_arrays(ft, model, terms, team, fold_error):
                         inc += b[j] * k
                         e += d[j] * k
                     y = state[comp, i, m]
-                    err = fold_error(c, work, comp, i, m, h * e, y, y + h * inc, g, rtol, err)
+                    err = fold_error(c, step_end, comp, i, m, h * e, y, y + h * inc, g, rtol, err)
         return team_max(err)
 
     @wp.func
@@ -425,7 +427,8 @@ def make_esdirk4(ft, model, terms, newton, gates, team, StepResult, fold_error):
     @wp.func
     def esdirk4_step(
         c: Coeffs, p: MemberParams, settings: SolverSettings, m: int, n: int, state: array3, K: array4,
-        work: array3, gates: array3, s1: int, t: wp.float64, h: wp.float64, t_new: wp.float64, delta0: ft, tilt: ft,
+        work: array3, gates: array3, step_end: array3, s1: int, t: wp.float64, h: wp.float64, t_new: wp.float64,
+        delta0: ft, tilt: ft,
     ):
         """One ESDIRK4 step of size h from t (ending at t_new): stages 1..5 (implicit, gamma = 1/4)
         into K[(s1 + i) % 6], the gate-switch test at the end of the last one, and the error norm."""
@@ -445,17 +448,18 @@ def make_esdirk4(ft, model, terms, newton, gates, team, StepResult, fold_error):
                 t_stage = t + e4_abscissa(i) * h
                 end = 0
             prepare_stage4(c, m, n, state, K, work, hf, s1, i)
-            ok, d0, a, iters, bad, _curvature = newton_solve(c, p, settings, m, n, work, gates, g, t_stage, t, d0, a,
-                                                             ft(0.0))
+            ok, d0, a, iters, bad, _curvature = newton_solve(c, p, settings, m, n, work, gates, step_end, g, t_stage, t,
+                                                             d0, a, ft(0.0))
             iterations = iterations + iters
             if ok != 1:
                 break
-            sums, test = stage_derivatives(c, p, settings, m, n, work, gates, K, (s1 + i) % 6, g, t_stage, t, d0, a, hf, end)
+            sums, test = stage_derivatives(c, p, settings, m, n, work, gates, step_end, K, (s1 + i) % 6, g, t_stage, t, d0,
+                                           a, hf, end)
             if end == 1:
                 res.sums = sums
                 res.switch_test = test
         if ok == 1:
-            res.error = wp.float64(error_norm4(c, settings, m, n, state, K, work, s1, hf))
+            res.error = wp.float64(error_norm4(c, settings, m, n, state, K, step_end, s1, hf))
         res.ok = ok
         res.iterations = iterations
         res.non_finite = bad

@@ -108,13 +108,14 @@ def block_members_for(n_members: int, sm_count: int, requested: int | None = Non
 
 # The blocked kernel's work array (kernels/types.py: the scratch of one attempted step, nothing in it
 # outlives the attempt) is kept in the block's shared memory where it fits (docs/performance.md,
-# "The work array in shared memory"): (N_WORK = 15, N, stride) float64, member fastest, with an odd
+# "The work array in shared memory"): (N_WORK = 13, N, stride) float64, member fastest, with an odd
 # member stride >= the block's members, so that the lanes of a warp, each on its own nodes, fall
 # into different banks (at most two lanes a bank at N = 200 and N = 40). Every stride gives the
 # same outputs bit for bit (tests/test_team.py); the global work array's do not: the compiler
-# fuses a few multiply-adds differently (round-off, within 2e-12 of mu_s on the H100). The stress
-# gate's end-of-step margins and gate, which only the step's acceptance reads, are in ``gates``
-# (kernels/types.py), so that 8 members' work fits at N = 200.
+# fuses a few multiply-adds differently (round-off, within 2e-12 of mu_s on the H100). What a step
+# leaves for its error norm and acceptance, read once per node, is in ``step_end`` and ``gates``
+# (kernels/types.py), so that 8 members' work fits at N = 200 in 187 KB, which leaves the SM 60 KB
+# of L1 (the shared-memory carve-out of 196 KB).
 SHARED_WORK_RESERVE = 4096  # bytes of a block's opt-in shared memory left to the kernel's static shared memory
 
 
@@ -128,8 +129,8 @@ def shared_work_stride(n_nodes: int, block_members: int, max_shared: int) -> int
 
 def shared_work_members(n_nodes: int, max_shared: int) -> int:
     """The most members of a block whose work is in shared memory: MAX_BLOCK_MEMBERS (8) where the
-    stride 9 fits (N <= 211 on the H100), 7 where only 7 does (a member fewer per block: 211 < N <=
-    271), else 0: the work stays in global memory (N > 271). Fewer members per block than 7 were not
+    stride 9 fits (N <= 243 on the H100), 7 where only 7 does (a member fewer per block: 243 < N <=
+    313), else 0: the work stays in global memory (N > 313). Fewer members per block than 7 were not
     measured, so they are not chosen."""
     if shared_work_stride(n_nodes, MAX_BLOCK_MEMBERS, max_shared):
         return MAX_BLOCK_MEMBERS
@@ -330,7 +331,7 @@ def make_acceptance(ft, model, method, stages):
     @wp.func
     def accept_step(
         c: Coeffs, p: MemberParams, st: IntegratorState, settings: SolverSettings, outputs: OutputSettings, m: int,
-        n: int, state: array3, K: array4, work: array3, gates: array3, s1: int, s2: int, s3: int, t: wp.float64,
+        n: int, state: array3, K: array4, step_end: array3, gates: array3, s1: int, s2: int, s3: int, t: wp.float64,
         step: Step, factor: wp.float64, res: StepResult, restart: int, yield_time: wp.array2d(dtype=wp.float64),
         arrival: wp.array3d(dtype=wp.float64), arrival_error: wp.array3d(dtype=wp.float64),
         strength: wp.array3d(dtype=wp.float64), record_times: wp.array(dtype=wp.float64), record_previous: array3,
@@ -360,7 +361,7 @@ def make_acceptance(ft, model, method, stages):
         else:
             st.h = accepted_step_size(st, step, factor)
         st.fsal = s3
-        st = on_accept(c, p, st, outputs, m, n, state, K, work, s1, s2, s3, t, step.t_new, delta0, tilt,
+        st = on_accept(c, p, st, outputs, m, n, state, K, step_end, s1, s2, s3, t, step.t_new, delta0, tilt,
                        res.sums.friction, res.sums.normal, res.sums.min_normal, restart, arrival, arrival_error,
                        strength, record_times, record_previous, record)
         if wp.static(stress_gate):
@@ -421,6 +422,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
         state: array3,
         K: array4,
         work: array3,
+        step_end: array3,
         gates: array3,
         record_previous: array3,
         # outputs
@@ -493,13 +495,14 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
             # ---- stepper ----
             if wp.static(esdirk4):
                 if restart != 0:
-                    res = implicit_step(c, p, settings, m, n, state, K, work_view, gates, s1, s2, s3, t, step.h, step.t_new,
-                                        delta0, tilt, 1, ft(0.0))
+                    res = implicit_step(c, p, settings, m, n, state, K, work_view, gates, step_end, s1, s2, s3, t, step.h,
+                                        step.t_new, delta0, tilt, 1, ft(0.0))
                 else:
-                    res = esdirk4_step(c, p, settings, m, n, state, K, work_view, gates, s1, t, step.h, step.t_new, delta0, tilt)
+                    res = esdirk4_step(c, p, settings, m, n, state, K, work_view, gates, step_end, s1, t, step.h, step.t_new,
+                                       delta0, tilt)
             else:  # TR-BDF2, or backward Euler at a (re)start: one call, so the stage code is compiled once
-                res = implicit_step(c, p, settings, m, n, state, K, work_view, gates, s1, s2, s3, t, step.h, step.t_new,
-                                    delta0, tilt, restart, ft(st.newton_curvature))
+                res = implicit_step(c, p, settings, m, n, state, K, work_view, gates, step_end, s1, s2, s3, t, step.h,
+                                    step.t_new, delta0, tilt, restart, ft(st.newton_curvature))
                 # the next step's first Newton iteration is judged with this step's curvature
                 # (kernels/newton.py newton_solve); a failed solve or a restart forgets it
                 st.newton_curvature = wp.float64(0.0)
@@ -526,7 +529,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
                     break
                 continue
             # ---- accepted: advance, gates, observers ----
-            st = accept_step(c, p, st, settings, outputs, m, n, state, K, work_view, gates, s1, s2, s3, t, step, factor, res,
+            st = accept_step(c, p, st, settings, outputs, m, n, state, K, step_end, gates, s1, s2, s3, t, step, factor, res,
                              restart, yield_time, arrival, arrival_error, strength, record_times, record_previous, record)
             delta0 = res.delta0
             tilt = res.tilt

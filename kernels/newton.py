@@ -34,12 +34,12 @@ from .types import (
     C_TAU,
     C_U,
     C_V,
+    E_CONTACT,
+    E_DIAG,
     G_GATE_END,
     W_C1,
     W_C2,
-    W_CONTACT,
     W_CP,
-    W_DIAG,
     W_R0,
     W_R1,
     W_R2,
@@ -495,8 +495,8 @@ def make_newton_system(ft, model, terms, team, equations, solver, team_solver):
 
     @wp.func
     def assemble_system(
-        c: Coeffs, settings: SolverSettings, m: int, n: int, work: array3, gates: array3, g: ft, delta0: ft,
-        tilt: ft, v_disc: ft, force_per_depth: ft, moment_per_depth: ft,
+        c: Coeffs, settings: SolverSettings, m: int, n: int, work: array3, gates: array3, step_end: array3, g: ft,
+        delta0: ft, tilt: ft, v_disc: ft, force_per_depth: ft, moment_per_depth: ft,
     ):
         """Pass 1 (the residuals and Jacobian rows of the nodes, node_row, and the forward elimination
         of J on three right-hand sides: -R, B0, B1) and pass 2 (back substitution and the border
@@ -540,7 +540,7 @@ def make_newton_system(ft, model, terms, team, equations, solver, team_solver):
             u_r = stage_displacement(work, i + 1, n, m, g)
             row = node_row(c, settings, m, n, work, gates, i, u_l, u_c, u_r, delta0, tilt, v_disc, g)
             if wp.static(inertia):
-                work[W_DIAG, i, m] = row.jac_center
+                step_end[E_DIAG, i, m] = row.jac_center
             kink = wp.max(kink, row.kink)
             e1 += row.e1
             e2 += row.e2
@@ -636,7 +636,7 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
     @wp.func
     def newton_solve(
         c: Coeffs, p: MemberParams, settings: SolverSettings, m: int, n: int, work: array3, gates: array3,
-        g: ft, t_stage: wp.float64, t_step: wp.float64, delta0_in: ft, tilt_in: ft, curvature_in: ft,
+        step_end: array3, g: ft, t_stage: wp.float64, t_step: wp.float64, delta0_in: ft, tilt_in: ft, curvature_in: ft,
     ):
         """Solve one implicit stage (stage constants z in work[W_ZU..W_ZP], start V in work[W_V], the
         stage coefficient g = gamma*h). Returns (converged, delta0, tilt, iterations, non_finite,
@@ -672,7 +672,7 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
             iters = it + 1
             # ---- pass 1: residuals, Jacobian rows, forward elimination (3 right-hand sides) ----
             # ---- pass 2: back substitution and the border products ----
-            bs = assemble_system(c, settings, m, n, work, gates, g, delta0, tilt, v_disc, force_per_depth,
+            bs = assemble_system(c, settings, m, n, work, gates, step_end, g, delta0, tilt, v_disc, force_per_depth,
                                  moment_per_depth)
             kinked = wp.max(kinked, bs.kink)
             # ---- the Schur complement ----
@@ -764,7 +764,7 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
     @wp.func
     def stage_derivatives(
         c: Coeffs, p: MemberParams, settings: SolverSettings, m: int, n: int, work: array3, gates: array3,
-        K: array4, slot: int, g: ft, t_stage: wp.float64, t_step: wp.float64, delta0: ft, tilt: ft,
+        step_end: array3, K: array4, slot: int, g: ft, t_stage: wp.float64, t_step: wp.float64, delta0: ft, tilt: ft,
         h: ft, end_of_step: int,
     ):
         """Stage derivatives K[slot] = f(Y) of a converged stage; returns its StageSums and, at the end
@@ -788,7 +788,7 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
                                    g, node_gate(gates, i, m), node_sliding(gates, i, m), ft(settings.sliding_width))
             sigma = ns.value
             if end_of_step == 1:
-                work[W_CONTACT, i, m] = fr.contact  # at the end of the step: fronts skip lifted-off nodes
+                step_end[E_CONTACT, i, m] = fr.contact  # at the end of the step: fronts skip lifted-off nodes
                 if wp.static(stress_gate):
                     gates[G_GATE_END, i, m] = fr.gate
                     test = test_switch(c, settings, gates, i, m, fr, sigma, vel, v_disc, h, test)

@@ -31,7 +31,7 @@ from .reductions import (
     record_friction_point_cubic,
 )
 from .types import (
-    C_PHI, C_TAU, C_U, C_V, EV_STRENGTH, EV_VELOCITY, S_MAX, S_RATIO1, S_RATIO2, W_CONTACT, IntegratorState, MemberParams,
+    C_PHI, C_TAU, C_U, C_V, E_CONTACT, EV_STRENGTH, EV_VELOCITY, S_MAX, S_RATIO1, S_RATIO2, IntegratorState, MemberParams,
     OutputSettings,
 )
 
@@ -149,8 +149,8 @@ def make_velocity_front(ft, terms, team):
 
     @wp.func
     def track_fronts(
-        c: Coeffs, p: MemberParams, st: IntegratorState, m: int, n: int, K: array4, work: array3, s1: int, s2: int, s3: int,
-        t_old: wp.float64, t_new: wp.float64, arrival: wp.array3d(dtype=wp.float64),
+        c: Coeffs, p: MemberParams, st: IntegratorState, m: int, n: int, K: array4, step_end: array3, s1: int, s2: int,
+        s3: int, t_old: wp.float64, t_new: wp.float64, arrival: wp.array3d(dtype=wp.float64),
         arrival_error: wp.array3d(dtype=wp.float64), direction: int,
         threshold: wp.float64, use_stage2: int,
     ):
@@ -170,7 +170,7 @@ def make_velocity_front(ft, terms, team):
             disc_sign = wp.float64(-1.0)
         w_step = wp.float64(-1.0e300)
         for i in range(c.first_node, c.end_node):
-            if work[W_CONTACT, i, m] == ft(0.0):
+            if step_end[E_CONTACT, i, m] == ft(0.0):
                 continue
             w_old = detachment_velocity(wp.float64(K[s1, C_U, i, m]), disc_sign, direction)
             w_new = detachment_velocity(wp.float64(K[s3, C_U, i, m]), disc_sign, direction)
@@ -353,7 +353,7 @@ def make_observers(ft, model, terms, team, method="tr_bdf2", observed=ObserverSe
     @wp.func
     def on_accept(
         c: Coeffs, p: MemberParams, st: IntegratorState, outputs: OutputSettings, m: int, n: int, state: array3,
-        K: array4, work: array3, s1: int, s2: int, s3: int, t_old: wp.float64, t_new: wp.float64, delta0: ft,
+        K: array4, step_end: array3, s1: int, s2: int, s3: int, t_old: wp.float64, t_new: wp.float64, delta0: ft,
         tilt: ft, friction: wp.float64, normal: wp.float64, min_normal: wp.float64, backward_euler: int,
         arrival: wp.array3d(dtype=wp.float64), arrival_error: wp.array3d(dtype=wp.float64),
         strength: wp.array3d(dtype=wp.float64),
@@ -364,7 +364,7 @@ def make_observers(ft, model, terms, team, method="tr_bdf2", observed=ObserverSe
         parabola through it)."""
         if wp.static(observed.velocity_front):
             if outputs.velocity_front == 1:
-                st = track_fronts(c, p, st, m, n, K, work, s1, s2, s3, t_old, t_new, arrival, arrival_error,
+                st = track_fronts(c, p, st, m, n, K, step_end, s1, s2, s3, t_old, t_new, arrival, arrival_error,
                                   outputs.front_direction, outputs.front_threshold, 1 - backward_euler)
         if wp.static(observed.strength_front):
             if outputs.strength_front == 1:

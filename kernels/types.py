@@ -16,6 +16,7 @@ states             (member,)                           struct IntegratorState (p
 state              (component, node, member)           ft     y = (u m, u_t m/s, tau_el Pa, phi s) at time t
 stages             (stage_slot, component, node, mbr)  ft     stage derivatives K = f(Y) (per s); FSAL slot
 work               (work_slot, node, member)           ft     stage constants, Newton iterate, Thomas rows
+step_end           (step_end_slot, node, member)       ft     Jacobian diagonal (Pa s/m), contact (1) at a step's end
 gates              (gate_slot, node, member)           ft     stress gate: gate (1), margin (Pa), sliding (1), ...;
                                                               (gate_slot, 1, 1) for the other laws
 yield_time         (node, member)                      f64    first gate opening (s); (1, 1) unless stress gate
@@ -42,12 +43,17 @@ N_COMPONENTS = 4
 # work slots (first index of ``work``: the scratch of one attempted step, which the blocked GPU
 # kernel keeps in shared memory, kernels/integrator.py team_layout): the stage constants z (in the
 # order of the components), the Newton iterate of the pad velocity, the Thomas sweep's rows (cp,
-# three right-hand sides), the two border rows of the plate balance, the Jacobian diagonal
-# (velocity error filter), the end-of-step contact; last, the cooperative kernel's two coupling
-# columns of a lane's interior rows (kernels/team.py)
-W_ZU, W_ZV, W_ZT, W_ZP, W_V, W_CP, W_R0, W_R1, W_R2, W_C1, W_C2, W_DIAG, W_CONTACT = range(13)
-W_RL, W_RR = 13, 14
-N_WORK = 15
+# three right-hand sides) and the two border rows of the plate balance; last, the cooperative
+# kernel's two coupling columns of a lane's interior rows (kernels/team.py)
+W_ZU, W_ZV, W_ZT, W_ZP, W_V, W_CP, W_R0, W_R1, W_R2, W_C1, W_C2 = range(11)
+W_RL, W_RR = 11, 12
+N_WORK = 13
+# step-end slots (first index of ``step_end``): what an attempted step leaves for its error norm and
+# its acceptance, read once per node (kept out of ``work`` so that the shared work array is
+# smaller): the Jacobian diagonal of the last Newton iteration (Pa s/m; the velocity error filter)
+# and the contact at the end of the step (1 in contact, 0 lifted off; the velocity front)
+E_DIAG, E_CONTACT = 0, 1
+N_STEP_END = 2
 # gate slots (stress gate, first index of ``gates``): the gate held over the next step (0 closed,
 # 1 open; for a sliding node the start of its implicit solve), the yield margin |tau_f| - tau_c*A
 # (Pa) at the last accepted point, the sliding flag (1: solved on the yield surface each stage), the
@@ -213,6 +219,7 @@ class DeviceArrays:
     state: wp.array
     stages: wp.array
     work: wp.array
+    step_end: wp.array
     gates: wp.array
     yield_time: wp.array
     arrival: wp.array
@@ -258,6 +265,7 @@ def allocate(ft, params_np: np.ndarray, n_nodes: int, stress_gate: bool, fronts:
         stages=member_zeros((stage_slots(method), N_COMPONENTS, n_nodes, n_members), ft, member_major),
         work=member_zeros((N_WORK, n_nodes, n_members), ft, member_major) if global_work
         else wp.zeros((N_WORK, 1, 1), dtype=ft),
+        step_end=member_zeros((N_STEP_END, n_nodes, n_members), ft, member_major),
         gates=member_zeros((N_GATE, n_nodes, n_members), ft, member_major) if stress_gate
         else wp.zeros((N_GATE, 1, 1), dtype=ft),
         # NaN: not set yet (the kernels test isfinite)

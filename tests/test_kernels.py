@@ -485,7 +485,7 @@ def _fronts_kernel():
     @wp.kernel(module="unique")
     def sweep(params: wp.array(dtype=types.MemberParams), states: wp.array(dtype=types.IntegratorState),
               crossing: wp.array(dtype=f64), slope: wp.array(dtype=f64), curvature: f64, contact: wp.array(dtype=f64),
-              h: f64, steps: int, use_stage2: int, K: wp.array4d(dtype=f64), work: wp.array3d(dtype=f64),
+              h: f64, steps: int, use_stage2: int, K: wp.array4d(dtype=f64), step_end: wp.array3d(dtype=f64),
               arrival: wp.array3d(dtype=f64), arrival_error: wp.array3d(dtype=f64)):
         """Steps of size h from t = 20.5 through a field whose detachment velocity at node i is
         w_i(t) = level + slope_i (t - crossing_i) + curvature (t - crossing_i)^2 (pad velocity -w: the
@@ -494,7 +494,7 @@ def _fronts_kernel():
         n = crossing.shape[0]
         level = st.front_level
         for i in range(n):
-            work[types.W_CONTACT, i, 0] = contact[i]
+            step_end[types.E_CONTACT, i, 0] = contact[i]
         for k in range(steps):
             t_old = f64(20.5) + f64(k) * h
             t_new = t_old + h
@@ -506,7 +506,7 @@ def _fronts_kernel():
                 K[0, types.C_U, i, 0] = -(level + slope[i] * d0 + curvature * d0 * d0)
                 K[1, types.C_U, i, 0] = -(level + slope[i] * dm + curvature * dm * dm)
                 K[2, types.C_U, i, 0] = -(level + slope[i] * d1 + curvature * d1 * d1)
-            st = track_fronts(make_coeffs(params[0], n), params[0], st, 0, n, K, work, 0, 1, 2, t_old, t_new, arrival, arrival_error, 0,
+            st = track_fronts(make_coeffs(params[0], n), params[0], st, 0, n, K, step_end, 0, 1, 2, t_old, t_new, arrival, arrival_error, 0,
                               f64(0.4), use_stage2)
         states[0] = st
 
@@ -530,7 +530,7 @@ def test_front_observer_on_a_synthetic_field(use_stage2):
     st["front_level"] = level
     st["front_max"] = -np.inf
     arrays = dict(K=wp.zeros((3, types.N_COMPONENTS, n, 1), dtype=f64, device=DEVICE),
-                  work=wp.zeros((types.N_WORK, n, 1), dtype=f64, device=DEVICE),
+                  step_end=wp.zeros((types.N_STEP_END, n, 1), dtype=f64, device=DEVICE),
                   arrival=wp.full((types.N_EVENTS, n, 1), np.nan, dtype=f64, device=DEVICE),
                   arrival_error=wp.full((types.N_EVENTS, n, 1), np.nan, dtype=f64, device=DEVICE))
     states = wp.array(st, dtype=types.IntegratorState, device=DEVICE)
@@ -538,7 +538,7 @@ def test_front_observer_on_a_synthetic_field(use_stage2):
         wp.array(member_params(values), dtype=types.MemberParams, device=DEVICE), states,
         wp.array(crossing, dtype=f64, device=DEVICE), wp.array(slope, dtype=f64, device=DEVICE), curvature,
         wp.array(contact, dtype=f64, device=DEVICE), h, steps, use_stage2,
-        arrays["K"], arrays["work"], arrays["arrival"], arrays["arrival_error"]])
+        arrays["K"], arrays["step_end"], arrays["arrival"], arrays["arrival_error"]])
     arrival = arrays["arrival"].numpy()[types.EV_VELOCITY, :, 0]
     error = arrays["arrival_error"].numpy()[types.EV_VELOCITY, :, 0]
     assert np.isnan(arrival[5]) and np.isnan(error[5])  # lifted off
@@ -568,12 +568,13 @@ def _newton_kernel():
 
     @wp.kernel(module="unique")
     def solve(params: wp.array(dtype=types.MemberParams), settings: types.SolverSettings, work: wp.array3d(dtype=f64),
-              gates: wp.array3d(dtype=f64), out: wp.array2d(dtype=int)):
+              gates: wp.array3d(dtype=f64), step_end: wp.array3d(dtype=f64), out: wp.array2d(dtype=int)):
         m = wp.tid()
         n = work.shape[1]
         c = make_coeffs(params[m], n)
-        ok, d0, a, iters, bad, _curvature = newton_solve(c, params[m], settings, m, n, work, gates, f64(1e-6),
-                                                         f64(10.0), f64(10.0), f64(6e-6), f64(0.0), f64(0.0))
+        ok, d0, a, iters, bad, _curvature = newton_solve(c, params[m], settings, m, n, work, gates, step_end,
+                                                         f64(1e-6), f64(10.0), f64(10.0), f64(6e-6), f64(0.0),
+                                                         f64(0.0))
         out[m, 0] = ok
         out[m, 1] = bad
         out[m, 2] = iters
@@ -595,7 +596,8 @@ def test_newton_flags_a_non_finite_update():
     out = wp.zeros((2, 3), dtype=int, device=DEVICE)
     wp.launch(_newton_kernel(), dim=2, device=DEVICE, inputs=[
         wp.array(member_params(values), dtype=types.MemberParams, device=DEVICE), solver_settings(wf.Solver()),
-        wp.array(work, dtype=f64, device=DEVICE), wp.array(gates, dtype=f64, device=DEVICE), out])
+        wp.array(work, dtype=f64, device=DEVICE), wp.array(gates, dtype=f64, device=DEVICE),
+        wp.zeros((types.N_STEP_END, nodes, 2), dtype=f64, device=DEVICE), out])
     result = out.numpy()
     assert result[0, 0] == 0 and result[0, 1] == 1 and result[0, 2] == 1  # stopped at the first NaN update
     assert result[1, 1] == 0
@@ -606,8 +608,9 @@ def test_newton_flags_a_non_finite_update():
                                                         ("float64", "stress", True, 8)])
 def test_device_memory_per_member_is_reported(dtype, gate, fronts, lanes):
     """device_bytes_per_member counts the integration arrays of kernels/types.py: state (4 N),
-    stages (12 N), work (N_WORK N = 18 N) in the working precision, the stress gate's gates (N_GATE N,
-    working precision) and yield times (N, float64), the fronts' arrival times and errors of the three
+    stages (12 N), step_end (2 N) and work (N_WORK N = 13 N; not where the blocked GPU kernel keeps
+    it in shared memory, work_memory "shared") in the working precision, the stress gate's gates
+    (N_GATE N = 7 N, working precision) and yield times (N, float64), the fronts' arrival times and errors of the three
     events (6 N, float64; the contact front's, the default), and the member's parameter and state
     structs; kernel builds are timed apart from the run. A team's arrays hold each member
     contiguously (transposed views; they were counted short, 4,248 bytes against 9,112)."""
@@ -616,8 +619,10 @@ def test_device_memory_per_member_is_reported(dtype, gate, fronts, lanes):
                      solver=wf.Solver(nodes=n, dtype=dtype, lanes=lanes), fronts=wf.Fronts() if fronts else None,
                      device=DEVICE, progress=False)
     size = 8 if dtype == "float64" else 4
-    expected = (size * n * (4 + 12 + types.N_WORK) + (size * types.N_GATE * n + 8 * n if gate == "stress" else 0)
+    work = types.N_WORK if ds.attrs["work_memory"] == "global" else 0
+    expected = (size * n * (4 + 12 + types.N_STEP_END + work) + (size * types.N_GATE * n + 8 * n if gate == "stress" else 0)
                 + (2 * types.N_EVENTS * 8 * n if fronts else 0))
     expected += np.dtype(types.MemberParams.numpy_dtype()).itemsize + np.dtype(types.IntegratorState.numpy_dtype()).itemsize
     assert ds.attrs["device_bytes_per_member"] == expected
+    assert types.N_WORK == 13 and types.N_STEP_END == 2 and types.N_GATE == 7
     assert ds.attrs["kernel_build_time_s"] >= 0 and ds.attrs["wall_time_s"] > 0

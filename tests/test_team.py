@@ -199,9 +199,9 @@ def test_members_per_block_choice(monkeypatch):
 
 def test_work_array_memory_choice(monkeypatch):
     """The blocked kernel keeps its work array in the block's shared memory where a block of 7
-    members' work fits, (N_WORK = 15, N, stride) float64 with the smallest odd stride >= the block's
-    members: on an H100 (232,448 bytes a block, 4,096 kept back) 9 fits to N = 211 (8 members), 7 to
-    N = 271 (7 members a block at most), else the work stays in global memory with 8 members a
+    members' work fits, (N_WORK = 13, N, stride) float64 with the smallest odd stride >= the block's
+    members: on an H100 (232,448 bytes a block, 4,096 kept back) 9 fits to N = 243 (8 members), 7 to
+    N = 313 (7 members a block at most), else the work stays in global memory with 8 members a
     block. The choice does not depend on the member count (a member's outputs do not depend on its
     ensemble), only the stride does, and every stride gives the same outputs (the GPU test below).
     WARPFRIC_TEAM_SHARED_WORK=0 keeps the work in global memory; other values are refused."""
@@ -209,12 +209,12 @@ def test_work_array_memory_choice(monkeypatch):
     from warpfric.kernels.types import N_WORK
 
     h100 = 232_448
-    assert N_WORK == 15
-    assert 15 * 211 * 9 * 8 <= h100 - 4096 < 15 * 212 * 9 * 8 and 15 * 271 * 7 * 8 <= h100 - 4096 < 15 * 272 * 7 * 8
+    assert N_WORK == 13
+    assert 13 * 243 * 9 * 8 <= h100 - 4096 < 13 * 244 * 9 * 8 and 13 * 313 * 7 * 8 <= h100 - 4096 < 13 * 314 * 7 * 8
     assert [shared_work_stride(200, k, h100) for k in range(1, 9)] == [1, 3, 3, 5, 5, 7, 7, 9]
     assert [shared_work_stride(250, k, h100) for k in range(1, 9)] == [1, 3, 3, 5, 5, 7, 7, 0]
-    assert shared_work_members(211, h100) == 8 and shared_work_members(212, h100) == 7
-    assert shared_work_members(271, h100) == 7 and shared_work_members(272, h100) == 0
+    assert shared_work_members(243, h100) == 8 and shared_work_members(244, h100) == 7
+    assert shared_work_members(313, h100) == 7 and shared_work_members(314, h100) == 0
     monkeypatch.delenv("WARPFRIC_TEAM_BLOCK_MEMBERS", raising=False)
     monkeypatch.delenv("WARPFRIC_TEAM_EXCHANGE", raising=False)
     members = (1, 300, 1000, 10_000)
@@ -222,7 +222,7 @@ def test_work_array_memory_choice(monkeypatch):
         (True, 1, (200, 1)), (True, 3, (200, 3)), (True, 8, (200, 9)), (True, 8, (200, 9))]
     assert [team_layout(32, 250, m, True, 132, h100) for m in members] == [
         (True, 1, (250, 1)), (True, 3, (250, 3)), (True, 7, (250, 7)), (True, 7, (250, 7))]
-    assert [team_layout(32, 300, m, True, 132, h100) for m in members] == [
+    assert [team_layout(32, 320, m, True, 132, h100) for m in members] == [
         (True, 1, None), (True, 3, None), (True, 8, None), (True, 8, None)]
     assert team_layout(20, 40, 10_000, True, 132, h100) == (True, 8, (40, 9))
     assert team_layout(32, 200, 10_000, False) == (False, 1, None)  # the CPU: tiles, a block per member

@@ -467,7 +467,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                           member_major=team, method=solver.method, strength=strength,
                           global_work=layout.shared_work is None)
         per_member = [arrays.params, arrays.state, arrays.stages]  # not the (.., 1, 1) placeholders
-        per_member += [arrays.work] if layout.shared_work is None else []
+        per_member += [arrays.step_end] + ([arrays.work] if layout.shared_work is None else [])
         per_member += [arrays.gates, arrays.yield_time] if stress_gate else []
         per_member += [arrays.arrival, arrays.arrival_error] if fronts is not None else []
         per_member += [arrays.strength] if strength else []
@@ -506,7 +506,8 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             last_limit = NO_STALL_LIMIT
             inputs = [arrays.params, settings, outputs if pass_index == 0 else arrival_pass_settings(outputs),
                       launch_steps(solver, n_members, device), block_members, stall_limit, arrays.record_times,
-                      member_states, arrays.state, arrays.stages, arrays.work, arrays.gates, arrays.record_previous]
+                      member_states, arrays.state, arrays.stages, arrays.work, arrays.step_end, arrays.gates,
+                      arrays.record_previous]
             outputs_ = [arrays.arrival, arrays.arrival_error, arrays.strength, arrays.yield_time, arrays.record]
             # the launches are queued one ahead of the host: while chunk k + 1 runs, the host reads the
             # member states after chunk k (an asynchronous copy into pinned memory), updates the
