@@ -134,12 +134,14 @@ case "$mode" in
     NCU=$(ncu_bin); echo "ncu: $NCU"
     python3 studies/bench_engine.py --device cuda:0 --members 1 --dtypes float64 --lanes 32 --out "$OUT/stalls_warm.json" \
       > /dev/null 2>&1  # compile outside the profiler
-    "$NCU" --profile-from-start off -k regex:integrate --launch-skip 2 --launch-count 1 \
+    # the first launch of the 10,000 members, after the three of the benchmark's one-member warm-up
+    # (--profile-from-start off with --cuda-profile-range profiled nothing on the H100 host of 2655f21)
+    "$NCU" -k regex:integrate --launch-skip 3 --launch-count 1 \
       --section LaunchStats --section Occupancy --section WarpStateStats --section MemoryWorkloadAnalysis \
       --section SchedulerStats --section SpeedOfLight \
-      --metrics regex:smsp__average_warps_issue_stalled_.*_per_issue_active\.ratio,smsp__inst_executed.sum,l1tex__t_sector_pipe_lsu_mem_global_op_ld_hit_rate.pct,dram__bytes.sum \
+      --metrics regex:smsp__average_warps_issue_stalled_.*_per_issue_active\.ratio,smsp__inst_executed.sum,l1tex__t_sector_pipe_lsu_mem_global_op_ld_hit_rate.pct,dram__bytes.sum,l1tex__t_sectors_pipe_lsu_mem_local_op_ld.sum \
       python3 studies/bench_engine.py --device cuda:0 --dtypes float64 --members 10000 --lanes 32 --steps-per-launch 100 \
-      --cuda-profile-range --out "$OUT/stalls_bench.json" > "$OUT/ncu_stress_10k_stalls.txt" 2>&1
+      --repeat 1 --out "$OUT/stalls_bench.json" > "$OUT/ncu_stress_10k_stalls.txt" 2>&1
     grep -E "Duration|Warp Cycles Per Issued|Issued Ipc|Achieved Active|stalled_.*ratio|inst_executed.sum|Hit Rate|Stack" \
       "$OUT/ncu_stress_10k_stalls.txt" | awk '$NF+0 > 0.04 || !/stalled/' | head -30 ;;
   stall-sites)
@@ -148,16 +150,19 @@ case "$mode" in
     export WARP_CACHE_PATH=$(mktemp -d)
     python3 studies/bench_engine.py --device cuda:0 --members 1 --dtypes float64 --lanes 32 --lineinfo \
       --out "$OUT/stall_sites_warm.json" > "$OUT/stall_sites_warm.log" 2>&1 || { tail "$OUT/stall_sites_warm.log"; exit 1; }
-    "$NCU" --profile-from-start off -k regex:integrate --launch-skip 1 --launch-count 1 --section SourceCounters \
+    "$NCU" -k regex:integrate --launch-skip 3 --launch-count 1 --section SourceCounters \
       --section WarpStateStats --import-source yes -o "$OUT/stall_sites" python3 studies/bench_engine.py \
       --device cuda:0 --dtypes float64 --members 10000 --lanes 32 --lineinfo --steps-per-launch 100 \
-      --cuda-profile-range --out "$OUT/stall_sites_bench.json" > "$OUT/ncu_stall_sites.log" 2>&1
+      --repeat 1 --out "$OUT/stall_sites_bench.json" > "$OUT/ncu_stall_sites.log" 2>&1
     "$NCU" -i "$OUT/stall_sites.ncu-rep" --page source --csv --print-source sass | gzip -9 > "$OUT/stall_sass.csv.gz"
-    cubins=$(find "$WARP_CACHE_PATH" -name "*integrate*.cubin")
-    [ "$(echo "$cubins" | wc -w)" = 1 ] || { echo "expected one integrate cubin, found: $cubins"; exit 1; }
-    cp $cubins "$OUT/integrate.cubin"
-    python3 studies/stall_sites.py --csv "$OUT/stall_sass.csv.gz" --cubin "$OUT/integrate.cubin" "$@" 2>&1 \
-      | tee "$OUT/stall_sites.txt" | head -40 ;;
+    # one cubin per shared-work stride (one member a block in the warm-up, eight in the profile):
+    # the profiled kernel is the one whose instructions match
+    for cubin in $(find "$WARP_CACHE_PATH" -name "*integrate*.cubin"); do
+      cp "$cubin" "$OUT/integrate.cubin"
+      python3 studies/stall_sites.py --csv "$OUT/stall_sass.csv.gz" --cubin "$OUT/integrate.cubin" "$@" \
+        > "$OUT/stall_sites.txt" 2>&1 && break
+    done
+    head -40 "$OUT/stall_sites.txt" ;;
   sass)
     python3 studies/sass_sites.py "$@" 2>&1 | tee "$OUT/sass_sites.txt" | head -30 ;;
   blocks)
