@@ -63,11 +63,18 @@ def segment(arrival_time, length, fronts: Fronts = Fronts(), device: str | None 
     start (:func:`name_from_start`; positions and lengths in m, times in s, speeds in m/s;
     nucleation_edge -1 left, 0 interior, +1 right, NaN none).
     """
+    ta = np.atleast_2d(np.asarray(arrival_time, dtype=np.float64))
+    return segment_nodes_first(np.ascontiguousarray(ta.T), length, fronts, device)
+
+
+def segment_nodes_first(arrival_nodes_first, length, fronts: Fronts = Fronts(), device: str | None = "cpu") -> dict:
+    """:func:`segment` of arrival times given as (nodes, members) s, the layout of the segmentation
+    kernel and of the engine's read-back (warpfric.simulate passes them so, without transposing)."""
     wp = init_warp()
     from warpfric.kernels.reductions import N_FRONT_METRICS, SegmentSettings, segment_fronts
 
-    ta = np.atleast_2d(np.asarray(arrival_time, dtype=np.float64))
-    n_members, n = ta.shape
+    nodes_first = np.ascontiguousarray(arrival_nodes_first, dtype=np.float64)
+    n, n_members = nodes_first.shape
     if n < 2:
         raise ValueError(f"arrival_time: {n} nodes; valid: at least 2")
     length = np.broadcast_to(np.asarray(length, dtype=np.float64), (n_members,)).copy()
@@ -79,7 +86,7 @@ def segment(arrival_time, length, fronts: Fronts = Fronts(), device: str | None 
     seg.speed_ratio = fronts.speed_ratio
     seg.edge_zone = float(fronts.edge_zone_fraction * np.min(length))
     with wp.ScopedDevice(check_device(device)):
-        arrival = wp.array(np.ascontiguousarray(ta.T), dtype=wp.float64)
+        arrival = wp.array(nodes_first, dtype=wp.float64)
         sums = wp.zeros((5, n, n_members), dtype=wp.float64)
         out = wp.zeros((N_FRONT_METRICS, n_members), dtype=wp.float64)
         wp.launch(segment_fronts, dim=n_members, inputs=[wp.array(length, dtype=wp.float64), arrival, seg, sums, out])

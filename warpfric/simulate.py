@@ -227,7 +227,7 @@ def _front_metrics(fronts: Fronts, model: Model, values, result, device: str) ->
     with the event's name (e.g. ``strength_v_main``)."""
     from warpfric.kernels.types import FRONT_EVENTS
 
-    from .fronts import segment, speed_errors
+    from .fronts import segment_nodes_first, speed_errors
 
     out = {}
     for k, event in enumerate(fronts.events):
@@ -238,8 +238,10 @@ def _front_metrics(fronts: Fronts, model: Model, values, result, device: str) ->
                           "stick-to-slip front; its outputs are NaN (event='strength' exists under every law)",
                           stacklevel=3)
         row = FRONT_EVENTS.index(event)
-        arrival_time = result.arrival[row].T.copy()
-        metrics = segment(arrival_time, values["length"], fronts, device=device)
+        # the engine's read-back is (node, member), the layout the segmentation kernel takes; the
+        # Dataset gets its transposed view (member, x), no copy
+        arrival_time = result.arrival[row].T
+        metrics = segment_nodes_first(result.arrival[row], values["length"], fronts, device=device)
         metrics["arrival_time"] = arrival_time
         metrics.update(speed_errors(metrics, arrival_time, result.arrival_error[row].T, values["length"]))
         if event == "velocity":
