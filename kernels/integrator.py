@@ -40,6 +40,7 @@ class TeamCompileOptions(NamedTuple):
     exchange: str | None = None  # the team's lane exchange, kernels/team.py (None: the automatic choice)
     block_members: int | None = None  # members per thread block (None: per run, block_members_for; 1: a block each)
     shared_work: bool = True  # the blocked kernel's work array in shared memory where it fits (team_layout)
+    poison_shared_work: bool = False  # a check: the shared work array filled with NaN at each launch's start
 
 
 def team_compile_options() -> TeamCompileOptions:
@@ -47,8 +48,10 @@ def team_compile_options() -> TeamCompileOptions:
     WARPFRIC_INLINE ('force' or 'never'), WARPFRIC_TEAM_SMEM_SPILLING (1), WARPFRIC_NOINLINE
     (comma-separated function names), WARPFRIC_TEAM_EXCHANGE ('tile', 'shuffle' or 'emulated':
     kernels/team.py), WARPFRIC_TEAM_BLOCK_MEMBERS (1 to 8: members per thread block,
-    blocked_layout; at most shared_work_members where the work is in shared memory) and
-    WARPFRIC_TEAM_SHARED_WORK (0: the blocked kernel's work array in global memory; team_layout)."""
+    blocked_layout; at most shared_work_members where the work is in shared memory),
+    WARPFRIC_TEAM_SHARED_WORK (0: the blocked kernel's work array in global memory; team_layout) and
+    WARPFRIC_TEAM_POISON_SHARED_WORK (1: that shared array filled with NaN at the start of every
+    launch, so that a value read before the attempt wrote it shows; a check, not for runs)."""
     registers = int(os.environ.get("WARPFRIC_TEAM_MAX_REGISTERS", "0"))
     inline = os.environ.get("WARPFRIC_INLINE", "") or None
     if inline not in (None, "force", "never"):
@@ -63,13 +66,16 @@ def team_compile_options() -> TeamCompileOptions:
             raise ValueError(f"WARPFRIC_TEAM_BLOCK_MEMBERS={block_members!r} is invalid; valid: an integer from 1 to "
                              f"{MAX_BLOCK_MEMBERS}, or unset")
         block_members = int(block_members)
-    shared_work = os.environ.get("WARPFRIC_TEAM_SHARED_WORK", "1")
+    shared_work = os.environ.get("WARPFRIC_TEAM_SHARED_WORK", "") or "1"
     if shared_work not in ("0", "1"):
         raise ValueError(f"WARPFRIC_TEAM_SHARED_WORK={shared_work!r} is invalid; valid: 0, 1 or unset")
+    poison = os.environ.get("WARPFRIC_TEAM_POISON_SHARED_WORK", "") or "0"
+    if poison not in ("0", "1"):
+        raise ValueError(f"WARPFRIC_TEAM_POISON_SHARED_WORK={poison!r} is invalid; valid: 0, 1 or unset")
     return TeamCompileOptions(max_registers=registers if registers > 0 else None, inline=inline,
                               smem_spilling=os.environ.get("WARPFRIC_TEAM_SMEM_SPILLING", "0") == "1",
                               out_of_line=out_of_line, exchange=exchange, block_members=block_members,
-                              shared_work=shared_work == "1")
+                              shared_work=shared_work == "1", poison_shared_work=poison == "1")
 
 
 # Where a team's lanes exchange by warp shuffles (a team of at most 32 lanes: one warp), a thread
@@ -154,9 +160,12 @@ def team_layout(lanes: int, n_nodes: int, n_members: int, cuda: bool, sm_count: 
     The work array goes into shared memory wherever the blocked kernel runs and a block of 7
     members' work fits (shared_work_members), whatever n_members: a member's outputs then do not
     depend on the ensemble it runs in. Not with Warp's debug mode, whose bounds checks reject the
-    shared view's indexing by member (make_integrate_kernel), nor with WARPFRIC_TEAM_SHARED_WORK=0."""
+    shared view's indexing by member (make_integrate_kernel), nor with WARPFRIC_TEAM_SHARED_WORK=0.
+    The thread-per-member kernel (lanes 1) reads none of the team's switches."""
+    if lanes <= 1:
+        return TeamLayout(False, 1, None)
     options = team_compile_options()
-    if lanes <= 1 or not blocked_layout(lanes, team_exchange(lanes, cuda, options.exchange), options.block_members):
+    if not blocked_layout(lanes, team_exchange(lanes, cuda, options.exchange), options.block_members):
         return TeamLayout(False, 1, None)
     most = 0
     if options.shared_work and wp.config.mode != "debug":
@@ -396,6 +405,8 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     shared_on = shared_work is not None
     shared_nodes, shared_stride = shared_work if shared_on else (1, 1)
     shared_len = N_WORK * shared_nodes * shared_stride
+    poison_on = shared_on and options.poison_shared_work
+    threads = block_threads(lanes, blocked)
 
     # enable_backward=False: no adjoint code is generated (nothing differentiates through the
     # integrator); the forward code is the same, and the first compile takes a third of the time
@@ -438,6 +449,12 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
         0 stores it."""
         if wp.static(shared_on):  # the first tile: reserves the block's dynamic shared memory for the work view below
             wp.tile_empty(shape=(shared_len,), dtype=ft, storage="shared")
+        if wp.static(poison_on):  # the check WARPFRIC_TEAM_POISON_SHARED_WORK: all of it NaN, by every thread
+            _poison_block, poison_thread = wp.tid()
+            reserved = wp.array(ptr=dynamic_shared_base(), shape=(shared_len,), dtype=ft)
+            for k in range(poison_thread, shared_len, threads):
+                reserved[k] = ft(wp.nan)
+            block_barrier()
         lane = int(0)
         m = int(0)
         work_view = work

@@ -105,9 +105,11 @@ case "$mode" in
   launches)
     $E --members 1 1000 10000 --steps-per-launch 500 100 --launch-log "$OUT/launches.jsonl" \
       --out "$OUT/bench_launches.json" "$@" 2>&1 | tee "$OUT/launches.log" | grep -v '^{' | tail -12
-    "$(ncu_bin)" --profile-from-start off -k regex:integrate --section SpeedOfLight --section Occupancy \
+    # every launch after the three of the benchmark's one-member warm-up (--profile-from-start off
+    # with --cuda-profile-range profiled nothing on the H100 host of 2655f21)
+    "$(ncu_bin)" -k regex:integrate --launch-skip 3 --section SpeedOfLight --section Occupancy \
       --section LaunchStats python3 studies/bench_engine.py --device cuda:0 --dtypes float64 --members 10000 \
-      --steps-per-launch 100 --cuda-profile-range --out "$OUT/bench_ncu.json" > "$OUT/ncu_launches.txt" 2>&1
+      --steps-per-launch 100 --repeat 1 --out "$OUT/bench_ncu.json" > "$OUT/ncu_launches.txt" 2>&1
     grep -E "Duration|SM Active Cycles|Elapsed Cycles|Achieved Occupancy" "$OUT/ncu_launches.txt" ;;
   ncu)
     GATE=${GATE:-none}; LANES=${LANES:-32}; NCU=$(ncu_bin); echo "ncu: $NCU"
@@ -157,15 +159,20 @@ case "$mode" in
     "$NCU" -i "$OUT/stall_sites.ncu-rep" --page source --csv --print-source sass | gzip -9 > "$OUT/stall_sass.csv.gz"
     # one cubin per shared-work stride (one member a block in the warm-up, eight in the profile):
     # the profiled kernel is the one whose instructions match
+    matched=0
     for cubin in $(find "$WARP_CACHE_PATH" -name "*integrate*.cubin"); do
       cp "$cubin" "$OUT/integrate.cubin"
-      python3 studies/stall_sites.py --csv "$OUT/stall_sass.csv.gz" --cubin "$OUT/integrate.cubin" "$@" \
-        > "$OUT/stall_sites.txt" 2>&1 && break
+      if python3 studies/stall_sites.py --csv "$OUT/stall_sass.csv.gz" --cubin "$OUT/integrate.cubin" "$@" \
+        > "$OUT/stall_sites.txt" 2>&1; then matched=1; break; fi
     done
-    head -40 "$OUT/stall_sites.txt" ;;
+    head -40 "$OUT/stall_sites.txt"
+    [ "$matched" = 1 ] || { echo "no integrate cubin matches the profile"; exit 1; } ;;
   sass)
     python3 studies/sass_sites.py "$@" 2>&1 | tee "$OUT/sass_sites.txt" | head -30 ;;
   blocks)
+    # a block per member (WARPFRIC_TEAM_BLOCK_MEMBERS=1) keeps its work in global memory: so that the
+    # rows differ only by the blocks, the blocked runs keep theirs there too
+    export WARPFRIC_TEAM_SHARED_WORK=0
     for round in 1 2; do
       for k in 1 auto; do
         if [ "$k" = auto ]; then unset WARPFRIC_TEAM_BLOCK_MEMBERS; else export WARPFRIC_TEAM_BLOCK_MEMBERS=$k; fi
@@ -174,7 +181,7 @@ case "$mode" in
         $E --lanes 32 --members 10000 --relaxation-gate none --out "$OUT/bench_blocks.json" "$@" 2>&1 | grep 'cuda:0' | grep -v '{' | sed "s/^/block $k: /"
       done
     done
-    unset WARPFRIC_TEAM_BLOCK_MEMBERS
+    unset WARPFRIC_TEAM_BLOCK_MEMBERS WARPFRIC_TEAM_SHARED_WORK
     WARPFRIC_TEST_DEVICE=cuda:0 python3 -m pytest -q -p no:cacheprovider tests/test_team.py 2>&1 | tee "$OUT/tests_team_cuda.log" | tail -3 ;;
   exchange)
     (cd studies && python3 team_exchange.py --members 1000 "$@") 2>&1 | tee "$OUT/team_exchange.txt" | tail -9

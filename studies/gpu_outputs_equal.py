@@ -3,10 +3,11 @@
     python studies/gpu_outputs_equal.py save FILE.npz [--device cuda:0]
     python studies/gpu_outputs_equal.py compare BEFORE.npz AFTER.npz
 
-The runs: 300 of the engine benchmark's members (studies/bench_engine.py ``members``) at N = 200 and
-N = 40, and its first member alone at N = 200, the default law and Solver, the contact front (the
-default ``simulate``), so that the cooperative kernel runs in blocks of several members and of one
-(docs/model.md, "Time integration"). studies/outputs_equal.py is the CPU's guard (smaller scenes,
+The runs: the engine benchmark's members (studies/bench_engine.py ``members``), the default law and
+Solver, the contact front (the default ``simulate``): 1,100 at N = 200 (8 members a block on an
+H100, member stride 9), 1,000 at N = 300 (7 a block, stride 7: the largest shared array), 300 at N =
+40 (3 a block, stride 3) and the first member alone at N = 200 (stride 1), so that the cooperative
+kernel runs in blocks of many members, a few and one (docs/model.md, "Time integration"). studies/outputs_equal.py is the CPU's guard (smaller scenes,
 every law and model switch); this one checks what only a GPU runs: the blocked kernel, its
 shared work array. ``compare`` prints how many arrays differ (integer outputs by name) and the
 largest relative difference of mu_s; it exits 1 if any array differs.
@@ -23,7 +24,7 @@ from bench_engine import members  # noqa: E402
 
 import warpfric as wf  # noqa: E402
 
-RUNS = ((200, 300), (40, 300), (200, 1))  # (nodes, members)
+RUNS = ((200, 1100), (300, 1000), (40, 300), (200, 1))  # (nodes, members)
 
 
 def save(path: str, device: str) -> None:

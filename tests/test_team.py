@@ -204,9 +204,15 @@ def test_work_array_memory_choice(monkeypatch):
     N = 313 (7 members a block at most), else the work stays in global memory with 8 members a
     block. The choice does not depend on the member count (a member's outputs do not depend on its
     ensemble), only the stride does, and every stride gives the same outputs (the GPU test below).
-    WARPFRIC_TEAM_SHARED_WORK=0 keeps the work in global memory; other values are refused."""
+    WARPFRIC_TEAM_SHARED_WORK=0 keeps the work in global memory (empty is unset); other values are
+    refused, naming the variable, but only where a team runs: the thread-per-member kernel reads
+    none of the team's switches. Warp's debug mode keeps the work in global memory (its bounds checks
+    would reject the shared view's indexing by member)."""
     from warpfric.kernels.integrator import shared_work_members, shared_work_stride, team_layout
     from warpfric.kernels.types import N_WORK
+
+    for name in ("WARPFRIC_TEAM_SHARED_WORK", "WARPFRIC_TEAM_POISON_SHARED_WORK"):
+        monkeypatch.delenv(name, raising=False)
 
     h100 = 232_448
     assert N_WORK == 13
@@ -230,11 +236,19 @@ def test_work_array_memory_choice(monkeypatch):
     monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "8")  # a request above what fits gets what fits
     assert team_layout(32, 250, 10_000, True, 132, h100) == (True, 7, (250, 7))
     monkeypatch.delenv("WARPFRIC_TEAM_BLOCK_MEMBERS")
+    with monkeypatch.context() as debug:
+        debug.setattr(wp.config, "mode", "debug")
+        assert team_layout(32, 200, 10_000, True, 132, h100) == (True, 8, None)
+    monkeypatch.setenv("WARPFRIC_TEAM_SHARED_WORK", "")
+    assert team_layout(32, 200, 10_000, True, 132, h100) == (True, 8, (200, 9))
     monkeypatch.setenv("WARPFRIC_TEAM_SHARED_WORK", "0")
     assert team_layout(32, 200, 10_000, True, 132, h100) == (True, 8, None)
-    monkeypatch.setenv("WARPFRIC_TEAM_SHARED_WORK", "yes")
-    with pytest.raises(ValueError, match="WARPFRIC_TEAM_SHARED_WORK='yes' is invalid; valid: 0, 1 or unset"):
-        team_layout(32, 200, 10_000, True, 132, h100)
+    for name in ("WARPFRIC_TEAM_SHARED_WORK", "WARPFRIC_TEAM_POISON_SHARED_WORK"):
+        monkeypatch.setenv(name, "yes")
+        with pytest.raises(ValueError, match=f"{name}='yes' is invalid; valid: 0, 1 or unset"):
+            team_layout(32, 200, 10_000, True, 132, h100)
+        assert team_layout(1, 200, 10_000, True, 132, h100) == (False, 1, None)  # no team, no switch read
+        monkeypatch.delenv(name)
 
 
 @pytest.mark.skipif(not DEVICE.startswith("cuda"), reason="warp shuffles, and so several members per block, need a GPU")
@@ -284,27 +298,39 @@ def test_members_in_one_block_give_the_outputs_of_one_member_per_block(monkeypat
 
 
 @pytest.mark.skipif(not DEVICE.startswith("cuda"), reason="the blocked kernel's shared work array needs a GPU")
-def test_shared_work_array_gives_the_global_work_array_outputs(monkeypatch):
+@pytest.mark.parametrize("nodes, gate, method", [(200, "stress", "tr_bdf2"), (40, "stress", "tr_bdf2"),
+                                                 (300, "stress", "tr_bdf2"), (200, "none", "esdirk4"),
+                                                 (100, "velocity", "tr_bdf2")])
+def test_shared_work_array_gives_the_global_work_array_outputs(nodes, gate, method, monkeypatch):
     """The work array in shared memory (the default where it fits) against the same kernel with its
     work in global memory (WARPFRIC_TEAM_SHARED_WORK=0): the same arithmetic, but the compiler fuses a
     few multiply-adds differently (1,643 against 1,640 DFMA at N = 200 on sm_90), so equal to
     round-off, not bit for bit: the same statuses, steps, rejections and Newton iterations, mu_s
     and mu_s_time within 1e-11 relative (2e-12 seen on the H100, 300 members with the contact
-    front). The 11 members of the test above, default law with the contact front, N = 200 and 40."""
+    front). And with the shared array filled with NaN at every launch's start
+    (WARPFRIC_TEAM_POISON_SHARED_WORK=1), which a value read before its attempt wrote it would carry
+    into the outputs: the same to round-off again. 11 members in blocks of 8 (requested; 7 at N =
+    300, where 8 do not fit: stride 7, the largest shared array), the contact front with the stress
+    gate; both integrators; the three laws."""
     values = {"eccentricity": np.linspace(-0.3, 0.3, 11), "normal_force": np.geomspace(300.0, 3000.0, 11)}
-    monkeypatch.delenv("WARPFRIC_TEAM_BLOCK_MEMBERS", raising=False)
-    for nodes in (200, 40):
-        monkeypatch.delenv("WARPFRIC_TEAM_SHARED_WORK", raising=False)
-        shared = run(values, nodes=nodes, rtol=1e-5, fronts=wf.Fronts())
-        monkeypatch.setenv("WARPFRIC_TEAM_SHARED_WORK", "0")
-        global_ = run(values, nodes=nodes, rtol=1e-5, fronts=wf.Fronts())
-        assert global_.attrs["work_memory"] == "global"
-        if shared.attrs["work_memory"] != "shared":
-            pytest.skip(f"the work array of N = {nodes} does not fit this GPU's shared memory")
-        assert (shared.status.values == 0).all()
-        for name, var in global_.data_vars.items():
+    monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "8")
+    model = wf.Model(relaxation_gate=gate)
+    fronts = wf.Fronts() if gate == "stress" else None
+    runs = {}
+    for name, shared, poison in (("shared", "1", "0"), ("poisoned", "1", "1"), ("global", "0", "0")):
+        monkeypatch.setenv("WARPFRIC_TEAM_SHARED_WORK", shared)
+        monkeypatch.setenv("WARPFRIC_TEAM_POISON_SHARED_WORK", poison)
+        runs[name] = run(values, nodes=nodes, rtol=1e-5, fronts=fronts, model=model, method=method)
+    assert runs["global"].attrs["work_memory"] == "global" and runs["global"].attrs["block_members"] == 8
+    if runs["shared"].attrs["work_memory"] != "shared":
+        pytest.skip(f"the work array of N = {nodes} does not fit this GPU's shared memory")
+    if nodes == 300 and wp.get_device(DEVICE).max_shared_memory_per_block >= 232_448:
+        assert runs["shared"].attrs["block_members"] == 7
+    assert (runs["global"].status.values == 0).all()
+    for other in ("shared", "poisoned"):
+        for name, var in runs["global"].data_vars.items():
             if var.dtype.kind in "iu":
-                np.testing.assert_array_equal(shared[name].values, var.values, err_msg=f"N = {nodes}: {name}")
+                np.testing.assert_array_equal(runs[other][name].values, var.values, err_msg=f"{other}: {name}")
         for name in ("mu_s", "mu_s_time"):
-            np.testing.assert_allclose(shared[name].values, global_[name].values, rtol=1e-11, atol=0,
-                                       err_msg=f"N = {nodes}: {name}")
+            np.testing.assert_allclose(runs[other][name].values, runs["global"][name].values, rtol=1e-11, atol=0,
+                                       err_msg=f"{other}: {name}")
