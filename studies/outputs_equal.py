@@ -1,17 +1,25 @@
 """Refactor guard: save every output of a fixed set of scenes, or compare against a saved set.
 
-    python studies/outputs_equal.py save  FILE.npz [--device cpu]
-    python studies/outputs_equal.py compare FILE.npz [--device cpu]
+    python studies/outputs_equal.py save  FILE.npz [--device cpu] [--scenes cpu|gpu]
+    python studies/outputs_equal.py compare FILE.npz [--device cpu] [--scenes cpu|gpu]
 
-Scenes (N = 30, CPU-sized), each with the members e = 0, -0.2 (1000 N), 0.3 (300 N) and 0.6
-(3000 N, lift-off): the default law with fronts and two recorded members, the gate-less and the
-velocity-gate laws, float32 (gate-less), the model switches off (inertia, tilt, poisson_coupling,
-viscous_friction), and the default law without fronts. ``compare`` prints the largest relative
-difference of each scene's outputs and exits 1 above --rtol (default 1e-12; 0 asks for bit
-equality).
+Scenes "cpu" (the default; N = 30, CPU-sized), each with the members e = 0, -0.2 (1000 N), 0.3
+(300 N) and 0.6 (3000 N, lift-off): the default law with fronts and two recorded members, the
+gate-less and the velocity-gate laws, float32 (gate-less), the model switches off (inertia, tilt,
+poisson_coupling, viscous_friction), and the default law without fronts.
+
+Scenes "gpu" (with --device cuda:0), for what only a GPU runs, the blocked cooperative kernel and
+its shared work array: the engine benchmark's members (studies/bench_engine.py ``members``), the
+default law with the contact front, 1,100 at N = 200 (8 members a block on an H100, member stride
+9), 1,000 at N = 300 (7 a block, stride 7: the largest shared array), 300 at N = 40 (3 a block,
+stride 3) and the first member alone at N = 200 (stride 1).
+
+``compare`` prints the largest relative difference of each scene's outputs and exits 1 above
+--rtol (default 1e-12; 0 asks for bit equality).
 """
 
 import argparse
+import os
 import sys
 
 import numpy as np
@@ -33,11 +41,20 @@ def scenes():
     yield "stress_no_fronts", dict(model=wf.Model(), fronts=None)
 
 
-def run(device):
+def gpu_scenes():
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from bench_engine import members
+
+    for nodes, m in ((200, 1100), (300, 1000), (40, 300), (200, 1)):
+        yield f"n{nodes}_m{m}", dict(model=wf.Model(), members=members(m), nodes=nodes, fronts=wf.Fronts())
+
+
+def run(device, which="cpu"):
     out = {}
-    for name, kw in scenes():
-        ds = wf.simulate(MEMBERS, model=kw["model"], solver=wf.Solver(nodes=30, dtype=kw.get("dtype", "float64")),
-                         fronts=kw.get("fronts", FRONTS), record=kw.get("record"), device=device, progress=False)
+    for name, kw in (scenes() if which == "cpu" else gpu_scenes()):
+        solver = wf.Solver(nodes=kw.get("nodes", 30), dtype=kw.get("dtype", "float64"))
+        ds = wf.simulate(kw.get("members", MEMBERS), model=kw["model"], solver=solver, fronts=kw.get("fronts", FRONTS),
+                         record=kw.get("record"), device=device, progress=False)
         for var, arr in ds.data_vars.items():
             if np.issubdtype(arr.dtype, np.number):
                 out[f"{name}/{var}"] = arr.values
@@ -50,8 +67,9 @@ def main(argv=None):
     ap.add_argument("file")
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--rtol", type=float, default=1e-12)
+    ap.add_argument("--scenes", choices=("cpu", "gpu"), default="cpu")
     args = ap.parse_args(argv)
-    now = run(args.device)
+    now = run(args.device, args.scenes)
     if args.action == "save":
         np.savez_compressed(args.file, **now)
         print(f"saved {len(now)} arrays to {args.file}")
