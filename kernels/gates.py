@@ -16,7 +16,7 @@ from .controller import STEP_AT_SWITCH
 from .model_terms import disc_velocity_at
 from .reductions import crossing_time_quadratic
 from .types import (
-    C_PHI, C_TAU, C_V, EV_CONTACT, G_GATE, G_MARGIN, G_MARGIN_OLD, G_SLIDE, G_MARGIN_END, G_DMARGIN, G_GATE_END, IntegratorState,
+    C_PHI, C_TAU, C_V, EV_CONTACT, G_DMARGIN, G_GATE, G_GATE_END, G_MARGIN, G_MARGIN_END, G_MARGIN_OLD, G_SLIDE, IntegratorState,
     MemberParams, OutputSettings, SolverSettings,
 )
 

@@ -414,7 +414,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     # the benchmark switches (team_compile_options): shared-memory spilling needs launch bounds
     # instead of a register cap
     if options.smem_spilling:  # the launch bounds: the threads of a block (engine.py)
-        limits = dict(enable_cuda_smem_spilling=True, launch_bounds=block_threads(lanes, blocked))
+        limits = dict(enable_cuda_smem_spilling=True, launch_bounds=threads)
     else:
         limits = dict(cuda_max_registers=options.max_registers)
 
