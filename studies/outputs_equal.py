@@ -1,12 +1,16 @@
 """Refactor guard: save every output of a fixed set of scenes, or compare against a saved set.
 
-    python studies/outputs_equal.py save  FILE.npz [--device cpu] [--scenes cpu|gpu]
-    python studies/outputs_equal.py compare FILE.npz [--device cpu] [--scenes cpu|gpu]
+    python studies/outputs_equal.py save  FILE.npz [--device cpu] [--scenes cpu|team|gpu]
+    python studies/outputs_equal.py compare FILE.npz [--device cpu] [--scenes cpu|team|gpu]
 
 Scenes "cpu" (the default; N = 30, CPU-sized), each with the members e = 0, -0.2 (1000 N), 0.3
 (300 N) and 0.6 (3000 N, lift-off): the default law with fronts and two recorded members, the
 gate-less and the velocity-gate laws, float32 (gate-less), the model switches off (inertia, tilt,
 poisson_coupling, viscous_friction), and the default law without fronts.
+
+Scenes "team": the cooperative kernel (kernels/team.py) on the CPU, the members above at N = 30:
+the default law with fronts in teams of 4 and 7 lanes (7 or 8 nodes a lane; 4 or 5), the
+gate-less law in a team of 4.
 
 Scenes "gpu" (with --device cuda:0), for what only a GPU runs, the blocked cooperative kernel and
 its shared work array: the engine benchmark's members (studies/bench_engine.py ``members``), the
@@ -21,6 +25,8 @@ stride 3) and the first member alone at N = 200 (stride 1).
 import argparse
 import os
 import sys
+
+import warnings
 
 import numpy as np
 
@@ -41,6 +47,12 @@ def scenes():
     yield "stress_no_fronts", dict(model=wf.Model(), fronts=None)
 
 
+def team_scenes():
+    yield "team4_stress", dict(model=wf.Model(), lanes=4)
+    yield "team7_stress", dict(model=wf.Model(), lanes=7)
+    yield "team4_none", dict(model=wf.Model(relaxation_gate="none"), lanes=4)
+
+
 def gpu_scenes():
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     from bench_engine import members
@@ -50,9 +62,11 @@ def gpu_scenes():
 
 
 def run(device, which="cpu"):
+    # the team scenes run the cooperative kernel on the CPU on purpose
+    warnings.filterwarnings("ignore", message=r"Solver\(lanes=")
     out = {}
-    for name, kw in (scenes() if which == "cpu" else gpu_scenes()):
-        solver = wf.Solver(nodes=kw.get("nodes", 30), dtype=kw.get("dtype", "float64"))
+    for name, kw in {"cpu": scenes, "team": team_scenes, "gpu": gpu_scenes}[which]():
+        solver = wf.Solver(nodes=kw.get("nodes", 30), dtype=kw.get("dtype", "float64"), lanes=kw.get("lanes"))
         ds = wf.simulate(kw.get("members", MEMBERS), model=kw["model"], solver=solver, fronts=kw.get("fronts", FRONTS),
                          record=kw.get("record"), device=device, progress=False)
         for var, arr in ds.data_vars.items():
@@ -67,7 +81,7 @@ def main(argv=None):
     ap.add_argument("file")
     ap.add_argument("--device", default="cpu")
     ap.add_argument("--rtol", type=float, default=1e-12)
-    ap.add_argument("--scenes", choices=("cpu", "gpu"), default="cpu")
+    ap.add_argument("--scenes", choices=("cpu", "team", "gpu"), default="cpu")
     args = ap.parse_args(argv)
     now = run(args.device, args.scenes)
     if args.action == "save":
