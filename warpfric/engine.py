@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
+import os
 import threading
 import time
 import warnings
@@ -51,6 +52,7 @@ class EngineResult:
     team_exchange: str  # how a team's lanes exchange values (kernels/team.py; "none" for one lane)
     block_members: int  # members per thread block of the cooperative kernel, in step at each attempt (1: one)
     work_memory: str  # where the integrator's work array lives: "shared" (the blocked kernel's, where it fits) or "global"
+    member_order: str  # the order the kernel ran the members in: "similar" (member_order) or "given" (the caller's)
     passes: int  # integration passes (2 with the velocity front, else 1)
 
 
@@ -59,6 +61,58 @@ class EngineResult:
 # nodes for which it is chosen (a team of 8 lanes of 2 nodes)
 AUTO_LANES = 32
 AUTO_MIN_NODES = 16
+
+
+# The blocked kernel's members wait for each other at every attempt (kernels/integrator.py,
+# "Members in step"), so a block runs at the pace of its slowest member, attempt by attempt. Members
+# with close parameters take nearly the same steps, so run() hands the kernel its members in an
+# order where neighbours are alike (member_order) and puts the outputs back into the caller's
+# order. A member's outputs do not depend on its block's other members: the order changes the
+# time, not one bit of the results (docs/performance.md, "Similar members share a block").
+# WARPFRIC_MEMBER_ORDER: "similar" (on any device; also the CPU's, where it only costs a copy) or
+# "given" (the caller's order); unset: "similar" where the blocked kernel runs blocks of several
+# members.
+MEMBER_ORDERS = ("similar", "given")
+MORTON_BITS = 63  # bits of a member's key, shared among the parameters that vary
+
+
+def morton_key(coords: np.ndarray, bits: int) -> np.ndarray:
+    """Z-order key (uint64) of points with coordinates coords (point, dim) in [0, 1]: each
+    coordinate quantised to ``bits`` bits, the bits interleaved, the most significant first."""
+    n_points, n_dims = coords.shape
+    cells = np.minimum((coords * (1 << bits)).astype(np.uint64), np.uint64((1 << bits) - 1))
+    key = np.zeros(n_points, dtype=np.uint64)
+    for bit in range(bits - 1, -1, -1):
+        for dim in range(n_dims):
+            key = (key << np.uint64(1)) | ((cells[:, dim] >> np.uint64(bit)) & np.uint64(1))
+    return key
+
+
+def member_order(values: dict, blocked: bool, requested: str | None = None) -> np.ndarray | None:
+    """The order in which run() hands its members to the kernel (an index array), or None for the
+    caller's order: ``requested`` (WARPFRIC_MEMBER_ORDER) or, unset, "similar" where the blocked
+    kernel runs (``blocked``). "similar": the members sorted along a Z-order curve through the
+    parameters that vary among them, each mapped to [0, 1] by the rank of its distinct values
+    (equal values, equal coordinates; the spacing of the values does not matter), so that runs
+    of consecutive members (a block's) lie close in every varied parameter; ties keep the caller's
+    order."""
+    requested = requested or None
+    if requested is not None and requested not in MEMBER_ORDERS:
+        raise ValueError(f"WARPFRIC_MEMBER_ORDER={requested!r} is invalid; valid: {', '.join(MEMBER_ORDERS)} or unset")
+    if (requested or ("similar" if blocked else "given")) == "given":
+        return None
+    varied = []
+    for name in sorted(values):
+        column = np.asarray(values[name], dtype=np.float64)
+        distinct, rank = np.unique(column, return_inverse=True)
+        if distinct.size > 1:
+            varied.append(rank / (distinct.size - 1))
+    n_members = values["normal_force"].shape[0]
+    if not varied or n_members < 2:
+        return None
+    varied = varied[:MORTON_BITS]
+    key = morton_key(np.stack(varied, axis=1), MORTON_BITS // len(varied))
+    return np.argsort(key, kind="stable")
 
 
 def choose_lanes(solver: Solver, device: str) -> int:
@@ -451,6 +505,9 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         for layout_kernel in kern["layout"].values():
             wp.load_module(layout_kernel.module, device=device)
     kernel_build_s = time.perf_counter() - t_build
+    order = member_order(values, layout.blocked and layout.block_members > 1, os.environ.get("WARPFRIC_MEMBER_ORDER"))
+    if order is not None:  # the kernel's order; put back below
+        values = {name: np.asarray(column)[order] for name, column in values.items()}
     block_members = layout.block_members
     blocks = -(-n_members // block_members)  # of a team kernel's launch
     ft = kern["ft"]
@@ -459,6 +516,8 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     stress_gate = model.relaxation_gate == "stress"
     outputs = output_settings(fronts, stress_gate)
     slots = record_slots(record, n_members)
+    if order is not None:
+        slots = slots[order]
     strength = outputs.strength_front == 1
     n_passes = 2 if outputs.velocity_front == 1 else 1
     with wp.ScopedDevice(device):
@@ -558,6 +617,16 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             if strength:
                 strength_rows = {slot: host_copy(arrays.strength[slot]) for slot in (S_MAX, S_RATIO1)}
                 strength_peak = confirmed_strength_peaks(strength_rows, arrival, arrival_error, st["t"])
+        if order is not None:  # back into the caller's order
+            back = np.argsort(order)
+            st, fields, sigma, tau = st[back], fields[:, back], sigma[back], tau[back]
+            yield_np, gate_np = (None if a is None else a[back] for a in (yield_np, gate_np))
+            event = None if event is None else event[back]
+            if arrival is not None:
+                arrival = {row: a[:, back] for row, a in arrival.items()}
+                arrival_error = {row: a[:, back] for row, a in arrival_error.items()}
+            if strength_peak is not None:
+                strength_peak = strength_peak[:, back]
         result = EngineResult(
             member_states=st, fields=fields, normal_stress=sigma, friction_stress=tau, yield_time=yield_np, yield_gate=gate_np,
             arrival=arrival, arrival_error=arrival_error, strength_peak=strength_peak,
@@ -565,6 +634,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             kernel_build_s=kernel_build_s, device_bytes_per_member=device_bytes_per_member, lanes=lanes,
             team_exchange=kern["exchange"], block_members=block_members, passes=n_passes,
             work_memory="global" if layout.shared_work is None else "shared",
+            member_order="given" if order is None else "similar",
         )
         wp.synchronize_device(device)
     return result

@@ -128,6 +128,7 @@ def simulate(
     ds.attrs["team_exchange"] = result.team_exchange
     ds.attrs["block_members"] = result.block_members
     ds.attrs["work_memory"] = result.work_memory
+    ds.attrs["member_order"] = result.member_order
     ds.attrs["integration_passes"] = result.passes
     if yield_np is not None:
         broken = (ds.status.values != 0) & (ds.status.values != STATUS_MEANINGS.index("no_peak"))
