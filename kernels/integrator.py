@@ -564,8 +564,9 @@ _LAYOUT_KERNELS: dict = {}
 def make_layout_kernels(ft):
     """The state's layout between host and device, done on the device so that the host touches
     each value once: ``initial_state`` (the pad at rest) and ``member_rows`` ((slot, node, member)
-    -> (slot, member, node) copies, the Dataset's (member, x) order). One set per scalar type,
-    shared by every integrator of that type (cached)."""
+    -> (slot, member, node) copies, the Dataset's (member, x) order, with the members put back into
+    the caller's order: warpfric/engine.py member_order). One set per scalar type, shared by every
+    integrator of that type (cached)."""
     if ft in _LAYOUT_KERNELS:
         return _LAYOUT_KERNELS[ft]
     array3 = wp.array3d(dtype=ft)
@@ -581,14 +582,24 @@ def make_layout_kernels(ft):
         state[comp, i, m] = value
 
     @wp.kernel(module="unique", enable_backward=False)
-    def member_rows(source: array3, rows: array3):
-        """rows[k, m, i] = source[k, i, m]: (slot, node, member) -> (slot, member, node); launched
-        over rows' shape, so a leading part of source's slots."""
+    def member_rows(source: array3, order: wp.array(dtype=wp.int32), rows: array3):
+        """rows[k, m, i] = source[k, i, order[m]]: (slot, node, member) -> (slot, member, node), the
+        caller's member m being the kernel's member order[m]; launched over rows' shape, so a
+        leading part of source's slots."""
         k, m, i = wp.tid()
-        rows[k, m, i] = source[k, i, m]
+        rows[k, m, i] = source[k, i, order[m]]
 
-    _LAYOUT_KERNELS[ft] = dict(initial_state=initial_state, member_rows=member_rows)
+    _LAYOUT_KERNELS[ft] = dict(initial_state=initial_state, member_rows=member_rows, member_columns=member_columns)
     return _LAYOUT_KERNELS[ft]
+
+
+@wp.kernel(module="unique", enable_backward=False)
+def member_columns(source: wp.array2d(dtype=wp.float64), order: wp.array(dtype=wp.int32),
+                   columns: wp.array2d(dtype=wp.float64)):
+    """columns[i, m] = source[i, order[m]]: a (node, member) float64 output (the fronts' arrival
+    times, the strength ratios) with the members put back into the caller's order."""
+    i, m = wp.tid()
+    columns[i, m] = source[i, order[m]]
 
 
 def make_field_kernel(ft, stages):
@@ -603,12 +614,15 @@ def make_field_kernel(ft, stages):
         params: wp.array(dtype=MemberParams),
         member_states: wp.array(dtype=IntegratorState),
         state: array3,
+        row_of: wp.array(dtype=wp.int32),
         normal_stress_out: wp.array2d(dtype=ft),
         friction_stress_out: wp.array2d(dtype=ft),
     ):
         """Interface normal stress (Pa, contact part max(sigma_n, 0)) and friction stress (Pa) of
-        the current state of each member, (member, node): the Dataset's order."""
+        the current state of each member, (member, node): the Dataset's order, the kernel's member m
+        in row row_of[m] (the caller's order: warpfric/engine.py member_order)."""
         m = wp.tid()
+        row = row_of[m]
         st = member_states[m]
         p = params[m]
         n = state.shape[1]
@@ -621,8 +635,8 @@ def make_field_kernel(ft, stages):
         for i in range(n):
             u_r = state_displacement(state, i + 1, n, m)
             ns, fr = state_contact(c, state, i, n, m, u_l, u_c, u_r, delta0, tilt, v_disc)
-            normal_stress_out[m, i] = fr.contact * ns.value
-            friction_stress_out[m, i] = fr.stress
+            normal_stress_out[row, i] = fr.contact * ns.value
+            friction_stress_out[row, i] = fr.stress
             u_l = u_c
             u_c = u_r
 

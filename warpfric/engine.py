@@ -379,14 +379,27 @@ def host_copy(a) -> np.ndarray:
     return out
 
 
-def member_rows(layout: dict, source, slots: int) -> np.ndarray:
+def member_rows(layout: dict, source, slots: int, order) -> np.ndarray:
     """The first ``slots`` slots of a (slot, node, member) device array (any layout) on the host as
-    (slot, member, node), arranged by the layout kernels' member_rows on the device."""
+    (slot, member, node), arranged by the layout kernels' member_rows on the device, the caller's
+    member m being the kernel's order[m] (an int32 device array)."""
     import warp as wp
 
     rows = wp.empty((slots, source.shape[2], source.shape[1]), dtype=source.dtype, device=source.device)
-    wp.launch(layout["member_rows"], dim=rows.shape, inputs=[source, rows], device=source.device)
+    wp.launch(layout["member_rows"], dim=rows.shape, inputs=[source, order, rows], device=source.device)
     return host_copy(rows)
+
+
+def member_columns(layout: dict, source, order) -> np.ndarray:
+    """A (node, member) float64 device array on the host with its members in the caller's order
+    (order: int32 device array, None where the kernel ran the caller's order)."""
+    import warp as wp
+
+    if order is None:
+        return host_copy(source)
+    columns = wp.empty(source.shape, dtype=wp.float64, device=source.device)
+    wp.launch(layout["member_columns"], dim=columns.shape, inputs=[source, order, columns], device=source.device)
+    return host_copy(columns)
 
 
 class StateSnapshots:
@@ -506,7 +519,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             wp.load_module(layout_kernel.module, device=device)
     kernel_build_s = time.perf_counter() - t_build
     order = member_order(values, layout.blocked and layout.block_members > 1, os.environ.get("WARPFRIC_MEMBER_ORDER"))
-    if order is not None:  # the kernel's order; put back below
+    if order is not None:  # the kernel's order; the outputs go back into the caller's on their way to the host
         values = {name: np.asarray(column)[order] for name, column in values.items()}
     block_members = layout.block_members
     blocks = -(-n_members // block_members)  # of a team kernel's launch
@@ -536,6 +549,11 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         stall_limit = wp.full(1, NO_STALL_LIMIT, dtype=wp.int32)  # attempts after which a member stalls
         snapshot = StateSnapshots(n_members, device)
         initial_age = wp.array(values["initial_age"], dtype=wp.float64)
+        # the kernel's member m is the caller's order[m], so the caller's member m is the kernel's
+        # back[m]: outputs are read back through kernel_member (back) or written to row_of (order)
+        back = np.arange(n_members) if order is None else np.argsort(order)
+        kernel_member = wp.array(back, dtype=wp.int32)
+        row_of = wp.array(np.arange(n_members) if order is None else order, dtype=wp.int32)
 
         def launch_integrate(inputs, outputs_):
             if team:
@@ -597,36 +615,32 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                 # read back in the Dataset's (member, node) order, arranged on the device: the host
                 # writes each value once (docs/performance.md, "Host time around the kernel"); the
                 # fields' device copy is freed before the stresses are allocated
-                fields = member_rows(kern["layout"], arrays.state, N_COMPONENTS)
+                fields = member_rows(kern["layout"], arrays.state, N_COMPONENTS, kernel_member)
                 sigma_out = wp.zeros((n_members, n), dtype=ft)
                 tau_out = wp.zeros((n_members, n), dtype=ft)
-                wp.launch(kern["evaluate_fields"], dim=n_members, inputs=[arrays.params, member_states, arrays.state],
-                          outputs=[sigma_out, tau_out])
+                wp.launch(kern["evaluate_fields"], dim=n_members,
+                          inputs=[arrays.params, member_states, arrays.state, row_of], outputs=[sigma_out, tau_out])
                 sigma = host_copy(sigma_out)
                 tau = host_copy(tau_out)
                 yield_np = gate_np = None
                 if stress_gate:  # float64 (the stress gate refuses float32), like yield_time
-                    yield_np = member_rows(kern["layout"], arrays.yield_time.reshape((1, n, n_members)), 1)[0]
-                    gate_np = member_rows(kern["layout"], arrays.gates, G_GATE + 1)[G_GATE]
+                    yield_np = member_rows(kern["layout"], arrays.yield_time.reshape((1, n, n_members)), 1,
+                                           kernel_member)[0]
+                    gate_np = member_rows(kern["layout"], arrays.gates, G_GATE + 1, kernel_member)[G_GATE]
         snapshot.close()
+        if order is not None:  # the member states and events back into the caller's order (the rest: above, below)
+            st = st[back]
+            event = None if event is None else event[back]
         arrival = arrival_error = strength_peak = None
         if fronts is not None:
             rows = sorted({FRONT_EVENTS.index(name) for name in fronts.events})  # only what is asked for is read
-            arrival = {row: host_copy(arrays.arrival[row]) for row in rows}
-            arrival_error = {row: host_copy(arrays.arrival_error[row]) for row in rows}
+            by_member = None if order is None else kernel_member
+            arrival = {row: member_columns(kern["layout"], arrays.arrival[row], by_member) for row in rows}
+            arrival_error = {row: member_columns(kern["layout"], arrays.arrival_error[row], by_member) for row in rows}
             if strength:
-                strength_rows = {slot: host_copy(arrays.strength[slot]) for slot in (S_MAX, S_RATIO1)}
+                strength_rows = {slot: member_columns(kern["layout"], arrays.strength[slot], by_member)
+                                 for slot in (S_MAX, S_RATIO1)}
                 strength_peak = confirmed_strength_peaks(strength_rows, arrival, arrival_error, st["t"])
-        if order is not None:  # back into the caller's order
-            back = np.argsort(order)
-            st, fields, sigma, tau = st[back], fields[:, back], sigma[back], tau[back]
-            yield_np, gate_np = (None if a is None else a[back] for a in (yield_np, gate_np))
-            event = None if event is None else event[back]
-            if arrival is not None:
-                arrival = {row: a[:, back] for row, a in arrival.items()}
-                arrival_error = {row: a[:, back] for row, a in arrival_error.items()}
-            if strength_peak is not None:
-                strength_peak = strength_peak[:, back]
         result = EngineResult(
             member_states=st, fields=fields, normal_stress=sigma, friction_stress=tau, yield_time=yield_np, yield_gate=gate_np,
             arrival=arrival, arrival_error=arrival_error, strength_peak=strength_peak,
