@@ -71,8 +71,13 @@ AUTO_MIN_NODES = 16
 # time, not one bit of the results (docs/performance.md, "Similar members share a block").
 # WARPFRIC_MEMBER_ORDER: "similar" (on any device; also the CPU's, where it only costs a copy) or
 # "given" (the caller's order); unset: "similar" where the blocked kernel runs blocks of several
-# members.
+# members in at least SIMILAR_ORDER_MIN_WAVES blocks per SM. In one wave of blocks the run lasts as
+# long as its slowest block, and alike members put the slowest together, where they share an SM's
+# issue slots: 1,000 members (125 blocks on 132 SMs) took 0.164 s in the similar order against
+# 0.144 s as drawn; 3,000 (2.8 blocks per SM) 0.344 against 0.358 s, 10,000 0.925 against 1.041 s
+# (H100, studies/results/h100/member_order_8114533.jsonl).
 MEMBER_ORDERS = ("similar", "given")
+SIMILAR_ORDER_MIN_WAVES = 2
 MORTON_BITS = 63  # bits of a member's key, shared among the parameters that vary
 
 
@@ -90,8 +95,8 @@ def morton_key(coords: np.ndarray, bits: int) -> np.ndarray:
 
 def member_order(values: dict, blocked: bool, requested: str | None = None) -> np.ndarray | None:
     """The order in which run() hands its members to the kernel (an index array), or None for the
-    caller's order: ``requested`` (WARPFRIC_MEMBER_ORDER) or, unset, "similar" where the blocked
-    kernel runs (``blocked``). "similar": the members sorted along a Z-order curve through the
+    caller's order: ``requested`` (WARPFRIC_MEMBER_ORDER) or, unset, "similar" where ``blocked``
+    (the blocked kernel runs blocks of several members, at least SIMILAR_ORDER_MIN_WAVES per SM). "similar": the members sorted along a Z-order curve through the
     parameters that vary among them, each mapped to [0, 1] by the rank of its distinct values
     (equal values, equal coordinates; the spacing of the values does not matter), so that runs
     of consecutive members (a block's) lie close in every varied parameter; ties keep the caller's
@@ -518,7 +523,9 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         for layout_kernel in kern["layout"].values():
             wp.load_module(layout_kernel.module, device=device)
     kernel_build_s = time.perf_counter() - t_build
-    order = member_order(values, layout.blocked and layout.block_members > 1, os.environ.get("WARPFRIC_MEMBER_ORDER"))
+    waves = -(-n_members // layout.block_members) / (gpu.sm_count if cuda else 1)  # blocks per SM
+    alike = layout.blocked and layout.block_members > 1 and waves >= SIMILAR_ORDER_MIN_WAVES
+    order = member_order(values, alike, os.environ.get("WARPFRIC_MEMBER_ORDER"))
     if order is not None:  # the kernel's order; the outputs go back into the caller's on their way to the host
         values = {name: np.asarray(column)[order] for name, column in values.items()}
     block_members = layout.block_members
