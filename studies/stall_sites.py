@@ -27,7 +27,7 @@ sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from sass_sites import OPCODE, instructions, tool  # noqa: E402
 
 # stall reasons shown apart (ncu's column names, "stall_" dropped); the rest is summed as "other"
-REASONS = ("long_sb", "no_inst", "wait", "short_sb", "branch_resolving", "selected", "math", "lg", "mio")
+REASONS = ("long_sb", "no_inst", "wait", "short_sb", "branch_resolving", "selected", "math", "lg", "mio", "barrier")
 
 
 def read_samples(path: str) -> list:
