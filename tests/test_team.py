@@ -10,8 +10,8 @@ import warp as wp
 from conftest import DEVICE, run
 
 import warpfric as wf
-from warpfric.engine import (AUTO_LANES, AUTO_MIN_NODES, choose_lanes, cpu_blocks, member_order, morton_key,
-                             slower_float32)
+from warpfric.engine import (AUTO_LANES, AUTO_MIN_NODES, alike_blocks, choose_lanes, cpu_blocks, member_order,
+                             morton_key, slower_float32)
 
 # the members of studies/outputs_equal.py: e = 0, -0.2 (1000 N), 0.3 (300 N), 0.6 (3000 N: lift-off)
 MEMBERS = {"eccentricity": [0.0, -0.2, 0.3, 0.6], "normal_force": [1000.0, 1000.0, 300.0, 3000.0]}
@@ -284,6 +284,14 @@ def test_similar_members_are_neighbours():
     np.testing.assert_array_equal(member_order(values, False, "similar"), order)
     with pytest.raises(ValueError, match="WARPFRIC_MEMBER_ORDER='random'"):
         member_order(values, True, "random")
+    # the default: blocks of several members, at least two blocks per SM (132 SMs: 264 blocks, 2,105 members or more)
+    from warpfric.kernels.integrator import TeamLayout
+
+    eight = TeamLayout(True, 8, (200, 9))
+    assert not alike_blocks(eight, 1000, 132) and not alike_blocks(eight, 2104, 132)
+    assert alike_blocks(eight, 2105, 132) and alike_blocks(eight, 10_000, 132)
+    assert not alike_blocks(TeamLayout(True, 1, (200, 1)), 10_000, 132)
+    assert not alike_blocks(TeamLayout(False, 1, None), 10_000, 1)  # the thread kernel, the CPU
 
 
 def test_the_member_order_changes_no_output(monkeypatch):

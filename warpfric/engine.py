@@ -93,6 +93,14 @@ def morton_key(coords: np.ndarray, bits: int) -> np.ndarray:
     return key
 
 
+def alike_blocks(layout, n_members: int, sm_count: int) -> bool:
+    """Whether a run of n_members in ``layout`` (kernels/integrator.py TeamLayout) on a device of
+    sm_count SMs gets the similar member order by default: blocks of several members, at least
+    SIMILAR_ORDER_MIN_WAVES blocks per SM."""
+    blocks = -(-n_members // layout.block_members)
+    return layout.blocked and layout.block_members > 1 and blocks >= SIMILAR_ORDER_MIN_WAVES * sm_count
+
+
 def member_order(values: dict, blocked: bool, requested: str | None = None) -> np.ndarray | None:
     """The order in which run() hands its members to the kernel (an index array), or None for the
     caller's order: ``requested`` (WARPFRIC_MEMBER_ORDER) or, unset, "similar" where ``blocked``
@@ -523,9 +531,8 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         for layout_kernel in kern["layout"].values():
             wp.load_module(layout_kernel.module, device=device)
     kernel_build_s = time.perf_counter() - t_build
-    waves = -(-n_members // layout.block_members) / (gpu.sm_count if cuda else 1)  # blocks per SM
-    alike = layout.blocked and layout.block_members > 1 and waves >= SIMILAR_ORDER_MIN_WAVES
-    order = member_order(values, alike, os.environ.get("WARPFRIC_MEMBER_ORDER"))
+    order = member_order(values, alike_blocks(layout, n_members, gpu.sm_count if cuda else 1),
+                         os.environ.get("WARPFRIC_MEMBER_ORDER"))
     if order is not None:  # the kernel's order; the outputs go back into the caller's on their way to the host
         values = {name: np.asarray(column)[order] for name, column in values.items()}
     block_members = layout.block_members
