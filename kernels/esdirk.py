@@ -161,10 +161,13 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
 
     @wp.func
     def error_norm(
-        c: Coeffs, s: SolverSettings, m: int, n: int, state: array3, K: array4, step_end: array3,
+        c: Coeffs, s: SolverSettings, m: int, n: int, state: array3, K: array4, step_end: array3, work: array3,
         s1: int, s2: int, s3: int, h: ft,
     ):
         """Max over nodes and differential components of |h*sum (b - b_hat) K| / (rtol*(scale + |y|)).
+        Leaves the step's solution y_new of every component but the velocity in work[comp] (the
+        stage constants' slots, free once the last stage converged), where advance_state takes it
+        if the step is accepted: it reads the state and three stage derivatives once, not twice.
 
         The velocity's estimate is filtered by the diagonal of (I - gamma*h*J)^-1 (Hairer & Wanner,
         IV.8; Shampine): the pad velocity is stiff and overdamped, and its raw estimate does not
@@ -180,24 +183,25 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
                     k3 = K[s3, comp, i, m]
                     y = state[comp, i, m]
                     y_new = y + solution_increment(h, k1, k2, k3)
+                    if comp != C_V:
+                        work[comp, i, m] = y_new
                     err = fold_error(c, step_end, comp, i, m, error_increment(h, k1, k2, k3), y, y_new, g, rtol, err)
         return team_max(err)
 
     @wp.func
-    def advance_state(c: Coeffs, m: int, n: int, state: array3, K: array4, s1: int, s2: int, s3: int, h: ft,
+    def advance_state(c: Coeffs, m: int, n: int, state: array3, K: array4, work: array3, s3: int, h: ft,
                       backward_euler: int):
-        """y_{n+1} = y_n + h * sum_j b_j K_j (backward Euler: y_n + h*K[s3]); the velocity is the last
-        stage's (stiffly accurate, and algebraic without inertia). The lane's nodes."""
+        """y_{n+1} = y_n + h * sum_j b_j K_j, which error_norm left in work[comp] (backward Euler: y_n +
+        h*K[s3]); the velocity is the last stage's (stiffly accurate, and algebraic without inertia).
+        The lane's nodes."""
         for i in range(c.first_node, c.end_node):
             for comp in range(N_COMPONENTS):
                 if comp == C_V:
                     state[comp, i, m] = K[s3, C_U, i, m]
+                elif backward_euler == 1:
+                    state[comp, i, m] = state[comp, i, m] + h * K[s3, comp, i, m]
                 else:
-                    k3 = K[s3, comp, i, m]
-                    if backward_euler == 1:
-                        state[comp, i, m] = state[comp, i, m] + h * k3
-                    else:
-                        state[comp, i, m] = state[comp, i, m] + solution_increment(h, K[s1, comp, i, m], K[s2, comp, i, m], k3)
+                    state[comp, i, m] = work[comp, i, m]
 
     return dict(prepare_stage=prepare_stage, fold_error=fold_error, error_norm=error_norm, advance_state=advance_state)
 
@@ -293,7 +297,7 @@ def make_tr_bdf2_steps(ft, terms, newton, StepResult, arrays):
                 res.sums = sums
                 res.switch_test = test
         if ok == 1 and backward_euler == 0:  # TR-BDF2 only: backward Euler has no error estimate
-            res.error = wp.float64(error_norm(c, settings, m, n, state, K, step_end, s1, s2, s3, ft(h)))
+            res.error = wp.float64(error_norm(c, settings, m, n, state, K, step_end, work, s1, s2, s3, ft(h)))
         res.ok = ok
         res.iterations = iterations
         res.non_finite = bad

@@ -340,8 +340,8 @@ def make_acceptance(ft, model, method, stages):
     @wp.func
     def accept_step(
         c: Coeffs, p: MemberParams, st: IntegratorState, settings: SolverSettings, outputs: OutputSettings, m: int,
-        n: int, state: array3, K: array4, step_end: array3, gates: array3, s1: int, s2: int, s3: int, t: wp.float64,
-        step: Step, factor: wp.float64, res: StepResult, restart: int, yield_time: wp.array2d(dtype=wp.float64),
+        n: int, state: array3, K: array4, work: array3, step_end: array3, gates: array3, s1: int, s2: int, s3: int,
+        t: wp.float64, step: Step, factor: wp.float64, res: StepResult, restart: int, yield_time: wp.array2d(dtype=wp.float64),
         arrival: wp.array3d(dtype=wp.float64), arrival_error: wp.array3d(dtype=wp.float64),
         strength: wp.array3d(dtype=wp.float64), record_times: wp.array(dtype=wp.float64), record_previous: array3,
         record: array4,
@@ -351,11 +351,11 @@ def make_acceptance(ft, model, method, stages):
         the gates, set the next step size and the FSAL slot s3, and run the observers. Returns st."""
         if wp.static(esdirk4):
             if restart != 0:
-                advance_state(c, m, n, state, K, s1, s2, s3, ft(step.h), restart)
+                advance_state(c, m, n, state, K, work, s3, ft(step.h), restart)
             else:
                 advance_state4(c, m, n, state, K, s1, ft(step.h))
         else:
-            advance_state(c, m, n, state, K, s1, s2, s3, ft(step.h), restart)
+            advance_state(c, m, n, state, K, work, s3, ft(step.h), restart)
         if wp.static(stress_gate):
             switches_before = st.gate_switches
             st = switch_gates(c, p, st, outputs, m, n, state, K, s3, gates, t, step.t_new, restart, yield_time,
@@ -546,7 +546,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
                     break
                 continue
             # ---- accepted: advance, gates, observers ----
-            st = accept_step(c, p, st, settings, outputs, m, n, state, K, step_end, gates, s1, s2, s3, t, step, factor, res,
+            st = accept_step(c, p, st, settings, outputs, m, n, state, K, work_view, step_end, gates, s1, s2, s3, t, step, factor, res,
                              restart, yield_time, arrival, arrival_error, strength, record_times, record_previous, record)
             delta0 = res.delta0
             tilt = res.tilt

@@ -42,7 +42,8 @@ C_U, C_V, C_TAU, C_PHI = 0, 1, 2, 3
 N_COMPONENTS = 4
 # work slots (first index of ``work``: the scratch of one attempted step, which the blocked GPU
 # kernel keeps in shared memory, kernels/integrator.py team_layout): the stage constants z (in the
-# order of the components), the Newton iterate of the pad velocity, the Thomas sweep's rows (cp,
+# order of the components; after the last stage, TR-BDF2's error norm leaves the step's solution
+# there for advance_state), the Newton iterate of the pad velocity, the Thomas sweep's rows (cp,
 # three right-hand sides) and the two border rows of the plate balance; last, the cooperative
 # kernel's two coupling columns of a lane's interior rows (kernels/team.py)
 W_ZU, W_ZV, W_ZT, W_ZP, W_V, W_CP, W_R0, W_R1, W_R2, W_C1, W_C2 = range(11)
