@@ -87,9 +87,9 @@ def make_switch_test(ft, model, terms, team, node_sliding):
         c: Coeffs, settings: SolverSettings, gates: array3, i: int, m: int, fr: Friction, sigma: ft,
         velocity: ft, v_disc: ft, h: ft, test: SwitchTest,
     ):
-        """At the end of a step of size h, node i: store the yield margin z1 (gates[G_MARGIN_END]) and
-        its slope with respect to the gate (gates[G_DMARGIN]), and fold the node into the step's switch
-        test.
+        """At the end of a step of size h, node i: store the yield margin z1 (gates[G_MARGIN_END]) and,
+        where the node switched (the only place switch_gates reads it), the slope of its rate with
+        respect to the gate (gates[G_DMARGIN]), and fold the node into the step's switch test.
 
         Where z1 has the other sign than the gate held, the switch happened inside the step, at the
         fraction theta = z0/(z0 - z1) (linear in time); the relaxation then ran with the wrong gate
@@ -99,15 +99,8 @@ def make_switch_test(ft, model, terms, team, node_sliding):
         rtol = ft(wp.min(settings.switch_rtol, wp.float64(1.0e30)))
         z1 = yield_margin(c, fr.stress, fr.area)
         gates[G_MARGIN_END, i, m] = z1
-        # d(dz/dt)/d(gate) at the end of the step: the gate enters the rates of tau_el and phi (and A
-        # through phi); the pad's rates do not depend on it
         slip = v_disc - c.kif * velocity
         relax = wp.abs(slip) * c.inv_D
-        darea_dgate = fr.contact * sigma * c.inv_hardness * c.b / (c.phi0 + fr.contact_age) * (-fr.contact_age * relax)
-        dtau_dgate = -fr.elastic_stress * relax
-        if wp.static(viscous):
-            dtau_dgate += c.eta_vstar * wp.sign(slip) * wp.log(ft(1.0) + wp.abs(slip) / c.vstar) * darea_dgate
-        gates[G_DMARGIN, i, m] = wp.sign(fr.stress) * dtau_dgate - c.tau_c * darea_dgate
         open_now = ft(0.0)
         if z1 > ft(0.0):
             open_now = ft(1.0)
@@ -119,6 +112,14 @@ def make_switch_test(ft, model, terms, team, node_sliding):
                 fr.contact_age * relax / (rtol * (c.phi_scale + wp.abs(fr.contact_age))),
             )
             if open_now != fr.gate:
+                # d(dz/dt)/d(gate) at the end of the step: the gate enters the rates of tau_el and phi
+                # (and A through phi); the pad's rates do not depend on it. switch_gates reads it where
+                # the gate changes, which for a node not sliding is here (its new gate is open_now)
+                darea_dgate = fr.contact * sigma * c.inv_hardness * c.b / (c.phi0 + fr.contact_age) * (-fr.contact_age * relax)
+                dtau_dgate = -fr.elastic_stress * relax
+                if wp.static(viscous):
+                    dtau_dgate += c.eta_vstar * wp.sign(slip) * wp.log(ft(1.0) + wp.abs(slip) / c.vstar) * darea_dgate
+                gates[G_DMARGIN, i, m] = wp.sign(fr.stress) * dtau_dgate - c.tau_c * darea_dgate
                 theta = ft(0.0)
                 if z0 != z1:
                     theta = wp.clamp(z0 / (z0 - z1), ft(0.0), ft(1.0))
@@ -293,7 +294,8 @@ def make_gate_update(ft, terms, team):
             z1 = gates[G_MARGIN_END, i, m]
             z0 = gates[G_MARGIN, i, m]
             sliding = gates[G_SLIDE, i, m]
-            gate = gates[G_GATE, i, m]
+            gate_start = gates[G_GATE, i, m]
+            gate = gate_start
             new_sliding = ft(0.0)
             new_gate = ft(0.0)
             if sliding > ft(0.0):
@@ -306,7 +308,9 @@ def make_gate_update(ft, terms, team):
             else:
                 if z1 > ft(0.0):
                     new_gate = ft(1.0)
-                dr = gates[G_DMARGIN, i, m]
+                dr = ft(0.0)
+                if new_gate != gate:  # test_switch stored the slope only there
+                    dr = gates[G_DMARGIN, i, m]
                 if dr < ft(0.0) and h > ft(0.0) and new_gate != gate:
                     r_obs = (z1 - z0) / h
                     rate_far = r_obs + (ft(1.0) - ft(2.0) * gate) * dr  # the rate with the other gate value
@@ -319,11 +323,14 @@ def make_gate_update(ft, terms, team):
                 K[slot, C_PHI, i, m] = K[slot, C_PHI, i, m] - state[C_PHI, i, m] * relax
             if gate_regime(new_gate, new_sliding) != gate_regime(gate, sliding):
                 switches += 1
-            if new_gate > ft(0.0) and not wp.isfinite(yield_time[i, m]):
-                theta = wp.float64(0.0)
-                if z0 != z1 and z1 > ft(0.0):
-                    theta = wp.clamp(wp.float64(z0) / wp.float64(z0 - z1), wp.float64(0.0), wp.float64(1.0))
-                yield_time[i, m] = t_old + theta * (t_new - t_old)
+            # a first opening has gate 0 at the step's start (the gates start closed, and a gate once
+            # above 0 recorded its opening then): yield_time is read only there, not at every node
+            if gate_start == ft(0.0) and new_gate > ft(0.0):
+                if not wp.isfinite(yield_time[i, m]):
+                    theta = wp.float64(0.0)
+                    if z0 != z1 and z1 > ft(0.0):
+                        theta = wp.clamp(wp.float64(z0) / wp.float64(z0 - z1), wp.float64(0.0), wp.float64(1.0))
+                    yield_time[i, m] = t_old + theta * (t_new - t_old)
             if outputs.contact_front == 1 and new_gate > ft(0.0) and gate_regime(gate, sliding) == 0:
                 if not wp.isfinite(arrival[EV_CONTACT, i, m]):
                     t_cross, t_err = contact_arrival(p, st, t_old, t_new, gates[G_MARGIN_OLD, i, m], z0, z1,
