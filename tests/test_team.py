@@ -294,25 +294,31 @@ def test_similar_members_are_neighbours():
     assert not alike_blocks(TeamLayout(False, 1, None), 10_000, 1)  # the thread kernel, the CPU
 
 
+@pytest.mark.filterwarnings("ignore:Solver\\(lanes=:UserWarning")  # a team on the CPU's fibers
 def test_the_member_order_changes_no_output(monkeypatch):
     """The kernel's members in the similar order (WARPFRIC_MEMBER_ORDER=similar, which the CPU's
     thread kernel takes only on request) give every output of the caller's order bit for bit, put
     back in the caller's order: the stress gate with the contact and velocity fronts (two passes:
-    the second pass's members are chosen by the first's events) and two recorded members; the
-    order of these 5 members is not its own inverse, so a read-back through the wrong one fails."""
+    the second pass's members are chosen by the first's events) and two recorded members, in the
+    thread kernel and (with the strength front) a team of 4 lanes; the order of these 5 members is
+    not its own inverse, so a read-back through the wrong one fails. A bad value is refused."""
     values = {"eccentricity": [0.3, -0.2, 0.0, 0.6, -0.1], "normal_force": [300.0, 1000.0, 1000.0, 3000.0, 600.0]}
     record = wf.Record.window(20.1, 20.4, 4, members=(0, 3))
-    fronts = wf.Fronts(event=("contact", "velocity"))
-    runs = {}
-    for order in ("given", "similar"):
-        monkeypatch.setenv("WARPFRIC_MEMBER_ORDER", order)
-        runs[order] = run(values, nodes=20, rtol=1e-5, fronts=fronts, record=record, lanes=1)
-        assert runs[order].attrs["member_order"] == order
     order = member_order({k: np.asarray(v) for k, v in values.items()}, False, "similar")
     assert list(order[order]) != list(range(5))  # not its own inverse: reading back through it would show
-    assert runs["given"].attrs["integration_passes"] == 2
-    for name, var in runs["given"].data_vars.items():
-        np.testing.assert_array_equal(runs["similar"][name].values, var.values, err_msg=name)
+    for lanes, events in ((1, ("contact", "velocity")), (4, ("contact", "strength"))):
+        runs = {}
+        for order_name in ("given", "similar"):
+            monkeypatch.setenv("WARPFRIC_MEMBER_ORDER", order_name)
+            runs[order_name] = run(values, nodes=20, rtol=1e-5, fronts=wf.Fronts(event=events), record=record,
+                                   lanes=lanes)
+            assert runs[order_name].attrs["member_order"] == order_name
+        assert runs["given"].attrs["integration_passes"] == (2 if "velocity" in events else 1)
+        for name, var in runs["given"].data_vars.items():
+            np.testing.assert_array_equal(runs["similar"][name].values, var.values, err_msg=f"{lanes} lanes: {name}")
+    monkeypatch.setenv("WARPFRIC_MEMBER_ORDER", "random")
+    with pytest.raises(ValueError, match="WARPFRIC_MEMBER_ORDER='random'"):
+        run(values, nodes=20, rtol=1e-5)
 
 
 @pytest.mark.skipif(not DEVICE.startswith("cuda"), reason="warp shuffles, and so several members per block, need a GPU")

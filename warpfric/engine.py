@@ -521,6 +521,11 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     # members per block and the work array's memory (kernels/integrator.py team_layout)
     layout = team_layout(lanes, n, n_members, cuda, gpu.sm_count if cuda else 1,
                          gpu.max_shared_memory_per_block if cuda else 0)
+    # before the kernels are built, so that a bad WARPFRIC_MEMBER_ORDER is refused first
+    order = member_order(values, alike_blocks(layout, n_members, gpu.sm_count if cuda else 1),
+                         os.environ.get("WARPFRIC_MEMBER_ORDER"))
+    if order is not None:  # the kernel's order; the outputs go back into the caller's on their way to the host
+        values = {name: np.asarray(column)[order] for name, column in values.items()}
     t_build = time.perf_counter()
     kern = get_integrator(solver.dtype, model, lanes, solver.method, cuda=cuda, observed=observer_set(fronts),
                           shared_work=layout.shared_work)
@@ -531,10 +536,6 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         for layout_kernel in kern["layout"].values():
             wp.load_module(layout_kernel.module, device=device)
     kernel_build_s = time.perf_counter() - t_build
-    order = member_order(values, alike_blocks(layout, n_members, gpu.sm_count if cuda else 1),
-                         os.environ.get("WARPFRIC_MEMBER_ORDER"))
-    if order is not None:  # the kernel's order; the outputs go back into the caller's on their way to the host
-        values = {name: np.asarray(column)[order] for name, column in values.items()}
     block_members = layout.block_members
     blocks = -(-n_members // block_members)  # of a team kernel's launch
     ft = kern["ft"]

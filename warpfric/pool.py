@@ -277,6 +277,8 @@ def run(n_workers: int, values: dict, *, scene, model, solver, fronts, record, d
         shutdown(terminate=True)
         raise
     ds = join(parts, [chosen for _, chosen in records], x, varying_parameters)
+    orders = {p.attrs.get("member_order", "given") for p in parts}  # each chunk's engine chose its own
+    ds.attrs["member_order"] = orders.pop() if len(orders) == 1 else "mixed"
     build = max(float(p.attrs.get("kernel_build_time_s", 0.0)) for p in parts)
     ds.attrs["kernel_build_time_s"] = build
     ds.attrs["wall_time_s"] = max(time.perf_counter() - t0 - build, 0.0)
