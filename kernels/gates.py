@@ -308,15 +308,14 @@ def make_gate_update(ft, terms, team):
             else:
                 if z1 > ft(0.0):
                     new_gate = ft(1.0)
-                dr = ft(0.0)
-                if new_gate != gate:  # test_switch stored the slope only there
+                if new_gate != gate:  # the node switched: test_switch stored the slope dr for it
                     dr = gates[G_DMARGIN, i, m]
-                if dr < ft(0.0) and h > ft(0.0) and new_gate != gate:
-                    r_obs = (z1 - z0) / h
-                    rate_far = r_obs + (ft(1.0) - ft(2.0) * gate) * dr  # the rate with the other gate value
-                    if (gate == ft(0.0) and rate_far < ft(0.0)) or (gate == ft(1.0) and rate_far > ft(0.0)):
-                        new_sliding = ft(1.0)
-                        new_gate = wp.clamp(gate + (-z1 / h - r_obs) / dr, ft(0.0), ft(1.0))  # start value
+                    if dr < ft(0.0) and h > ft(0.0):
+                        r_obs = (z1 - z0) / h
+                        rate_far = r_obs + (ft(1.0) - ft(2.0) * gate) * dr  # the rate with the other gate value
+                        if (gate == ft(0.0) and rate_far < ft(0.0)) or (gate == ft(1.0) and rate_far > ft(0.0)):
+                            new_sliding = ft(1.0)
+                            new_gate = wp.clamp(gate + (-z1 / h - r_obs) / dr, ft(0.0), ft(1.0))  # start value
             if new_gate != gate:
                 relax = (new_gate - gate) * wp.abs(v_disc - c.kif * state[C_V, i, m]) * c.inv_D
                 K[slot, C_TAU, i, m] = K[slot, C_TAU, i, m] - state[C_TAU, i, m] * relax

@@ -566,7 +566,7 @@ def make_layout_kernels(ft):
     each value once: ``initial_state`` (the pad at rest) and ``member_rows`` ((slot, node, member)
     -> (slot, member, node) copies, the Dataset's (member, x) order, with the members put back into
     the caller's order: warpfric/engine.py member_order). One set per scalar type, shared by every
-    integrator of that type (cached)."""
+    integrator of that type (cached), with the float64 ``member_columns``, which every type shares."""
     if ft in _LAYOUT_KERNELS:
         return _LAYOUT_KERNELS[ft]
     array3 = wp.array3d(dtype=ft)
@@ -582,24 +582,24 @@ def make_layout_kernels(ft):
         state[comp, i, m] = value
 
     @wp.kernel(module="unique", enable_backward=False)
-    def member_rows(source: array3, order: wp.array(dtype=wp.int32), rows: array3):
-        """rows[k, m, i] = source[k, i, order[m]]: (slot, node, member) -> (slot, member, node), the
-        caller's member m being the kernel's member order[m]; launched over rows' shape, so a
-        leading part of source's slots."""
+    def member_rows(source: array3, kernel_member: wp.array(dtype=wp.int32), rows: array3):
+        """rows[k, m, i] = source[k, i, kernel_member[m]]: (slot, node, member) -> (slot, member, node),
+        the caller's member m being the integrate kernel's member kernel_member[m]; launched over
+        rows' shape, so a leading part of source's slots."""
         k, m, i = wp.tid()
-        rows[k, m, i] = source[k, i, order[m]]
+        rows[k, m, i] = source[k, i, kernel_member[m]]
 
     _LAYOUT_KERNELS[ft] = dict(initial_state=initial_state, member_rows=member_rows, member_columns=member_columns)
     return _LAYOUT_KERNELS[ft]
 
 
 @wp.kernel(module="unique", enable_backward=False)
-def member_columns(source: wp.array2d(dtype=wp.float64), order: wp.array(dtype=wp.int32),
+def member_columns(source: wp.array2d(dtype=wp.float64), kernel_member: wp.array(dtype=wp.int32),
                    columns: wp.array2d(dtype=wp.float64)):
-    """columns[i, m] = source[i, order[m]]: a (node, member) float64 output (the fronts' arrival
-    times, the strength ratios) with the members put back into the caller's order."""
+    """columns[i, m] = source[i, kernel_member[m]]: a (node, member) float64 output (the fronts'
+    arrival times, the strength ratios) with the members put back into the caller's order."""
     i, m = wp.tid()
-    columns[i, m] = source[i, order[m]]
+    columns[i, m] = source[i, kernel_member[m]]
 
 
 def make_field_kernel(ft, stages):

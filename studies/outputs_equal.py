@@ -25,7 +25,6 @@ stride 3) and the first member alone at N = 200 (stride 1).
 import argparse
 import os
 import sys
-
 import warnings
 
 import numpy as np

@@ -104,7 +104,7 @@ def alike_blocks(layout, n_members: int, sm_count: int) -> bool:
 def member_order(values: dict, blocked: bool, requested: str | None = None) -> np.ndarray | None:
     """The order in which run() hands its members to the kernel (an index array), or None for the
     caller's order: ``requested`` (WARPFRIC_MEMBER_ORDER) or, unset, "similar" where ``blocked``
-    (the blocked kernel runs blocks of several members, at least SIMILAR_ORDER_MIN_WAVES per SM). "similar": the members sorted along a Z-order curve through the
+    (alike_blocks). "similar": the members sorted along a Z-order curve through the
     parameters that vary among them, each mapped to [0, 1] by the rank of its distinct values
     (equal values, equal coordinates; the spacing of the values does not matter), so that runs
     of consecutive members (a block's) lie close in every varied parameter; ties keep the caller's
@@ -120,8 +120,7 @@ def member_order(values: dict, blocked: bool, requested: str | None = None) -> n
         distinct, rank = np.unique(column, return_inverse=True)
         if distinct.size > 1:
             varied.append(rank / (distinct.size - 1))
-    n_members = values["normal_force"].shape[0]
-    if not varied or n_members < 2:
+    if not varied:  # one member, or members alike in every parameter
         return None
     varied = varied[:MORTON_BITS]
     key = morton_key(np.stack(varied, axis=1), MORTON_BITS // len(varied))
@@ -392,26 +391,27 @@ def host_copy(a) -> np.ndarray:
     return out
 
 
-def member_rows(layout: dict, source, slots: int, order) -> np.ndarray:
+def member_rows(layout: dict, source, slots: int, kernel_member) -> np.ndarray:
     """The first ``slots`` slots of a (slot, node, member) device array (any layout) on the host as
     (slot, member, node), arranged by the layout kernels' member_rows on the device, the caller's
-    member m being the kernel's order[m] (an int32 device array)."""
+    member m being the kernel's kernel_member[m] (an int32 device array)."""
     import warp as wp
 
     rows = wp.empty((slots, source.shape[2], source.shape[1]), dtype=source.dtype, device=source.device)
-    wp.launch(layout["member_rows"], dim=rows.shape, inputs=[source, order, rows], device=source.device)
+    wp.launch(layout["member_rows"], dim=rows.shape, inputs=[source, kernel_member, rows], device=source.device)
     return host_copy(rows)
 
 
-def member_columns(layout: dict, source, order) -> np.ndarray:
+def member_columns(layout: dict, source, kernel_member) -> np.ndarray:
     """A (node, member) float64 device array on the host with its members in the caller's order
-    (order: int32 device array, None where the kernel ran the caller's order)."""
+    (kernel_member as in member_rows; None where the kernel ran the caller's order)."""
     import warp as wp
 
-    if order is None:
+    if kernel_member is None:
         return host_copy(source)
     columns = wp.empty(source.shape, dtype=wp.float64, device=source.device)
-    wp.launch(layout["member_columns"], dim=columns.shape, inputs=[source, order, columns], device=source.device)
+    wp.launch(layout["member_columns"], dim=columns.shape, inputs=[source, kernel_member, columns],
+              device=source.device)
     return host_copy(columns)
 
 
