@@ -23,7 +23,7 @@ from .gates import make_gates
 from .model_terms import disc_velocity_at, make_model_terms
 from .newton import make_newton
 from .observers import ObserverSet, make_observers, run_finished
-from .team import EXCHANGES, WARP_SIZE, make_team, node_range
+from .team import EXCHANGES, MAX_TEAM_LANES, WARP_SIZE, make_team, node_range
 from .types import C_PHI, N_WORK, IntegratorState, MemberParams, OutputSettings, SolverSettings, stage_slots
 
 _CACHE: dict = {}
@@ -200,13 +200,16 @@ def team_exchange(lanes: int, cuda: bool, requested: str | None = None) -> str:
     """The lane exchange of a team of ``lanes`` on a CUDA device (cuda) or the CPU: ``requested``
     (WARPFRIC_TEAM_EXCHANGE), else warp shuffles on a GPU for a team of one warp (<= 32 lanes) and
     Warp's tiles otherwise (docs/performance.md, "Warp shuffles")."""
+    by_value = lanes <= WARP_SIZE or (lanes % WARP_SIZE == 0 and lanes <= MAX_TEAM_LANES)
     if requested is None:
-        return "shuffle" if cuda and lanes <= WARP_SIZE else "tile"
-    if requested == "shuffle" and not (cuda and lanes <= WARP_SIZE):
-        raise ValueError(f"WARPFRIC_TEAM_EXCHANGE='shuffle' needs a CUDA device and at most {WARP_SIZE} lanes; "
-                         f"got {'a CUDA device' if cuda else 'the CPU'} and {lanes} lanes")
-    if requested == "emulated" and lanes > WARP_SIZE:
-        raise ValueError(f"WARPFRIC_TEAM_EXCHANGE='emulated' needs at most {WARP_SIZE} lanes; got {lanes}")
+        return "shuffle" if cuda and by_value else "tile"
+    if requested == "shuffle" and not (cuda and by_value):
+        raise ValueError(f"WARPFRIC_TEAM_EXCHANGE='shuffle' needs a CUDA device and at most {WARP_SIZE} lanes or a "
+                         f"multiple of {WARP_SIZE} up to {MAX_TEAM_LANES}; got {'a CUDA device' if cuda else 'the CPU'} "
+                         f"and {lanes} lanes")
+    if requested == "emulated" and not by_value:
+        raise ValueError(f"WARPFRIC_TEAM_EXCHANGE='emulated' needs at most {WARP_SIZE} lanes or a multiple of "
+                         f"{WARP_SIZE} up to {MAX_TEAM_LANES}; got {lanes}")
     return requested
 
 

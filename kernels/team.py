@@ -13,7 +13,8 @@ a lane's writes and its neighbours' reads of halo nodes; ``barrier`` is the expl
 reduction falls.
 
 How the lanes exchange values (``exchange``):
-- "tile": Warp's tile primitives (the CPU's cooperative fibers, and teams of more than 32 lanes).
+- "tile": Warp's tile primitives (the CPU's cooperative fibers, and teams of more than 32 lanes
+  that are not whole warps).
   A tile operation synchronises the block. Every reduction ends with ``settle``: a one-element
   shared tile assignment, which synchronises before it writes, so that no lane starts the next
   tile operation while another still reads this one's result. Without it, Warp's CPU reductions
@@ -21,7 +22,9 @@ How the lanes exchange values (``exchange``):
   synchronisation, and the lanes of a team of 2-8 read different sums (found in review: teams of
   7 and 8 lanes failed on a lift-off member; tests/test_team.py checks the sums of every lane).
   The separator system is solved by each lane's twisted factorisation.
-- "shuffle": warp shuffles, on a GPU, for a team of at most 32 lanes (one warp); below.
+- "shuffle": warp shuffles, on a GPU, for a team of at most 32 lanes (one warp), or of several
+  whole warps (64 to MAX_TEAM_LANES lanes: shuffles inside each warp, a shared buffer between
+  them, make_warps_team); below.
 - "emulated": the shuffles' algorithms with each shuffle through a tile, so that the CPU tests
   them.
 
@@ -359,6 +362,44 @@ def lane_index() -> int:
     ...
 
 
+# ---- a team of several warps (exchange = "shuffle", lanes a multiple of 32 up to MAX_TEAM_LANES) ----
+# Its lanes reduce inside their warp by the shuffles above, and the warps combine their partial
+# results through a small static shared buffer, the same for every team operation: each operation
+# is a block barrier (the lanes' global-memory writes seen by all, and the buffer's last reads
+# done), its writes into the buffer, another barrier and its reads. A neighbour's value comes
+# through the buffer too (a lane at a warp's edge has its neighbour in the next warp). The member
+# is the thread block (one member per block: kernels/integrator.py blocked_layout).
+WARP_SIZE = 32  # threads of a warp: a team of at most this many lanes is one warp
+MAX_TEAM_LANES = 256  # 8 warps: at 255 registers per thread one such block fills an SM's registers
+TEAM_BUFFER_ROWS = 12  # the buffer's rows: the widest exchange (a vec12d's partial sums, a vec6d row)
+_TEAM_BUFFER_LEN = TEAM_BUFFER_ROWS * MAX_TEAM_LANES
+
+
+@wp.func_native(f"""
+#if defined(__CUDA_ARCH__)
+    __shared__ double wf_team_buffer[{_TEAM_BUFFER_LEN}];
+    return (uint64_t)(wf_team_buffer);
+#else
+    return 0;  // never used: a team of several warps is built for CUDA devices only
+#endif
+""")
+def team_buffer_base() -> wp.uint64:
+    """The address of the block's team buffer: TEAM_BUFFER_ROWS x MAX_TEAM_LANES float64 of static
+    shared memory (24 KB), through which a team of several warps exchanges values."""
+    ...
+
+
+@wp.func_native(r"""
+#if defined(__CUDA_ARCH__)
+    __syncthreads();
+#endif
+""")
+def team_block_sync():
+    """Every thread of the block waits for the others; their shared- and global-memory writes before
+    it are seen by all after it (__syncthreads)."""
+    ...
+
+
 # ---- the same operations through a tile (exchange = "emulated") ----
 
 @wp.func
@@ -386,9 +427,11 @@ def smaller(a: Any, b: Any):
 
 def make_emulated_shuffles(lanes: int):
     """warp_sum_f64, .., warp_sync of a team of ``lanes`` with each shuffle through a tile, in the
-    same order of operations."""
-    power_of_two = lanes & (lanes - 1) == 0
-    levels = max(1, (lanes - 1).bit_length())  # ceil(log2(lanes))
+    same order of operations (for several warps, those of make_warps_team)."""
+    warps = warps_of(lanes)
+    in_warp = lanes if warps == 1 else WARP_SIZE  # the lanes a butterfly spans
+    power_of_two = in_warp & (in_warp - 1) == 0
+    levels = max(1, (in_warp - 1).bit_length())  # ceil(log2(in_warp))
 
     @wp.func
     def partner(v: Any, lane: int, s: int):
@@ -404,7 +447,9 @@ def make_emulated_shuffles(lanes: int):
 
     def reduction(combine):
         """The reduction of _reduction_snippet, merging with ``combine``: a butterfly for a
-        power-of-two team, else a tree to lane 0 and lane 0's value to every lane."""
+        power-of-two team, else a tree to lane 0 and lane 0's value to every lane; for a team of
+        several warps (make_warps_team) a butterfly inside each warp, then the warps' results
+        merged in the warps' order."""
 
         @wp.func
         def reduce(x: Any, lanes_: int):
@@ -418,6 +463,11 @@ def make_emulated_shuffles(lanes: int):
                 s = s // 2
             if wp.static(not power_of_two):
                 v = tile_value(v, 0)
+            if wp.static(warps > 1):
+                r = tile_value(v, 0)
+                for w in range(1, warps):
+                    r = combine(r, tile_value(v, w * WARP_SIZE))
+                v = r
             return v
 
         return reduce
@@ -440,36 +490,172 @@ def make_emulated_shuffles(lanes: int):
                 up_f64=up_f64, down_f64=down_f64, sync=sync)
 
 
+def warps_of(lanes: int) -> int:
+    """The warps of a team that exchanges by value: 1 for at most 32 lanes, else lanes / 32 (a team
+    of several warps has full warps only, at most MAX_TEAM_LANES lanes)."""
+    if lanes <= WARP_SIZE:
+        return 1
+    if lanes % WARP_SIZE or lanes > MAX_TEAM_LANES:
+        raise ValueError(f"a team of {lanes} lanes that exchanges by value is invalid: at most {WARP_SIZE} lanes, "
+                         f"or a multiple of {WARP_SIZE} up to {MAX_TEAM_LANES}")
+    return lanes // WARP_SIZE
+
+
+def make_warps_team(lanes: int):
+    """The operations of make_exchange_team for a team of several warps on a GPU: reductions by
+    shuffles inside each warp and the warps' results merged in the warps' order through the team
+    buffer; the neighbours' values through the buffer (team_buffer_base)."""
+    warps = warps_of(lanes)
+
+    def reduction(in_warp, combine):
+        """A reduction over the team (called after ``sync``, which leaves the buffer free): the
+        warp's result by shuffles, each warp's written by its first lane, merged in warp order."""
+
+        @wp.func
+        def reduce(x: wp.float64, lanes_: int):
+            v = in_warp(x, WARP_SIZE)
+            lane = lane_index()
+            buffer = wp.array(ptr=team_buffer_base(), shape=(TEAM_BUFFER_ROWS, MAX_TEAM_LANES), dtype=wp.float64)
+            if lane % WARP_SIZE == 0:
+                buffer[0, lane // WARP_SIZE] = v
+            team_block_sync()
+            r = buffer[0, 0]
+            for w in range(1, warps):
+                r = combine(r, buffer[0, w])
+            return r
+
+        return reduce
+
+    @wp.func
+    def sum12(x: vec12d):
+        """The sums of a vec12d's components over the team (after ``sync``), as 12 reductions."""
+        v = vec12d()
+        for k in range(12):
+            v[k] = warp_sum_f64(x[k], WARP_SIZE)
+        lane = lane_index()
+        buffer = wp.array(ptr=team_buffer_base(), shape=(TEAM_BUFFER_ROWS, MAX_TEAM_LANES), dtype=wp.float64)
+        if lane % WARP_SIZE == 0:
+            for k in range(12):
+                buffer[k, lane // WARP_SIZE] = v[k]
+        team_block_sync()
+        r = vec12d()
+        for k in range(12):
+            t = buffer[k, 0]
+            for w in range(1, warps):
+                t = t + buffer[k, w]
+            r[k] = t
+        return r
+
+    def vector_move(vector, length: int, step: int):
+        """The vector x of lane + step * delta (clamped to the team: callers do not use a value
+        from beyond its edges), through the buffer: barrier, write, barrier, read."""
+
+        @wp.func
+        def moved(x: vector, delta: int):
+            lane = lane_index()
+            buffer = wp.array(ptr=team_buffer_base(), shape=(TEAM_BUFFER_ROWS, MAX_TEAM_LANES), dtype=wp.float64)
+            team_block_sync()
+            for k in range(length):
+                buffer[k, lane] = x[k]
+            team_block_sync()
+            source = wp.clamp(lane + step * delta, 0, lanes - 1)
+            out = vector()
+            for k in range(length):
+                out[k] = buffer[k, source]
+            return out
+
+        return moved
+
+    @wp.func
+    def rows(x: vec6d, s: int):
+        """The rows of lanes - s and + s (clamped to the team), one write of each lane's row."""
+        lane = lane_index()
+        buffer = wp.array(ptr=team_buffer_base(), shape=(TEAM_BUFFER_ROWS, MAX_TEAM_LANES), dtype=wp.float64)
+        team_block_sync()
+        for k in range(6):
+            buffer[k, lane] = x[k]
+        team_block_sync()
+        below = wp.max(lane - s, 0)
+        above = wp.min(lane + s, lanes - 1)
+        up = vec6d()
+        dn = vec6d()
+        for k in range(6):
+            up[k] = buffer[k, below]
+            dn[k] = buffer[k, above]
+        return up, dn
+
+    @wp.func
+    def sync(lanes_: int):
+        team_block_sync()
+
+    @wp.func
+    def sum_i32(x: int, lanes_: int):
+        v = warp_sum_i32(x, WARP_SIZE)
+        lane = lane_index()
+        buffer = wp.array(ptr=team_buffer_base(), shape=(TEAM_BUFFER_ROWS, MAX_TEAM_LANES), dtype=wp.float64)
+        if lane % WARP_SIZE == 0:
+            buffer[0, lane // WARP_SIZE] = wp.float64(v)
+        team_block_sync()
+        r = int(0)
+        for w in range(warps):
+            r = r + int(buffer[0, w])
+        return r
+
+    return dict(sum_f64=reduction(warp_sum_f64, plus), max_f64=reduction(warp_max_f64, larger),
+                min_f64=reduction(warp_min_f64, smaller), sum_i32=sum_i32, sum12=sum12, sync=sync,
+                vector_move=vector_move, rows=rows)
+
+
 def make_exchange_team(lanes: int, exchange: str):
     """The team's operations (those of make_tile_reductions and make_separator_exchange) on the lane
-    exchange by value: ``exchange`` = "shuffle" (warp shuffles: CUDA, lanes <= 32) or "emulated"
-    (the same through a tile)."""
-    if exchange == "shuffle":
+    exchange by value: ``exchange`` = "shuffle" (warp shuffles: CUDA, lanes <= 32, or whole warps up
+    to MAX_TEAM_LANES through make_warps_team) or "emulated" (the same through a tile)."""
+    if exchange == "shuffle" and lanes > WARP_SIZE:
+        ops = make_warps_team(lanes)
+    elif exchange == "shuffle":
         ops = dict(sum_f64=warp_sum_f64, max_f64=warp_max_f64, min_f64=warp_min_f64, sum_i32=warp_sum_i32,
                    up_f64=warp_up_f64, down_f64=warp_down_f64, sync=warp_sync)
     else:
         ops = make_emulated_shuffles(lanes)
     sum_f64, max_f64, min_f64, sum_i32 = ops["sum_f64"], ops["max_f64"], ops["min_f64"], ops["sum_i32"]
-    up_f64, down_f64, sync = ops["up_f64"], ops["down_f64"], ops["sync"]
+    sync = ops["sync"]
     levels = max(1, (lanes - 1).bit_length())  # ceil(log2(lanes)): the cyclic reduction's levels
 
-    def vector_move(vector, length: int, move):
-        """The vector x of lane -/+ delta, component by component through ``move`` (up_f64 or
-        down_f64: what they say of lanes beyond the team's edges holds here)."""
+    if "vector_move" in ops:  # a team of several warps: through its buffer
+        move = ops["vector_move"]
+        up3, up4, down4, down5 = move(vec3d, 3, -1), move(vec4d, 4, -1), move(vec4d, 4, 1), move(vec5d, 5, 1)
+        rows, sum12 = ops["rows"], ops["sum12"]
+    else:
+        up_f64, down_f64 = ops["up_f64"], ops["down_f64"]
+
+        def vector_move(vector, length: int, move):
+            """The vector x of lane -/+ delta, component by component through ``move`` (up_f64 or
+            down_f64: what they say of lanes beyond the team's edges holds here)."""
+
+            @wp.func
+            def moved(x: vector, delta: int):
+                out = vector()
+                for k in range(length):
+                    out[k] = move(x[k], delta, lanes)
+                return out
+
+            return moved
+
+        up3 = vector_move(vec3d, 3, up_f64)
+        up4, down4 = vector_move(vec4d, 4, up_f64), vector_move(vec4d, 4, down_f64)
+        down5 = vector_move(vec5d, 5, down_f64)
+        up6, down6 = vector_move(vec6d, 6, up_f64), vector_move(vec6d, 6, down_f64)
 
         @wp.func
-        def moved(x: vector, delta: int):
-            out = vector()
-            for k in range(length):
-                out[k] = move(x[k], delta, lanes)
-            return out
+        def rows(x: vec6d, s: int):
+            """The rows of lanes - s and + s."""
+            return up6(x, s), down6(x, s)
 
-        return moved
-
-    up3 = vector_move(vec3d, 3, up_f64)
-    up4, down4 = vector_move(vec4d, 4, up_f64), vector_move(vec4d, 4, down_f64)
-    down5 = vector_move(vec5d, 5, down_f64)
-    up6, down6 = vector_move(vec6d, 6, up_f64), vector_move(vec6d, 6, down_f64)
+        @wp.func
+        def sum12(x: vec12d):
+            return vec12d(sum_f64(x[0], lanes), sum_f64(x[1], lanes), sum_f64(x[2], lanes), sum_f64(x[3], lanes),
+                          sum_f64(x[4], lanes), sum_f64(x[5], lanes), sum_f64(x[6], lanes), sum_f64(x[7], lanes),
+                          sum_f64(x[8], lanes), sum_f64(x[9], lanes), sum_f64(x[10], lanes), sum_f64(x[11], lanes))
 
     @wp.func
     def team_sum(x: wp.float64):
@@ -500,9 +686,7 @@ def make_exchange_team(lanes: int, exchange: str):
     @wp.func
     def team_sum_vec12(x: vec12d):
         sync(lanes)
-        return vec12d(sum_f64(x[0], lanes), sum_f64(x[1], lanes), sum_f64(x[2], lanes), sum_f64(x[3], lanes),
-                      sum_f64(x[4], lanes), sum_f64(x[5], lanes), sum_f64(x[6], lanes), sum_f64(x[7], lanes),
-                      sum_f64(x[8], lanes), sum_f64(x[9], lanes), sum_f64(x[10], lanes), sum_f64(x[11], lanes))
+        return sum12(x)
 
     @wp.func
     def from_next_lane(x: vec5d, lane: int):
@@ -542,8 +726,7 @@ def make_exchange_team(lanes: int, exchange: str):
         for _level in range(levels):
             # row k - s (up) and row k + s (down); a coupling across the team's edge is zero at
             # every level
-            up = up6(r, s)
-            dn = down6(r, s)
+            up, dn = rows(r, s)
             # the rows beyond the team's edges are not read, not even multiplied by zero: a
             # shuffle from beyond a partial warp's last lane returns an undefined value (NaN * 0)
             new = vec6d(wp.float64(0.0), r[1], wp.float64(0.0), r[3], r[4], r[5])
@@ -574,13 +757,13 @@ def make_exchange_team(lanes: int, exchange: str):
 
 
 EXCHANGES = ("tile", "shuffle", "emulated")
-WARP_SIZE = 32  # threads of a warp: the most lanes of a team that exchanges by shuffles
 
 
 def make_team(ft, lanes: int, exchange: str = "tile"):
     """Reductions over a member's team (identity for lanes = 1) and the separator exchange of the
     team's tridiagonal solve: through Warp's tiles (exchange = "tile"), warp shuffles ("shuffle":
-    CUDA, at most 32 lanes) or the shuffles' algorithms through a tile ("emulated")."""
+    CUDA, at most 32 lanes or whole warps up to MAX_TEAM_LANES) or the shuffles' algorithms through
+    a tile ("emulated")."""
     if lanes == 1:
         return make_solo()
     if ft != wp.float64:
@@ -589,6 +772,5 @@ def make_team(ft, lanes: int, exchange: str = "tile"):
         raise ValueError(f"team exchange {exchange!r} is invalid; valid: {', '.join(EXCHANGES)}")
     if exchange == "tile":
         return dict(lanes=lanes, exchange=exchange, **make_tile_reductions(lanes), **make_separator_exchange(lanes))
-    if lanes > WARP_SIZE:
-        raise ValueError(f"a team exchange {exchange!r} of {lanes} lanes is invalid: at most {WARP_SIZE} lanes (one warp)")
+    warps_of(lanes)  # refuses a team of several warps that are not full, or of more than MAX_TEAM_LANES
     return dict(lanes=lanes, exchange=exchange, block_barrier=block_barrier, **make_exchange_team(lanes, exchange))

@@ -16,7 +16,8 @@ Scenes "gpu" (with --device cuda:0), for what only a GPU runs, the blocked coope
 its shared work array: the engine benchmark's members (studies/bench_engine.py ``members``), the
 default law with the contact front, 1,100 at N = 200 (8 members a block on an H100, member stride
 9), 1,000 at N = 300 (7 a block, stride 7: the largest shared array), 300 at N = 40 (3 a block,
-stride 3) and the first member alone at N = 200 (stride 1).
+stride 3) and the first member alone at N = 200 (stride 1), each in teams of min(32, N // 2) lanes
+(the blocked kernel; for one member lanes=None would choose a team of several warps).
 
 ``compare`` prints the largest relative difference of each scene's outputs and exits 1 above
 --rtol (default 1e-12; 0 asks for bit equality).
@@ -57,7 +58,9 @@ def gpu_scenes():
     from bench_engine import members
 
     for nodes, m in ((200, 1100), (300, 1000), (40, 300), (200, 1)):
-        yield f"n{nodes}_m{m}", dict(model=wf.Model(), members=members(m), nodes=nodes, fronts=wf.Fronts())
+        # lanes pinned: for one member lanes=None would take a team of several warps (96 lanes)
+        yield f"n{nodes}_m{m}", dict(model=wf.Model(), members=members(m), nodes=nodes, fronts=wf.Fronts(),
+                                     lanes=min(32, nodes // 2))
 
 
 def run(device, which="cpu"):

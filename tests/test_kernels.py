@@ -202,15 +202,17 @@ TEAM_EXCHANGES = ["tile", "emulated"] + (["shuffle"] if DEVICE.startswith("cuda"
 
 
 @pytest.mark.parametrize("tilt_on, lanes, exchange", [(True, 1, None), (False, 1, None)] + [
-    (tilt_on, lanes, exchange) for exchange in TEAM_EXCHANGES for tilt_on, lanes in ((True, 4), (False, 3), (True, 8))])
+    (tilt_on, lanes, exchange) for exchange in TEAM_EXCHANGES
+    for tilt_on, lanes in ((True, 4), (False, 3), (True, 8), (True, 64))])
 def test_bordered_tridiagonal_solve_matches_numpy(tilt_on, lanes, exchange):
     """[[J, B], [C, D]] (dV, dd0, da) = (rhs, -e) for random diagonally dominant J and random borders,
-    5 systems of 17 unknowns: the kernel's Thomas + Schur solve (lanes = 1) and the partitioned solve
-    of a team (lanes > 1: 8 lanes leave lanes of two nodes, one interior row; its separators by
-    the tile team's twisted factorisation or by parallel cyclic reduction, kernels/team.py) equal
-    numpy.linalg.solve to 1e-11."""
+    5 systems of 17 unknowns (131 for a team of 64 lanes, two warps: at least two per lane): the
+    kernel's Thomas + Schur solve (lanes = 1) and the partitioned solve of a team (lanes > 1: 8
+    lanes leave lanes of two nodes, one interior row; its separators by the tile team's twisted
+    factorisation or by parallel cyclic reduction, kernels/team.py) equal numpy.linalg.solve to
+    1e-11."""
     rng = np.random.default_rng(7)
-    members, n = 5, 17
+    members, n = 5, max(17, 2 * lanes + 3)
     bands = rng.normal(size=(members, n, 8))
     bands[:, :, 1] = 4.0 + np.abs(bands[:, :, 1])  # diagonal dominance (the Newton matrix has it)
     bands[:, 0, 0] = 0.0

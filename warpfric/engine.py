@@ -58,7 +58,10 @@ class EngineResult:
 
 # the cooperative kernel's largest team when Solver.lanes is None (docs/performance.md, "GPU: where
 # the time goes", team size: on the H100 32 lanes beat 8 and equal 64 at N = 200), and the fewest
-# nodes for which it is chosen (a team of 8 lanes of 2 nodes)
+# nodes for which it is chosen (a team of 8 lanes of 2 nodes); a run of at most as many members as
+# the GPU has SMs takes wider teams of several warps, up to MAX_TEAM_LANES (docs/performance.md,
+# "Teams of several warps": one member at N = 200 0.047 -> 0.038 s with 96 lanes, 100 members
+# 0.095 -> 0.077 s; 1,000 members lose, 0.137 -> 0.193 s with 64)
 AUTO_LANES = 32
 AUTO_MIN_NODES = 16
 
@@ -127,16 +130,23 @@ def member_order(values: dict, blocked: bool, requested: str | None = None) -> n
     return np.argsort(key, kind="stable")
 
 
-def choose_lanes(solver: Solver, device: str) -> int:
+def choose_lanes(solver: Solver, device: str, members: int | None = None, sm_count: int = 0) -> int:
     """Threads per member: Solver.lanes, or for None, on a CUDA device in float64 with at least
     AUTO_MIN_NODES nodes, the cooperative kernel with min(AUTO_LANES, nodes // 2) lanes (the most
     lanes of at least two nodes each, one warp at most: a lane's time grows with its nodes; at
     N = 40 on the H100, 20 lanes beat the 16 of a power of two by 3 % for one member and 9 % for
-    100, docs/performance.md); else 1 (the thread-per-member kernel: on the CPU a team's lanes run
-    one after the other on Warp's fibers, which only costs)."""
+    100, docs/performance.md); where the run's ``members`` are at most the GPU's ``sm_count`` SMs
+    and nodes // 2 >= 64, the most whole warps of such lanes instead (a team of several warps,
+    kernels/team.py make_warps_team: 96 lanes at N = 200, 192 at N = 400, at most MAX_TEAM_LANES);
+    else 1 (the thread-per-member kernel: on the CPU a team's lanes run one after the other on
+    Warp's fibers, which only costs)."""
+    from warpfric.kernels.team import MAX_TEAM_LANES, WARP_SIZE
+
     if solver.lanes is not None:
         return solver.lanes
     if str(device).startswith("cuda") and solver.dtype == "float64" and solver.nodes >= AUTO_MIN_NODES:
+        if members is not None and members <= sm_count and solver.nodes // 2 >= 2 * WARP_SIZE:
+            return min(MAX_TEAM_LANES, solver.nodes // 2 // WARP_SIZE * WARP_SIZE)
         return min(AUTO_LANES, solver.nodes // 2)
     return 1
 
@@ -507,17 +517,17 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
 
     n_members = values["normal_force"].shape[0]
     n = solver.nodes
-    lanes = choose_lanes(solver, device)
+    cuda = str(device).startswith("cuda")
+    gpu = wp.get_device(device) if cuda else None
+    lanes = choose_lanes(solver, device, n_members, gpu.sm_count if cuda else 0)
     team = lanes > 1
-    if team and not str(device).startswith("cuda"):
+    if team and not cuda:
         warnings.warn(f"Solver(lanes={lanes}) on {device}: the cooperative kernel runs there on Warp's experimental "
                       "CPU fibers, slowly and for tests only (docs/model.md, 'Time integration'); "
                       "lanes=1 is the CPU's kernel", stacklevel=3)
     note = slower_float32(solver, device)
     if note is not None:
         warnings.warn(note, stacklevel=3)
-    cuda = str(device).startswith("cuda")
-    gpu = wp.get_device(device) if cuda else None
     # members per block and the work array's memory (kernels/integrator.py team_layout)
     layout = team_layout(lanes, n, n_members, cuda, gpu.sm_count if cuda else 1,
                          gpu.max_shared_memory_per_block if cuda else 0)
