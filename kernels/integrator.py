@@ -23,7 +23,7 @@ from .gates import make_gates
 from .model_terms import disc_velocity_at, make_model_terms
 from .newton import make_newton
 from .observers import ObserverSet, make_observers, run_finished
-from .team import EXCHANGES, MAX_TEAM_LANES, WARP_SIZE, make_team, node_range
+from .team import EXCHANGES, MAX_TEAM_LANES, TEAM_BUFFER_BYTES, WARP_SIZE, make_team, node_range
 from .types import C_PHI, N_WORK, IntegratorState, MemberParams, OutputSettings, SolverSettings, stage_slots
 
 _CACHE: dict = {}
@@ -39,7 +39,7 @@ class TeamCompileOptions(NamedTuple):
     out_of_line: tuple = ()  # names of device functions kept out of line
     exchange: str | None = None  # the team's lane exchange, kernels/team.py (None: the automatic choice)
     block_members: int | None = None  # members per thread block (None: per run, block_members_for; 1: a block each)
-    shared_work: bool = True  # the blocked kernel's work array in shared memory where it fits (team_layout)
+    shared_work: bool = True  # the work array in shared memory where it fits (team_layout: blocked kernel, wide teams)
     poison_shared_work: bool = False  # a check: the shared work array filled with NaN at each launch's start
 
 
@@ -49,7 +49,7 @@ def team_compile_options() -> TeamCompileOptions:
     (comma-separated function names), WARPFRIC_TEAM_EXCHANGE ('tile', 'shuffle' or 'emulated':
     kernels/team.py), WARPFRIC_TEAM_BLOCK_MEMBERS (1 to 8: members per thread block,
     blocked_layout; at most shared_work_members where the work is in shared memory),
-    WARPFRIC_TEAM_SHARED_WORK (0: the blocked kernel's work array in global memory; team_layout) and
+    WARPFRIC_TEAM_SHARED_WORK (0: the team kernel's work array in global memory; team_layout) and
     WARPFRIC_TEAM_POISON_SHARED_WORK (1: that shared array filled with NaN at the start of every
     launch, so that a value read before the attempt wrote it shows; a check, not for runs)."""
     registers = int(os.environ.get("WARPFRIC_TEAM_MAX_REGISTERS", "0"))
@@ -86,6 +86,12 @@ def team_compile_options() -> TeamCompileOptions:
 # 8: the registers of one SM hold 8 warps of this kernel (255 registers per thread), so one block
 # fills an SM as 8 blocks of one member did.
 MAX_BLOCK_MEMBERS = 8
+
+
+def warps_team(lanes: int, exchange: str) -> bool:
+    """Whether a team of ``lanes`` with its lane exchange is a team of several warps on a GPU
+    (kernels/team.py make_warps_team): one member a block, the block's threads its lanes."""
+    return exchange == "shuffle" and lanes > WARP_SIZE
 
 
 def blocked_layout(lanes: int, exchange: str, requested: int | None = None) -> bool:
@@ -159,16 +165,23 @@ def team_layout(lanes: int, n_nodes: int, n_members: int, cuda: bool, sm_count: 
     sm_count SMs and max_shared bytes of opt-in shared memory per block, or the CPU (cuda False).
     The work array goes into shared memory wherever the blocked kernel runs and a block of 7
     members' work fits (shared_work_members), whatever n_members: a member's outputs then do not
-    depend on the ensemble it runs in. Not with Warp's debug mode, whose bounds checks reject the
-    shared view's indexing by member (make_integrate_kernel), nor with WARPFRIC_TEAM_SHARED_WORK=0.
-    The thread-per-member kernel (lanes 1) reads none of the team's switches."""
+    depend on the ensemble it runs in; and for a team of several warps (one member a block,
+    kernels/team.py make_warps_team) wherever its member's work fits beside the team buffer. Not
+    with Warp's debug mode, whose bounds checks reject the shared view's indexing by member
+    (make_integrate_kernel), nor with WARPFRIC_TEAM_SHARED_WORK=0. The thread-per-member kernel
+    (lanes 1) reads none of the team's switches."""
     if lanes <= 1:
         return TeamLayout(False, 1, None)
     options = team_compile_options()
-    if not blocked_layout(lanes, team_exchange(lanes, cuda, options.exchange), options.block_members):
+    exchange = team_exchange(lanes, cuda, options.exchange)
+    shared_allowed = options.shared_work and wp.config.mode != "debug"
+    if not blocked_layout(lanes, exchange, options.block_members):
+        fits = shared_work_stride(n_nodes, 1, max_shared - TEAM_BUFFER_BYTES)  # one member beside the team buffer
+        if shared_allowed and warps_team(lanes, exchange) and fits:
+            return TeamLayout(False, 1, (n_nodes, 1))
         return TeamLayout(False, 1, None)
     most = 0
-    if options.shared_work and wp.config.mode != "debug":
+    if shared_allowed:
         most = shared_work_members(n_nodes, max_shared)
     block_members = block_members_for(n_members, sm_count, options.block_members, most or MAX_BLOCK_MEMBERS)
     if not most:
@@ -313,8 +326,9 @@ def _make_integrator(dtype: str, model, lanes: int, method: str = "tr_bdf2", opt
     stages = make_stages(ft, model, lanes, method, options.exchange or "tile", observed)
     acceptance = make_acceptance(ft, model, method, stages)
     blocked = lanes > 1 and blocked_layout(lanes, options.exchange, options.block_members)
-    if shared_work is not None and not blocked:
-        raise ValueError(f"shared_work={shared_work} needs the blocked layout of the team kernel (team_layout)")
+    if shared_work is not None and not (blocked or warps_team(lanes, options.exchange)):
+        raise ValueError(f"shared_work={shared_work} needs the blocked layout of the team kernel or a team of several "
+                         f"warps (team_layout)")
     integrate = make_integrate_kernel(ft, model, lanes, method, stages, acceptance, options, blocked, shared_work)
     evaluate_fields = make_field_kernel(ft, stages)
     return dict(integrate=integrate, evaluate_fields=evaluate_fields, ft=ft, stages=stages,
@@ -480,6 +494,9 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
             else:
                 m = block
                 lane = thread
+                if wp.static(shared_on):  # a team of several warps: its member's work, stride 1, indexed by m
+                    work_view = wp.array(ptr=dynamic_shared_base() - wp.uint64(block) * wp.uint64(8),
+                                         shape=(N_WORK, shared_nodes, shared_stride), dtype=ft)
         else:
             m = wp.tid()
         st = member_states[m]

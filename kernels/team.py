@@ -373,6 +373,7 @@ WARP_SIZE = 32  # threads of a warp: a team of at most this many lanes is one wa
 MAX_TEAM_LANES = 256  # 8 warps: at 255 registers per thread one such block fills an SM's registers
 TEAM_BUFFER_ROWS = 12  # the buffer's rows: the widest exchange (a vec12d's partial sums, a vec6d row)
 _TEAM_BUFFER_LEN = TEAM_BUFFER_ROWS * MAX_TEAM_LANES
+TEAM_BUFFER_BYTES = 8 * _TEAM_BUFFER_LEN  # the static shared memory it takes (kernels/integrator.py team_layout)
 
 
 @wp.func_native(f"""
@@ -546,43 +547,34 @@ def make_warps_team(lanes: int):
             r[k] = t
         return r
 
-    def vector_move(vector, length: int, step: int):
-        """The vector x of lane + step * delta (clamped to the team: callers do not use a value
-        from beyond its edges), through the buffer: barrier, write, barrier, read."""
+    def neighbours(vector, length: int):
+        """The vector x of lanes - delta and + delta (clamped to the team: callers do not use a
+        value from beyond its edges), one write of each lane's x into the buffer. ``level``: 0 for
+        an exchange of its own, which first waits for the lanes (their global-memory writes and
+        the buffer's last reads: a team operation's barrier); k > 0 for the k-th level of the
+        cyclic reduction, which writes into the other half of the buffer than level k - 1, whose
+        reads it need not wait for (every lane read them before the barrier of level k)."""
 
         @wp.func
-        def moved(x: vector, delta: int):
+        def both(x: vector, delta: int, level: int):
             lane = lane_index()
             buffer = wp.array(ptr=team_buffer_base(), shape=(TEAM_BUFFER_ROWS, MAX_TEAM_LANES), dtype=wp.float64)
-            team_block_sync()
+            half = (level % 2) * (TEAM_BUFFER_ROWS // 2)
+            if level == 0:
+                team_block_sync()
             for k in range(length):
-                buffer[k, lane] = x[k]
+                buffer[half + k, lane] = x[k]
             team_block_sync()
-            source = wp.clamp(lane + step * delta, 0, lanes - 1)
-            out = vector()
+            below = wp.max(lane - delta, 0)
+            above = wp.min(lane + delta, lanes - 1)
+            up = vector()
+            dn = vector()
             for k in range(length):
-                out[k] = buffer[k, source]
-            return out
+                up[k] = buffer[half + k, below]
+                dn[k] = buffer[half + k, above]
+            return up, dn
 
-        return moved
-
-    @wp.func
-    def rows(x: vec6d, s: int):
-        """The rows of lanes - s and + s (clamped to the team), one write of each lane's row."""
-        lane = lane_index()
-        buffer = wp.array(ptr=team_buffer_base(), shape=(TEAM_BUFFER_ROWS, MAX_TEAM_LANES), dtype=wp.float64)
-        team_block_sync()
-        for k in range(6):
-            buffer[k, lane] = x[k]
-        team_block_sync()
-        below = wp.max(lane - s, 0)
-        above = wp.min(lane + s, lanes - 1)
-        up = vec6d()
-        dn = vec6d()
-        for k in range(6):
-            up[k] = buffer[k, below]
-            dn[k] = buffer[k, above]
-        return up, dn
+        return both
 
     @wp.func
     def sync(lanes_: int):
@@ -603,7 +595,7 @@ def make_warps_team(lanes: int):
 
     return dict(sum_f64=reduction(warp_sum_f64, plus), max_f64=reduction(warp_max_f64, larger),
                 min_f64=reduction(warp_min_f64, smaller), sum_i32=sum_i32, sum12=sum12, sync=sync,
-                vector_move=vector_move, rows=rows)
+                neighbours=neighbours)
 
 
 def make_exchange_team(lanes: int, exchange: str):
@@ -621,10 +613,26 @@ def make_exchange_team(lanes: int, exchange: str):
     sync = ops["sync"]
     levels = max(1, (lanes - 1).bit_length())  # ceil(log2(lanes)): the cyclic reduction's levels
 
-    if "vector_move" in ops:  # a team of several warps: through its buffer
-        move = ops["vector_move"]
-        up3, up4, down4, down5 = move(vec3d, 3, -1), move(vec4d, 4, -1), move(vec4d, 4, 1), move(vec5d, 5, 1)
-        rows, sum12 = ops["rows"], ops["sum12"]
+    if "neighbours" in ops:  # a team of several warps: through its buffer, each exchange its own barrier
+        both3, both4 = ops["neighbours"](vec3d, 3), ops["neighbours"](vec4d, 4)
+        both5, rows, sum12 = ops["neighbours"](vec5d, 5), ops["neighbours"](vec6d, 6), ops["sum12"]
+
+        @wp.func
+        def next5(x: vec5d):
+            """x of lane + 1, after the team's barrier (undefined for the last lane)."""
+            _prev, nxt = both5(x, 1, 0)
+            return nxt
+
+        @wp.func
+        def prev_next4(x: vec4d):
+            """x of lanes - 1 and + 1, after the team's barrier (undefined beyond the edges)."""
+            return both4(x, 1, 0)
+
+        @wp.func
+        def prev3(x: vec3d):
+            """x of lane - 1 (undefined for lane 0)."""
+            prev, _next = both3(x, 1, 0)
+            return prev
     else:
         up_f64, down_f64 = ops["up_f64"], ops["down_f64"]
 
@@ -647,7 +655,21 @@ def make_exchange_team(lanes: int, exchange: str):
         up6, down6 = vector_move(vec6d, 6, up_f64), vector_move(vec6d, 6, down_f64)
 
         @wp.func
-        def rows(x: vec6d, s: int):
+        def next5(x: vec5d):
+            sync(lanes)
+            return down5(x, 1)
+
+        @wp.func
+        def prev_next4(x: vec4d):
+            sync(lanes)
+            return up4(x, 1), down4(x, 1)
+
+        @wp.func
+        def prev3(x: vec3d):
+            return up3(x, 1)
+
+        @wp.func
+        def rows(x: vec6d, s: int, level: int):
             """The rows of lanes - s and + s."""
             return up6(x, s), down6(x, s)
 
@@ -691,8 +713,7 @@ def make_exchange_team(lanes: int, exchange: str):
     @wp.func
     def from_next_lane(x: vec5d, lane: int):
         """The value of lane + 1 (zero for the last lane)."""
-        sync(lanes)
-        out = down5(x, 1)
+        out = next5(x)
         if lane + 1 >= lanes:
             out = vec5d()
         return out
@@ -700,9 +721,7 @@ def make_exchange_team(lanes: int, exchange: str):
     @wp.func
     def from_neighbour_lanes(x: vec4d, lane: int):
         """The values of lane - 1 and lane + 1 (zero beyond the first and the last lane)."""
-        sync(lanes)
-        prev = up4(x, 1)
-        nxt = down4(x, 1)
+        prev, nxt = prev_next4(x)
         if lane == 0:
             prev = vec4d()
         if lane + 1 >= lanes:
@@ -723,10 +742,10 @@ def make_exchange_team(lanes: int, exchange: str):
         if lane + 1 >= lanes:
             r[2] = wp.float64(0.0)
         s = int(1)
-        for _level in range(levels):
+        for level in range(levels):
             # row k - s (up) and row k + s (down); a coupling across the team's edge is zero at
             # every level
-            up, dn = rows(r, s)
+            up, dn = rows(r, s, level)
             # the rows beyond the team's edges are not read, not even multiplied by zero: a
             # shuffle from beyond a partial warp's last lane returns an undefined value (NaN * 0)
             new = vec6d(wp.float64(0.0), r[1], wp.float64(0.0), r[3], r[4], r[5])
@@ -746,7 +765,7 @@ def make_exchange_team(lanes: int, exchange: str):
             s = s * 2
         inv = wp.float64(1.0) / r[1]
         e_self = vec3d(r[3] * inv, r[4] * inv, r[5] * inv)
-        e_prev = up3(e_self, 1)
+        e_prev = prev3(e_self)
         if lane == 0:
             e_prev = vec3d()
         return e_prev, e_self

@@ -246,7 +246,8 @@ def test_work_array_memory_choice(monkeypatch):
     WARPFRIC_TEAM_SHARED_WORK=0 keeps the work in global memory (empty is unset); other values are
     refused, naming the variable, but only where a team runs: the thread-per-member kernel reads
     none of the team's switches. Warp's debug mode keeps the work in global memory (its bounds checks
-    would reject the shared view's indexing by member)."""
+    would reject the shared view's indexing by member). A team of several warps (one member a
+    block) keeps its member's work there beside its team buffer where it fits."""
     from warpfric.kernels.integrator import shared_work_members, shared_work_stride, team_layout
     from warpfric.kernels.types import N_WORK
 
@@ -272,16 +273,27 @@ def test_work_array_memory_choice(monkeypatch):
     assert team_layout(20, 40, 10_000, True, 132, h100) == (True, 8, (40, 9))
     assert team_layout(32, 200, 10_000, False) == (False, 1, None)  # the CPU: tiles, a block per member
     assert team_layout(1, 200, 10_000, True, 132, h100) == (False, 1, None)  # the thread-per-member kernel
+    # a team of several warps: one member a block, its work beside the 24 KB team buffer while it fits
+    # (13 * N * 8 <= h100 - 4096 - 24,576: N <= 1,959)
+    assert team_layout(96, 200, 1, True, 132, h100) == team_layout(96, 200, 100, True, 132, h100) == (False, 1, (200, 1))
+    assert team_layout(256, 1959, 1, True, 132, h100) == (False, 1, (1959, 1))
+    assert team_layout(256, 1960, 1, True, 132, h100) == (False, 1, None)
+    assert team_layout(96, 200, 1, False) == (False, 1, None)  # the CPU
+    with monkeypatch.context() as tiles:
+        tiles.setenv("WARPFRIC_TEAM_EXCHANGE", "tile")
+        assert team_layout(96, 200, 1, True, 132, h100) == (False, 1, None)
     monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "8")  # a request above what fits gets what fits
     assert team_layout(32, 250, 10_000, True, 132, h100) == (True, 7, (250, 7))
     monkeypatch.delenv("WARPFRIC_TEAM_BLOCK_MEMBERS")
     with monkeypatch.context() as debug:
         debug.setattr(wp.config, "mode", "debug")
         assert team_layout(32, 200, 10_000, True, 132, h100) == (True, 8, None)
+        assert team_layout(96, 200, 1, True, 132, h100) == (False, 1, None)
     monkeypatch.setenv("WARPFRIC_TEAM_SHARED_WORK", "")
     assert team_layout(32, 200, 10_000, True, 132, h100) == (True, 8, (200, 9))
     monkeypatch.setenv("WARPFRIC_TEAM_SHARED_WORK", "0")
     assert team_layout(32, 200, 10_000, True, 132, h100) == (True, 8, None)
+    assert team_layout(96, 200, 1, True, 132, h100) == (False, 1, None)
     for name in ("WARPFRIC_TEAM_SHARED_WORK", "WARPFRIC_TEAM_POISON_SHARED_WORK"):
         monkeypatch.setenv(name, "yes")
         with pytest.raises(ValueError, match=f"{name}='yes' is invalid; valid: 0, 1 or unset"):
@@ -386,7 +398,8 @@ def test_members_in_one_block_give_the_outputs_of_one_member_per_block(monkeypat
                 monkeypatch.delenv(name, raising=False)
             else:
                 monkeypatch.setenv(name, value)
-        return run(values, nodes=nodes, rtol=1e-5, fronts=wf.Fronts())
+        # lanes pinned: for 11 members lanes=None takes a team of several warps at N = 200
+        return run(values, nodes=nodes, rtol=1e-5, fronts=wf.Fronts(), lanes=min(32, nodes // 2))
 
     for nodes, lanes in ((200, 32), (40, 20)):
         for shared_work in (None, "0"):
@@ -406,10 +419,10 @@ def test_members_in_one_block_give_the_outputs_of_one_member_per_block(monkeypat
 
 
 @pytest.mark.skipif(not DEVICE.startswith("cuda"), reason="the blocked kernel's shared work array needs a GPU")
-@pytest.mark.parametrize("nodes, gate, method", [(200, "stress", "tr_bdf2"), (40, "stress", "tr_bdf2"),
-                                                 (300, "stress", "tr_bdf2"), (200, "none", "esdirk4"),
-                                                 (100, "velocity", "tr_bdf2")])
-def test_shared_work_array_gives_the_global_work_array_outputs(nodes, gate, method, monkeypatch):
+@pytest.mark.parametrize("nodes, gate, method, lanes", [
+    (200, "stress", "tr_bdf2", 32), (40, "stress", "tr_bdf2", 20), (300, "stress", "tr_bdf2", 32),
+    (200, "none", "esdirk4", 32), (100, "velocity", "tr_bdf2", 32), (200, "stress", "tr_bdf2", 96)])
+def test_shared_work_array_gives_the_global_work_array_outputs(nodes, gate, method, lanes, monkeypatch):
     """The work array in shared memory (the default where it fits) against the same kernel with its
     work in global memory (WARPFRIC_TEAM_SHARED_WORK=0): the same arithmetic, but the compiler fuses a
     few multiply-adds differently (1,643 against 1,640 DFMA at N = 200 on sm_90), so equal to
@@ -419,17 +432,20 @@ def test_shared_work_array_gives_the_global_work_array_outputs(nodes, gate, meth
     (WARPFRIC_TEAM_POISON_SHARED_WORK=1), which a value read before its attempt wrote it would carry
     into the outputs: the same to round-off again. 11 members in blocks of 8 (requested; 7 at N =
     300, where 8 do not fit: stride 7, the largest shared array), the contact front with the stress
-    gate; both integrators; the three laws."""
+    gate; both integrators; the three laws. And a team of several warps (96 lanes, one member a
+    block, stride 1: kernels/team.py make_warps_team), whose work sits beside its team buffer."""
     values = {"eccentricity": np.linspace(-0.3, 0.3, 11), "normal_force": np.geomspace(300.0, 3000.0, 11)}
-    monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "8")
+    per_block = 8 if lanes <= 32 else 1
+    if lanes <= 32:
+        monkeypatch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "8")
     model = wf.Model(relaxation_gate=gate)
     fronts = wf.Fronts() if gate == "stress" else None
     runs = {}
     for name, shared, poison in (("shared", "1", "0"), ("poisoned", "1", "1"), ("global", "0", "0")):
         monkeypatch.setenv("WARPFRIC_TEAM_SHARED_WORK", shared)
         monkeypatch.setenv("WARPFRIC_TEAM_POISON_SHARED_WORK", poison)
-        runs[name] = run(values, nodes=nodes, rtol=1e-5, fronts=fronts, model=model, method=method)
-    assert runs["global"].attrs["work_memory"] == "global" and runs["global"].attrs["block_members"] == 8
+        runs[name] = run(values, nodes=nodes, rtol=1e-5, fronts=fronts, model=model, method=method, lanes=lanes)
+    assert runs["global"].attrs["work_memory"] == "global" and runs["global"].attrs["block_members"] == per_block
     if runs["shared"].attrs["work_memory"] != "shared":
         pytest.skip(f"the work array of N = {nodes} does not fit this GPU's shared memory")
     if nodes == 300 and wp.get_device(DEVICE).max_shared_memory_per_block >= 232_448:
