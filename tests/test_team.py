@@ -134,9 +134,9 @@ def test_every_lane_reads_the_same_team_reductions(lanes, exchange):
 
 def test_lanes_is_validated_and_chosen():
     """Solver.lanes: None, 1 or 2..nodes//2, float64 only; None picks the cooperative kernel on a
-    CUDA device in float64 (min(32, nodes // 2) lanes, from 16 nodes; for a run of at most as
-    many members as SMs, the most whole warps of lanes of two nodes or more), the thread-per-member
-    kernel otherwise."""
+    CUDA device in float64 (min(32, nodes // 2) lanes, from 16 nodes; for a run whose members fit
+    the GPU at once in teams of the most whole warps of lanes of two nodes or more, those), the
+    thread-per-member kernel otherwise."""
     for bad in (0, 51, 2.0, True):
         with pytest.raises(ValueError, match="lanes"):
             wf.Solver(nodes=100, lanes=bad)
@@ -151,13 +151,16 @@ def test_lanes_is_validated_and_chosen():
     assert choose_lanes(wf.Solver(nodes=AUTO_MIN_NODES), "cuda:0") == 8
     assert choose_lanes(wf.Solver(nodes=AUTO_MIN_NODES - 1), "cuda:0") == 1
     assert choose_lanes(wf.Solver(nodes=100, dtype="float32"), "cuda:0") == 1
-    # a run of at most as many members as the GPU has SMs: the most whole warps of >= 2 nodes a lane
+    # a run whose members fit the GPU at once in teams of the most whole warps of >= 2 nodes a lane
+    # (8 warps an SM): those teams
     sms = 132  # an H100's
-    assert choose_lanes(wf.Solver(nodes=200), "cuda:0", 1, sms) == choose_lanes(wf.Solver(nodes=200), "cuda:0", sms, sms) == 96
-    assert choose_lanes(wf.Solver(nodes=200), "cuda:0", sms + 1, sms) == 32
-    assert choose_lanes(wf.Solver(nodes=400), "cuda:0", 1, sms) == 192
-    assert choose_lanes(wf.Solver(nodes=1000), "cuda:0", 1, sms) == 256  # MAX_TEAM_LANES
-    assert choose_lanes(wf.Solver(nodes=128), "cuda:0", 1, sms) == 64
+    at_200 = [choose_lanes(wf.Solver(nodes=200), "cuda:0", m, sms) for m in (1, 2 * sms, 2 * sms + 1)]
+    assert at_200 == [96, 96, 32]  # 3 warps: 2 members an SM
+    at_400 = [choose_lanes(wf.Solver(nodes=400), "cuda:0", m, sms) for m in (1, sms, sms + 1)]
+    assert at_400 == [192, 192, 32]  # 6 warps: one member an SM
+    assert choose_lanes(wf.Solver(nodes=1000), "cuda:0", sms, sms) == 256  # MAX_TEAM_LANES, 8 warps
+    assert choose_lanes(wf.Solver(nodes=128), "cuda:0", 4 * sms, sms) == 64  # 2 warps: 4 an SM
+    assert choose_lanes(wf.Solver(nodes=128), "cuda:0", 4 * sms + 1, sms) == 32
     assert choose_lanes(wf.Solver(nodes=127), "cuda:0", 1, sms) == 32  # 63 lanes of two nodes: one warp
     assert choose_lanes(wf.Solver(nodes=40), "cuda:0", 1, sms) == 20
     assert choose_lanes(wf.Solver(nodes=200), "cpu", 1, 0) == 1
@@ -275,7 +278,8 @@ def test_work_array_memory_choice(monkeypatch):
     assert team_layout(1, 200, 10_000, True, 132, h100) == (False, 1, None)  # the thread-per-member kernel
     # a team of several warps: one member a block, its work beside the 24 KB team buffer while it fits
     # (13 * N * 8 <= h100 - 4096 - 24,576: N <= 1,959)
-    assert team_layout(96, 200, 1, True, 132, h100) == team_layout(96, 200, 100, True, 132, h100) == (False, 1, (200, 1))
+    wide_200 = (False, 1, (200, 1))
+    assert team_layout(96, 200, 1, True, 132, h100) == team_layout(96, 200, 100, True, 132, h100) == wide_200
     assert team_layout(256, 1959, 1, True, 132, h100) == (False, 1, (1959, 1))
     assert team_layout(256, 1960, 1, True, 132, h100) == (False, 1, None)
     assert team_layout(96, 200, 1, False) == (False, 1, None)  # the CPU

@@ -58,12 +58,13 @@ class EngineResult:
 
 # the cooperative kernel's largest team when Solver.lanes is None (docs/performance.md, "GPU: where
 # the time goes", team size: on the H100 32 lanes beat 8 and equal 64 at N = 200), and the fewest
-# nodes for which it is chosen (a team of 8 lanes of 2 nodes); a run of at most as many members as
-# the GPU has SMs takes wider teams of several warps, up to MAX_TEAM_LANES (docs/performance.md,
-# "Teams of several warps": one member at N = 200 0.047 -> 0.038 s with 96 lanes, 100 members
-# 0.095 -> 0.077 s; 1,000 members lose, 0.137 -> 0.193 s with 64)
+# nodes for which it is chosen (a team of 8 lanes of 2 nodes); a run whose members' teams of several
+# warps fit the GPU at once (WIDE_WARPS_PER_SM warps an SM) takes those, up to MAX_TEAM_LANES
+# (docs/performance.md, "Teams of several warps": 96 lanes at N = 200, one member 0.047 -> 0.031 s,
+# 264 members 0.092 -> 0.074 s; 528, two rounds of blocks, 0.108 against 0.105 s)
 AUTO_LANES = 32
 AUTO_MIN_NODES = 16
+WIDE_WARPS_PER_SM = 8  # the warps an SM's registers hold at 255 registers a thread
 
 
 # The blocked kernel's members wait for each other at every attempt (kernels/integrator.py,
@@ -135,18 +136,22 @@ def choose_lanes(solver: Solver, device: str, members: int | None = None, sm_cou
     AUTO_MIN_NODES nodes, the cooperative kernel with min(AUTO_LANES, nodes // 2) lanes (the most
     lanes of at least two nodes each, one warp at most: a lane's time grows with its nodes; at
     N = 40 on the H100, 20 lanes beat the 16 of a power of two by 3 % for one member and 9 % for
-    100, docs/performance.md); where the run's ``members`` are at most the GPU's ``sm_count`` SMs
-    and nodes // 2 >= 64, the most whole warps of such lanes instead (a team of several warps,
-    kernels/team.py make_warps_team: 96 lanes at N = 200, 192 at N = 400, at most MAX_TEAM_LANES);
-    else 1 (the thread-per-member kernel: on the CPU a team's lanes run one after the other on
-    Warp's fibers, which only costs)."""
+    100, docs/performance.md); where nodes // 2 >= 64, the most whole warps of such lanes instead
+    (a team of several warps, kernels/team.py make_warps_team: 96 lanes at N = 200, 192 at N = 400,
+    at most MAX_TEAM_LANES) if the run's ``members`` fit the GPU's ``sm_count`` SMs at once in
+    those (WIDE_WARPS_PER_SM warps an SM: 264 members of 96 lanes on an H100); else 1 (the
+    thread-per-member kernel: on the CPU a team's lanes run one after the other on Warp's fibers,
+    which only costs)."""
     from warpfric.kernels.team import MAX_TEAM_LANES, WARP_SIZE
 
     if solver.lanes is not None:
         return solver.lanes
     if str(device).startswith("cuda") and solver.dtype == "float64" and solver.nodes >= AUTO_MIN_NODES:
-        if members is not None and members <= sm_count and solver.nodes // 2 >= 2 * WARP_SIZE:
-            return min(MAX_TEAM_LANES, solver.nodes // 2 // WARP_SIZE * WARP_SIZE)
+        wide = min(MAX_TEAM_LANES, solver.nodes // 2 // WARP_SIZE * WARP_SIZE)
+        if members is not None and wide > WARP_SIZE:
+            at_once = sm_count * (WIDE_WARPS_PER_SM // (wide // WARP_SIZE))  # members whose wide teams fit the GPU
+            if members <= at_once:
+                return wide
         return min(AUTO_LANES, solver.nodes // 2)
     return 1
 
