@@ -218,8 +218,8 @@ def make_separator_exchange(lanes: int):
 # On a GPU a team of at most 32 lanes is one warp: its lanes read each other's registers with warp
 # shuffles, so nothing goes through shared memory and no block barrier is needed (only __syncwarp,
 # for the lanes' global-memory writes, which every team operation but reduced_solve starts with, as
-# the tiles' synchronisation did; reduced_solve works on registers only and follows
-# from_next_lane). Reductions are butterflies (every lane adds its partner's partial sum at
+# the tiles' synchronisation did; in one warp reduced_solve works on registers only and follows
+# from_next_lane; a team of several warps exchanges through a buffer: make_warps_team). Reductions are butterflies (every lane adds its partner's partial sum at
 # distance 16, 8, .., 1; commutativity gives every lane the same bits) for a power-of-two team,
 # else a tree to lane 0 and lane 0's value to every lane; the separators' reduced system is solved
 # by parallel cyclic reduction (make_exchange_team). "emulated" runs the same operations with each
@@ -552,8 +552,9 @@ def make_warps_team(lanes: int):
         value from beyond its edges), one write of each lane's x into the buffer. ``level``: 0 for
         an exchange of its own, which first waits for the lanes (their global-memory writes and
         the buffer's last reads: a team operation's barrier); k > 0 for the k-th level of the
-        cyclic reduction, which writes into the other half of the buffer than level k - 1, whose
-        reads it need not wait for (every lane read them before the barrier of level k)."""
+        cyclic reduction, which writes into the other half of the buffer than level k - 1 and
+        needs no barrier first: the half it writes was last read at level k - 2 (or before level
+        0's leading barrier), and every lane did those reads before level k - 1's barrier."""
 
         @wp.func
         def both(x: vector, delta: int, level: int):

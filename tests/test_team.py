@@ -4,6 +4,8 @@ control (sums are taken in another order, so not bit for bit). On the CPU the te
 cooperative fibers (warp.config.enable_cpu_blocks); WARPFRIC_TEST_DEVICE=cuda:0 runs the same
 assertions on a GPU. The partitioned bordered solve alone is tested against numpy in test_kernels.py."""
 
+import math
+
 import numpy as np
 import pytest
 import warp as wp
@@ -130,13 +132,73 @@ def test_every_lane_reads_the_same_team_reductions(lanes, exchange):
     for it in range(3):
         np.testing.assert_allclose(o[it, :, :12], np.broadcast_to(expected, (lanes, 12)), rtol=1e-15)
         assert (o[it, :, 12] == lanes - 1 + it).all() and (o[it, :, 13] == lane_sum).all()
+        assert (o[it] == o[it, :1]).all()  # every lane the same bits
 
 
-def test_lanes_is_validated_and_chosen():
+def _sum_kernel(lanes, exchange):
+    from warpfric.kernels.team import make_team
+
+    team_sum = make_team(wp.float64, lanes, exchange)["team_sum"]
+
+    @wp.kernel(module="unique")
+    def total(x: wp.array(dtype=wp.float64), out: wp.array(dtype=wp.float64)):
+        _m, lane = wp.tid()
+        out[lane] = team_sum(x[lane])
+
+    return total
+
+
+def _sum_in_order(x, lanes):
+    """The team's sum in the order kernels/team.py documents: a butterfly (partners lane ^ s, s = 16
+    or lanes / 2 down to 1) inside each warp for a power-of-two warp, else a tree to the warp's
+    first lane (lane + s, s = 2^(ceil(log2 lanes) - 1) down to 1, then lane 0's value); then, for
+    several warps, the warps' results added in warp order."""
+    in_warp = min(lanes, 32)
+    v = np.array(x, dtype=np.float64)
+    levels = max(1, (in_warp - 1).bit_length())
+    s = 1 << (levels - 1)
+    while s:
+        lane = np.arange(lanes)
+        if in_warp & (in_warp - 1) == 0:
+            v = v + v[lane ^ s]
+        else:
+            v = np.where(lane + s < lanes, v + v[np.minimum(lane + s, lanes - 1)], v)
+        s //= 2
+    if in_warp & (in_warp - 1):
+        v = np.full(lanes, v[0])
+    total = v[0]
+    for w in range(1, lanes // 32 if lanes > 32 else 1):
+        total = total + v[32 * w]
+    return total
+
+
+@pytest.mark.parametrize("exchange", ["emulated"] + (["shuffle"] if DEVICE.startswith("cuda") else []))
+@pytest.mark.parametrize("lanes", [7, 8, 32, 64, 96])
+def test_a_team_sums_in_its_documented_order(lanes, exchange):
+    """A team's sum of values of both signs over 6 orders of magnitude and two of 1e17 that cancel
+    (the order of the sums shows: what is added to 1e17 first is lost, so the sum is not the exact
+    one) equals bit for bit the sum in the order kernels/team.py documents, in every lane: the
+    CPU's emulated exchange, and on a GPU its shuffles, so that the CPU tests the GPU's arithmetic
+    (one warp, a tree of 7 lanes, and teams of two and three warps)."""
+    rng = np.random.default_rng(lanes)
+    x = rng.choice([-1.0, 1.0], lanes) * 10.0 ** rng.uniform(-3.0, 3.0, lanes)
+    x[0], x[min(lanes - 1, 32)] = 1e17, -1e17  # they cancel (in the first two warps), and swallow what meets them first
+    out = wp.zeros(lanes, dtype=wp.float64, device=DEVICE)
+    with cpu_blocks(True):
+        values = wp.array(x, dtype=wp.float64, device=DEVICE)
+        wp.launch_tiled(_sum_kernel(lanes, exchange), dim=[1], inputs=[values, out], block_dim=lanes, device=DEVICE)
+    expected = _sum_in_order(x, lanes)
+    assert expected != math.fsum(x)  # the order shows in these bits
+    np.testing.assert_array_equal(out.numpy(), np.full(lanes, expected))
+
+
+def test_lanes_is_validated_and_chosen(monkeypatch):
     """Solver.lanes: None, 1 or 2..nodes//2, float64 only; None picks the cooperative kernel on a
     CUDA device in float64 (min(32, nodes // 2) lanes, from 16 nodes; for a run whose members fit
     the GPU at once in teams of the most whole warps of lanes of two nodes or more, those), the
     thread-per-member kernel otherwise."""
+    for name in ("WARPFRIC_TEAM_BLOCK_MEMBERS", "WARPFRIC_TEAM_EXCHANGE"):
+        monkeypatch.delenv(name, raising=False)
     for bad in (0, 51, 2.0, True):
         with pytest.raises(ValueError, match="lanes"):
             wf.Solver(nodes=100, lanes=bad)
@@ -165,6 +227,14 @@ def test_lanes_is_validated_and_chosen():
     assert choose_lanes(wf.Solver(nodes=40), "cuda:0", 1, sms) == 20
     assert choose_lanes(wf.Solver(nodes=200), "cpu", 1, 0) == 1
     assert choose_lanes(wf.Solver(nodes=200, lanes=8), "cuda:0", 1, sms) == 8
+    # the benchmark switches that only one-warp teams take keep lanes=None at one warp
+    for name, value in (("WARPFRIC_TEAM_BLOCK_MEMBERS", "8"), ("WARPFRIC_TEAM_EXCHANGE", "tile")):
+        with monkeypatch.context() as switch:
+            switch.setenv(name, value)
+            assert choose_lanes(wf.Solver(nodes=200), "cuda:0", 1, sms) == 32
+    with monkeypatch.context() as switch:
+        switch.setenv("WARPFRIC_TEAM_BLOCK_MEMBERS", "1")
+        assert choose_lanes(wf.Solver(nodes=200), "cuda:0", 1, sms) == 96
 
 
 def test_the_lane_exchange_is_chosen_and_refused():

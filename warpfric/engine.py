@@ -139,16 +139,21 @@ def choose_lanes(solver: Solver, device: str, members: int | None = None, sm_cou
     100, docs/performance.md); where nodes // 2 >= 64, the most whole warps of such lanes instead
     (a team of several warps, kernels/team.py make_warps_team: 96 lanes at N = 200, 192 at N = 400,
     at most MAX_TEAM_LANES) if the run's ``members`` fit the GPU's ``sm_count`` SMs at once in
-    those (WIDE_WARPS_PER_SM warps an SM: 264 members of 96 lanes on an H100); else 1 (the
+    those (WIDE_WARPS_PER_SM warps an SM: 264 members of 96 lanes on an H100), unless the
+    benchmark switches ask for what only one-warp teams do (WARPFRIC_TEAM_BLOCK_MEMBERS above 1, or
+    an exchange other than shuffles: kernels/integrator.py team_compile_options); else 1 (the
     thread-per-member kernel: on the CPU a team's lanes run one after the other on Warp's fibers,
     which only costs)."""
+    from warpfric.kernels.integrator import team_compile_options
     from warpfric.kernels.team import MAX_TEAM_LANES, WARP_SIZE
 
     if solver.lanes is not None:
         return solver.lanes
     if str(device).startswith("cuda") and solver.dtype == "float64" and solver.nodes >= AUTO_MIN_NODES:
         wide = min(MAX_TEAM_LANES, solver.nodes // 2 // WARP_SIZE * WARP_SIZE)
-        if members is not None and wide > WARP_SIZE:
+        options = team_compile_options()
+        one_warp_asked = (options.block_members or 1) > 1 or options.exchange not in (None, "shuffle")
+        if members is not None and wide > WARP_SIZE and not one_warp_asked:
             at_once = sm_count * (WIDE_WARPS_PER_SM // (wide // WARP_SIZE))  # members whose wide teams fit the GPU
             if members <= at_once:
                 return wide
