@@ -37,6 +37,9 @@
 #   sass           the integrate kernel's SASS instructions by inlined call site (studies/sass_sites.py)
 #   exchange       the team's lane exchanges, tiles against warp shuffles: outputs (studies/team_exchange.py)
 #                  and 1 / 10,000 members timed with each
+#   wide           teams of several warps: team sizes give the same member (studies/team_lanes.py), then
+#                  32 / 64 / 96 lanes for 1 and 100 members, 32 / 96 for 133 / 264 / 528, and one member
+#                  at N = 400 in 32 to 192 lanes, two rounds
 #   blocks         members per thread block, chosen per run (min(8, ceil(members / SMs))) against 1
 #                  (WARPFRIC_TEAM_BLOCK_MEMBERS=1):
 #                  1 / 1,000 / 10,000 members, the contact front, the gate-less law, two rounds; then the
@@ -188,6 +191,14 @@ case "$mode" in
     WARPFRIC_TEAM_EXCHANGE=tile $E --members 1 10000 --relaxation-gate stress --lanes 32 --out "$OUT/bench_tile.json" 2>&1 \
       | tail -3
     $E --members 1 10000 --relaxation-gate stress --lanes 32 --out "$OUT/bench_shuffle.json" 2>&1 | tail -3 ;;
+  wide)
+    python3 studies/team_lanes.py --nodes 200 --lanes 1 32 64 96 2>&1 | tee "$OUT/team_lanes_n200.txt" | tail -4
+    for round in 1 2; do
+      $E --members 1 100 --lanes 32 64 96 --repeat 5 --out "$OUT/bench_wide.json" 2>&1 | grep -v '^{' | tail -6
+      $E --members 133 264 528 --lanes 32 96 --repeat 3 --out "$OUT/bench_wide_members.json" 2>&1 | grep -v '^{' | tail -6
+      $E --members 1 --nodes 400 --lanes 32 64 128 192 --repeat 3 --out "$OUT/bench_wide_n400.json" 2>&1 \
+        | grep -v '^{' | tail -4
+    done ;;
   ncu-sources)
     NCU=$(ncu_bin); echo "ncu: $NCU"
     "$NCU" -k regex:integrate --launch-skip 2 --launch-count 1 --section SourceCounters --section WarpStateStats \
