@@ -51,13 +51,13 @@ class EngineResult:
     lanes: int  # threads per member (1: the thread-per-member kernel; > 1: the cooperative kernel)
     team_exchange: str  # how a team's lanes exchange values (kernels/team.py; "none" for one lane)
     block_members: int  # members per thread block of the cooperative kernel, in step at each attempt (1: one)
-    work_memory: str  # where the integrator's work array lives: "shared" (the blocked kernel's, where it fits) or "global"
+    work_memory: str  # where the integrator's work array lives: "shared" (team kernels, where it fits) or "global"
     member_order: str  # the order the kernel ran the members in: "similar" (member_order) or "given" (the caller's)
     passes: int  # integration passes (2 with the velocity front, else 1)
 
 
-# the cooperative kernel's largest team when Solver.lanes is None (docs/performance.md, "GPU: where
-# the time goes", team size: on the H100 32 lanes beat 8 and equal 64 at N = 200), and the fewest
+# the cooperative kernel's largest one-warp team when Solver.lanes is None (docs/performance.md, "GPU:
+# where the time goes", team size: on the H100 32 lanes beat 8, and 64 by tiles, at N = 200), and the fewest
 # nodes for which it is chosen (a team of 8 lanes of 2 nodes); a run whose members' teams of several
 # warps fit the GPU at once (WIDE_WARPS_PER_SM warps an SM) takes those, up to MAX_TEAM_LANES
 # (docs/performance.md, "Teams of several warps": 96 lanes at N = 200, one member 0.047 -> 0.031 s,
@@ -529,7 +529,8 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     n = solver.nodes
     cuda = str(device).startswith("cuda")
     gpu = wp.get_device(device) if cuda else None
-    lanes = choose_lanes(solver, device, n_members, gpu.sm_count if cuda else 0)
+    sm_count = gpu.sm_count if cuda else 1
+    lanes = choose_lanes(solver, device, n_members, sm_count)
     team = lanes > 1
     if team and not cuda:
         warnings.warn(f"Solver(lanes={lanes}) on {device}: the cooperative kernel runs there on Warp's experimental "
@@ -539,11 +540,9 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     if note is not None:
         warnings.warn(note, stacklevel=3)
     # members per block and the work array's memory (kernels/integrator.py team_layout)
-    layout = team_layout(lanes, n, n_members, cuda, gpu.sm_count if cuda else 1,
-                         gpu.max_shared_memory_per_block if cuda else 0)
+    layout = team_layout(lanes, n, n_members, cuda, sm_count, gpu.max_shared_memory_per_block if cuda else 0)
     # before the kernels are built, so that a bad WARPFRIC_MEMBER_ORDER is refused first
-    order = member_order(values, alike_blocks(layout, n_members, gpu.sm_count if cuda else 1),
-                         os.environ.get("WARPFRIC_MEMBER_ORDER"))
+    order = member_order(values, alike_blocks(layout, n_members, sm_count), os.environ.get("WARPFRIC_MEMBER_ORDER"))
     if order is not None:  # the kernel's order; the outputs go back into the caller's on their way to the host
         values = {name: np.asarray(column)[order] for name, column in values.items()}
     t_build = time.perf_counter()
