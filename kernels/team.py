@@ -508,44 +508,74 @@ def make_warps_team(lanes: int):
     buffer; the neighbours' values through the buffer (team_buffer_base)."""
     warps = warps_of(lanes)
 
+    @wp.func
+    def team_buffer():
+        """The block's team buffer, (TEAM_BUFFER_ROWS, MAX_TEAM_LANES) float64 in shared memory."""
+        return wp.array(ptr=team_buffer_base(), shape=(TEAM_BUFFER_ROWS, MAX_TEAM_LANES), dtype=wp.float64)
+
+    def merged_in_warp_order(combine):
+        """Row ``row`` of the buffer's first ``warps`` columns (each warp's result, written before
+        a block barrier) merged with ``combine`` in the warps' order: the same bits in every lane."""
+
+        @wp.func
+        def merge(row: int):
+            buffer = team_buffer()
+            r = buffer[row, 0]
+            for w in range(1, warps):
+                r = combine(r, buffer[row, w])
+            return r
+
+        return merge
+
+    merged_sum = merged_in_warp_order(plus)
+
+    @wp.func
+    def publish(warp_result: wp.float64):
+        """Each warp's first lane writes its warp's result into the buffer's row 0; a block barrier."""
+        lane = lane_index()
+        if lane % WARP_SIZE == 0:
+            buffer = team_buffer()
+            buffer[0, lane // WARP_SIZE] = warp_result
+        team_block_sync()
+
     def reduction(in_warp, combine):
         """A reduction over the team (called after ``sync``, which leaves the buffer free): the
         warp's result by shuffles, each warp's written by its first lane, merged in warp order."""
+        merge = merged_in_warp_order(combine)
 
         @wp.func
         def reduce(x: wp.float64, lanes_: int):
-            v = in_warp(x, WARP_SIZE)
-            lane = lane_index()
-            buffer = wp.array(ptr=team_buffer_base(), shape=(TEAM_BUFFER_ROWS, MAX_TEAM_LANES), dtype=wp.float64)
-            if lane % WARP_SIZE == 0:
-                buffer[0, lane // WARP_SIZE] = v
-            team_block_sync()
-            r = buffer[0, 0]
-            for w in range(1, warps):
-                r = combine(r, buffer[0, w])
-            return r
+            publish(in_warp(x, WARP_SIZE))
+            return merge(0)
 
         return reduce
 
+    total = reduction(warp_sum_f64, plus)
+
     @wp.func
     def sum12(x: vec12d):
-        """The sums of a vec12d's components over the team (after ``sync``), as 12 reductions."""
+        """The sums of a vec12d's components over the team (after ``sync``): each component as
+        ``total`` sums it, with one barrier for the twelve."""
         v = vec12d()
         for k in range(12):
             v[k] = warp_sum_f64(x[k], WARP_SIZE)
         lane = lane_index()
-        buffer = wp.array(ptr=team_buffer_base(), shape=(TEAM_BUFFER_ROWS, MAX_TEAM_LANES), dtype=wp.float64)
         if lane % WARP_SIZE == 0:
+            buffer = team_buffer()
             for k in range(12):
                 buffer[k, lane // WARP_SIZE] = v[k]
         team_block_sync()
         r = vec12d()
         for k in range(12):
-            t = buffer[k, 0]
-            for w in range(1, warps):
-                t = t + buffer[k, w]
-            r[k] = t
+            r[k] = merged_sum(k)
         return r
+
+    @wp.func
+    def sum_i32(x: int, lanes_: int):
+        """The sum of an int over the team (the warps' sums pass through the float64 buffer, exact
+        for the counts a team sums)."""
+        publish(wp.float64(warp_sum_i32(x, WARP_SIZE)))
+        return int(merged_sum(0))
 
     def neighbours(vector, length: int):
         """The vector x of lanes - delta and + delta (clamped to the team: callers do not use a
@@ -559,7 +589,7 @@ def make_warps_team(lanes: int):
         @wp.func
         def both(x: vector, delta: int, level: int):
             lane = lane_index()
-            buffer = wp.array(ptr=team_buffer_base(), shape=(TEAM_BUFFER_ROWS, MAX_TEAM_LANES), dtype=wp.float64)
+            buffer = team_buffer()
             half = (level % 2) * (TEAM_BUFFER_ROWS // 2)
             if level == 0:
                 team_block_sync()
@@ -581,22 +611,8 @@ def make_warps_team(lanes: int):
     def sync(lanes_: int):
         team_block_sync()
 
-    @wp.func
-    def sum_i32(x: int, lanes_: int):
-        v = warp_sum_i32(x, WARP_SIZE)
-        lane = lane_index()
-        buffer = wp.array(ptr=team_buffer_base(), shape=(TEAM_BUFFER_ROWS, MAX_TEAM_LANES), dtype=wp.float64)
-        if lane % WARP_SIZE == 0:
-            buffer[0, lane // WARP_SIZE] = wp.float64(v)
-        team_block_sync()
-        r = int(0)
-        for w in range(warps):
-            r = r + int(buffer[0, w])
-        return r
-
-    return dict(sum_f64=reduction(warp_sum_f64, plus), max_f64=reduction(warp_max_f64, larger),
-                min_f64=reduction(warp_min_f64, smaller), sum_i32=sum_i32, sum12=sum12, sync=sync,
-                neighbours=neighbours)
+    return dict(sum_f64=total, max_f64=reduction(warp_max_f64, larger), min_f64=reduction(warp_min_f64, smaller),
+                sum_i32=sum_i32, sum12=sum12, sync=sync, neighbours=neighbours)
 
 
 def make_exchange_team(lanes: int, exchange: str):
