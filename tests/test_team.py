@@ -418,6 +418,25 @@ def test_similar_members_are_neighbours():
     assert not alike_blocks(TeamLayout(False, 1, None), 10_000, 1)  # the thread kernel, the CPU
 
 
+def test_host_copy_lands_in_the_array_it_is_given():
+    """engine.host_copy fills the host array it is given (the engine reads its final fields back
+    into arrays allocated and touched while a GPU integrates: landing_arrays, used on every device)
+    and refuses one of another shape, dtype or layout, naming both."""
+    import warp as wp
+
+    from warpfric.engine import host_copy, touched_empty
+
+    values = np.arange(12.0).reshape(3, 4)
+    a = wp.array(values, dtype=wp.float64, device="cpu")
+    out = touched_empty((3, 4), np.float64)
+    assert host_copy(a, out) is out
+    np.testing.assert_array_equal(out, values)
+    np.testing.assert_array_equal(host_copy(a), values)
+    for wrong in (np.empty((4, 3)), np.empty((3, 4), np.float32), np.empty((4, 3)).T):
+        with pytest.raises(ValueError, match=r"must be the device array's float64\(3, 4\)"):
+            host_copy(a, wrong)
+
+
 @pytest.mark.filterwarnings("ignore:Solver\\(lanes=:UserWarning")  # a team on the CPU's fibers
 def test_the_member_order_changes_no_output(monkeypatch):
     """The kernel's members in the similar order (WARPFRIC_MEMBER_ORDER=similar, which the CPU's

@@ -121,6 +121,8 @@ def member_order(values: dict, blocked: bool, requested: str | None = None) -> n
     varied = []
     for name in sorted(values):
         column = np.asarray(values[name], dtype=np.float64)
+        if column.size and column.min() == column.max():
+            continue  # alike in every member (found without np.unique's sort: most columns of a run)
         distinct, rank = np.unique(column, return_inverse=True)
         if distinct.size > 1:
             varied.append(rank / (distinct.size - 1))
@@ -398,28 +400,61 @@ PINNED_POOL_MAX_BYTES = 1 << 20  # per buffer kept
 PINNED_POOL_MAX_TOTAL = 16 << 20  # all buffers kept
 
 
-def host_copy(a) -> np.ndarray:
-    """A contiguous float device array copied into a new numpy array. Like ``a.numpy()`` (on the
-    default stream, so synchronous), but into memory numpy allocates, which the OS backs with huge
-    pages where it can: writing 64 MB there costs half the page faults' time of Warp's own host
-    allocation (docs/performance.md, "Host time around the kernel")."""
+def touched_empty(shape, dtype) -> np.ndarray:
+    """np.empty(shape, dtype) with every page written once (one value per 4 KiB): the OS's
+    first-touch page faults are taken now, so that a later copy into it runs at the copy's own
+    speed. The engine allocates its read-back arrays so while the kernel runs (landing_arrays)."""
+    out = np.empty(shape, dtype)
+    flat = out.reshape(-1)
+    flat[:: max(1, 4096 // out.itemsize)] = 0
+    return out
+
+
+def landing_arrays(n_members: int, n: int, ft, stress_gate: bool) -> dict:
+    """The host arrays that the final fields are read back into (names as in run(), shapes as
+    member_rows and host_copy give them), allocated and touched (touched_empty) while the GPU
+    integrates: the read-back after the last launch, on the critical path, then only copies."""
     import warp as wp
 
-    out = np.empty(a.shape, dtype=wp.dtype_to_numpy(a.dtype))
+    from warpfric.kernels.types import G_GATE, N_COMPONENTS
+
+    real = wp.dtype_to_numpy(ft)
+    arrays = dict(fields=touched_empty((N_COMPONENTS, n_members, n), real),
+                  normal_stress=touched_empty((n_members, n), real), friction_stress=touched_empty((n_members, n), real))
+    if stress_gate:  # float64, like the kernels' yield_time and gates
+        arrays.update(yield_time=touched_empty((1, n_members, n), np.float64),
+                      gates=touched_empty((G_GATE + 1, n_members, n), np.float64))
+    return arrays
+
+
+def host_copy(a, out: np.ndarray | None = None) -> np.ndarray:
+    """A contiguous float device array copied into a new numpy array, or into ``out`` (of a's shape
+    and dtype; e.g. one of landing_arrays). Like ``a.numpy()`` (on the default stream, so
+    synchronous), but into memory numpy allocates, which the OS backs with huge pages where it can:
+    writing 64 MB there costs half the page faults' time of Warp's own host allocation
+    (docs/performance.md, "Host time around the kernel")."""
+    import warp as wp
+
+    real = np.dtype(wp.dtype_to_numpy(a.dtype))
+    if out is None:
+        out = np.empty(a.shape, dtype=real)
+    elif out.shape != tuple(a.shape) or out.dtype != real or not out.flags.c_contiguous:
+        raise ValueError(f"host_copy: out is {out.dtype}{out.shape} (C-contiguous: {out.flags.c_contiguous}); "
+                         f"it must be the device array's {real}{tuple(a.shape)}, C-contiguous")
     with wp.ScopedStream(a.device.null_stream):
         wp.copy(wp.array(out, dtype=a.dtype, device="cpu", copy=False), a)
     return out
 
 
-def member_rows(layout: dict, source, slots: int, kernel_member) -> np.ndarray:
+def member_rows(layout: dict, source, slots: int, kernel_member, out: np.ndarray | None = None) -> np.ndarray:
     """The first ``slots`` slots of a (slot, node, member) device array (any layout) on the host as
     (slot, member, node), arranged by the layout kernels' member_rows on the device, the caller's
-    member m being the kernel's kernel_member[m] (an int32 device array)."""
+    member m being the kernel's kernel_member[m] (an int32 device array); into ``out`` if given."""
     import warp as wp
 
     rows = wp.empty((slots, source.shape[2], source.shape[1]), dtype=source.dtype, device=source.device)
     wp.launch(layout["member_rows"], dim=rows.shape, inputs=[source, kernel_member, rows], device=source.device)
-    return host_copy(rows)
+    return host_copy(rows, out)
 
 
 def member_columns(layout: dict, source, kernel_member) -> np.ndarray:
@@ -629,6 +664,8 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                              device, stall_limit, solver)
             launch_integrate(inputs, outputs_)
             pending = snapshot.take(member_states)
+            if pass_index == 0:  # while a GPU runs (a CPU launch has run by now: the same copies, nothing overlapped)
+                landing = landing_arrays(n_members, n, ft, stress_gate)
             while True:
                 launch_integrate(inputs, outputs_)
                 st_now = snapshot.wait(pending)
@@ -649,18 +686,19 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                 # read back in the Dataset's (member, node) order, arranged on the device: the host
                 # writes each value once (docs/performance.md, "Host time around the kernel"); the
                 # fields' device copy is freed before the stresses are allocated
-                fields = member_rows(kern["layout"], arrays.state, N_COMPONENTS, kernel_member)
+                fields = member_rows(kern["layout"], arrays.state, N_COMPONENTS, kernel_member, landing["fields"])
                 sigma_out = wp.zeros((n_members, n), dtype=ft)
                 tau_out = wp.zeros((n_members, n), dtype=ft)
                 wp.launch(kern["evaluate_fields"], dim=n_members,
                           inputs=[arrays.params, member_states, arrays.state, row_of], outputs=[sigma_out, tau_out])
-                sigma = host_copy(sigma_out)
-                tau = host_copy(tau_out)
+                sigma = host_copy(sigma_out, landing["normal_stress"])
+                tau = host_copy(tau_out, landing["friction_stress"])
                 yield_np = gate_np = None
                 if stress_gate:  # float64 (the stress gate refuses float32), like yield_time
                     yield_np = member_rows(kern["layout"], arrays.yield_time.reshape((1, n, n_members)), 1,
-                                           kernel_member)[0]
-                    gate_np = member_rows(kern["layout"], arrays.gates, G_GATE + 1, kernel_member)[G_GATE]
+                                           kernel_member, landing["yield_time"])[0]
+                    gate_np = member_rows(kern["layout"], arrays.gates, G_GATE + 1, kernel_member,
+                                          landing["gates"])[G_GATE]
         snapshot.close()
         if order is not None:  # the member states and events back into the caller's order (the rest: above, below)
             st = st[back]
