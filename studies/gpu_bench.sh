@@ -34,6 +34,7 @@
 #   stalls         Nsight Compute's warp stall reasons and memory traffic of one 10,000-member launch
 #   stall-sites    the same launch's warp samples by SASS instruction (line-info kernel), summed by Python
 #                  call site and source line (studies/stall_sites.py)
+#   stall-sites-one the same for one member alone (its automatic team), the launch that integrates it
 #   sass           the integrate kernel's SASS instructions by inlined call site (studies/sass_sites.py)
 #   exchange       the team's lane exchanges, tiles against warp shuffles: outputs (studies/team_exchange.py)
 #                  and 1 / 10,000 members timed with each
@@ -169,6 +170,27 @@ case "$mode" in
         > "$OUT/stall_sites.txt" 2>&1; then matched=1; break; fi
     done
     head -40 "$OUT/stall_sites.txt"
+    [ "$matched" = 1 ] || { echo "no integrate cubin matches the profile"; exit 1; } ;;
+  stall-sites-one)
+    # one member alone (the automatic team: 96 lanes at N = 200), the launch that integrates it
+    NCU=$(ncu_bin); echo "ncu: $NCU"
+    export WARP_CACHE_PATH=$(mktemp -d)
+    python3 studies/bench_engine.py --device cuda:0 --members 1 --dtypes float64 --lineinfo \
+      --out "$OUT/stall_sites_one_warm.json" > "$OUT/stall_sites_one_warm.log" 2>&1 || { tail "$OUT/stall_sites_one_warm.log"; exit 1; }
+    # the benchmark's warm-up simulate launches twice (the second launch finds the member done), then the timed one
+    "$NCU" -k regex:integrate --launch-skip 2 --launch-count 1 --section SourceCounters --section WarpStateStats \
+      --section LaunchStats --section Occupancy --section SpeedOfLight --import-source yes -o "$OUT/stall_sites_one" \
+      python3 studies/bench_engine.py --device cuda:0 --dtypes float64 --members 1 --lineinfo --repeat 1 \
+      --out "$OUT/stall_sites_one_bench.json" > "$OUT/ncu_stall_sites_one.log" 2>&1
+    "$NCU" -i "$OUT/stall_sites_one.ncu-rep" --page details > "$OUT/ncu_one_member_details.txt" 2>&1
+    "$NCU" -i "$OUT/stall_sites_one.ncu-rep" --page source --csv --print-source sass | gzip -9 > "$OUT/stall_sass_one.csv.gz"
+    matched=0
+    for cubin in $(find "$WARP_CACHE_PATH" -name "*integrate*.cubin"); do
+      cp "$cubin" "$OUT/integrate_one.cubin"
+      if python3 studies/stall_sites.py --csv "$OUT/stall_sass_one.csv.gz" --cubin "$OUT/integrate_one.cubin" "$@" \
+        > "$OUT/stall_sites_one.txt" 2>&1; then matched=1; break; fi
+    done
+    head -40 "$OUT/stall_sites_one.txt"
     [ "$matched" = 1 ] || { echo "no integrate cubin matches the profile"; exit 1; } ;;
   sass)
     python3 studies/sass_sites.py "$@" 2>&1 | tee "$OUT/sass_sites.txt" | head -30 ;;
