@@ -118,6 +118,7 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
     error_increment = tableau["error_increment"]
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
+    vec4 = wp.types.vector(length=N_COMPONENTS, dtype=ft)
 
     @wp.func
     def prepare_stage(
@@ -127,14 +128,23 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         """Stage constants z = y_n + h*(a1*K[s1] + a2*K[s2]) (first n_terms terms) into work[0..3] and
         the Newton start for V into work[W_V]: v_n + extrapolate*(V(stage s2) - v_n). (The lane's
         nodes; the Newton solve that follows reads the stage displacement of the neighbouring lanes'
-        end nodes: a barrier.)"""
+        end nodes: a barrier.) A node's values are all read before its constants are written: for
+        the compiler a write may alias a later read, so reads after a write wait for it in turn."""
         for i in range(c.first_node, c.end_node):
+            y = vec4()
+            k1 = vec4()
+            k2 = vec4()
             for comp in range(N_COMPONENTS):
-                work[comp, i, m] = stage_constant(state[comp, i, m], h, a1, K[s1, comp, i, m], a2, K[s2, comp, i, m], n_terms)
-            v = state[C_V, i, m]
-            guess = v
+                y[comp] = state[comp, i, m]
+                if n_terms >= 1:
+                    k1[comp] = K[s1, comp, i, m]
+                if n_terms >= 2:
+                    k2[comp] = K[s2, comp, i, m]
+            for comp in range(N_COMPONENTS):
+                work[comp, i, m] = stage_constant(y[comp], h, a1, k1[comp], a2, k2[comp], n_terms)
+            guess = y[C_V]
             if n_terms >= 2:
-                guess = v + extrapolate * (K[s2, C_U, i, m] - v)
+                guess = y[C_V] + extrapolate * (k2[C_U] - y[C_V])
             work[W_V, i, m] = guess
         barrier()
 
@@ -176,16 +186,24 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         rtol = ft(s.rtol)
         err = ft(0.0)
         for i in range(c.first_node, c.end_node):
+            # a node's values all read before its writes (as in prepare_stage)
+            y = vec4()
+            k1 = vec4()
+            k2 = vec4()
+            k3 = vec4()
             for comp in range(N_COMPONENTS):
                 if comp != C_V or wp.static(inertia):
-                    k1 = K[s1, comp, i, m]
-                    k2 = K[s2, comp, i, m]
-                    k3 = K[s3, comp, i, m]
-                    y = state[comp, i, m]
-                    y_new = y + solution_increment(h, k1, k2, k3)
+                    y[comp] = state[comp, i, m]
+                    k1[comp] = K[s1, comp, i, m]
+                    k2[comp] = K[s2, comp, i, m]
+                    k3[comp] = K[s3, comp, i, m]
+            for comp in range(N_COMPONENTS):
+                if comp != C_V or wp.static(inertia):
+                    y_new = y[comp] + solution_increment(h, k1[comp], k2[comp], k3[comp])
                     if comp != C_V:
                         work[comp, i, m] = y_new
-                    err = fold_error(c, step_end, comp, i, m, error_increment(h, k1, k2, k3), y, y_new, g, rtol, err)
+                    err = fold_error(c, step_end, comp, i, m, error_increment(h, k1[comp], k2[comp], k3[comp]), y[comp],
+                                     y_new, g, rtol, err)
         return team_max(err)
 
     @wp.func
@@ -195,13 +213,16 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         h*K[s3]); the velocity is the last stage's (stiffly accurate, and algebraic without inertia).
         The lane's nodes."""
         for i in range(c.first_node, c.end_node):
+            y_new = vec4()  # a node's values all read before its writes (as in prepare_stage)
             for comp in range(N_COMPONENTS):
                 if comp == C_V:
-                    state[comp, i, m] = K[s3, C_U, i, m]
+                    y_new[comp] = K[s3, C_U, i, m]
                 elif backward_euler == 1:
-                    state[comp, i, m] = state[comp, i, m] + h * K[s3, comp, i, m]
+                    y_new[comp] = state[comp, i, m] + h * K[s3, comp, i, m]
                 else:
-                    state[comp, i, m] = work[comp, i, m]
+                    y_new[comp] = work[comp, i, m]
+            for comp in range(N_COMPONENTS):
+                state[comp, i, m] = y_new[comp]
 
     return dict(prepare_stage=prepare_stage, fold_error=fold_error, error_norm=error_norm, advance_state=advance_state)
 
