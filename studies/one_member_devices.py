@@ -8,8 +8,9 @@ the default scene (Parameters()) and the engine benchmark's first member (studie
 ``members``: e and F drawn, 417 attempts). Each is run once to compile, then timed ``--repeat``
 times; the best wall time is kept. On the CPU it is Warp's thread kernel on one core
 (``workers=1``); on a GPU the automatic team. Prints a table and, with --jsonl, one JSON line per
-timing with the fields of studies/bench_engine.py's rows (mu_s_error against the benchmark's rtol
-1e-9 reference for its member; none for the default scene).
+timing: device, members, nodes, dtype, rtol, relaxation_gate, fronts, method, wall_s, mu_s_error,
+commit (the fields of the benchmark rows), and member, lanes, attempts, mu_s (mu_s_error against
+the benchmark's rtol 1e-9 reference for its member; none for the default scene).
 """
 
 import argparse

@@ -421,7 +421,7 @@ def test_similar_members_are_neighbours():
 def test_host_copy_lands_in_the_array_it_is_given():
     """engine.host_copy fills the host array it is given (the engine reads its final fields back
     into arrays allocated and touched while a GPU integrates: landing_arrays, used on every device)
-    and refuses one of another shape, dtype or layout, naming both."""
+    and refuses one of another shape, dtype or layout, or a read-only one, naming both."""
     import warp as wp
 
     from warpfric.engine import host_copy, touched_empty
@@ -432,7 +432,9 @@ def test_host_copy_lands_in_the_array_it_is_given():
     assert host_copy(a, out) is out
     np.testing.assert_array_equal(out, values)
     np.testing.assert_array_equal(host_copy(a), values)
-    for wrong in (np.empty((4, 3)), np.empty((3, 4), np.float32), np.empty((4, 3)).T):
+    read_only = np.empty((3, 4))
+    read_only.flags.writeable = False
+    for wrong in (np.empty((4, 3)), np.empty((3, 4), np.float32), np.empty((4, 3)).T, read_only):
         with pytest.raises(ValueError, match=r"must be the device array's float64\(3, 4\)"):
             host_copy(a, wrong)
 

@@ -438,9 +438,11 @@ def host_copy(a, out: np.ndarray | None = None) -> np.ndarray:
     real = np.dtype(wp.dtype_to_numpy(a.dtype))
     if out is None:
         out = np.empty(a.shape, dtype=real)
-    elif out.shape != tuple(a.shape) or out.dtype != real or not out.flags.c_contiguous:
-        raise ValueError(f"host_copy: out is {out.dtype}{out.shape} (C-contiguous: {out.flags.c_contiguous}); "
-                         f"it must be the device array's {real}{tuple(a.shape)}, C-contiguous")
+    elif (out.shape != tuple(a.shape) or out.dtype != real or not out.flags.c_contiguous
+          or not out.flags.writeable):
+        raise ValueError(f"host_copy: out is {out.dtype}{out.shape} (C-contiguous: {out.flags.c_contiguous}, "
+                         f"writeable: {out.flags.writeable}); it must be the device array's {real}{tuple(a.shape)}, "
+                         "C-contiguous and writeable")
     with wp.ScopedStream(a.device.null_stream):
         wp.copy(wp.array(out, dtype=a.dtype, device="cpu", copy=False), a)
     return out
