@@ -23,7 +23,7 @@ from .gates import make_gates
 from .model_terms import disc_velocity_at, make_model_terms
 from .newton import make_newton
 from .observers import ObserverSet, make_observers, run_finished
-from .team import EXCHANGES, MAX_TEAM_LANES, TEAM_BUFFER_BYTES, WARP_SIZE, make_team, node_range
+from .team import EXCHANGES, MAX_TEAM_LANES, TEAM_BUFFER_BYTES, WARP_SIZE, exchanges_by_value, make_team, node_range
 from .types import C_PHI, N_WORK, IntegratorState, MemberParams, OutputSettings, SolverSettings, stage_slots
 
 _CACHE: dict = {}
@@ -213,7 +213,7 @@ def team_exchange(lanes: int, cuda: bool, requested: str | None = None) -> str:
     """The lane exchange of a team of ``lanes`` on a CUDA device (cuda) or the CPU: ``requested``
     (WARPFRIC_TEAM_EXCHANGE), else warp shuffles on a GPU for a team of one warp (<= 32 lanes) and
     Warp's tiles otherwise (docs/performance.md, "Warp shuffles")."""
-    by_value = lanes <= WARP_SIZE or (lanes % WARP_SIZE == 0 and lanes <= MAX_TEAM_LANES)
+    by_value = exchanges_by_value(lanes)
     if requested is None:
         return "shuffle" if cuda and by_value else "tile"
     if requested == "shuffle" and not (cuda and by_value):

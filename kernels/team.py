@@ -491,12 +491,18 @@ def make_emulated_shuffles(lanes: int):
                 up_f64=up_f64, down_f64=down_f64, sync=sync)
 
 
+def exchanges_by_value(lanes: int) -> bool:
+    """Whether a team of ``lanes`` can exchange by value (shuffles, or their emulation): one warp (at
+    most 32 lanes) or whole warps up to MAX_TEAM_LANES."""
+    return lanes <= WARP_SIZE or (lanes % WARP_SIZE == 0 and lanes <= MAX_TEAM_LANES)
+
+
 def warps_of(lanes: int) -> int:
     """The warps of a team that exchanges by value: 1 for at most 32 lanes, else lanes / 32 (a team
     of several warps has full warps only, at most MAX_TEAM_LANES lanes)."""
     if lanes <= WARP_SIZE:
         return 1
-    if lanes % WARP_SIZE or lanes > MAX_TEAM_LANES:
+    if not exchanges_by_value(lanes):
         raise ValueError(f"a team of {lanes} lanes that exchanges by value is invalid: at most {WARP_SIZE} lanes, "
                          f"or a multiple of {WARP_SIZE} up to {MAX_TEAM_LANES}")
     return lanes // WARP_SIZE
@@ -538,10 +544,10 @@ def make_warps_team(lanes: int):
             buffer[0, lane // WARP_SIZE] = warp_result
         team_block_sync()
 
-    def reduction(in_warp, combine):
+    def reduction(in_warp, merge):
         """A reduction over the team (called after ``sync``, which leaves the buffer free): the
-        warp's result by shuffles, each warp's written by its first lane, merged in warp order."""
-        merge = merged_in_warp_order(combine)
+        warp's result by shuffles (``in_warp``), each warp's written by its first lane, merged in
+        warp order (``merge``, of merged_in_warp_order)."""
 
         @wp.func
         def reduce(x: wp.float64, lanes_: int):
@@ -550,7 +556,7 @@ def make_warps_team(lanes: int):
 
         return reduce
 
-    total = reduction(warp_sum_f64, plus)
+    total = reduction(warp_sum_f64, merged_sum)
 
     @wp.func
     def sum12(x: vec12d):
@@ -611,8 +617,9 @@ def make_warps_team(lanes: int):
     def sync(lanes_: int):
         team_block_sync()
 
-    return dict(sum_f64=total, max_f64=reduction(warp_max_f64, larger), min_f64=reduction(warp_min_f64, smaller),
-                sum_i32=sum_i32, sum12=sum12, sync=sync, neighbours=neighbours)
+    return dict(sum_f64=total, max_f64=reduction(warp_max_f64, merged_in_warp_order(larger)),
+                min_f64=reduction(warp_min_f64, merged_in_warp_order(smaller)), sum_i32=sum_i32, sum12=sum12, sync=sync,
+                neighbours=neighbours)
 
 
 def make_exchange_team(lanes: int, exchange: str):
