@@ -57,6 +57,20 @@ B="python3 studies/bench.py --jsonl $JSONL"
 E="$B engine --device cuda:0 --dtypes float64"
 python3 -c "import warp as wp; wp.config.quiet = True; wp.init(); print('warp', wp.__version__, wp.get_cuda_devices())"
 ncu_bin() { command -v ncu || ls /usr/local/cuda*/bin/ncu /opt/nvidia/nsight-compute/*/ncu 2>/dev/null | head -1; }
+# stall_sites_table SUFFIX [options of studies/stall_sites.py]: the SASS source page of the profile
+# $OUT/stall_sites$SUFFIX.ncu-rep summed by call site and source line, with the integrate cubin of
+# $WARP_CACHE_PATH whose instructions match it (one cubin per shared-work stride); the table's head
+stall_sites_table() {
+  local suffix=$1 cubin; shift
+  "$NCU" -i "$OUT/stall_sites$suffix.ncu-rep" --page source --csv --print-source sass | gzip -9 > "$OUT/stall_sass$suffix.csv.gz"
+  for cubin in $(find "$WARP_CACHE_PATH" -name "*integrate*.cubin"); do
+    cp "$cubin" "$OUT/integrate$suffix.cubin"
+    if python3 studies/stall_sites.py --csv "$OUT/stall_sass$suffix.csv.gz" --cubin "$OUT/integrate$suffix.cubin" "$@" \
+      > "$OUT/stall_sites$suffix.txt" 2>&1; then head -40 "$OUT/stall_sites$suffix.txt"; return 0; fi
+  done
+  head -40 "$OUT/stall_sites$suffix.txt"
+  echo "no integrate cubin matches the profile"; return 1
+}
 case "$mode" in
   tests)
     WARPFRIC_TEST_DEVICE=cuda:0 python3 -m pytest -q -p no:cacheprovider tests "$@" 2>&1 | tee "$OUT/tests_cuda.log" | tail -15 ;;
@@ -160,17 +174,8 @@ case "$mode" in
       --section WarpStateStats --import-source yes -o "$OUT/stall_sites" python3 studies/bench_engine.py \
       --device cuda:0 --dtypes float64 --members 10000 --lanes 32 --lineinfo --steps-per-launch 100 \
       --repeat 1 --out "$OUT/stall_sites_bench.json" > "$OUT/ncu_stall_sites.log" 2>&1
-    "$NCU" -i "$OUT/stall_sites.ncu-rep" --page source --csv --print-source sass | gzip -9 > "$OUT/stall_sass.csv.gz"
-    # one cubin per shared-work stride (one member a block in the warm-up, eight in the profile):
-    # the profiled kernel is the one whose instructions match
-    matched=0
-    for cubin in $(find "$WARP_CACHE_PATH" -name "*integrate*.cubin"); do
-      cp "$cubin" "$OUT/integrate.cubin"
-      if python3 studies/stall_sites.py --csv "$OUT/stall_sass.csv.gz" --cubin "$OUT/integrate.cubin" "$@" \
-        > "$OUT/stall_sites.txt" 2>&1; then matched=1; break; fi
-    done
-    head -40 "$OUT/stall_sites.txt"
-    [ "$matched" = 1 ] || { echo "no integrate cubin matches the profile"; exit 1; } ;;
+    # the cache holds a cubin for the warm-up (one member a block) and one for the profile (eight)
+    stall_sites_table "" "$@" || exit 1 ;;
   stall-sites-one)
     # one member alone (the automatic team: 96 lanes at N = 200), the launch that integrates it
     NCU=$(ncu_bin); echo "ncu: $NCU"
@@ -183,15 +188,7 @@ case "$mode" in
       python3 studies/bench_engine.py --device cuda:0 --dtypes float64 --members 1 --lineinfo --repeat 1 \
       --out "$OUT/stall_sites_one_bench.json" > "$OUT/ncu_stall_sites_one.log" 2>&1
     "$NCU" -i "$OUT/stall_sites_one.ncu-rep" --page details > "$OUT/ncu_one_member_details.txt" 2>&1
-    "$NCU" -i "$OUT/stall_sites_one.ncu-rep" --page source --csv --print-source sass | gzip -9 > "$OUT/stall_sass_one.csv.gz"
-    matched=0
-    for cubin in $(find "$WARP_CACHE_PATH" -name "*integrate*.cubin"); do
-      cp "$cubin" "$OUT/integrate_one.cubin"
-      if python3 studies/stall_sites.py --csv "$OUT/stall_sass_one.csv.gz" --cubin "$OUT/integrate_one.cubin" "$@" \
-        > "$OUT/stall_sites_one.txt" 2>&1; then matched=1; break; fi
-    done
-    head -40 "$OUT/stall_sites_one.txt"
-    [ "$matched" = 1 ] || { echo "no integrate cubin matches the profile"; exit 1; } ;;
+    stall_sites_table _one "$@" || exit 1 ;;
   sass)
     python3 studies/sass_sites.py "$@" 2>&1 | tee "$OUT/sass_sites.txt" | head -30 ;;
   blocks)
