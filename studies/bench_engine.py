@@ -53,6 +53,14 @@ def members(m: int, seed: int = 0) -> dict:
     }
 
 
+def tree_commit() -> str:
+    """The commit of the timed tree for a result row: WARPFRIC_COMMIT, which names the tree where
+    there is no git (a GPU host that got a copy of it), else git's short HEAD, else "unknown"."""
+    return os.environ.get("WARPFRIC_COMMIT") or subprocess.run(
+        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=Path(__file__).parent
+    ).stdout.strip() or "unknown"
+
+
 def profiler(on: bool, what: str):
     """cuProfilerStart / cuProfilerStop of the CUDA driver (the current context), when ``on``."""
     if on:
@@ -161,10 +169,7 @@ def main(argv=None):
     ref_mu = np.asarray(reference["mu_s"])
     rows = []
     front_events = args.front_events or (["contact"] if args.fronts else ["off"])
-    # WARPFRIC_COMMIT names the tree where there is no git (a GPU host that got a copy of it)
-    commit = os.environ.get("WARPFRIC_COMMIT") or subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=Path(__file__).parent
-    ).stdout.strip() or "unknown"
+    commit = tree_commit()
     for dtype, lanes, predict, method, event, spl in [(d, k, p, me, ev, sp) for d in args.dtypes for k in args.lanes
                                                       for p in args.predict_switches for me in args.methods
                                                       for ev in front_events for sp in args.steps_per_launch]:

@@ -15,8 +15,6 @@ the benchmark's rtol 1e-9 reference for its member; none for the default scene).
 
 import argparse
 import json
-import os
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -26,7 +24,7 @@ import warp as wp
 import warpfric as wf
 
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_engine import members  # noqa: E402
+from bench_engine import members, tree_commit  # noqa: E402
 
 
 def timed(member, solver, device, repeat):
@@ -50,9 +48,7 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=10)
     ap.add_argument("--jsonl", default=None)
     args = ap.parse_args(argv)
-    commit = os.environ.get("WARPFRIC_COMMIT") or subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=Path(__file__).parent
-    ).stdout.strip() or "unknown"
+    commit = tree_commit()
     solver = wf.Solver(nodes=200, rtol=1e-5)
     with open(Path(__file__).parent / "reference" / "bench_members_mu_s_stress.json") as f:
         reference = {"bench member 0": json.load(f)["mu_s"][0]}  # rtol 1e-9, N = 200 (no reference for the scene)
