@@ -176,8 +176,8 @@ def team_layout(lanes: int, n_nodes: int, n_members: int, cuda: bool, sm_count: 
     exchange = team_exchange(lanes, cuda, options.exchange)
     shared_allowed = options.shared_work and wp.config.mode != "debug"
     if not blocked_layout(lanes, exchange, options.block_members):
-        fits = shared_work_stride(n_nodes, 1, max_shared - TEAM_BUFFER_BYTES)  # one member beside the team buffer
-        if shared_allowed and warps_team(lanes, exchange) and fits:
+        if (shared_allowed and warps_team(lanes, exchange)
+                and shared_work_stride(n_nodes, 1, max_shared - TEAM_BUFFER_BYTES)):  # one member beside the team buffer
             return TeamLayout(False, 1, (n_nodes, 1))
         return TeamLayout(False, 1, None)
     most = 0
