@@ -23,7 +23,7 @@ from .gates import make_gates
 from .model_terms import disc_velocity_at, make_model_terms
 from .newton import make_newton
 from .observers import ObserverSet, make_observers, run_finished
-from .team import EXCHANGES, MAX_TEAM_LANES, TEAM_BUFFER_BYTES, WARP_SIZE, exchanges_by_value, make_team, node_slot
+from .team import EXCHANGES, MAX_TEAM_LANES, TEAM_BUFFER_BYTES, WARP_SIZE, exchanges_by_value, make_team, node_range
 from .types import C_PHI, N_WORK, IntegratorState, MemberParams, OutputSettings, SolverSettings, stage_slots
 
 _CACHE: dict = {}
@@ -411,7 +411,6 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     step_factor = step_factor_for(method)
     stress_gate = model.relaxation_gate == "stress"
     make_coeffs = stages["terms"]["make_coeffs"]
-    team_lane = stages["terms"]["team_lane"]
     esdirk = stages["esdirk"]
     implicit_step = esdirk["implicit_step"]
     esdirk4_step = esdirk.get("esdirk4_step", implicit_step)
@@ -507,7 +506,10 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
         n = state.shape[1]
         c = make_coeffs(p, n)
         if wp.static(team_on):
-            c = team_lane(c, lane, lanes, n)
+            c.lane = lane
+            first_node, end_node = node_range(lane, lanes, n)
+            c.first_node = first_node
+            c.end_node = end_node
         delta0 = ft(st.delta0)
         tilt = ft(st.tilt)
         attempt_limit = stall_limit[0]
@@ -600,13 +602,12 @@ def make_layout_kernels(ft):
         state[comp, i, m] = value
 
     @wp.kernel(module="unique", enable_backward=False)
-    def member_rows(source: array3, kernel_member: wp.array(dtype=wp.int32), lanes: int, rows: array3):
-        """rows[k, m, i] = source[k, node_slot(i), kernel_member[m]]: (slot, node, member) -> (slot,
-        member, node), the caller's member m being the integrate kernel's member kernel_member[m],
-        node i read where a team of ``lanes`` keeps it (kernels/team.py node_slot; 1: node i);
-        launched over rows' shape, so a leading part of source's slots."""
+    def member_rows(source: array3, kernel_member: wp.array(dtype=wp.int32), rows: array3):
+        """rows[k, m, i] = source[k, i, kernel_member[m]]: (slot, node, member) -> (slot, member, node),
+        the caller's member m being the integrate kernel's member kernel_member[m]; launched over
+        rows' shape, so a leading part of source's slots."""
         k, m, i = wp.tid()
-        rows[k, m, i] = source[k, node_slot(i, lanes, source.shape[1]), kernel_member[m]]
+        rows[k, m, i] = source[k, i, kernel_member[m]]
 
     _LAYOUT_KERNELS[ft] = dict(initial_state=initial_state, member_rows=member_rows, member_columns=member_columns)
     return _LAYOUT_KERNELS[ft]
@@ -624,7 +625,6 @@ def member_columns(source: wp.array2d(dtype=wp.float64), kernel_member: wp.array
 def make_field_kernel(ft, stages):
     """The evaluate_fields kernel: the interface stresses of the current state."""
     make_coeffs = stages["terms"]["make_coeffs"]
-    outside_reader = stages["terms"]["outside_reader"]
     state_displacement = stages["observers"]["state_displacement"]
     state_contact = stages["observers"]["state_contact"]
     array3 = wp.array3d(dtype=ft)
@@ -635,27 +635,25 @@ def make_field_kernel(ft, stages):
         member_states: wp.array(dtype=IntegratorState),
         state: array3,
         row_of: wp.array(dtype=wp.int32),
-        lanes: int,
         normal_stress_out: wp.array2d(dtype=ft),
         friction_stress_out: wp.array2d(dtype=ft),
     ):
         """Interface normal stress (Pa, contact part max(sigma_n, 0)) and friction stress (Pa) of
         the current state of each member, (member, node): the Dataset's order, the kernel's member m
-        in row row_of[m] (the caller's order: warpfric/engine.py member_order); state as a team of
-        ``lanes`` keeps it (kernels/team.py node_slot)."""
+        in row row_of[m] (the caller's order: warpfric/engine.py member_order)."""
         m = wp.tid()
         row = row_of[m]
         st = member_states[m]
         p = params[m]
         n = state.shape[1]
-        c = outside_reader(make_coeffs(p, n), lanes)
+        c = make_coeffs(p, n)
         delta0 = ft(st.delta0)
         tilt = ft(st.tilt)
         v_disc = ft(disc_velocity_at(p, st.t, st.t))
         u_l = ft(0.0)
-        u_c = state_displacement(c, state, 0, n, m)
+        u_c = state_displacement(state, 0, n, m)
         for i in range(n):
-            u_r = state_displacement(c, state, i + 1, n, m)
+            u_r = state_displacement(state, i + 1, n, m)
             ns, fr = state_contact(c, state, i, n, m, u_l, u_c, u_r, delta0, tilt, v_disc)
             normal_stress_out[row, i] = fr.contact * ns.value
             friction_stress_out[row, i] = fr.stress

@@ -18,7 +18,6 @@ the free edges, so the elastic force sums to zero over the pad exactly.
 
 import warp as wp
 
-from .team import node_range, node_slot
 from .types import MemberParams
 
 FLOAT32_VELOCITY_FLOOR = 1.0e-4  # m/s, smallest velocity reference of the error weights in float32
@@ -160,11 +159,6 @@ def make_coefficients(ft):
         first_node: wp.int32
         end_node: wp.int32
         lane: wp.int32
-        # where the lane's nodes sit in the member's persistent arrays (kernels/team.py node_slot):
-        # its j-th node at j*slot_lanes + lane for j < short_len, a last one at extra_slot
-        slot_lanes: wp.int32
-        short_len: wp.int32
-        extra_slot: wp.int32
 
     @wp.func
     def make_coeffs(p: MemberParams, n: int):
@@ -210,51 +204,9 @@ def make_coefficients(ft):
         c.first_node = 0
         c.end_node = n
         c.lane = 0
-        c.slot_lanes = 1
-        c.short_len = n
-        c.extra_slot = n
         return c
 
-    @wp.func
-    def team_lane(c: Coeffs, lane: int, lanes: int, n: int):
-        """c for lane ``lane`` of a team of ``lanes`` on n nodes: its nodes (kernels/team.py
-        node_range) and where they sit in the persistent arrays (node_slot)."""
-        first, end = node_range(lane, lanes, n)
-        c.first_node = first
-        c.end_node = end
-        c.lane = lane
-        c.slot_lanes = lanes
-        c.short_len = n // lanes
-        c.extra_slot = c.short_len * lanes + first - lane * c.short_len
-        return c
-
-    @wp.func
-    def outside_reader(c: Coeffs, lanes: int):
-        """c for a thread that reads every node of arrays a team of ``lanes`` wrote (no nodes of its
-        own: node_slot_of takes the general path)."""
-        c.first_node = 0
-        c.end_node = 0
-        c.lane = 0
-        c.slot_lanes = lanes
-        return c
-
-    @wp.func
-    def lane_slot(c: Coeffs, i: int):
-        """The slot of the lane's own node i (first_node <= i < end_node) in the persistent arrays."""
-        j = i - c.first_node
-        if j < c.short_len:
-            return j * c.slot_lanes + c.lane
-        return c.extra_slot
-
-    @wp.func
-    def node_slot_of(c: Coeffs, i: int, n: int):
-        """The slot of any node i of n in the persistent arrays (lane_slot for the lane's own)."""
-        if i >= c.first_node and i < c.end_node:
-            return lane_slot(c, i)
-        return node_slot(i, c.slot_lanes, n)
-
-    return dict(Coeffs=Coeffs, make_coeffs=make_coeffs, team_lane=team_lane, outside_reader=outside_reader,
-                lane_slot=lane_slot, node_slot_of=node_slot_of)
+    return dict(Coeffs=Coeffs, make_coeffs=make_coeffs)
 
 
 def make_grid(ft, Coeffs):
@@ -608,10 +560,6 @@ def make_model_terms(ft, model):
         StencilTerm=stencil["StencilTerm"],
         Friction=at_gate["Friction"],
         make_coeffs=coefficients["make_coeffs"],
-        team_lane=coefficients["team_lane"],
-        outside_reader=coefficients["outside_reader"],
-        lane_slot=coefficients["lane_slot"],
-        node_slot_of=coefficients["node_slot_of"],
         node_x=grid["node_x"],
         node_weight=grid["node_weight"],
         node_moment_weight=grid["node_moment_weight"],

@@ -57,22 +57,6 @@ def node_range(lane: int, lanes: int, n: int):
 
 
 @wp.func
-def node_slot(i: int, lanes: int, n: int):
-    """Where node i of n sits in a member's persistent arrays (state, stage derivatives, step_end,
-    gates) of a team of ``lanes``: the j-th node of lane k at j*lanes + k for j < n // lanes (every
-    lane's first n // lanes nodes, interleaved), a lane's one node beyond those after them, in lane
-    order. So when every lane reads its j-th node the team reads consecutive values (one coalesced
-    access instead of one per lane). A bijection of [0, n); the identity for a team of one."""
-    lane = ((i + 1) * lanes - 1) // n
-    first = (lane * n) // lanes
-    short = n // lanes
-    j = i - first
-    if j < short:
-        return j * lanes + lane
-    return short * lanes + first - lane * short
-
-
-@wp.func
 def settle():
     """A barrier that synchronises before it writes (a shared tile's assignment: sync, write,
     sync): every lane has finished what it did before, reads of the last reduction included."""

@@ -198,63 +198,6 @@ def _team_bordered_kernel(tilt_on, lanes, exchange):
     return solve
 
 
-def _slot_kernel():
-    from warpfric.kernels.model_terms import make_coefficients
-    from warpfric.kernels.team import node_slot
-
-    coefficients = make_coefficients(f64)
-    Coeffs, team_lane, lane_slot = coefficients["Coeffs"], coefficients["team_lane"], coefficients["lane_slot"]
-    node_slot_of, outside_reader = coefficients["node_slot_of"], coefficients["outside_reader"]
-
-    @wp.kernel(module="unique")
-    def slots(lanes: int, n: int, by_node: wp.array(dtype=wp.int32), by_lane: wp.array(dtype=wp.int32),
-              by_reader: wp.array(dtype=wp.int32), owner: wp.array(dtype=wp.int32)):
-        """For each node i of n: node_slot(i), the slot its owning lane's lane_slot gives (and that
-        lane), and the slot an outside reader's node_slot_of gives."""
-        i = wp.tid()
-        by_node[i] = node_slot(i, lanes, n)
-        for lane in range(lanes):
-            c = team_lane(Coeffs(), lane, lanes, n)
-            if i >= c.first_node and i < c.end_node:
-                by_lane[i] = lane_slot(c, i)
-                owner[i] = lane
-        by_reader[i] = node_slot_of(outside_reader(Coeffs(), lanes), i, n)
-
-    return slots
-
-
-@pytest.mark.parametrize("lanes, n", [(1, 7), (2, 5), (3, 17), (8, 17), (32, 200), (32, 64), (96, 200), (64, 131)])
-def test_node_slots_interleave_the_lanes(lanes, n):
-    """Where a team keeps its nodes in the persistent arrays (kernels/team.py node_slot): a bijection
-    of [0, n); lane k's j-th node at j*lanes + k for every j < n // lanes (so the lanes' j-th nodes
-    are consecutive), its one node beyond those after all of those, in lane order; the same slot
-    by the lane's own lane_slot and by an outside reader; the identity for a team of one. Expected
-    values from the lanes' node ranges [k*n//lanes, (k+1)*n//lanes)."""
-    out = [wp.zeros(n, dtype=wp.int32, device=DEVICE) for _ in range(4)]
-    wp.launch(_slot_kernel(), dim=n, inputs=[lanes, n] + out, device=DEVICE)
-    by_node, by_lane, by_reader, owner = (a.numpy() for a in out)
-    first = np.array([k * n // lanes for k in range(lanes + 1)])
-    expected_owner = np.searchsorted(first, np.arange(n), side="right") - 1
-    short = n // lanes
-    expected = np.empty(n, dtype=np.int64)
-    extra = short * lanes
-    for k in range(lanes):
-        for j, i in enumerate(range(first[k], first[k + 1])):
-            if j < short:
-                expected[i] = j * lanes + k
-            else:
-                expected[i] = extra
-                extra += 1
-    assert extra == n
-    np.testing.assert_array_equal(owner, expected_owner)
-    np.testing.assert_array_equal(by_node, expected)
-    np.testing.assert_array_equal(by_lane, expected)
-    np.testing.assert_array_equal(by_reader, expected)
-    np.testing.assert_array_equal(np.sort(by_node), np.arange(n))
-    if lanes == 1:
-        np.testing.assert_array_equal(by_node, np.arange(n))
-
-
 TEAM_EXCHANGES = ["tile", "emulated"] + (["shuffle"] if DEVICE.startswith("cuda") else [])
 
 

@@ -448,17 +448,14 @@ def host_copy(a, out: np.ndarray | None = None) -> np.ndarray:
     return out
 
 
-def member_rows(layout: dict, source, slots: int, kernel_member, lanes: int = 1,
-                out: np.ndarray | None = None) -> np.ndarray:
-    """The first ``slots`` slots of a (slot, node, member) device array (any memory layout) on the
-    host as (slot, member, node), arranged by the layout kernels' member_rows on the device, the
-    caller's member m being the kernel's kernel_member[m] (an int32 device array); ``lanes``: the
-    team that wrote source's nodes where it keeps them (kernels/team.py node_slot: the state,
-    stage derivatives and gates; 1 for any other array); into ``out`` if given."""
+def member_rows(layout: dict, source, slots: int, kernel_member, out: np.ndarray | None = None) -> np.ndarray:
+    """The first ``slots`` slots of a (slot, node, member) device array (any layout) on the host as
+    (slot, member, node), arranged by the layout kernels' member_rows on the device, the caller's
+    member m being the kernel's kernel_member[m] (an int32 device array); into ``out`` if given."""
     import warp as wp
 
     rows = wp.empty((slots, source.shape[2], source.shape[1]), dtype=source.dtype, device=source.device)
-    wp.launch(layout["member_rows"], dim=rows.shape, inputs=[source, kernel_member, lanes, rows], device=source.device)
+    wp.launch(layout["member_rows"], dim=rows.shape, inputs=[source, kernel_member, rows], device=source.device)
     return host_copy(rows, out)
 
 
@@ -691,18 +688,18 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                 # read back in the Dataset's (member, node) order, arranged on the device: the host
                 # writes each value once (docs/performance.md, "Host time around the kernel"); the
                 # fields' device copy is freed before the stresses are allocated
-                fields = member_rows(kern["layout"], arrays.state, N_COMPONENTS, kernel_member, lanes, landing["fields"])
+                fields = member_rows(kern["layout"], arrays.state, N_COMPONENTS, kernel_member, landing["fields"])
                 sigma_out = wp.zeros((n_members, n), dtype=ft)
                 tau_out = wp.zeros((n_members, n), dtype=ft)
                 wp.launch(kern["evaluate_fields"], dim=n_members,
-                          inputs=[arrays.params, member_states, arrays.state, row_of, lanes], outputs=[sigma_out, tau_out])
+                          inputs=[arrays.params, member_states, arrays.state, row_of], outputs=[sigma_out, tau_out])
                 sigma = host_copy(sigma_out, landing["normal_stress"])
                 tau = host_copy(tau_out, landing["friction_stress"])
                 yield_np = gate_np = None
                 if stress_gate:  # float64 (the stress gate refuses float32), like yield_time
                     yield_np = member_rows(kern["layout"], arrays.yield_time.reshape((1, n, n_members)), 1,
-                                           kernel_member, 1, landing["yield_time"])[0]
-                    gate_np = member_rows(kern["layout"], arrays.gates, G_GATE + 1, kernel_member, lanes,
+                                           kernel_member, landing["yield_time"])[0]
+                    gate_np = member_rows(kern["layout"], arrays.gates, G_GATE + 1, kernel_member,
                                           landing["gates"])[G_GATE]
         snapshot.close()
         if order is not None:  # the member states and events back into the caller's order (the rest: above, below)
