@@ -35,7 +35,6 @@ import argparse
 import json
 import os
 import platform
-import subprocess
 import sys
 import tempfile
 import time
@@ -45,10 +44,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 DEFAULT_JSONL = HERE / "results" / "bench.jsonl"
 
-
-def _commit() -> str:
-    res = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=HERE)
-    return res.stdout.strip() or "unknown"
+from bench_engine import tree_commit  # noqa: E402  (WARPFRIC_COMMIT, else git's short HEAD)
 
 
 def _option(argv: list[str], name: str) -> str | None:
@@ -238,7 +234,7 @@ def main(argv=None):
         os.unlink(tmp)
         out_path = None
     line = dict(bench=sub, args=rest if tmp is None else rest[:-2], command="python studies/bench.py " + " ".join(argv),
-                commit=_commit(), time=time.strftime("%Y-%m-%d %H:%M:%S"), host=platform.node(),
+                commit=tree_commit(), time=time.strftime("%Y-%m-%d %H:%M:%S"), host=platform.node(),
                 platform=platform.platform(), wall_s=time.perf_counter() - t0, exit=status, output_file=out_path,
                 result=result)
     Path(args.jsonl).parent.mkdir(parents=True, exist_ok=True)
