@@ -2,7 +2,7 @@
 each SASS instruction, summed over the instructions of each call site and each source line of
 kernels/ (the instructions' sites come from the cubin's line info, as in studies/sass_sites.py).
 
-    python studies/stall_sites.py --csv stall_sass.csv[.gz] --cubin integrate.cubin[.gz] [--top 25]
+    python studies/stall_sites.py --csv stall_sass.csv[.gz] --cubin integrate.cubin[.gz] [--top 25] [--executed]
 
 The two inputs come from a GPU host (`bash studies/gpu_bench.sh stall-sites`): the SASS source page
 of an `ncu --section SourceCounters --section WarpStateStats --import-source yes` profile of one
@@ -10,7 +10,9 @@ launch of the line-info kernel (`ncu -i REPORT --page source --csv --print-sourc
 kernel's cubin from Warp's kernel cache. nvdisasm comes from $CUDA_BIN, the PATH or
 /usr/local/cuda/bin (the PyPI wheel nvidia-cuda-nvdisasm carries it). Prints the samples by stall
 reason in all, then the call sites (an instruction counts in every call that inlines it) and the
-source lines (each instruction counts once, at its own line) with the most samples.
+source lines (each instruction counts once, at its own line) with the most samples. --executed adds
+the warp instructions executed (the profile's "Instructions Executed" column) by opcode, call site
+and source line: where the instructions go, beside where the warps wait.
 """
 
 import argparse
@@ -48,6 +50,35 @@ def read_samples(path: str) -> list:
     return out
 
 
+def read_executed(path: str) -> list:
+    """Warp instructions executed per SASS instruction, in address order, from the same source page
+    as read_samples (its "Instructions Executed" column; 0 where a row has none)."""
+    raw = gzip.open(path, "rt") if path.endswith(".gz") else open(path)
+    with raw:
+        lines = raw.read().splitlines()
+    rows = list(csv.DictReader(io.StringIO("\n".join(lines[1:]))))
+    if rows and "Instructions Executed" not in rows[0]:
+        raise SystemExit(f"{path} has no 'Instructions Executed' column (profile with --section SourceCounters)")
+    return [float(v.replace(",", "")) if (v := row["Instructions Executed"]) not in ("", "-", None) else 0.0
+            for row in rows]
+
+
+def executed_tables(instr: list, executed: list) -> tuple:
+    """(total, by opcode, by call site, by source line): Counters of the warp instructions executed,
+    from instructions() of the cubin and read_executed() of the profile, matched by position; the
+    opcode without its modifiers (DFMA, LDG, ...)."""
+    by_opcode = collections.Counter()
+    by_site = collections.Counter()
+    by_line = collections.Counter()
+    for (line, sites, where), count in zip(instr, executed):
+        by_opcode[opcode_of(line).split(".")[0]] += count
+        for site in sites:
+            by_site[site] += count
+        if where is not None:
+            by_line[where] += count
+    return sum(executed), by_opcode, by_site, by_line
+
+
 def stall_tables(instr: list, samples: list) -> tuple:
     """(totals, by call site, by source line): Counters of samples per stall reason (REASONS,
     "other" for the rest), "all" and "instructions", from instructions() of the cubin and
@@ -73,11 +104,24 @@ def opcode_of(line: str) -> str:
     return m.group(1) if m else ""
 
 
+def source_text(kernels: str, name: str, lineno: int) -> str:
+    """Line ``lineno`` of ``name`` in the folder ``kernels``, stripped and cut to 70 characters; ""
+    where there is no such file."""
+    path = os.path.join(kernels, name)
+    return open(path).read().splitlines()[lineno - 1].strip()[:70] if os.path.exists(path) else ""
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--csv", required=True, help="ncu's SASS source page of the profiled launch (CSV, .gz allowed)")
     ap.add_argument("--cubin", required=True, help="the profiled kernel's cubin (line info on; .gz allowed)")
     ap.add_argument("--top", type=int, default=25)
+    ap.add_argument("--kernels", default=os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))),
+                                                      "kernels"),
+                    help="the profiled tree's kernels/ folder, for the source text (default: this tree's; an "
+                         "older profile's lines: `git archive COMMIT kernels | tar -x -C DIR`, then DIR/kernels)")
+    ap.add_argument("--executed", action="store_true",
+                    help="also the warp instructions executed, by opcode, call site and source line")
     args = ap.parse_args(argv)
     samples = read_samples(args.csv)
     cubin = args.cubin
@@ -101,7 +145,6 @@ def main(argv=None):
     grand = total["all"]
     print(f"{len(instr)} instructions, {grand:.0f} warp samples ({mismatched} opcodes differ); "
           + ", ".join(f"{r} {100 * total[r] / grand:.1f} %" for r in REASONS + ("other",)))
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     # the table shows the first five reasons; "rest" is every other reason (selected included)
     columns = ("all",) + REASONS[:5] + ("rest",)
     head = f"{'instr':>6s} " + " ".join(f"{c[:8]:>8s}" for c in columns) + "  (% of all samples)  site"
@@ -109,8 +152,7 @@ def main(argv=None):
     def show(title, table):
         print(f"\n{title}\n{head}")
         for (name, lineno), row in sorted(table.items(), key=lambda kv: -kv[1]["all"])[:args.top]:
-            path = os.path.join(root, "kernels", name)
-            src = open(path).read().splitlines()[lineno - 1].strip()[:70] if os.path.exists(path) else ""
+            src = source_text(args.kernels, name, lineno)
             other = row["all"] - sum(row[r] for r in REASONS[:5])
             cells = [row["all"]] + [row[r] for r in REASONS[:5]] + [other]
             print(f"{row['instructions']:6.0f} " + " ".join(f"{100 * v / grand:8.1f}" for v in cells)
@@ -118,6 +160,14 @@ def main(argv=None):
 
     show("call sites (an instruction counts in every inlined call it sits in)", by_site)
     show("source lines (each instruction once, at its own line)", by_line)
+    if args.executed:
+        executed, by_opcode, ex_site, ex_line = executed_tables(instr, read_executed(args.csv))
+        print(f"\n{executed:.4g} warp instructions executed; by opcode: "
+              + ", ".join(f"{op} {100 * n / executed:.1f} %" for op, n in by_opcode.most_common(12)))
+        for title, table in (("call sites", ex_site), ("source lines", ex_line)):
+            print(f"\n{title} by warp instructions executed (% of all)")
+            for (name, lineno), n in table.most_common(args.top):
+                print(f"{100 * n / executed:6.1f}  {name}:{lineno}  {source_text(args.kernels, name, lineno)}")
 
 
 if __name__ == "__main__":

@@ -99,3 +99,35 @@ def test_stall_sites_prints_the_tables_and_refuses_another_kernel(tmp_path, monk
     monkeypatch.setenv("CUDA_BIN", _fake_nvdisasm(tmp_path, bare))
     with pytest.raises(SystemExit, match="no Python line information"):
         stall_sites.main(["--csv", str(tmp_path / "s.csv"), "--cubin", str(tmp_path / "k.cubin")])
+
+
+CSV_EXECUTED = """\
+"Kernel Name","integrate",
+"Address","Source","Warp Stall Sampling (All Samples)","Instructions Executed","stall_long_sb"
+"0x10","      DFMA R2, R4, R6, R2","10","100","0"
+"0x20","  @!P0 LDG.E.64 R8, desc[UR4][R10.64]","30","1,000","25"
+"0x30","      EXIT","2","7","0"
+"""
+
+
+def test_instructions_executed_are_summed_by_opcode_site_and_line(tmp_path, monkeypatch, capsys):
+    path = tmp_path / "s.csv"
+    path.write_text(CSV_EXECUTED)
+    executed = stall_sites.read_executed(str(path))
+    assert executed == [100.0, 1000.0, 7.0]  # ncu's thousands separator read
+    total, by_opcode, by_site, by_line = stall_sites.executed_tables(list(sass_sites.instructions(SASS)), executed)
+    assert total == 1107
+    assert by_opcode == {"DFMA": 100, "LDG": 1000, "EXIT": 7}  # predicate and modifiers dropped
+    assert by_site[("integrator.py", 5)] == 1100 and by_site[("newton.py", 12)] == 1000
+    assert by_site[("model_terms.py", 20)] == 1000 and ("integrator.py", 7) not in by_site
+    assert by_line == {("newton.py", 10): 100, ("model_terms.py", 20): 1000, ("integrator.py", 7): 7}
+    (tmp_path / "k.cubin").write_bytes(b"")
+    monkeypatch.setenv("CUDA_BIN", _fake_nvdisasm(tmp_path, SASS))
+    stall_sites.main(["--csv", str(path), "--cubin", str(tmp_path / "k.cubin"), "--executed"])
+    out = capsys.readouterr().out
+    assert "1107 warp instructions executed; by opcode: LDG 90.3 %, DFMA 9.0 %, EXIT 0.6 %" in out
+    assert any(line.split()[:2] == ["99.4", "integrator.py:5"] for line in out.splitlines())
+    # a profile without the column (no SourceCounters section) is refused by name
+    (tmp_path / "bare.csv").write_text(CSV)
+    with pytest.raises(SystemExit, match="no 'Instructions Executed' column"):
+        stall_sites.read_executed(str(tmp_path / "bare.csv"))
