@@ -29,6 +29,7 @@ import math
 
 import warp as wp
 
+from .model_terms import quotient
 from .types import C_PHI, C_TAU, C_U, C_V, E_DIAG, N_COMPONENTS, W_V, MemberParams, SolverSettings
 
 GAMMA = 1.0 - math.sqrt(2.0) / 2.0
@@ -164,7 +165,7 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         if comp == C_PHI:
             scale = c.phi_scale
         wgt = rtol * (scale + wp.max(wp.abs(y), wp.abs(y_new)))
-        err = wp.max(err, wp.abs(e) / wgt)
+        err = wp.max(err, quotient(wp.abs(e), wgt))  # e is 0 in some components (the GPU's slow path for 0/x)
         if not wp.isfinite(e):
             err = ft(1.0e30)
         return err

@@ -16,6 +16,8 @@ the free edges, so the elastic force sums to zero over the pad exactly.
 """
 
 
+from typing import Any
+
 import warp as wp
 
 from .types import MemberParams
@@ -23,6 +25,25 @@ from .types import MemberParams
 FLOAT32_VELOCITY_FLOOR = 1.0e-4  # m/s, smallest velocity reference of the error weights in float32
 SLIDING_NEWTON_ITERATIONS = 12  # Newton iterations on the gate of a node sliding on the yield surface
 SLIDING_GATE_TOL = 1.0e-10  # converged gate update
+
+# ------------------------------------------------------------------------------------------------
+# Arithmetic
+# ------------------------------------------------------------------------------------------------
+
+
+@wp.func
+def quotient(num: Any, den: Any):
+    """num / den, the same bits, without CUDA's slow path for a zero numerator: the GPU's FP64
+    division checks its operands and calls a full-range subroutine (__cuda_sm20_div_rn_f64_full)
+    for a zero or tiny numerator, a call that also moves the caller's registers. A zero numerator
+    divides 1 instead, and its quotient is (1/den) * num: the signed zero (or NaN) that num / den
+    gives, for any den. The quotient of 1 is used in both cases, so that the compiler cannot
+    divide num itself in its place. For the quotients that are often 0/x in a node sweep
+    (docs/performance.md, "Divisions of zero")."""
+    zero_numerator = num == type(num)(0.0)
+    q = wp.where(zero_numerator, type(num)(1.0), num) / den
+    return wp.where(zero_numerator, q * num, q)
+
 
 # ------------------------------------------------------------------------------------------------
 # Load protocol (float64: times of order 20 s need more than float32's 1e-6 s resolution).

@@ -27,7 +27,7 @@ partitioned solve), ``make_stage_equations`` (the load and each node's row), ``m
 
 import warp as wp
 
-from .model_terms import disc_velocity_at, disc_velocity_piece, normal_force_in_step, normal_force_piece
+from .model_terms import disc_velocity_at, disc_velocity_piece, normal_force_in_step, normal_force_piece, quotient
 from .team import vec3d, vec4d, vec5d, vec6d, vec12d
 from .types import (
     C_PHI,
@@ -206,10 +206,12 @@ def make_lane_elimination(ft):
         the coupling columns' entries of the row, 0 but at the lane's first and last interior row);
         stores cp and the five modified right-hand sides in work[W_CP, W_R0..R2, W_RL, W_RR]."""
         den = diagonal - lower * cp_prev
-        cp = upper / den
+        # quotient: cp is 0/den at the pad's last node, rl at lane 0 (no left separator) and rr
+        # before the lane's last interior row, where the GPU's division would take its slow path
+        cp = quotient(upper, den)
         r = (rhs - lower * r_prev) / den
-        rl = (couple_left - lower * rl_prev) / den
-        rr = (couple_right - lower * rr_prev) / den
+        rl = quotient(couple_left - lower * rl_prev, den)
+        rr = quotient(couple_right - lower * rr_prev, den)
         work[W_CP, i, m] = cp
         work[W_R0, i, m] = r[0]
         work[W_R1, i, m] = r[1]

@@ -198,6 +198,44 @@ def _team_bordered_kernel(tilt_on, lanes, exchange):
     return solve
 
 
+def _quotient_kernel(dtype):
+    from warpfric.kernels.model_terms import quotient
+
+    @wp.kernel(module="unique")
+    def divide(num: wp.array(dtype=dtype), den: wp.array(dtype=dtype), by_quotient: wp.array(dtype=dtype),
+               by_division: wp.array(dtype=dtype)):
+        i = wp.tid()
+        by_quotient[i] = quotient(num[i], den[i])
+        by_division[i] = num[i] / den[i]
+
+    return divide
+
+
+@pytest.mark.parametrize("dtype", [wp.float64, wp.float32])
+def test_quotient_has_the_bits_of_the_division(dtype):
+    """kernels/model_terms.py quotient (a zero numerator's signed zero by a product, so that the GPU's
+    division does not take its slow path) equals num / den bit for bit: the device's own division
+    and numpy's, over every pair of signed zeros, infinities, NaN, a tiny, a huge and ordinary values."""
+    np_type, bits = (np.float64, np.uint64) if dtype == wp.float64 else (np.float32, np.uint32)
+    tiny, huge = (1e-300, 3e300) if dtype == wp.float64 else (1e-30, 3e38)
+    values = np.array([0.0, -0.0, 1.0, -2.5, 7.0, tiny, -huge, np.inf, -np.inf, np.nan], dtype=np_type)
+    num, den = (a.ravel() for a in np.meshgrid(values, values, indexing="ij"))
+    out = [wp.zeros(num.size, dtype=dtype, device=DEVICE) for _ in range(2)]
+    wp.launch(_quotient_kernel(dtype), dim=num.size, device=DEVICE,
+              inputs=[wp.array(num, dtype=dtype, device=DEVICE), wp.array(den, dtype=dtype, device=DEVICE)] + out)
+    by_quotient, by_division = (a.numpy().view(bits) for a in out)
+    with np.errstate(all="ignore"):
+        expected = (num / den).astype(np_type)
+    # NaN payloads may differ between operations and devices: NaN compared as NaN, the rest by bits
+    nan = np.isnan(expected)
+    np.testing.assert_array_equal(np.isnan(by_division.view(np_type)), nan)
+    np.testing.assert_array_equal(by_quotient[~nan], by_division[~nan])
+    np.testing.assert_array_equal(np.isnan(by_quotient.view(np_type)), nan)
+    np.testing.assert_array_equal(by_quotient[~nan], expected.view(bits)[~nan])
+    zero_over = (num == 0) & np.isfinite(den) & (den != 0)
+    assert np.array_equal(np.signbit(by_quotient.view(np_type)[zero_over]), np.signbit(num[zero_over]) ^ np.signbit(den[zero_over]))
+
+
 TEAM_EXCHANGES = ["tile", "emulated"] + (["shuffle"] if DEVICE.startswith("cuda") else [])
 
 
