@@ -159,8 +159,10 @@ def make_coefficients(ft):
         inv_hardness: ft  # 1/Pa
         eta_vstar: ft  # eta * v_star, Pa
         vstar: ft  # m/s
+        inv_vstar: ft  # s/m
         b: ft
         phi0: ft  # s
+        inv_phi0: ft  # 1/s
         inv_D: ft  # 1/m
         tau_c: ft  # shear strength, Pa (stress gate)
         v0: ft  # gate velocity, m/s (velocity gate)
@@ -199,8 +201,10 @@ def make_coefficients(ft):
         c.inv_hardness = ft(wp.float64(1.0) / p.hardness)
         c.eta_vstar = ft(p.viscous_coefficient * p.reference_velocity)
         c.vstar = ft(p.reference_velocity)
+        c.inv_vstar = ft(wp.float64(1.0) / p.reference_velocity)
         c.b = ft(p.aging_coefficient)
         c.phi0 = ft(p.aging_time)
+        c.inv_phi0 = ft(wp.float64(1.0) / p.aging_time)
         c.inv_D = ft(wp.float64(1.0) / p.memory_length)
         c.tau_c = ft(p.shear_strength)
         c.v0 = ft(p.gate_velocity)
@@ -402,8 +406,9 @@ def make_friction_at_gate(ft, model, Coeffs):
     @wp.func
     def over_den(x: ft, den: ft, inv_den: ft):
         """x / den: in float64 as x * (1/den), one division per node for the seven quotients of the
-        stage solution (the GPU's FP64 division is a long dependent sequence); float32 keeps the
-        exact quotient (its round-off decides which hard float32 members stall: tests/test_trust.py)."""
+        stage solution and none for phi/phi0 and |s|/v* (the member's 1/phi0 and 1/v* in Coeffs): the
+        GPU's FP64 division is a long dependent sequence; float32 keeps the exact quotient (its
+        round-off decides which hard float32 members stall: tests/test_trust.py)."""
         if wp.static(ft == wp.float64):
             return x * inv_den
         return x / den
@@ -428,7 +433,7 @@ def make_friction_at_gate(ft, model, Coeffs):
         if sigma >= ft(0.0):
             contact = ft(1.0)
         sigma_c = sigma * contact
-        aging = ft(1.0) + c.b * wp.log(ft(1.0) + phi / c.phi0)
+        aging = ft(1.0) + c.b * wp.log(ft(1.0) + over_den(phi, c.phi0, c.inv_phi0))
         daging_dphi = c.b / (c.phi0 + phi)
         area = sigma_c * c.inv_hardness * aging
         darea_dsigma = contact * c.inv_hardness * aging
@@ -443,7 +448,7 @@ def make_friction_at_gate(ft, model, Coeffs):
         dtf_darea = dtel_darea
         dtf_ds = dtel_ds
         if wp.static(viscous):
-            lg = wp.log(ft(1.0) + a_s / c.vstar)
+            lg = wp.log(ft(1.0) + over_den(a_s, c.vstar, c.inv_vstar))
             tau_f += c.eta_vstar * area * sg * lg
             dtf_darea += c.eta_vstar * sg * lg
             dtf_ds += c.eta_vstar * area / (c.vstar + a_s)

@@ -27,7 +27,7 @@ partitioned solve), ``make_stage_equations`` (the load and each node's row), ``m
 
 import warp as wp
 
-from .model_terms import disc_velocity_at, disc_velocity_piece, normal_force_in_step, normal_force_piece, quotient
+from .model_terms import disc_velocity_at, disc_velocity_piece, normal_force_in_step, normal_force_piece
 from .team import vec3d, vec4d, vec5d, vec6d, vec12d
 from .types import (
     C_PHI,
@@ -69,15 +69,24 @@ def make_bordered_solver(ft, tilt_on: bool):
         columns B0_i, B1_i): stores the modified upper diagonal and right-hand sides in work[W_CP],
         work[W_R0..R2] and returns them for the next row."""
         den = diagonal - lower * cp_prev
-        cp = upper / den
-        r0 = (rhs - lower * r0_prev) / den
-        r1 = (border_d0 - lower * r1_prev) / den
+        if wp.static(ft == wp.float64):  # one reciprocal for the row's quotients (as over_den, model_terms.py)
+            inv_den = ft(1.0) / den
+            cp = upper * inv_den
+            r0 = (rhs - lower * r0_prev) * inv_den
+            r1 = (border_d0 - lower * r1_prev) * inv_den
+        else:
+            cp = upper / den
+            r0 = (rhs - lower * r0_prev) / den
+            r1 = (border_d0 - lower * r1_prev) / den
         work[W_CP, i, m] = cp
         work[W_R0, i, m] = r0
         work[W_R1, i, m] = r1
         r2 = ft(0.0)
         if wp.static(tilt_on):
-            r2 = (border_tilt - lower * r2_prev) / den
+            if wp.static(ft == wp.float64):
+                r2 = (border_tilt - lower * r2_prev) * inv_den
+            else:
+                r2 = (border_tilt - lower * r2_prev) / den
             work[W_R2, i, m] = r2
         return cp, r0, r1, r2
 
@@ -206,12 +215,14 @@ def make_lane_elimination(ft):
         the coupling columns' entries of the row, 0 but at the lane's first and last interior row);
         stores cp and the five modified right-hand sides in work[W_CP, W_R0..R2, W_RL, W_RR]."""
         den = diagonal - lower * cp_prev
-        # quotient: cp is 0/den at the pad's last node, rl at lane 0 (no left separator) and rr
-        # before the lane's last interior row, where the GPU's division would take its slow path
-        cp = quotient(upper, den)
-        r = (rhs - lower * r_prev) / den
-        rl = quotient(couple_left - lower * rl_prev, den)
-        rr = quotient(couple_right - lower * rr_prev, den)
+        # one reciprocal for the row's six quotients (a team is float64: as over_den, model_terms.py);
+        # a zero numerator (cp at the pad's last node, rl on lane 0, rr before the lane's last
+        # interior row) costs no division at all
+        inv_den = ft(1.0) / den
+        cp = upper * inv_den
+        r = (rhs - lower * r_prev) * inv_den
+        rl = (couple_left - lower * rl_prev) * inv_den
+        rr = (couple_right - lower * rr_prev) * inv_den
         work[W_CP, i, m] = cp
         work[W_R0, i, m] = r[0]
         work[W_R1, i, m] = r[1]
@@ -392,8 +403,13 @@ def make_stage_equations(ft, model, terms, gates, method="tr_bdf2"):
         residual = -(ef.value + fr.stress - c.damping * vel)
         jac_c = -g * (ef.d_u_center + fr.d_normal * ns.d_u_center) + c.kif * fr.d_slip + c.damping
         if wp.static(inertia):
-            residual += c.rhoH * (vel - work[W_ZV, i, m]) / g
-            jac_c += c.rhoH / g
+            if wp.static(ft == wp.float64):  # one quotient (the same for every node: hoisted)
+                rhoH_over_g = c.rhoH / g
+                residual += rhoH_over_g * (vel - work[W_ZV, i, m])
+                jac_c += rhoH_over_g
+            else:
+                residual += c.rhoH * (vel - work[W_ZV, i, m]) / g
+                jac_c += c.rhoH / g
         row.residual = residual
         row.jac_center = jac_c
         row.jac_left = -g * (ef.d_u_left + fr.d_normal * ns.d_u_left)
@@ -779,6 +795,7 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
         sums.normal = wp.float64(0.0)
         sums.min_normal = wp.float64(1.0e300)
         test = no_switch()
+        inv_g = ft(1.0) / g  # float64: K_V = (V - z_V) * (1/g), one quotient for every node
         u_l = ft(0.0)
         if c.first_node > 0:
             u_l = stage_displacement(work, c.first_node - 1, n, m, g)
@@ -796,7 +813,10 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
                     test = test_switch(c, settings, gates, i, m, fr, sigma, vel, v_disc, h, test)
             K[slot, C_U, i, m] = vel
             if wp.static(inertia):
-                K[slot, C_V, i, m] = (vel - work[W_ZV, i, m]) / g
+                if wp.static(ft == wp.float64):
+                    K[slot, C_V, i, m] = (vel - work[W_ZV, i, m]) * inv_g
+                else:
+                    K[slot, C_V, i, m] = (vel - work[W_ZV, i, m]) / g
             else:
                 K[slot, C_V, i, m] = ft(0.0)
             K[slot, C_TAU, i, m] = fr.elastic_stress_rate
