@@ -33,16 +33,19 @@ SLIDING_GATE_TOL = 1.0e-10  # converged gate update
 
 @wp.func
 def quotient(num: Any, den: Any):
-    """num / den, the same bits, without CUDA's slow path for a zero numerator: the GPU's FP64
-    division checks its operands and calls a full-range subroutine (__cuda_sm20_div_rn_f64_full)
-    for a zero or tiny numerator, a call that also moves the caller's registers. A zero numerator
-    divides 1 instead, and its quotient is (1/den) * num: the signed zero (or NaN) that num / den
-    gives, for any den. The quotient of 1 is used in both cases, so that the compiler cannot
-    divide num itself in its place. For the quotients that are often 0/x in a node sweep
-    (docs/performance.md, "Divisions of zero")."""
-    zero_numerator = num == type(num)(0.0)
+    """num / den, the same value (NaN as NaN), without CUDA's slow path for a zero numerator: the
+    GPU's FP64 division checks its operands and calls a full-range subroutine
+    (__cuda_sm20_div_rn_f64_full) for a zero or tiny numerator, a call that also moves the
+    caller's registers. A zero numerator divides 1 instead. Its quotient is then num * den for a
+    finite, non-zero den (the signed zero of num / den, subnormal den included) and (1/den) * num
+    for den = 0, inf or NaN (NaN, the signed zero, NaN). That last case uses the quotient of 1, so
+    the compiler cannot divide num itself in its place. For the quotients that are often 0/x in a
+    node sweep (docs/performance.md, "Divisions of zero")."""
+    zero = type(num)(0.0)
+    zero_numerator = num == zero
     q = wp.where(zero_numerator, type(num)(1.0), num) / den
-    return wp.where(zero_numerator, q * num, q)
+    finite_nonzero = den != zero and den - den == zero
+    return wp.where(zero_numerator, wp.where(finite_nonzero, num * den, q * num), q)
 
 
 # ------------------------------------------------------------------------------------------------

@@ -216,8 +216,8 @@ def make_lane_elimination(ft):
         stores cp and the five modified right-hand sides in work[W_CP, W_R0..R2, W_RL, W_RR]."""
         den = diagonal - lower * cp_prev
         # one reciprocal for the row's six quotients (a team is float64: as over_den, model_terms.py);
-        # a zero numerator (cp at the pad's last node, rl on lane 0, rr before the lane's last
-        # interior row) costs no division at all
+        # a zero numerator (cp at the lane's last interior row, rl on lane 0, rr before the lane's
+        # last interior row) costs no division at all
         inv_den = ft(1.0) / den
         cp = upper * inv_den
         r = (rhs - lower * r_prev) * inv_den
@@ -403,7 +403,7 @@ def make_stage_equations(ft, model, terms, gates, method="tr_bdf2"):
         residual = -(ef.value + fr.stress - c.damping * vel)
         jac_c = -g * (ef.d_u_center + fr.d_normal * ns.d_u_center) + c.kif * fr.d_slip + c.damping
         if wp.static(inertia):
-            if wp.static(ft == wp.float64):  # one quotient (the same for every node: hoisted)
+            if wp.static(ft == wp.float64):  # one quotient, the same for every node (the compiler may hoist it)
                 rhoH_over_g = c.rhoH / g
                 residual += rhoH_over_g * (vel - work[W_ZV, i, m])
                 jac_c += rhoH_over_g

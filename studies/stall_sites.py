@@ -106,9 +106,13 @@ def opcode_of(line: str) -> str:
 
 def source_text(kernels: str, name: str, lineno: int) -> str:
     """Line ``lineno`` of ``name`` in the folder ``kernels``, stripped and cut to 70 characters; ""
-    where there is no such file."""
+    where there is no such file or line (an older profile read against another tree)."""
     path = os.path.join(kernels, name)
-    return open(path).read().splitlines()[lineno - 1].strip()[:70] if os.path.exists(path) else ""
+    if not os.path.exists(path):
+        return ""
+    with open(path) as f:
+        lines = f.read().splitlines()
+    return lines[lineno - 1].strip()[:70] if 0 < lineno <= len(lines) else ""
 
 
 def main(argv=None):
@@ -162,6 +166,8 @@ def main(argv=None):
     show("source lines (each instruction once, at its own line)", by_line)
     if args.executed:
         executed, by_opcode, ex_site, ex_line = executed_tables(instr, read_executed(args.csv))
+        if executed <= 0:
+            raise SystemExit(f"{args.csv}: no instruction executed (the profile's SourceCounters are empty)")
         print(f"\n{executed:.4g} warp instructions executed; by opcode: "
               + ", ".join(f"{op} {100 * n / executed:.1f} %" for op, n in by_opcode.most_common(12)))
         for title, table in (("call sites", ex_site), ("source lines", ex_line)):

@@ -214,11 +214,13 @@ def _quotient_kernel(dtype):
 @pytest.mark.parametrize("dtype", [wp.float64, wp.float32])
 def test_quotient_has_the_bits_of_the_division(dtype):
     """kernels/model_terms.py quotient (a zero numerator's signed zero by a product, so that the GPU's
-    division does not take its slow path) equals num / den bit for bit: the device's own division
-    and numpy's, over every pair of signed zeros, infinities, NaN, a tiny, a huge and ordinary values."""
+    division does not take its slow path) equals num / den bit for bit (NaN as NaN): the device's
+    own division and numpy's, over every pair of signed zeros, infinities, NaN, subnormals (whose
+    reciprocal overflows), a tiny, a huge and ordinary values."""
     np_type, bits = (np.float64, np.uint64) if dtype == wp.float64 else (np.float32, np.uint32)
-    tiny, huge = (1e-300, 3e300) if dtype == wp.float64 else (1e-30, 3e38)
-    values = np.array([0.0, -0.0, 1.0, -2.5, 7.0, tiny, -huge, np.inf, -np.inf, np.nan], dtype=np_type)
+    tiny, subnormal, huge = (1e-300, 5e-324, 3e300) if dtype == wp.float64 else (1e-30, 1e-45, 3e38)
+    values = np.array([0.0, -0.0, 1.0, -2.5, 7.0, tiny, subnormal, -subnormal, -huge, np.inf, -np.inf, np.nan],
+                      dtype=np_type)
     num, den = (a.ravel() for a in np.meshgrid(values, values, indexing="ij"))
     out = [wp.zeros(num.size, dtype=dtype, device=DEVICE) for _ in range(2)]
     wp.launch(_quotient_kernel(dtype), dim=num.size, device=DEVICE,
