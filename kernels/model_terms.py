@@ -48,6 +48,28 @@ def quotient(num: Any, den: Any):
     return wp.where(zero_numerator, wp.where(finite_nonzero, num * den, q * num), q)
 
 
+_OVER_DEN: dict = {}
+
+
+def make_over_den(ft):
+    """over_den(x, den, inv_den) for scalar type ``ft`` (one function per type, shared): x / den, in
+    float64 as x * inv_den (inv_den = 1/den), so that quotients of one denominator cost one division
+    (the friction law's stage solution, phi/phi0 and |s|/v* with the member's 1/phi0 and 1/v* in
+    Coeffs, the Thomas rows, the stage derivatives' 1/g): the GPU's FP64 division is a long
+    dependent sequence. float32 keeps the exact quotient (its round-off decides which hard float32
+    members stall: tests/test_trust.py), and inv_den is then unused."""
+    if ft not in _OVER_DEN:
+
+        @wp.func
+        def over_den(x: ft, den: ft, inv_den: ft):
+            if wp.static(ft == wp.float64):
+                return x * inv_den
+            return x / den
+
+        _OVER_DEN[ft] = over_den
+    return _OVER_DEN[ft]
+
+
 # ------------------------------------------------------------------------------------------------
 # Load protocol (float64: times of order 20 s need more than float32's 1e-6 s resolution).
 # ------------------------------------------------------------------------------------------------
@@ -406,15 +428,7 @@ def make_friction_at_gate(ft, model, Coeffs):
         d_area_gate: ft  # dA/d gate (1)
         gate: ft  # the gate used (1)
 
-    @wp.func
-    def over_den(x: ft, den: ft, inv_den: ft):
-        """x / den: in float64 as x * (1/den), one division per node for the seven quotients of the
-        stage solution and none for phi/phi0 and |s|/v* (the member's 1/phi0 and 1/v* in Coeffs): the
-        GPU's FP64 division is a long dependent sequence; float32 keeps the exact quotient (its
-        round-off decides which hard float32 members stall: tests/test_trust.py)."""
-        if wp.static(ft == wp.float64):
-            return x * inv_den
-        return x / den
+    over_den = make_over_den(ft)
 
     @wp.func
     def friction_at_gate(c: Coeffs, sigma: ft, s: ft, z_tau: ft, z_phi: ft, g: ft, gate: ft):

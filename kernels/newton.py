@@ -27,7 +27,7 @@ partitioned solve), ``make_stage_equations`` (the load and each node's row), ``m
 
 import warp as wp
 
-from .model_terms import disc_velocity_at, disc_velocity_piece, normal_force_in_step, normal_force_piece
+from .model_terms import disc_velocity_at, disc_velocity_piece, make_over_den, normal_force_in_step, normal_force_piece
 from .team import vec3d, vec4d, vec5d, vec6d, vec12d
 from .types import (
     C_PHI,
@@ -59,6 +59,7 @@ def make_bordered_solver(ft, tilt_on: bool):
     """The bordered tridiagonal solve for scalar type ``ft``; without tilt the system has one border
     (delta0) and the third right-hand side is skipped."""
     array3 = wp.array3d(dtype=ft)
+    over_den = make_over_den(ft)
 
     @wp.func
     def forward_row(
@@ -69,24 +70,16 @@ def make_bordered_solver(ft, tilt_on: bool):
         columns B0_i, B1_i): stores the modified upper diagonal and right-hand sides in work[W_CP],
         work[W_R0..R2] and returns them for the next row."""
         den = diagonal - lower * cp_prev
-        if wp.static(ft == wp.float64):  # one reciprocal for the row's quotients (as over_den, model_terms.py)
-            inv_den = ft(1.0) / den
-            cp = upper * inv_den
-            r0 = (rhs - lower * r0_prev) * inv_den
-            r1 = (border_d0 - lower * r1_prev) * inv_den
-        else:
-            cp = upper / den
-            r0 = (rhs - lower * r0_prev) / den
-            r1 = (border_d0 - lower * r1_prev) / den
+        inv_den = ft(1.0) / den  # float64: one division for the row's quotients (over_den)
+        cp = over_den(upper, den, inv_den)
+        r0 = over_den(rhs - lower * r0_prev, den, inv_den)
+        r1 = over_den(border_d0 - lower * r1_prev, den, inv_den)
         work[W_CP, i, m] = cp
         work[W_R0, i, m] = r0
         work[W_R1, i, m] = r1
         r2 = ft(0.0)
         if wp.static(tilt_on):
-            if wp.static(ft == wp.float64):
-                r2 = (border_tilt - lower * r2_prev) * inv_den
-            else:
-                r2 = (border_tilt - lower * r2_prev) / den
+            r2 = over_den(border_tilt - lower * r2_prev, den, inv_den)
             work[W_R2, i, m] = r2
         return cp, r0, r1, r2
 
@@ -215,7 +208,7 @@ def make_lane_elimination(ft):
         the coupling columns' entries of the row, 0 but at the lane's first and last interior row);
         stores cp and the five modified right-hand sides in work[W_CP, W_R0..R2, W_RL, W_RR]."""
         den = diagonal - lower * cp_prev
-        # one reciprocal for the row's six quotients (a team is float64: as over_den, model_terms.py);
+        # one reciprocal for the row's six quotients (a team is float64: over_den's float64 form);
         # a zero numerator (cp at the lane's last interior row, rl on lane 0, rr before the lane's
         # last interior row) costs no division at all
         inv_den = ft(1.0) / den
@@ -767,6 +760,7 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
     team_sum = team["team_sum"]
     disc_velocity_stage = equations["disc_velocity_stage"]
     stage_displacement = equations["stage_displacement"]
+    over_den = make_over_den(ft)
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
 
@@ -795,7 +789,7 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
         sums.normal = wp.float64(0.0)
         sums.min_normal = wp.float64(1.0e300)
         test = no_switch()
-        inv_g = ft(1.0) / g  # float64: K_V = (V - z_V) * (1/g), one quotient for every node
+        inv_g = ft(1.0) / g  # float64: K_V = (V - z_V) * (1/g), one division for every node (over_den)
         u_l = ft(0.0)
         if c.first_node > 0:
             u_l = stage_displacement(work, c.first_node - 1, n, m, g)
@@ -813,10 +807,7 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
                     test = test_switch(c, settings, gates, i, m, fr, sigma, vel, v_disc, h, test)
             K[slot, C_U, i, m] = vel
             if wp.static(inertia):
-                if wp.static(ft == wp.float64):
-                    K[slot, C_V, i, m] = (vel - work[W_ZV, i, m]) * inv_g
-                else:
-                    K[slot, C_V, i, m] = (vel - work[W_ZV, i, m]) / g
+                K[slot, C_V, i, m] = over_den(vel - work[W_ZV, i, m], g, inv_g)
             else:
                 K[slot, C_V, i, m] = ft(0.0)
             K[slot, C_TAU, i, m] = fr.elastic_stress_rate
