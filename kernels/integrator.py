@@ -23,7 +23,8 @@ from .gates import make_gates
 from .model_terms import disc_velocity_at, make_model_terms
 from .newton import make_newton
 from .observers import ObserverSet, make_observers, run_finished
-from .team import EXCHANGES, MAX_TEAM_LANES, TEAM_BUFFER_BYTES, WARP_SIZE, exchanges_by_value, make_team, node_range
+from .team import (EXCHANGES, MAX_TEAM_LANES, TEAM_BUFFER_BYTES, WARP_SIZE, exchanges_by_value, make_team, node_range,
+                   warps_team)
 from .types import C_PHI, N_WORK, IntegratorState, MemberParams, OutputSettings, SolverSettings, stage_slots
 
 _CACHE: dict = {}
@@ -86,12 +87,6 @@ def team_compile_options() -> TeamCompileOptions:
 # 8: the registers of one SM hold 8 warps of this kernel (255 registers per thread), so one block
 # fills an SM as 8 blocks of one member did.
 MAX_BLOCK_MEMBERS = 8
-
-
-def warps_team(lanes: int, exchange: str) -> bool:
-    """Whether a team of ``lanes`` with its lane exchange is a team of several warps on a GPU
-    (kernels/team.py make_warps_team): one member a block, the block's threads its lanes."""
-    return exchange == "shuffle" and lanes > WARP_SIZE
 
 
 def blocked_layout(lanes: int, exchange: str, requested: int | None = None) -> bool:

@@ -497,6 +497,12 @@ def exchanges_by_value(lanes: int) -> bool:
     return lanes <= WARP_SIZE or (lanes % WARP_SIZE == 0 and lanes <= MAX_TEAM_LANES)
 
 
+def warps_team(lanes: int, exchange: str) -> bool:
+    """Whether a team of ``lanes`` with its lane exchange is a team of several warps on a GPU
+    (make_warps_team): one member a block, the block's threads its lanes."""
+    return exchange == "shuffle" and lanes > WARP_SIZE
+
+
 def warps_of(lanes: int) -> int:
     """The warps of a team that exchanges by value: 1 for at most 32 lanes, else lanes / 32 (a team
     of several warps has full warps only, at most MAX_TEAM_LANES lanes)."""
@@ -626,7 +632,7 @@ def make_exchange_team(lanes: int, exchange: str):
     """The team's operations (those of make_tile_reductions and make_separator_exchange) on the lane
     exchange by value: ``exchange`` = "shuffle" (warp shuffles: CUDA, lanes <= 32, or whole warps up
     to MAX_TEAM_LANES through make_warps_team) or "emulated" (the same through a tile)."""
-    if exchange == "shuffle" and lanes > WARP_SIZE:
+    if warps_team(lanes, exchange):
         ops = make_warps_team(lanes)
     elif exchange == "shuffle":
         ops = dict(sum_f64=warp_sum_f64, max_f64=warp_max_f64, min_f64=warp_min_f64, sum_i32=warp_sum_i32,
