@@ -32,15 +32,20 @@ from sass_sites import OPCODE, instructions, tool  # noqa: E402
 REASONS = ("long_sb", "no_inst", "wait", "short_sb", "branch_resolving", "selected", "math", "lg", "mio", "barrier")
 
 
-def read_samples(path: str) -> list:
-    """[(opcode, {reason: samples}, total samples)] per SASS instruction, in address order, from
-    ncu's source page (CSV; gzip if the name ends in .gz). The first line names the kernel."""
+def source_rows(path: str) -> list:
+    """The rows (dicts by column name) of ncu's SASS source page, one per instruction in address
+    order (CSV; gzip if the name ends in .gz; its first line names the kernel)."""
     raw = gzip.open(path, "rt") if path.endswith(".gz") else open(path)
     with raw:
         lines = raw.read().splitlines()
-    rows = list(csv.DictReader(io.StringIO("\n".join(lines[1:]))))
+    return list(csv.DictReader(io.StringIO("\n".join(lines[1:]))))
+
+
+def read_samples(path: str) -> list:
+    """[(opcode, {reason: samples}, total samples)] per SASS instruction, in address order, from
+    ncu's source page (source_rows)."""
     out = []
-    for row in rows:
+    for row in source_rows(path):
         reasons = {k[len("stall_"):]: float(v) for k, v in row.items()
                    if k.startswith("stall_") and "Not Issued" not in k and v not in ("", "-")}
         op = row["Source"].split()
@@ -53,10 +58,7 @@ def read_samples(path: str) -> list:
 def read_executed(path: str) -> list:
     """Warp instructions executed per SASS instruction, in address order, from the same source page
     as read_samples (its "Instructions Executed" column; 0 where a row has none)."""
-    raw = gzip.open(path, "rt") if path.endswith(".gz") else open(path)
-    with raw:
-        lines = raw.read().splitlines()
-    rows = list(csv.DictReader(io.StringIO("\n".join(lines[1:]))))
+    rows = source_rows(path)
     if rows and "Instructions Executed" not in rows[0]:
         raise SystemExit(f"{path} has no 'Instructions Executed' column (profile with --section SourceCounters)")
     return [float(v.replace(",", "")) if (v := row["Instructions Executed"]) not in ("", "-", None) else 0.0
