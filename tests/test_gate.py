@@ -32,19 +32,25 @@ def test_stick_phase_ages_exactly_and_stores_elastic_stress_without_relaxation()
     TR-BDF2 integrates exactly), and tau_el is the unrelaxed spring: the same as the gate-less law
     with an effectively infinite memory length (|s|/D -> 0), an independent way to switch relaxation off."""
     scene = wf.Parameters(end_time=20.05)
-    gated = run(scene=scene, nodes=40)
+    gated = run(scene=scene, nodes=40, rtol=1e-8)
     # still stuck: mu still rises (status no_peak, no mu_s), and no gate has opened
     assert gated.status.attrs["flag_meanings"].split()[gated.status.values[0]] == "no_peak"
     assert np.isnan(gated.yield_time.values).all()
     assert (gated.yield_gate.values == 0).all()
     expected_age = gated.initial_age.values[0] + gated.final_time.values[0]
     np.testing.assert_allclose(gated.contact_age.values, expected_age, rtol=1e-12)
-    spring = run(scene=wf.Parameters(end_time=20.05, memory_length=1e3), model=wf.Model(relaxation_gate="none"), nodes=40)
+    # two integrations of the same stick-phase equations (a relaxation of |s|/D over micrometres of
+    # slip with D = 1 km is ~1e-9 of tau_el), each well inside the tolerance: against the gated
+    # law at rtol 1e-9, the gated run's tau_el is within 1.2e-6 of scale at rtol 1e-8 and the
+    # spring's (107,300 steps, its |s| kink at rest) within 6.4e-6 at rtol 1e-7; at the default rtol
+    # 1e-6 each is only within ~2.8e-5, and they agreed more closely by their errors' correlation
+    spring = run(scene=wf.Parameters(end_time=20.05, memory_length=1e3), model=wf.Model(relaxation_gate="none"), nodes=40,
+                 rtol=1e-7, max_steps=200_000)
     scale = np.abs(spring.elastic_stress.values).max()
     assert scale > 1e3  # Pa: the disc has loaded the interface
-    np.testing.assert_allclose(gated.elastic_stress.values, spring.elastic_stress.values, rtol=0, atol=1e-6 * scale)
+    np.testing.assert_allclose(gated.elastic_stress.values, spring.elastic_stress.values, rtol=0, atol=2e-5 * scale)
     gateless = run(scene=scene, model=wf.Model(relaxation_gate="none"), nodes=40)
-    assert np.abs(gateless.elastic_stress.values - spring.elastic_stress.values).max() > 1e-3 * scale  # v1 relaxes
+    assert np.abs(gateless.elastic_stress.values - spring.elastic_stress.values).max() > 1e-2 * scale  # v1 relaxes (7e-2)
 
 
 def test_gate_opens_where_the_asperity_stress_reaches_tau_c():
