@@ -29,7 +29,7 @@ import math
 
 import warp as wp
 
-from .model_terms import quotient
+from .model_terms import make_ratio_max, quotient
 from .types import C_PHI, C_TAU, C_U, C_V, E_DIAG, N_COMPONENTS, W_V, MemberParams, SolverSettings
 
 GAMMA = 1.0 - math.sqrt(2.0) / 2.0
@@ -120,6 +120,7 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
     vec4 = wp.types.vector(length=N_COMPONENTS, dtype=ft)
+    ratio_max = make_ratio_max(ft)
 
     @wp.func
     def prepare_stage(
@@ -151,24 +152,35 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
 
     @wp.func
     def fold_error(c: Coeffs, step_end: array3, comp: int, i: int, m: int, e: ft, y: ft, y_new: ft, g: ft, rtol: ft,
-                   err: ft):
+                   top: ft, bottom: ft):
         """Fold the local error estimate e of component comp at node i (from y to y_new; g = gamma*h)
-        into the running maximum err of |e| / (rtol*(scale + max(|y|, |y_new|))), scale the
-        component's natural scale; the velocity's e filtered by min(1, |rho H / (g * diag)|) (diag:
-        step_end[E_DIAG]); 1e30 where e is not finite."""
+        into the running maximum top/bottom (ratio_max) of |e| / (rtol*(scale + max(|y|, |y_new|))),
+        scale the component's natural scale; the velocity's e filtered by min(1, |rho H / (g *
+        diag)|) (diag: step_end[E_DIAG]; in float64 as |e| rho H / (weight |g diag|) where the
+        filter is below 1, without a quotient); 1e30 where e is not finite. Returns (top, bottom):
+        the sweep's norm is quotient(top, bottom)."""
         scale = c.u_scale
+        num = wp.abs(e)
+        den_factor = ft(1.0)
         if comp == C_V:
             scale = c.v_scale
-            e = e * wp.min(ft(1.0), wp.abs(c.rhoH / (g * step_end[E_DIAG, i, m])))
+            if wp.static(ft == wp.float64):
+                diag = wp.abs(g * step_end[E_DIAG, i, m])
+                if diag > c.rhoH:
+                    num = num * c.rhoH
+                    den_factor = diag
+            else:
+                num = wp.abs(e * wp.min(ft(1.0), wp.abs(c.rhoH / (g * step_end[E_DIAG, i, m]))))
         if comp == C_TAU:
             scale = c.tau_scale
         if comp == C_PHI:
             scale = c.phi_scale
         wgt = rtol * (scale + wp.max(wp.abs(y), wp.abs(y_new)))
-        err = wp.max(err, quotient(wp.abs(e), wgt))  # e is 0 in some components (the GPU's slow path for 0/x)
+        top, bottom = ratio_max(top, bottom, num, wgt * den_factor)
         if not wp.isfinite(e):
-            err = ft(1.0e30)
-        return err
+            top = ft(1.0e30)
+            bottom = ft(1.0)
+        return top, bottom
 
     @wp.func
     def error_norm(
@@ -185,7 +197,8 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         vanish for modes that the L-stable scheme damps correctly."""
         g = ft(GAMMA) * h
         rtol = ft(s.rtol)
-        err = ft(0.0)
+        top = ft(0.0)  # the norm so far, top/bottom (fold_error)
+        bottom = ft(1.0)
         for i in range(c.first_node, c.end_node):
             # a node's values all read before its writes (as in prepare_stage)
             y = vec4()
@@ -203,9 +216,9 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
                     y_new = y[comp] + solution_increment(h, k1[comp], k2[comp], k3[comp])
                     if comp != C_V:
                         work[comp, i, m] = y_new
-                    err = fold_error(c, step_end, comp, i, m, error_increment(h, k1[comp], k2[comp], k3[comp]), y[comp],
-                                     y_new, g, rtol, err)
-        return team_max(err)
+                    top, bottom = fold_error(c, step_end, comp, i, m, error_increment(h, k1[comp], k2[comp], k3[comp]),
+                                             y[comp], y_new, g, rtol, top, bottom)
+        return team_max(quotient(top, bottom))
 
     @wp.func
     def advance_state(c: Coeffs, m: int, n: int, state: array3, K: array4, work: array3, s3: int, h: ft,
@@ -404,7 +417,8 @@ def make_esdirk4_arrays(ft, model, terms, team, fold_error):
         rtol = ft(s.rtol)
         b = vec6(ft(E4_B0), ft(E4_B1), ft(E4_B2), ft(E4_B3), ft(E4_B4), ft(E4_B5))
         d = vec6(ft(E4_D0), ft(E4_D1), ft(E4_D2), ft(E4_D3), ft(E4_D4), ft(E4_D5))
-        err = ft(0.0)
+        top = ft(0.0)  # the norm so far, top/bottom (fold_error)
+        bottom = ft(1.0)
         for i in range(c.first_node, c.end_node):
             for comp in range(N_COMPONENTS):
                 if comp != C_V or wp.static(inertia):
@@ -415,8 +429,8 @@ def make_esdirk4_arrays(ft, model, terms, team, fold_error):
                         inc += b[j] * k
                         e += d[j] * k
                     y = state[comp, i, m]
-                    err = fold_error(c, step_end, comp, i, m, h * e, y, y + h * inc, g, rtol, err)
-        return team_max(err)
+                    top, bottom = fold_error(c, step_end, comp, i, m, h * e, y, y + h * inc, g, rtol, top, bottom)
+        return team_max(quotient(top, bottom))
 
     @wp.func
     def advance_state4(c: Coeffs, m: int, n: int, state: array3, K: array4, s1: int, h: ft):

@@ -70,6 +70,32 @@ def make_over_den(ft):
     return _OVER_DEN[ft]
 
 
+_RATIO_MAX: dict = {}
+
+
+def make_ratio_max(ft):
+    """ratio_max(top, bottom, num, den) -> (top, bottom) for scalar type ``ft`` (one function per
+    type, shared): the running maximum of num/den over a sweep (den > 0), kept as the fraction
+    top/bottom (start 0/1) so that the sweep divides once at its end (``quotient(top, bottom)``)
+    instead of once per term: the error-weighted norms of the Newton update and of the local error.
+    float64 compares num/den > top/bottom as num*bottom > top*den; a NaN term is dropped, as
+    wp.max drops it. The maximum is the same quotient unless two terms lie within a rounding of
+    each other (then either one, to an ulp). float32 keeps one quotient per term (bottom stays 1),
+    as over_den keeps its quotients."""
+    if ft not in _RATIO_MAX:
+
+        @wp.func
+        def ratio_max(top: ft, bottom: ft, num: ft, den: ft):
+            if wp.static(ft == wp.float64):
+                if num * bottom > top * den:
+                    return num, den
+                return top, bottom
+            return wp.max(top, num / den), bottom
+
+        _RATIO_MAX[ft] = ratio_max
+    return _RATIO_MAX[ft]
+
+
 # ------------------------------------------------------------------------------------------------
 # Load protocol (float64: times of order 20 s need more than float32's 1e-6 s resolution).
 # ------------------------------------------------------------------------------------------------
@@ -451,7 +477,14 @@ def make_friction_at_gate(ft, model, Coeffs):
             contact = ft(1.0)
         sigma_c = sigma * contact
         aging = ft(1.0) + c.b * wp.log(ft(1.0) + over_den(phi, c.phi0, c.inv_phi0))
-        daging_dphi = c.b / (c.phi0 + phi)
+        age_den = c.phi0 + phi  # s
+        slip_den = c.vstar + a_s  # m/s
+        inv_dens = ft(1.0)  # float64 with the viscous term: 1/(age_den*slip_den), one division for both
+        if wp.static(viscous and ft == wp.float64):
+            inv_dens = ft(1.0) / (age_den * slip_den)
+            daging_dphi = c.b * slip_den * inv_dens
+        else:
+            daging_dphi = c.b / age_den
         area = sigma_c * c.inv_hardness * aging
         darea_dsigma = contact * c.inv_hardness * aging
         darea_dphi = sigma_c * c.inv_hardness * daging_dphi
@@ -468,7 +501,10 @@ def make_friction_at_gate(ft, model, Coeffs):
             lg = wp.log(ft(1.0) + over_den(a_s, c.vstar, c.inv_vstar))
             tau_f += c.eta_vstar * area * sg * lg
             dtf_darea += c.eta_vstar * sg * lg
-            dtf_ds += c.eta_vstar * area / (c.vstar + a_s)
+            if wp.static(ft == wp.float64):
+                dtf_ds += c.eta_vstar * area * age_den * inv_dens
+            else:
+                dtf_ds += c.eta_vstar * area / slip_den
         dtf_ds += dtf_darea * darea_ds
         dtf_dsigma = dtf_darea * darea_dsigma
         dtf_dgate = dtel_dgate + dtf_darea * darea_dgate

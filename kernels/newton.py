@@ -27,7 +27,8 @@ partitioned solve), ``make_stage_equations`` (the load and each node's row), ``m
 
 import warp as wp
 
-from .model_terms import disc_velocity_at, disc_velocity_piece, make_over_den, normal_force_in_step, normal_force_piece
+from .model_terms import (disc_velocity_at, disc_velocity_piece, make_over_den, make_ratio_max, normal_force_in_step,
+                          normal_force_piece, quotient)
 from .team import vec3d, vec4d, vec5d, vec6d, vec12d
 from .types import (
     C_PHI,
@@ -625,14 +626,16 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
     normal_force_stage = equations["normal_force_stage"]
     assemble_system = system["assemble_system"]
     array3 = wp.array3d(dtype=ft)
+    ratio_max = make_ratio_max(ft)
 
     @wp.func
     def update_velocity(c: Coeffs, work: array3, lo: int, hi: int, m: int, g: ft, rtol: ft, d_delta0: ft, d_tilt: ft):
         """Apply the Newton update dV of nodes [lo, hi) to work[W_V]; returns the error-weighted norm
         of dV and of the displacement's g*dV, and whether every update (with d_delta0, d_tilt) is
         finite."""
-        norm = ft(0.0)
-        finite = wp.isfinite(d_delta0) and wp.isfinite(d_tilt)  # wp.max drops NaN (fmax): test each
+        top = ft(0.0)  # the norm so far, top/bottom (ratio_max: one division for the sweep)
+        bottom = ft(1.0)
+        finite = wp.isfinite(d_delta0) and wp.isfinite(d_tilt)  # the maximum drops NaN: test each
         for i in range(lo, hi):
             dv = solution_row(work, i, m, d_delta0, d_tilt)
             vel = work[W_V, i, m] + dv
@@ -640,9 +643,9 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
             u = work[W_ZU, i, m] + g * vel
             if not wp.isfinite(dv):
                 finite = False
-            norm = wp.max(norm, wp.abs(dv) / (rtol * (c.v_scale + wp.abs(vel))))
-            norm = wp.max(norm, g * wp.abs(dv) / (rtol * (c.u_scale + wp.abs(u))))
-        return norm, finite
+            top, bottom = ratio_max(top, bottom, wp.abs(dv), rtol * (c.v_scale + wp.abs(vel)))
+            top, bottom = ratio_max(top, bottom, g * wp.abs(dv), rtol * (c.u_scale + wp.abs(u)))
+        return quotient(top, bottom), finite
 
     @wp.func
     def newton_solve(

@@ -211,6 +211,49 @@ def _quotient_kernel(dtype):
     return divide
 
 
+def _ratio_max_kernel(dtype):
+    from warpfric.kernels.model_terms import make_ratio_max, quotient
+
+    ratio_max = make_ratio_max(dtype)
+
+    @wp.kernel(module="unique")
+    def sweep(num: wp.array2d(dtype=dtype), den: wp.array2d(dtype=dtype), norm: wp.array(dtype=dtype)):
+        row = wp.tid()
+        top = dtype(0.0)
+        bottom = dtype(1.0)
+        for j in range(num.shape[1]):
+            top, bottom = ratio_max(top, bottom, num[row, j], den[row, j])
+        norm[row] = quotient(top, bottom)
+
+    return sweep
+
+
+@pytest.mark.parametrize("dtype", [wp.float64, wp.float32])
+def test_ratio_max_is_the_largest_quotient(dtype):
+    """kernels/model_terms.py ratio_max (the error norms' running maximum of num/den kept as a
+    fraction, one division per sweep) gives the largest of the terms' quotients, as numpy's
+    maximum of num / den, bit for bit: over random sweeps with positive dens spanning 12 decades,
+    zero numerators, a sweep of zeros (norm 0), NaN terms (dropped, as wp.max drops them) and an
+    infinite numerator (norm inf)."""
+    np_type = np.float64 if dtype == wp.float64 else np.float32
+    rng = np.random.default_rng(7)
+    rows, terms = 400, 24
+    num = (rng.random((rows, terms)) * 10.0 ** rng.uniform(-8, 4, (rows, terms))).astype(np_type)
+    den = (10.0 ** rng.uniform(-6, 6, (rows, terms))).astype(np_type)
+    num[rng.random((rows, terms)) < 0.2] = 0.0
+    num[0] = 0.0
+    num[1, 5] = np.nan
+    num[2, ::3] = np.nan
+    num[3, 7] = np.inf
+    norm = wp.zeros(rows, dtype=dtype, device=DEVICE)
+    wp.launch(_ratio_max_kernel(dtype), dim=rows, device=DEVICE,
+              inputs=[wp.array(num, dtype=dtype, device=DEVICE), wp.array(den, dtype=dtype, device=DEVICE), norm])
+    got = norm.numpy()
+    expected = np.fmax.reduce(num / den, axis=1, initial=0.0).astype(np_type)
+    assert got[0] == 0.0 and np.isinf(got[3]) and np.isfinite(got[[1, 2]]).all()
+    np.testing.assert_array_equal(got, expected)
+
+
 @pytest.mark.parametrize("dtype", [wp.float64, wp.float32])
 def test_quotient_has_the_bits_of_the_division(dtype):
     """kernels/model_terms.py quotient (a zero numerator's signed zero by a product, so that the GPU's
