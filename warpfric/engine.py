@@ -174,7 +174,7 @@ def slower_float32(solver: Solver, device: str) -> str | None:
         return None
     return (f"Solver(dtype='float32') on {device} runs the thread-per-member kernel, where float64 would run "
             "the cooperative kernel, which was the faster on an H100 (10,000 gate-less members at N = 200: "
-            "0.62 s in float64, 1.14 s in float32; docs/performance.md); float64 is also the more robust precision")
+            "0.19 s in float64, 0.98 s in float32; docs/performance.md); float64 is also the more robust precision")
 
 
 class cpu_blocks:
