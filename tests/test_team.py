@@ -258,7 +258,7 @@ def test_the_lane_exchange_is_chosen_and_refused():
 
 def test_float32_on_a_gpu_says_it_is_the_slower_precision():
     """float32 runs the thread-per-member kernel; on a GPU, where float64 would run a team, a run
-    warns that float32 is slower there (docs/performance.md: 1.14 s against 0.62 s on an H100).
+    warns that float32 is slower there (docs/performance.md: 0.98 s against 0.19 s on an H100).
     Nothing is said on the CPU (both precisions run the thread kernel), for float64, or where
     float64 would not run a team either (too few nodes, or lanes=1 asked for)."""
     note = slower_float32(wf.Solver(nodes=200, dtype="float32"), "cuda:0")
