@@ -3,6 +3,7 @@ each SASS instruction, summed over the instructions of each call site and each s
 kernels/ (the instructions' sites come from the cubin's line info, as in studies/sass_sites.py).
 
     python studies/stall_sites.py --csv stall_sass.csv[.gz] --cubin integrate.cubin[.gz] [--top 25] [--executed]
+                                  [--waits-on]
 
 The two inputs come from a GPU host (`bash studies/gpu_bench.sh stall-sites`): the SASS source page
 of an `ncu --section SourceCounters --section WarpStateStats --import-source yes` profile of one
@@ -12,7 +13,9 @@ kernel's cubin from Warp's kernel cache. nvdisasm comes from $CUDA_BIN, the PATH
 reason in all, then the call sites (an instruction counts in every call that inlines it) and the
 source lines (each instruction counts once, at its own line) with the most samples. --executed adds
 the warp instructions executed (the profile's "Instructions Executed" column) by opcode, call site
-and source line: where the instructions go, beside where the warps wait.
+and source line: where the instructions go, beside where the warps wait. --waits-on gives each
+long-scoreboard sample to the load whose register it waits for (waits_on: the stack's spill reloads
+LDL, global LDG, generic LD, ...), and the stack's reloads by their source line.
 """
 
 import argparse
@@ -21,6 +24,7 @@ import csv
 import gzip
 import io
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -101,6 +105,73 @@ def stall_tables(instr: list, samples: list) -> tuple:
     return total, by_site, by_line
 
 
+# loads whose results a long-scoreboard wait can be for: local (the stack: spills), global,
+# generic (the work array in shared memory is reached through a generic pointer), shared, constant
+LOADS = ("LDL", "LDG", "LD", "LDS", "LDC")
+# how far back (instructions, in address order) waits_on looks for the awaited register's load
+WAIT_WINDOW = 300
+REGISTER = re.compile(r"\bR(\d+)\b")
+
+
+def register_operands(line: str) -> tuple:
+    """(opcode without modifiers, registers written, registers read) of one SASS line; a 64-bit
+    operand (FP64 opcodes, .64 memory operations) names a register pair and counts as both
+    registers, a .128 operand as four. Stores, branches and barriers write nothing."""
+    text = OPCODE.search(line)
+    if not text:
+        return "", set(), set()
+    full = text.group(1)
+    op = full.split(".")[0]
+    body = line[text.end():].split(";")[0]
+    operands = [o for o in body.split(",") if o.strip()]
+    width = 4 if ".128" in full else 2 if (".64" in full or op.startswith("D")) else 1
+
+    def regs(texts):
+        return {int(r) + k for t in texts for r in REGISTER.findall(t) if r != "Z" for k in range(width)}
+
+    if not operands or op.startswith(("ST", "BRA", "EXIT", "BAR", "RET", "CALL", "BSSY", "BSYNC", "WARPSYNC")):
+        return op, set(), regs(operands)
+    return op, regs(operands[:1]), regs(operands[1:])
+
+
+def waits_on(instr: list, samples: list) -> tuple:
+    """(by load opcode, by the load's source line, unattributed): the long-scoreboard samples of
+    each instruction given to the load that wrote the register it waits for, found as the nearest
+    earlier instruction (address order, within WAIT_WINDOW) that writes one of its source
+    registers and is a load (LOADS); a register written by another instruction first is dropped
+    from the search. Address order is not control flow: a value loaded in an earlier loop
+    iteration or another branch may be credited to the wrong load, and samples with no load found
+    are "unattributed"."""
+    operands = [register_operands(line) for line, _sites, _where in instr]
+    by_op = collections.Counter()
+    by_line = collections.Counter()
+    unattributed = 0.0
+    for k, (_op, reasons, _all) in enumerate(samples):
+        waiting = reasons.get("long_sb", 0.0)
+        if not waiting:
+            continue
+        wanted = set(operands[k][2])
+        found = None
+        for j in range(k - 1, max(-1, k - WAIT_WINDOW), -1):
+            op, written, _read = operands[j]
+            hit = written & wanted
+            if not hit:
+                continue
+            if op in LOADS:
+                found = j
+                break
+            wanted -= hit
+            if not wanted:
+                break
+        if found is None:
+            unattributed += waiting
+            continue
+        by_op[operands[found][0]] += waiting
+        if instr[found][2] is not None:
+            by_line[(operands[found][0],) + instr[found][2]] += waiting
+    return by_op, by_line, unattributed
+
+
 def opcode_of(line: str) -> str:
     m = OPCODE.search(line)
     return m.group(1) if m else ""
@@ -128,6 +199,9 @@ def main(argv=None):
                          "older profile's lines: `git archive COMMIT kernels | tar -x -C DIR`, then DIR/kernels)")
     ap.add_argument("--executed", action="store_true",
                     help="also the warp instructions executed, by opcode, call site and source line")
+    ap.add_argument("--waits-on", action="store_true",
+                    help="also the long-scoreboard samples by the load they wait for (stack, global, ...) and, "
+                         "for the stack's reloads, by the reload's source line")
     args = ap.parse_args(argv)
     samples = read_samples(args.csv)
     cubin = args.cubin
@@ -166,6 +240,14 @@ def main(argv=None):
 
     show("call sites (an instruction counts in every inlined call it sits in)", by_site)
     show("source lines (each instruction once, at its own line)", by_line)
+    if args.waits_on:
+        by_op, by_load_line, unattributed = waits_on(instr, samples)
+        print("\nlong-scoreboard samples by the load waited for (% of all samples): "
+              + ", ".join(f"{op} {100 * n / grand:.1f} %" for op, n in by_op.most_common())
+              + f", not found {100 * unattributed / grand:.1f} %")
+        print("\nthe stack's reloads (LDL) waited for, by the reload's source line (% of all samples)")
+        for (op, name, lineno), n in [(k, v) for k, v in by_load_line.most_common() if k[0] == "LDL"][:args.top]:
+            print(f"{100 * n / grand:6.1f}  {name}:{lineno}  {source_text(args.kernels, name, lineno)}")
     if args.executed:
         executed, by_opcode, ex_site, ex_line = executed_tables(instr, read_executed(args.csv))
         if executed <= 0:

@@ -131,3 +131,57 @@ def test_instructions_executed_are_summed_by_opcode_site_and_line(tmp_path, monk
     (tmp_path / "bare.csv").write_text(CSV)
     with pytest.raises(SystemExit, match="no 'Instructions Executed' column"):
         stall_sites.read_executed(str(tmp_path / "bare.csv"))
+
+
+# a long-scoreboard wait and the load it waits for: DADD reads the pair R4:R5 that the stack
+# reload LDL.64 wrote; DMUL reads R12 (DADD's, not a load: dropped) and R8 (the global load's);
+# FADD reads R2, written by a MOV (no load: the reload of R2 before it is not waited for); the
+# store reads R7 of a 32-bit stack reload
+SASS_WAITS = """\
+\t//## File "/x/kernels/esdirk.py", line 3
+        /*0000*/                   LDL R2, [R1+0x30] ;
+        /*0008*/                   LDL.64 R4, [R1+0x10] ;
+\t//## File "/x/kernels/newton.py", line 8
+        /*0010*/                   LDG.E.64 R8, desc[UR4][R10.64] ;
+        /*0020*/                   MOV R2, R3 ;
+        /*0030*/                   DADD R12, R4, 1 ;
+        /*0040*/                   DMUL R14, R8, R12 ;
+        /*0050*/                   FADD R6, R2, R2 ;
+\t//## File "/x/kernels/gates.py", line 5
+        /*0060*/                   LDL R7, [R1+0x20] ;
+        /*0070*/                   STG.E desc[UR4][R10.64], R7 ;
+"""
+
+CSV_WAITS = """\
+"Kernel Name","integrate",
+"Address","Source","Warp Stall Sampling (All Samples)","stall_long_sb","stall_wait"
+"0x00","      LDL R2, [R1+0x30]","1","0","0"
+"0x00","      LDL.64 R4, [R1+0x10]","1","0","0"
+"0x10","      LDG.E.64 R8, desc[UR4][R10.64]","1","0","0"
+"0x20","      MOV R2, R3","1","0","1"
+"0x30","      DADD R12, R4, 1","20","20","0"
+"0x40","      DMUL R14, R8, R12","12","10","2"
+"0x50","      FADD R6, R2, R2","3","3","0"
+"0x60","      LDL R7, [R1+0x20]","1","0","0"
+"0x70","      STG.E desc[UR4][R10.64], R7","7","7","0"
+"""
+
+
+def test_long_scoreboard_waits_are_given_to_the_load_they_wait_for(tmp_path, monkeypatch, capsys):
+    assert stall_sites.register_operands("/*0000*/ DFMA R2, R4, R6, R2 ;") == ("DFMA", {2, 3}, {2, 3, 4, 5, 6, 7})
+    assert stall_sites.register_operands("/*0000*/ @!P0 LDG.E.128 R8, desc[UR4][R2.64] ;") == ("LDG", {8, 9, 10, 11},
+                                                                                              {2, 3, 4, 5})
+    assert stall_sites.register_operands("/*0000*/ STL [R1+0x8], R5 ;") == ("STL", set(), {1, 5})
+    instr = list(sass_sites.instructions(SASS_WAITS))
+    (tmp_path / "s.csv").write_text(CSV_WAITS)
+    by_op, by_line, unattributed = stall_sites.waits_on(instr, stall_sites.read_samples(str(tmp_path / "s.csv")))
+    assert by_op == {"LDL": 27, "LDG": 10} and unattributed == 3
+    assert by_line == {("LDL", "esdirk.py", 3): 20, ("LDG", "newton.py", 8): 10, ("LDL", "gates.py", 5): 7}
+    (tmp_path / "k.cubin").write_bytes(b"")
+    monkeypatch.setenv("CUDA_BIN", _fake_nvdisasm(tmp_path, SASS_WAITS))
+    stall_sites.main(["--csv", str(tmp_path / "s.csv"), "--cubin", str(tmp_path / "k.cubin"), "--waits-on"])
+    out = capsys.readouterr().out
+    # 47 samples in all: the stack 27 (57.4 %), global 10 (21.3 %), no load 3 (6.4 %)
+    assert "by the load waited for (% of all samples): LDL 57.4 %, LDG 21.3 %, not found 6.4 %" in out
+    reloads = out.split("by the reload's source line")[1].splitlines()[1:3]
+    assert [r.split()[:2] for r in reloads] == [["42.6", "esdirk.py:3"], ["14.9", "gates.py:5"]]
