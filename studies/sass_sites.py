@@ -88,6 +88,61 @@ def call_sites(sass: str) -> tuple:
     return total, counts, by_kind, kind_totals
 
 
+REGISTER = re.compile(r"\bR(\d+)\b")
+STACK_STORE = re.compile(r"\bSTL(\.\d+)?\s+\[R1(?:\+(0x[0-9a-f]+))?\]")
+# how far back (instructions, in address order) a register's writer is looked for
+WRITER_WINDOW = 300
+
+
+def register_operands(line: str) -> tuple:
+    """(opcode without modifiers, registers written, registers read) of one SASS line; a 64-bit
+    operand (FP64 opcodes, .64 memory operations) names a register pair and counts as both
+    registers, a .128 operand as four. Stores, branches and barriers write nothing."""
+    text = OPCODE.search(line)
+    if not text:
+        return "", set(), set()
+    full = text.group(1)
+    op = full.split(".")[0]
+    body = line[text.end():].split(";")[0]
+    operands = [o for o in body.split(",") if o.strip()]
+    width = 4 if ".128" in full else 2 if (".64" in full or op.startswith("D")) else 1
+
+    def regs(texts):
+        return {int(r) + k for t in texts for r in REGISTER.findall(t) for k in range(width)}
+
+    if not operands or op.startswith(("ST", "BRA", "EXIT", "BAR", "RET", "CALL", "BSSY", "BSYNC", "WARPSYNC")):
+        return op, set(), regs(operands)
+    return op, regs(operands[:1]), regs(operands[1:])
+
+
+def stack_bytes(sass: str) -> collections.Counter:
+    """The stack (local memory: spilled registers) by the Python source line of the value first
+    stored in each of its slots: for each stack offset, the first STL to it in address order, and
+    the line of the nearest earlier instruction that wrote the stored register (within
+    WRITER_WINDOW; else the store's own line). Bytes per (file, line); address order is not control
+    flow, so this is a map of what the stack holds, not an exact account."""
+    instr = list(instructions(sass))
+    operands = [register_operands(line) for line, _sites, _where in instr]
+    seen = set()
+    out = collections.Counter()
+    for k, (line, _sites, where) in enumerate(instr):
+        store = STACK_STORE.search(line)
+        if not store:
+            continue
+        offset = int(store.group(2) or "0", 16)
+        if offset in seen:
+            continue
+        seen.add(offset)
+        data = set(REGISTER.findall(line.split("]")[-1]))
+        wanted = {int(r) for r in data}
+        for j in range(k - 1, max(-1, k - WRITER_WINDOW), -1):
+            if operands[j][1] & wanted:
+                where = instr[j][2] or where
+                break
+        out[where] += int(store.group(1)[1:]) // 8 if store.group(1) else 4
+    return out
+
+
 def tool(name: str) -> str:
     """A CUDA binary utility: $CUDA_BIN/name, on the PATH, or /usr/local/cuda/bin/name."""
     if os.environ.get("CUDA_BIN"):
@@ -102,6 +157,8 @@ def main(argv=None):
     ap.add_argument("--top", type=int, default=25)
     ap.add_argument("--relaxation-gate", default="stress")
     ap.add_argument("--arch", type=int, default=None, help="compile ahead of time for this sm (no GPU needed)")
+    ap.add_argument("--stack", action="store_true",
+                    help="also the stack's bytes by the source line of the value first stored in each slot")
     args = ap.parse_args(argv)
     nvdisasm = tool("nvdisasm")
     wp.config.lineinfo = True
@@ -138,6 +195,14 @@ def main(argv=None):
         src = open(path).read().splitlines()[line - 1].strip()[:80] if os.path.exists(path) else ""
         kinds = " ".join(f"{by_kind[k][(name, line)]:7d}" for k in KINDS)
         print(f"{n:7d} {kinds}  {name}:{line}  {src}")
+    if args.stack:
+        slots = stack_bytes(sass)
+        print(f"\nstack bytes {sum(slots.values())}, by the source line of the value first stored in each slot")
+        for where, n in slots.most_common(args.top):
+            name, line = where if where else ("?", 0)
+            path = os.path.join(root, "kernels", name)
+            src = open(path).read().splitlines()[line - 1].strip()[:80] if os.path.exists(path) and line else ""
+            print(f"{n:7d}  {name}:{line}  {src}")
     cuobjdump = tool("cuobjdump")
     if os.path.exists(cuobjdump):
         usage = subprocess.run([cuobjdump, "-res-usage", cubin], capture_output=True, text=True).stdout

@@ -24,13 +24,12 @@ import csv
 import gzip
 import io
 import os
-import re
 import subprocess
 import sys
 import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from sass_sites import OPCODE, instructions, tool  # noqa: E402
+from sass_sites import OPCODE, instructions, register_operands, tool  # noqa: E402
 
 # stall reasons shown apart (ncu's column names, "stall_" dropped); the rest is summed as "other"
 REASONS = ("long_sb", "no_inst", "wait", "short_sb", "branch_resolving", "selected", "math", "lg", "mio", "barrier")
@@ -110,30 +109,6 @@ def stall_tables(instr: list, samples: list) -> tuple:
 LOADS = ("LDL", "LDG", "LD", "LDS", "LDC")
 # how far back (instructions, in address order) waits_on looks for the awaited register's load
 WAIT_WINDOW = 300
-REGISTER = re.compile(r"\bR(\d+)\b")
-
-
-def register_operands(line: str) -> tuple:
-    """(opcode without modifiers, registers written, registers read) of one SASS line; a 64-bit
-    operand (FP64 opcodes, .64 memory operations) names a register pair and counts as both
-    registers, a .128 operand as four. Stores, branches and barriers write nothing."""
-    text = OPCODE.search(line)
-    if not text:
-        return "", set(), set()
-    full = text.group(1)
-    op = full.split(".")[0]
-    body = line[text.end():].split(";")[0]
-    operands = [o for o in body.split(",") if o.strip()]
-    width = 4 if ".128" in full else 2 if (".64" in full or op.startswith("D")) else 1
-
-    def regs(texts):
-        return {int(r) + k for t in texts for r in REGISTER.findall(t) if r != "Z" for k in range(width)}
-
-    if not operands or op.startswith(("ST", "BRA", "EXIT", "BAR", "RET", "CALL", "BSSY", "BSYNC", "WARPSYNC")):
-        return op, set(), regs(operands)
-    return op, regs(operands[:1]), regs(operands[1:])
-
-
 def waits_on(instr: list, samples: list) -> tuple:
     """(by load opcode, by the load's source line, unattributed): the long-scoreboard samples of
     each instruction given to the load that wrote the register it waits for, found as the nearest

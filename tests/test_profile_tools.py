@@ -168,10 +168,10 @@ CSV_WAITS = """\
 
 
 def test_long_scoreboard_waits_are_given_to_the_load_they_wait_for(tmp_path, monkeypatch, capsys):
-    assert stall_sites.register_operands("/*0000*/ DFMA R2, R4, R6, R2 ;") == ("DFMA", {2, 3}, {2, 3, 4, 5, 6, 7})
-    assert stall_sites.register_operands("/*0000*/ @!P0 LDG.E.128 R8, desc[UR4][R2.64] ;") == ("LDG", {8, 9, 10, 11},
+    assert sass_sites.register_operands("/*0000*/ DFMA R2, R4, R6, R2 ;") == ("DFMA", {2, 3}, {2, 3, 4, 5, 6, 7})
+    assert sass_sites.register_operands("/*0000*/ @!P0 LDG.E.128 R8, desc[UR4][R2.64] ;") == ("LDG", {8, 9, 10, 11},
                                                                                               {2, 3, 4, 5})
-    assert stall_sites.register_operands("/*0000*/ STL [R1+0x8], R5 ;") == ("STL", set(), {1, 5})
+    assert sass_sites.register_operands("/*0000*/ STL [R1+0x8], R5 ;") == ("STL", set(), {1, 5})
     instr = list(sass_sites.instructions(SASS_WAITS))
     (tmp_path / "s.csv").write_text(CSV_WAITS)
     by_op, by_line, unattributed = stall_sites.waits_on(instr, stall_sites.read_samples(str(tmp_path / "s.csv")))
@@ -185,3 +185,23 @@ def test_long_scoreboard_waits_are_given_to_the_load_they_wait_for(tmp_path, mon
     assert "by the load waited for (% of all samples): LDL 57.4 %, LDG 21.3 %, not found 6.4 %" in out
     reloads = out.split("by the reload's source line")[1].splitlines()[1:3]
     assert [r.split()[:2] for r in reloads] == [["42.6", "esdirk.py:3"], ["14.9", "gates.py:5"]]
+
+
+# the stack's slots by the value first stored there: 0x8 holds a pair loaded at newton.py 8 (the
+# store itself sits at integrator.py 2), stored again later (not counted twice); 0x10 a 32-bit sum
+# of esdirk.py 4; 0x18 a 128-bit store of a register no instruction before it writes (its own line)
+SASS_STACK = """\
+\t//## File "/x/kernels/newton.py", line 8
+        /*0000*/                   LDG.E.64 R4, desc[UR4][R10.64] ;
+\t//## File "/x/kernels/esdirk.py", line 4
+        /*0010*/                   IADD3 R7, R2, R3, RZ ;
+\t//## File "/x/kernels/integrator.py", line 2
+        /*0020*/                   STL.64 [R1+0x8], R4 ;
+        /*0030*/                   STL [R1+0x10], R7 ;
+        /*0040*/                   STL.64 [R1+0x8], R6 ;
+        /*0050*/                   STL.128 [R1+0x18], R12 ;
+"""
+
+
+def test_stack_bytes_by_the_line_of_the_stored_value():
+    assert sass_sites.stack_bytes(SASS_STACK) == {("newton.py", 8): 8, ("esdirk.py", 4): 4, ("integrator.py", 2): 16}
