@@ -159,22 +159,22 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         diag)|) (diag: step_end[E_DIAG]; in float64 as |e| rho H / (weight |g diag|) where the
         filter is below 1, without a quotient); 1e30 where e is not finite. Returns (top, bottom):
         the sweep's norm is quotient(top, bottom)."""
-        scale = c.values[c.m].u_scale
+        scale = c.u_scale
         num = wp.abs(e)
         den_factor = ft(1.0)
         if comp == C_V:
-            scale = c.values[c.m].v_scale
+            scale = c.v_scale
             if wp.static(ft == wp.float64):
                 diag = wp.abs(g * step_end[E_DIAG, i, m])
-                if diag > c.values[c.m].rhoH:
-                    num = num * c.values[c.m].rhoH
+                if diag > c.rhoH:
+                    num = num * c.rhoH
                     den_factor = diag
             else:
-                num = wp.abs(e * wp.min(ft(1.0), wp.abs(c.values[c.m].rhoH / (g * step_end[E_DIAG, i, m]))))
+                num = wp.abs(e * wp.min(ft(1.0), wp.abs(c.rhoH / (g * step_end[E_DIAG, i, m]))))
         if comp == C_TAU:
-            scale = c.values[c.m].tau_scale
+            scale = c.tau_scale
         if comp == C_PHI:
-            scale = c.values[c.m].phi_scale
+            scale = c.phi_scale
         wgt = rtol * (scale + wp.max(wp.abs(y), wp.abs(y_new)))
         top, bottom = ratio_max(top, bottom, num, wgt * den_factor)
         if not wp.isfinite(e):

@@ -99,8 +99,8 @@ def make_switch_test(ft, model, terms, team, node_sliding):
         rtol = ft(wp.min(settings.switch_rtol, wp.float64(1.0e30)))
         z1 = yield_margin(c, fr.stress, fr.area)
         gates[G_MARGIN_END, i, m] = z1
-        slip = v_disc - c.values[c.m].kif * velocity
-        relax = wp.abs(slip) * c.values[c.m].inv_D
+        slip = v_disc - c.kif * velocity
+        relax = wp.abs(slip) * c.inv_D
         open_now = ft(0.0)
         if z1 > ft(0.0):
             open_now = ft(1.0)
@@ -108,18 +108,18 @@ def make_switch_test(ft, model, terms, team, node_sliding):
             z0 = gates[G_MARGIN, i, m]
             # the switch error per second of wrong gate
             rate = wp.max(
-                wp.abs(fr.elastic_stress) * relax / (rtol * (c.values[c.m].tau_scale + wp.abs(fr.elastic_stress))),
-                fr.contact_age * relax / (rtol * (c.values[c.m].phi_scale + wp.abs(fr.contact_age))),
+                wp.abs(fr.elastic_stress) * relax / (rtol * (c.tau_scale + wp.abs(fr.elastic_stress))),
+                fr.contact_age * relax / (rtol * (c.phi_scale + wp.abs(fr.contact_age))),
             )
             if open_now != fr.gate:
                 # d(dz/dt)/d(gate) at the end of the step: the gate enters the rates of tau_el and phi
                 # (and A through phi); the pad's rates do not depend on it. switch_gates reads it where
                 # the gate changes, which for a node not sliding is here (its new gate is open_now)
-                darea_dgate = fr.contact * sigma * c.values[c.m].inv_hardness * c.values[c.m].b / (c.values[c.m].phi0 + fr.contact_age) * (-fr.contact_age * relax)
+                darea_dgate = fr.contact * sigma * c.inv_hardness * c.b / (c.phi0 + fr.contact_age) * (-fr.contact_age * relax)
                 dtau_dgate = -fr.elastic_stress * relax
                 if wp.static(viscous):
-                    dtau_dgate += c.values[c.m].eta_vstar * wp.sign(slip) * wp.log(ft(1.0) + wp.abs(slip) / c.values[c.m].vstar) * darea_dgate
-                gates[G_DMARGIN, i, m] = wp.sign(fr.stress) * dtau_dgate - c.values[c.m].tau_c * darea_dgate
+                    dtau_dgate += c.eta_vstar * wp.sign(slip) * wp.log(ft(1.0) + wp.abs(slip) / c.vstar) * darea_dgate
+                gates[G_DMARGIN, i, m] = wp.sign(fr.stress) * dtau_dgate - c.tau_c * darea_dgate
                 theta = ft(0.0)
                 if z0 != z1:
                     theta = wp.clamp(z0 / (z0 - z1), ft(0.0), ft(1.0))
@@ -317,7 +317,7 @@ def make_gate_update(ft, terms, team):
                             new_sliding = ft(1.0)
                             new_gate = wp.clamp(gate + (-z1 / h - r_obs) / dr, ft(0.0), ft(1.0))  # start value
             if new_gate != gate:
-                relax = (new_gate - gate) * wp.abs(v_disc - c.values[c.m].kif * state[C_V, i, m]) * c.values[c.m].inv_D
+                relax = (new_gate - gate) * wp.abs(v_disc - c.kif * state[C_V, i, m]) * c.inv_D
                 K[slot, C_TAU, i, m] = K[slot, C_TAU, i, m] - state[C_TAU, i, m] * relax
                 K[slot, C_PHI, i, m] = K[slot, C_PHI, i, m] - state[C_PHI, i, m] * relax
             if gate_regime(new_gate, new_sliding) != gate_regime(gate, sliding):

@@ -327,7 +327,6 @@ def _make_integrator(dtype: str, model, lanes: int, method: str = "tr_bdf2", opt
     integrate = make_integrate_kernel(ft, model, lanes, method, stages, acceptance, options, blocked, shared_work)
     evaluate_fields = make_field_kernel(ft, stages)
     return dict(integrate=integrate, evaluate_fields=evaluate_fields, ft=ft, stages=stages,
-                member_coefficients=stages["terms"]["member_coefficients"], CoeffValues=stages["terms"]["CoeffValues"],
                 layout=make_layout_kernels(ft),
                 exchange=(options.exchange or "tile") if lanes > 1 else "none",
                 blocked=blocked, shared_work=shared_work)
@@ -406,8 +405,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     n_slots = stage_slots(method)
     step_factor = step_factor_for(method)
     stress_gate = model.relaxation_gate == "stress"
-    member_coeffs = stages["terms"]["member_coeffs"]
-    CoeffValues = stages["terms"]["CoeffValues"]
+    make_coeffs = stages["terms"]["make_coeffs"]
     esdirk = stages["esdirk"]
     implicit_step = esdirk["implicit_step"]
     esdirk4_step = esdirk.get("esdirk4_step", implicit_step)
@@ -436,7 +434,6 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     def integrate(
         # inputs
         params: wp.array(dtype=MemberParams),
-        coeff_values: wp.array(dtype=CoeffValues),
         settings: SolverSettings,
         outputs: OutputSettings,
         launch_steps: int,
@@ -502,7 +499,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
             return
         p = params[m]
         n = state.shape[1]
-        c = member_coeffs(coeff_values, m, n)
+        c = make_coeffs(p, n)
         if wp.static(team_on):
             c.lane = lane
             first_node, end_node = node_range(lane, lanes, n)
@@ -622,8 +619,7 @@ def member_columns(source: wp.array2d(dtype=wp.float64), kernel_member: wp.array
 
 def make_field_kernel(ft, stages):
     """The evaluate_fields kernel: the interface stresses of the current state."""
-    member_coeffs = stages["terms"]["member_coeffs"]
-    CoeffValues = stages["terms"]["CoeffValues"]
+    make_coeffs = stages["terms"]["make_coeffs"]
     state_displacement = stages["observers"]["state_displacement"]
     state_contact = stages["observers"]["state_contact"]
     array3 = wp.array3d(dtype=ft)
@@ -631,7 +627,6 @@ def make_field_kernel(ft, stages):
     @wp.kernel(module="unique", enable_backward=False)
     def evaluate_fields(
         params: wp.array(dtype=MemberParams),
-        coeff_values: wp.array(dtype=CoeffValues),
         member_states: wp.array(dtype=IntegratorState),
         state: array3,
         row_of: wp.array(dtype=wp.int32),
@@ -646,7 +641,7 @@ def make_field_kernel(ft, stages):
         st = member_states[m]
         p = params[m]
         n = state.shape[1]
-        c = member_coeffs(coeff_values, m, n)
+        c = make_coeffs(p, n)
         delta0 = ft(st.delta0)
         tilt = ft(st.tilt)
         v_disc = ft(disc_velocity_at(p, st.t, st.t))

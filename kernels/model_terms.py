@@ -16,7 +16,6 @@ the free edges, so the elastic force sums to zero over the pad exactly.
 """
 
 
-import functools
 from typing import Any
 
 import warp as wp
@@ -191,19 +190,12 @@ def normal_force_piece(p: MemberParams, t: wp.float64, step_start: wp.float64):
     return p.normal_force * t / p.force_ramp_time
 
 
-@functools.cache  # one struct type per precision: the kernels of every model share it
 def make_coefficients(ft):
-    """The per-member coefficients (CoeffValues, in the working precision ``ft``), make_coeff_values,
-    which derives them from a member's MemberParams (float64, SI units) for a grid of n nodes, and
-    the handle a thread reads them through (Coeffs: its member's row of a (member,) table of
-    CoeffValues, and the thread's nodes; member_coeffs makes one).
-
-    The values stay in memory and are read where they are used (``c.values[c.m].G``), not copied
-    into every lane of a team: member-uniform values held in registers are spilled to each lane's
-    stack, 32 copies per member (docs/performance.md, "What the memory waits wait for")."""
+    """The per-member coefficients (Coeffs, in the working precision ``ft``) and make_coeffs, which
+    derives them from a member's MemberParams (float64, SI units) for a grid of n nodes."""
 
     @wp.struct
-    class CoeffValues:
+    class Coeffs:
         """Per-member coefficients in the working precision (SI units)."""
 
         MH: ft  # P-wave modulus times height, N/m
@@ -236,13 +228,6 @@ def make_coefficients(ft):
         phi_scale: ft
         delta_scale: ft
         tilt_scale: ft
-
-    @wp.struct
-    class Coeffs:
-        """What a thread of member m reads its coefficients through, and the nodes it works on."""
-
-        values: wp.array(dtype=CoeffValues)  # (member,): the coefficients of every member of the launch
-        m: wp.int32  # the member: its coefficients are values[m]
         # the nodes this thread works on, [first_node, end_node), and its lane in the member's team
         # (kernels/team.py; all nodes and lane 0 for the thread-per-member kernel)
         first_node: wp.int32
@@ -250,20 +235,8 @@ def make_coefficients(ft):
         lane: wp.int32
 
     @wp.func
-    def member_coeffs(values: wp.array(dtype=CoeffValues), m: int, n: int):
-        """The handle of member m's coefficients for a thread that works on all n nodes (lane 0)."""
+    def make_coeffs(p: MemberParams, n: int):
         c = Coeffs()
-        c.values = values
-        c.m = m
-        c.first_node = 0
-        c.end_node = n
-        c.lane = 0
-        return c
-
-    @wp.func
-    def make_coeff_values(p: MemberParams, n: int):
-        """A member's coefficients for a grid of n nodes."""
-        c = CoeffValues()
         nu = p.poisson_ratio
         M = wp.float64(2.0) * p.shear_modulus * (wp.float64(1.0) - nu) / (wp.float64(1.0) - wp.float64(2.0) * nu)
         lam = wp.float64(2.0) * p.shear_modulus * nu / (wp.float64(1.0) - wp.float64(2.0) * nu)
@@ -304,16 +277,12 @@ def make_coefficients(ft):
         c.phi_scale = ft(p.aging_time)
         c.delta_scale = ft(sigma0 / M * p.height)
         c.tilt_scale = ft(sigma0 / M * p.height / p.length)
+        c.first_node = 0
+        c.end_node = n
+        c.lane = 0
         return c
 
-    @wp.kernel(module="unique", enable_backward=False)
-    def member_coefficients(params: wp.array(dtype=MemberParams), n: int, values: wp.array(dtype=CoeffValues)):
-        """values[m]: member m's coefficients for a grid of n nodes (the table Coeffs reads)."""
-        m = wp.tid()
-        values[m] = make_coeff_values(params[m], n)
-
-    return dict(Coeffs=Coeffs, CoeffValues=CoeffValues, member_coeffs=member_coeffs,
-                make_coeff_values=make_coeff_values, member_coefficients=member_coefficients)
+    return dict(Coeffs=Coeffs, make_coeffs=make_coeffs)
 
 
 def make_grid(ft, Coeffs):
@@ -322,24 +291,24 @@ def make_grid(ft, Coeffs):
     @wp.func
     def node_x(c: Coeffs, i: int):
         """Position of node i, m."""
-        return ft(-0.5) * c.values[c.m].L + ft(float(i)) * c.values[c.m].dx
+        return ft(-0.5) * c.L + ft(float(i)) * c.dx
 
     @wp.func
     def node_weight(c: Coeffs, i: int, n: int):
         """Control-volume width w_i (trapezoid weight for integrals over x), m."""
         if i == 0 or i == n - 1:
-            return ft(0.5) * c.values[c.m].dx
-        return c.values[c.m].dx
+            return ft(0.5) * c.dx
+        return c.dx
 
     @wp.func
     def node_moment_weight(c: Coeffs, i: int, n: int):
         """Weight W1_i with sum_i W1_i f_i = integral x f(x) dx exactly for piecewise-linear f, m^2."""
         x = node_x(c, i)
         if i == 0:
-            return c.values[c.m].dx * (ft(0.5) * x + c.values[c.m].dx / ft(6.0))
+            return c.dx * (ft(0.5) * x + c.dx / ft(6.0))
         if i == n - 1:
-            return c.values[c.m].dx * (ft(0.5) * x - c.values[c.m].dx / ft(6.0))
-        return x * c.values[c.m].dx
+            return c.dx * (ft(0.5) * x - c.dx / ft(6.0))
+        return x * c.dx
 
     return dict(node_x=node_x, node_weight=node_weight, node_moment_weight=node_moment_weight)
 
@@ -383,35 +352,35 @@ def make_elastic_stencil(ft, model, Coeffs, node_x):
         the two faces of the control volume; on a free edge the face strain is
         lambda*delta(edge)/(M*H) (zero axial force)."""
         x = node_x(c, i)
-        sigma = c.values[c.m].M_over_H * (delta0 - tilt * x)
-        d_d0 = c.values[c.m].M_over_H
-        d_a = -c.values[c.m].M_over_H * x
+        sigma = c.M_over_H * (delta0 - tilt * x)
+        d_d0 = c.M_over_H
+        d_a = -c.M_over_H * x
         d_ul = ft(0.0)
         d_uc = ft(0.0)
         d_ur = ft(0.0)
         if wp.static(poisson):
             # eps = k_if * (e_left + e_right) / 2, sigma -= lam * eps
-            f = ft(0.5) * c.values[c.m].kif * c.values[c.m].lam
+            f = ft(0.5) * c.kif * c.lam
             e_l = ft(0.0)
             e_r = ft(0.0)
             if i == 0:
-                x_edge = ft(-0.5) * c.values[c.m].L
-                e_l = c.values[c.m].lam * (delta0 - tilt * x_edge) / c.values[c.m].MH
-                d_d0 -= f * c.values[c.m].lam / c.values[c.m].MH
-                d_a += f * c.values[c.m].lam * x_edge / c.values[c.m].MH
+                x_edge = ft(-0.5) * c.L
+                e_l = c.lam * (delta0 - tilt * x_edge) / c.MH
+                d_d0 -= f * c.lam / c.MH
+                d_a += f * c.lam * x_edge / c.MH
             else:
-                e_l = (u_c - u_l) * c.values[c.m].inv_dx
-                d_ul += f * c.values[c.m].inv_dx
-                d_uc -= f * c.values[c.m].inv_dx
+                e_l = (u_c - u_l) * c.inv_dx
+                d_ul += f * c.inv_dx
+                d_uc -= f * c.inv_dx
             if i == n - 1:
-                x_edge = ft(0.5) * c.values[c.m].L
-                e_r = c.values[c.m].lam * (delta0 - tilt * x_edge) / c.values[c.m].MH
-                d_d0 -= f * c.values[c.m].lam / c.values[c.m].MH
-                d_a += f * c.values[c.m].lam * x_edge / c.values[c.m].MH
+                x_edge = ft(0.5) * c.L
+                e_r = c.lam * (delta0 - tilt * x_edge) / c.MH
+                d_d0 -= f * c.lam / c.MH
+                d_a += f * c.lam * x_edge / c.MH
             else:
-                e_r = (u_r - u_c) * c.values[c.m].inv_dx
-                d_uc += f * c.values[c.m].inv_dx
-                d_ur -= f * c.values[c.m].inv_dx
+                e_r = (u_r - u_c) * c.inv_dx
+                d_uc += f * c.inv_dx
+                d_ur -= f * c.inv_dx
             sigma -= f * (e_l + e_r)
         return stencil_term(sigma, d_ul, d_uc, d_ur, d_d0, d_a)
 
@@ -419,40 +388,40 @@ def make_elastic_stencil(ft, model, Coeffs, node_x):
     def elastic_force(c: Coeffs, i: int, n: int, u_l: ft, u_c: ft, u_r: ft, delta0: ft, tilt: ft):
         """Elastic force density on node i (Pa): dN/dx - (2G/H)*u + G*a, and its derivatives with
         respect to u_{i-1}, u_i, u_{i+1}, delta0 and a."""
-        k = c.values[c.m].MH * c.values[c.m].inv_dx
+        k = c.MH * c.inv_dx
         div = ft(0.0)
         d_ul = ft(0.0)
         d_uc = ft(0.0)
         d_ur = ft(0.0)
         d_d0 = ft(0.0)
-        d_a = c.values[c.m].G
+        d_a = c.G
         if i > 0 and i < n - 1:
             # interior: (N_{i+1/2} - N_{i-1/2})/dx, the lambda*delta terms give exactly lambda*a
-            div = k * (u_r - ft(2.0) * u_c + u_l) * c.values[c.m].inv_dx + c.values[c.m].lam * tilt
-            d_ul = k * c.values[c.m].inv_dx
-            d_ur = k * c.values[c.m].inv_dx
-            d_uc = ft(-2.0) * k * c.values[c.m].inv_dx
-            d_a += c.values[c.m].lam
+            div = k * (u_r - ft(2.0) * u_c + u_l) * c.inv_dx + c.lam * tilt
+            d_ul = k * c.inv_dx
+            d_ur = k * c.inv_dx
+            d_uc = ft(-2.0) * k * c.inv_dx
+            d_a += c.lam
         else:
-            w = ft(0.5) * c.values[c.m].dx
+            w = ft(0.5) * c.dx
             if i == 0:
-                x_face = node_x(c, 0) + ft(0.5) * c.values[c.m].dx
-                flux = k * (u_r - u_c) - c.values[c.m].lam * (delta0 - tilt * x_face)
+                x_face = node_x(c, 0) + ft(0.5) * c.dx
+                flux = k * (u_r - u_c) - c.lam * (delta0 - tilt * x_face)
                 div = flux / w
                 d_ur = k / w
                 d_uc = -k / w
-                d_d0 = -c.values[c.m].lam / w
-                d_a += c.values[c.m].lam * x_face / w
+                d_d0 = -c.lam / w
+                d_a += c.lam * x_face / w
             else:
-                x_face = node_x(c, n - 1) - ft(0.5) * c.values[c.m].dx
-                flux = k * (u_c - u_l) - c.values[c.m].lam * (delta0 - tilt * x_face)
+                x_face = node_x(c, n - 1) - ft(0.5) * c.dx
+                flux = k * (u_c - u_l) - c.lam * (delta0 - tilt * x_face)
                 div = -flux / w
                 d_ul = k / w
                 d_uc = -k / w
-                d_d0 = c.values[c.m].lam / w
-                d_a -= c.values[c.m].lam * x_face / w
-        force = div - c.values[c.m].two_G_over_H * u_c + c.values[c.m].G * tilt
-        d_uc -= c.values[c.m].two_G_over_H
+                d_d0 = c.lam / w
+                d_a -= c.lam * x_face / w
+        force = div - c.two_G_over_H * u_c + c.G * tilt
+        d_uc -= c.two_G_over_H
         if wp.static(not tilt_on):
             d_a = ft(0.0)
         return stencil_term(force, d_ul, d_uc, d_ur, d_d0, d_a)
@@ -496,46 +465,46 @@ def make_friction_at_gate(ft, model, Coeffs):
         r = a_s * gate
         dr_ds = sg * gate
         if wp.static(velocity_gate):
-            r = wp.sqrt(s * s + c.values[c.m].v0 * c.values[c.m].v0)
+            r = wp.sqrt(s * s + c.v0 * c.v0)
             dr_ds = s / r
-        den = ft(1.0) + g * r * c.values[c.m].inv_D
+        den = ft(1.0) + g * r * c.inv_D
         inv_den = ft(1.0) / den
         phi = over_den(z_phi + g, den, inv_den)
-        dphi_ds = over_den(-phi * g * dr_ds * c.values[c.m].inv_D, den, inv_den)
-        dphi_dgate = over_den(-phi * g * a_s * c.values[c.m].inv_D, den, inv_den)
+        dphi_ds = over_den(-phi * g * dr_ds * c.inv_D, den, inv_den)
+        dphi_dgate = over_den(-phi * g * a_s * c.inv_D, den, inv_den)
         contact = ft(0.0)
         if sigma >= ft(0.0):
             contact = ft(1.0)
         sigma_c = sigma * contact
-        aging = ft(1.0) + c.values[c.m].b * wp.log(ft(1.0) + over_den(phi, c.values[c.m].phi0, c.values[c.m].inv_phi0))
-        age_den = c.values[c.m].phi0 + phi  # s
-        slip_den = c.values[c.m].vstar + a_s  # m/s
+        aging = ft(1.0) + c.b * wp.log(ft(1.0) + over_den(phi, c.phi0, c.inv_phi0))
+        age_den = c.phi0 + phi  # s
+        slip_den = c.vstar + a_s  # m/s
         inv_dens = ft(1.0)  # float64 with the viscous term: 1/(age_den*slip_den), one division for both
         if wp.static(viscous and ft == wp.float64):
             inv_dens = ft(1.0) / (age_den * slip_den)
-            daging_dphi = c.values[c.m].b * slip_den * inv_dens
+            daging_dphi = c.b * slip_den * inv_dens
         else:
-            daging_dphi = c.values[c.m].b / age_den
-        area = sigma_c * c.values[c.m].inv_hardness * aging
-        darea_dsigma = contact * c.values[c.m].inv_hardness * aging
-        darea_dphi = sigma_c * c.values[c.m].inv_hardness * daging_dphi
+            daging_dphi = c.b / age_den
+        area = sigma_c * c.inv_hardness * aging
+        darea_dsigma = contact * c.inv_hardness * aging
+        darea_dphi = sigma_c * c.inv_hardness * daging_dphi
         darea_ds = darea_dphi * dphi_ds
         darea_dgate = darea_dphi * dphi_dgate
-        tau_el = over_den(z_tau + g * c.values[c.m].Kh * area * s, den, inv_den)
-        dtel_darea = over_den(g * c.values[c.m].Kh * s, den, inv_den)
-        dtel_ds = over_den(g * c.values[c.m].Kh * area - tau_el * g * dr_ds * c.values[c.m].inv_D, den, inv_den)
-        dtel_dgate = over_den(-tau_el * g * a_s * c.values[c.m].inv_D, den, inv_den)
+        tau_el = over_den(z_tau + g * c.Kh * area * s, den, inv_den)
+        dtel_darea = over_den(g * c.Kh * s, den, inv_den)
+        dtel_ds = over_den(g * c.Kh * area - tau_el * g * dr_ds * c.inv_D, den, inv_den)
+        dtel_dgate = over_den(-tau_el * g * a_s * c.inv_D, den, inv_den)
         tau_f = tau_el
         dtf_darea = dtel_darea
         dtf_ds = dtel_ds
         if wp.static(viscous):
-            lg = wp.log(ft(1.0) + over_den(a_s, c.values[c.m].vstar, c.values[c.m].inv_vstar))
-            tau_f += c.values[c.m].eta_vstar * area * sg * lg
-            dtf_darea += c.values[c.m].eta_vstar * sg * lg
+            lg = wp.log(ft(1.0) + over_den(a_s, c.vstar, c.inv_vstar))
+            tau_f += c.eta_vstar * area * sg * lg
+            dtf_darea += c.eta_vstar * sg * lg
             if wp.static(ft == wp.float64):
-                dtf_ds += c.values[c.m].eta_vstar * area * age_den * inv_dens
+                dtf_ds += c.eta_vstar * area * age_den * inv_dens
             else:
-                dtf_ds += c.values[c.m].eta_vstar * area / slip_den
+                dtf_ds += c.eta_vstar * area / slip_den
         dtf_ds += dtf_darea * darea_ds
         dtf_dsigma = dtf_darea * darea_dsigma
         dtf_dgate = dtel_dgate + dtf_darea * darea_dgate
@@ -545,8 +514,8 @@ def make_friction_at_gate(ft, model, Coeffs):
         out.d_slip = dtf_ds
         out.elastic_stress = tau_el
         out.contact_age = phi
-        out.elastic_stress_rate = c.values[c.m].Kh * area * s - tau_el * r * c.values[c.m].inv_D
-        out.contact_age_rate = ft(1.0) - phi * r * c.values[c.m].inv_D
+        out.elastic_stress_rate = c.Kh * area * s - tau_el * r * c.inv_D
+        out.contact_age_rate = ft(1.0) - phi * r * c.inv_D
         out.contact = contact
         out.area = area
         out.d_area_normal = darea_dsigma
@@ -568,7 +537,7 @@ def make_friction_law(ft, model, Coeffs, friction_at_gate):
     @wp.func
     def sliding_gate_of(c: Coeffs, tau_f: ft, area: ft, scale: ft):
         """theta_w(x) and d theta_w/dx at x = (|tau_f|/A - tau_c)*scale, theta_w = (1 + tanh x)/2."""
-        x = (wp.abs(tau_f) / area - c.values[c.m].tau_c) * scale
+        x = (wp.abs(tau_f) / area - c.tau_c) * scale
         th = wp.tanh(x)
         return ft(0.5) * (ft(1.0) + th), ft(0.5) * (ft(1.0) - th * th)
 
@@ -599,11 +568,11 @@ def make_friction_law(ft, model, Coeffs, friction_at_gate):
 
         Returns a Friction (d_slip and d_normal total, including a sliding gate's response).
         """
-        s = v_disc - c.values[c.m].kif * velocity
+        s = v_disc - c.kif * velocity
         fr = friction_at_gate(c, sigma, s, z_tau, z_phi, g, gate)
         if wp.static(stress_gate):
             if sliding > ft(0.0) and g > ft(0.0) and fr.area > ft(0.0):
-                scale = ft(1.0) / (width * c.values[c.m].tau_c)
+                scale = ft(1.0) / (width * c.tau_c)
                 dF_dgate = ft(1.0)
                 dtheta = ft(0.0)
                 for _it in range(SLIDING_NEWTON_ITERATIONS):
@@ -634,7 +603,7 @@ def make_friction_law(ft, model, Coeffs, friction_at_gate):
         """|tau_f| - tau_c*A (Pa): the stress gate is open where this is > 0, i.e. where the
         asperity-level stress |tau_f|/A exceeds tau_c; a point without contact area (A = 0) that still
         carries a friction stress is open (the limit A -> 0+), one carrying none is closed."""
-        return wp.abs(tau_f) - c.values[c.m].tau_c * area
+        return wp.abs(tau_f) - c.tau_c * area
 
     return dict(interface_friction=interface_friction, yield_margin=yield_margin)
 
@@ -669,9 +638,7 @@ def make_model_terms(ft, model):
         Coeffs=Coeffs,
         StencilTerm=stencil["StencilTerm"],
         Friction=at_gate["Friction"],
-        CoeffValues=coefficients["CoeffValues"],
-        member_coeffs=coefficients["member_coeffs"],
-        member_coefficients=coefficients["member_coefficients"],
+        make_coeffs=coefficients["make_coeffs"],
         node_x=grid["node_x"],
         node_weight=grid["node_weight"],
         node_moment_weight=grid["node_moment_weight"],

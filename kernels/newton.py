@@ -394,16 +394,16 @@ def make_stage_equations(ft, model, terms, gates, method="tr_bdf2"):
         sigma = ns.value
         ef = elastic_force(c, i, n, u_l, u_c, u_r, delta0, tilt)
         row = NodeRow()
-        residual = -(ef.value + fr.stress - c.values[c.m].damping * vel)
-        jac_c = -g * (ef.d_u_center + fr.d_normal * ns.d_u_center) + c.values[c.m].kif * fr.d_slip + c.values[c.m].damping
+        residual = -(ef.value + fr.stress - c.damping * vel)
+        jac_c = -g * (ef.d_u_center + fr.d_normal * ns.d_u_center) + c.kif * fr.d_slip + c.damping
         if wp.static(inertia):
             if wp.static(ft == wp.float64):  # one quotient, the same for every node (the compiler may hoist it)
-                rhoH_over_g = c.values[c.m].rhoH / g
+                rhoH_over_g = c.rhoH / g
                 residual += rhoH_over_g * (vel - work[W_ZV, i, m])
                 jac_c += rhoH_over_g
             else:
-                residual += c.values[c.m].rhoH * (vel - work[W_ZV, i, m]) / g
-                jac_c += c.values[c.m].rhoH / g
+                residual += c.rhoH * (vel - work[W_ZV, i, m]) / g
+                jac_c += c.rhoH / g
         row.residual = residual
         row.jac_center = jac_c
         row.jac_left = -g * (ef.d_u_left + fr.d_normal * ns.d_u_left)
@@ -414,24 +414,24 @@ def make_stage_equations(ft, model, terms, gates, method="tr_bdf2"):
         wgt = node_weight(c, i, n)
         wmom = node_moment_weight(c, i, n)
         row.e1 = wgt * fr.contact * sigma
-        row.e2 = wmom * fr.contact * sigma + c.values[c.m].h_arm * wgt * fr.stress
+        row.e2 = wmom * fr.contact * sigma + c.h_arm * wgt * fr.stress
         row.d11 = wgt * fr.contact * ns.d_delta0
         row.d12 = wgt * fr.contact * ns.d_tilt
-        row.d21 = (wmom * fr.contact + c.values[c.m].h_arm * wgt * fr.d_normal) * ns.d_delta0
-        row.d22 = (wmom * fr.contact + c.values[c.m].h_arm * wgt * fr.d_normal) * ns.d_tilt
+        row.d21 = (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * ns.d_delta0
+        row.d22 = (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * ns.d_tilt
         q1 = wgt * fr.contact * g
-        q2 = (wmom * fr.contact + c.values[c.m].h_arm * wgt * fr.d_normal) * g
+        q2 = (wmom * fr.contact + c.h_arm * wgt * fr.d_normal) * g
         row.c1_left = q1 * ns.d_u_left
         row.c1_center = q1 * ns.d_u_center
         row.c1_right = q1 * ns.d_u_right
         row.c2_left = q2 * ns.d_u_left
-        row.c2_center = q2 * ns.d_u_center - c.values[c.m].h_arm * wgt * c.values[c.m].kif * fr.d_slip
+        row.c2_center = q2 * ns.d_u_center - c.h_arm * wgt * c.kif * fr.d_slip
         row.c2_right = q2 * ns.d_u_right
         # where Newton's contraction is no guide (kernels/newton.py newton_solve): a kink of the
         # equations, i.e. a lifted-off node, a node sliding on the yield surface, or a slip that
         # changed sign against the stage constant's (|s| in the relaxation, sign(s) in the viscous term)
-        slip = v_disc - c.values[c.m].kif * vel
-        slip_start = v_disc - c.values[c.m].kif * work[W_ZV, i, m]
+        slip = v_disc - c.kif * vel
+        slip_start = v_disc - c.kif * work[W_ZV, i, m]
         row.kink = ft(0.0)
         if sigma <= ft(0.0) or node_sliding(gates, i, m) > ft(0.0) or slip * slip_start <= ft(0.0):
             row.kink = ft(1.0)
@@ -643,8 +643,8 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
             u = work[W_ZU, i, m] + g * vel
             if not wp.isfinite(dv):
                 finite = False
-            top, bottom = ratio_max(top, bottom, wp.abs(dv), rtol * (c.values[c.m].v_scale + wp.abs(vel)))
-            top, bottom = ratio_max(top, bottom, g * wp.abs(dv), rtol * (c.values[c.m].u_scale + wp.abs(u)))
+            top, bottom = ratio_max(top, bottom, wp.abs(dv), rtol * (c.v_scale + wp.abs(vel)))
+            top, bottom = ratio_max(top, bottom, g * wp.abs(dv), rtol * (c.u_scale + wp.abs(u)))
         return quotient(top, bottom), finite
 
     @wp.func
@@ -704,8 +704,8 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
                 finite = wp.isfinite(norm)
             delta0 = delta0 + d_delta0
             tilt = tilt + d_tilt
-            norm = wp.max(norm, wp.abs(d_delta0) / (rtol * (c.values[c.m].delta_scale + wp.abs(delta0))))
-            norm = wp.max(norm, wp.abs(d_tilt) / (rtol * (c.values[c.m].tilt_scale + wp.abs(tilt))))
+            norm = wp.max(norm, wp.abs(d_delta0) / (rtol * (c.delta_scale + wp.abs(delta0))))
+            norm = wp.max(norm, wp.abs(d_tilt) / (rtol * (c.tilt_scale + wp.abs(tilt))))
             if not finite or not wp.isfinite(norm):
                 non_finite = 1
                 break

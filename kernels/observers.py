@@ -309,7 +309,7 @@ def make_recording(ft, terms, team, interface):
             vel = state[C_V, i, m]
             ns, fr = state_contact(c, state, i, n, m, u_l, u_c, u_r, delta0, tilt, v_disc)
             sigma = ns.value
-            current = wp.vector(vel, v_disc - c.values[c.m].kif * vel, fr.contact * sigma, fr.stress, length=4, dtype=ft)
+            current = wp.vector(vel, v_disc - c.kif * vel, fr.contact * sigma, fr.stress, length=4, dtype=ft)
             for k in range(st.record_next, k_end):
                 frac = ft(1.0)
                 if span > wp.float64(0.0):

@@ -15,7 +15,6 @@ import warpfric as wf
 from warpfric.engine import cpu_blocks, member_params, solver_settings
 from warpfric.kernels import controller, esdirk, types
 from warpfric.kernels.integrator import make_stages
-from warpfric.kernels.model_terms import make_coefficients
 from warpfric.kernels.observers import friction_point
 from warpfric.members import resolve_members
 
@@ -37,29 +36,17 @@ _TERM_OUTPUTS = ("sigma", "sigma_ul", "sigma_uc", "sigma_ur", "sigma_d0", "sigma
                  "tau_f", "tau_f_sigma", "tau_f_slip", "gate_used")
 
 
-CoeffValues = make_coefficients(f64)["CoeffValues"]
-
-
-def _coefficients(params, nodes):
-    """The (member,) table of the members' coefficients (kernels/model_terms.py member_coefficients)."""
-    values = wp.empty(params.shape[0], dtype=CoeffValues, device=DEVICE)
-    wp.launch(make_coefficients(f64)["member_coefficients"], dim=params.shape[0], inputs=[params, nodes],
-              outputs=[values], device=DEVICE)
-    return values
-
-
 def _terms_kernel(model):
     stages = make_stages(f64, model)
     terms = stages["terms"]
-    member_coeffs, normal_stress = terms["member_coeffs"], terms["normal_stress"]
+    make_coeffs, normal_stress = terms["make_coeffs"], terms["normal_stress"]
     elastic_force, interface_friction = terms["elastic_force"], terms["interface_friction"]
 
     @wp.kernel(module="unique")
-    def evaluate(params: wp.array(dtype=types.MemberParams), values: wp.array(dtype=CoeffValues), nodes: int,
-                 node: wp.array(dtype=int),
+    def evaluate(params: wp.array(dtype=types.MemberParams), nodes: int, node: wp.array(dtype=int),
                  x: wp.array2d(dtype=f64), out: wp.array2d(dtype=f64)):
         k = wp.tid()
-        c = member_coeffs(values, 0, nodes)
+        c = make_coeffs(params[0], nodes)
         i = node[k]
         ns = normal_stress(c, i, nodes, x[k, 0], x[k, 1], x[k, 2], x[k, 3], x[k, 4])
         ef = elastic_force(c, i, nodes, x[k, 0], x[k, 1], x[k, 2], x[k, 3], x[k, 4])
@@ -78,7 +65,7 @@ def _evaluate_terms(kernel, params, nodes, node, x):
     x = np.atleast_2d(np.asarray(x, dtype=np.float64))
     node = np.broadcast_to(np.asarray(node, dtype=np.int32), (x.shape[0],)).copy()
     out = wp.zeros((x.shape[0], len(_TERM_OUTPUTS)), dtype=f64, device=DEVICE)
-    wp.launch(kernel, dim=x.shape[0], inputs=[params, _coefficients(params, nodes), nodes, wp.array(node, dtype=int, device=DEVICE),
+    wp.launch(kernel, dim=x.shape[0], inputs=[params, nodes, wp.array(node, dtype=int, device=DEVICE),
                                                wp.array(x, dtype=f64, device=DEVICE), out], device=DEVICE)
     return dict(zip(_TERM_OUTPUTS, out.numpy().T))
 
@@ -578,11 +565,10 @@ def test_kernel_structs_stay_in_step_with_the_public_parameters():
 def _fronts_kernel():
     stages = make_stages(f64, wf.Model())
     track_fronts = stages["observers"]["track_fronts"]
-    member_coeffs = stages["terms"]["member_coeffs"]
+    make_coeffs = stages["terms"]["make_coeffs"]
 
     @wp.kernel(module="unique")
-    def sweep(params: wp.array(dtype=types.MemberParams), values: wp.array(dtype=CoeffValues),
-              states: wp.array(dtype=types.IntegratorState),
+    def sweep(params: wp.array(dtype=types.MemberParams), states: wp.array(dtype=types.IntegratorState),
               crossing: wp.array(dtype=f64), slope: wp.array(dtype=f64), curvature: f64, contact: wp.array(dtype=f64),
               h: f64, steps: int, use_stage2: int, K: wp.array4d(dtype=f64), step_end: wp.array3d(dtype=f64),
               arrival: wp.array3d(dtype=f64), arrival_error: wp.array3d(dtype=f64)):
@@ -605,7 +591,7 @@ def _fronts_kernel():
                 K[0, types.C_U, i, 0] = -(level + slope[i] * d0 + curvature * d0 * d0)
                 K[1, types.C_U, i, 0] = -(level + slope[i] * dm + curvature * dm * dm)
                 K[2, types.C_U, i, 0] = -(level + slope[i] * d1 + curvature * d1 * d1)
-            st = track_fronts(member_coeffs(values, 0, n), params[0], st, 0, n, K, step_end, 0, 1, 2, t_old, t_new, arrival, arrival_error, 0,
+            st = track_fronts(make_coeffs(params[0], n), params[0], st, 0, n, K, step_end, 0, 1, 2, t_old, t_new, arrival, arrival_error, 0,
                               f64(0.4), use_stage2)
         states[0] = st
 
@@ -633,9 +619,8 @@ def test_front_observer_on_a_synthetic_field(use_stage2):
                   arrival=wp.full((types.N_EVENTS, n, 1), np.nan, dtype=f64, device=DEVICE),
                   arrival_error=wp.full((types.N_EVENTS, n, 1), np.nan, dtype=f64, device=DEVICE))
     states = wp.array(st, dtype=types.IntegratorState, device=DEVICE)
-    params = wp.array(member_params(values), dtype=types.MemberParams, device=DEVICE)
     wp.launch(_fronts_kernel(), dim=1, device=DEVICE, inputs=[
-        params, _coefficients(params, n), states,
+        wp.array(member_params(values), dtype=types.MemberParams, device=DEVICE), states,
         wp.array(crossing, dtype=f64, device=DEVICE), wp.array(slope, dtype=f64, device=DEVICE), curvature,
         wp.array(contact, dtype=f64, device=DEVICE), h, steps, use_stage2,
         arrays["K"], arrays["step_end"], arrays["arrival"], arrays["arrival_error"]])
@@ -663,16 +648,15 @@ def test_front_observer_on_a_synthetic_field(use_stage2):
 
 def _newton_kernel():
     stages = make_stages(f64, wf.Model())
-    member_coeffs = stages["terms"]["member_coeffs"]
+    make_coeffs = stages["terms"]["make_coeffs"]
     newton_solve = stages["newton"]["newton_solve"]
 
     @wp.kernel(module="unique")
-    def solve(params: wp.array(dtype=types.MemberParams), values: wp.array(dtype=CoeffValues),
-              settings: types.SolverSettings, work: wp.array3d(dtype=f64),
+    def solve(params: wp.array(dtype=types.MemberParams), settings: types.SolverSettings, work: wp.array3d(dtype=f64),
               gates: wp.array3d(dtype=f64), step_end: wp.array3d(dtype=f64), out: wp.array2d(dtype=int)):
         m = wp.tid()
         n = work.shape[1]
-        c = member_coeffs(values, m, n)
+        c = make_coeffs(params[m], n)
         ok, d0, a, iters, bad, _curvature = newton_solve(c, params[m], settings, m, n, work, gates, step_end,
                                                          f64(1e-6), f64(10.0), f64(10.0), f64(6e-6), f64(0.0),
                                                          f64(0.0))
@@ -695,9 +679,8 @@ def test_newton_flags_a_non_finite_update():
     gates = np.ones((types.N_GATE, nodes, 2))
     gates[types.G_SLIDE] = 0.0
     out = wp.zeros((2, 3), dtype=int, device=DEVICE)
-    params = wp.array(member_params(values), dtype=types.MemberParams, device=DEVICE)
     wp.launch(_newton_kernel(), dim=2, device=DEVICE, inputs=[
-        params, _coefficients(params, nodes), solver_settings(wf.Solver()),
+        wp.array(member_params(values), dtype=types.MemberParams, device=DEVICE), solver_settings(wf.Solver()),
         wp.array(work, dtype=f64, device=DEVICE), wp.array(gates, dtype=f64, device=DEVICE),
         wp.zeros((types.N_STEP_END, nodes, 2), dtype=f64, device=DEVICE), out])
     result = out.numpy()
@@ -714,7 +697,7 @@ def test_device_memory_per_member_is_reported(dtype, gate, fronts, lanes):
     it in shared memory, work_memory "shared") in the working precision, the stress gate's gates
     (N_GATE N = 7 N, working precision) and yield times (N, float64), the fronts' arrival times and errors of the three
     events (6 N, float64; the contact front's, the default), and the member's parameter and state
-    structs and its coefficients (29 in the working precision); kernel builds are timed apart from the run. A team's arrays hold each member
+    structs; kernel builds are timed apart from the run. A team's arrays hold each member
     contiguously (transposed views; they were counted short, 4,248 bytes against 9,112)."""
     n = 24
     ds = wf.simulate({"eccentricity": [0.0, 0.1, 0.2]}, model=wf.Model(relaxation_gate=gate),
@@ -725,8 +708,6 @@ def test_device_memory_per_member_is_reported(dtype, gate, fronts, lanes):
     expected = (size * n * (4 + 12 + types.N_STEP_END + work) + (size * types.N_GATE * n + 8 * n if gate == "stress" else 0)
                 + (2 * types.N_EVENTS * 8 * n if fronts else 0))
     expected += np.dtype(types.MemberParams.numpy_dtype()).itemsize + np.dtype(types.IntegratorState.numpy_dtype()).itemsize
-    coefficients = make_coefficients(wp.float64 if dtype == "float64" else wp.float32)["CoeffValues"]
-    expected += np.dtype(coefficients.numpy_dtype()).itemsize  # 29 coefficients in the working precision
     assert ds.attrs["device_bytes_per_member"] == expected
     assert types.N_WORK == 13 and types.N_STEP_END == 2 and types.N_GATE == 7
     assert ds.attrs["kernel_build_time_s"] >= 0 and ds.attrs["wall_time_s"] > 0

@@ -589,7 +589,6 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         block_dim = block_threads(lanes, kern["blocked"])
         wp.load_module(kern["integrate"].module, device=device, block_dim=block_dim if team else None)
         wp.load_module(kern["evaluate_fields"].module, device=device)
-        wp.load_module(kern["member_coefficients"].module, device=device)
         for layout_kernel in kern["layout"].values():
             wp.load_module(layout_kernel.module, device=device)
     kernel_build_s = time.perf_counter() - t_build
@@ -610,10 +609,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                           record.times if record is not None else None, len(record.members) if record is not None else 0,
                           member_major=team, method=solver.method, strength=strength,
                           global_work=layout.shared_work is None)
-        # the members' coefficients (kernels/model_terms.py make_coefficients), read where used
-        coeff_values = wp.empty(n_members, dtype=kern["CoeffValues"])
-        wp.launch(kern["member_coefficients"], dim=n_members, inputs=[arrays.params, n], outputs=[coeff_values])
-        per_member = [arrays.params, coeff_values, arrays.state, arrays.stages]  # not the (.., 1, 1) placeholders
+        per_member = [arrays.params, arrays.state, arrays.stages]  # not the (.., 1, 1) placeholders
         per_member += [arrays.step_end] + ([arrays.work] if layout.shared_work is None else [])
         per_member += [arrays.gates, arrays.yield_time] if stress_gate else []
         per_member += [arrays.arrival, arrays.arrival_error] if fronts is not None else []
@@ -656,7 +652,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             bar.start_pass(pass_index)
             stall_limit.fill_(NO_STALL_LIMIT)
             last_limit = NO_STALL_LIMIT
-            inputs = [arrays.params, coeff_values, settings, outputs if pass_index == 0 else arrival_pass_settings(outputs),
+            inputs = [arrays.params, settings, outputs if pass_index == 0 else arrival_pass_settings(outputs),
                       launch_steps(solver, n_members, device), block_members, stall_limit, arrays.record_times,
                       member_states, arrays.state, arrays.stages, arrays.work, arrays.step_end, arrays.gates,
                       arrays.record_previous]
@@ -696,8 +692,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                 sigma_out = wp.zeros((n_members, n), dtype=ft)
                 tau_out = wp.zeros((n_members, n), dtype=ft)
                 wp.launch(kern["evaluate_fields"], dim=n_members,
-                          inputs=[arrays.params, coeff_values, member_states, arrays.state, row_of],
-                          outputs=[sigma_out, tau_out])
+                          inputs=[arrays.params, member_states, arrays.state, row_of], outputs=[sigma_out, tau_out])
                 sigma = host_copy(sigma_out, landing["normal_stress"])
                 tau = host_copy(tau_out, landing["friction_stress"])
                 yield_np = gate_np = None
