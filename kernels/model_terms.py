@@ -71,24 +71,43 @@ def make_over_den(ft):
 
 
 _RATIO_MAX: dict = {}
+# where ratio_max compares cross products: both within [RATIO_PRODUCT_MIN, RATIO_PRODUCT_MAX], far from
+# float64's underflow and overflow, so that each product is exact to a rounding
+RATIO_PRODUCT_MIN = 1.0e-290
+RATIO_PRODUCT_MAX = 1.0e290
 
 
 def make_ratio_max(ft):
     """ratio_max(top, bottom, num, den) -> (top, bottom) for scalar type ``ft`` (one function per
-    type, shared): the running maximum of num/den over a sweep (den > 0), kept as the fraction
+    type, shared): the running maximum of num/den over a sweep (num, den >= 0), kept as the fraction
     top/bottom (start 0/1) so that the sweep divides once at its end (``quotient(top, bottom)``)
     instead of once per term: the error-weighted norms of the Newton update and of the local error.
-    float64 compares num/den > top/bottom as num*bottom > top*den; a NaN term is dropped, as
-    wp.max drops it. The maximum is the same quotient unless two terms lie within a rounding of
-    each other (then either one, to an ulp). float32 keeps one quotient per term (bottom stays 1),
-    as over_den keeps its quotients."""
+
+    float64 compares num/den > top/bottom as num*bottom > top*den where both products lie in
+    [RATIO_PRODUCT_MIN, RATIO_PRODUCT_MAX]; elsewhere (a zero or NaN term, the sweep's first, a
+    zero or infinite den, or values far from 1, as in a diverged step, where a product could
+    overflow or underflow) it compares the quotients themselves. A NaN term is dropped, as wp.max
+    drops it. The maximum is the same quotient as wp.max of the quotients unless two terms lie
+    within a rounding of each other (then either one, to an ulp). float32 keeps one quotient per
+    term (bottom stays 1), as over_den keeps its quotients."""
     if ft not in _RATIO_MAX:
 
         @wp.func
         def ratio_max(top: ft, bottom: ft, num: ft, den: ft):
             if wp.static(ft == wp.float64):
-                if num * bottom > top * den:
-                    return num, den
+                lhs = num * bottom
+                rhs = top * den
+                low = ft(RATIO_PRODUCT_MIN)
+                high = ft(RATIO_PRODUCT_MAX)
+                if lhs > low and lhs < high and rhs > low and rhs < high:
+                    if lhs > rhs:
+                        return num, den
+                    return top, bottom
+                if num > ft(0.0) and den == den:  # NaN fails both
+                    if top == ft(0.0):
+                        return num, den
+                    if num / den > top / bottom:
+                        return num, den
                 return top, bottom
             return wp.max(top, num / den), bottom
 

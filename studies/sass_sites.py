@@ -88,31 +88,63 @@ def call_sites(sass: str) -> tuple:
     return total, counts, by_kind, kind_totals
 
 
-REGISTER = re.compile(r"\bR(\d+)\b")
-STACK_STORE = re.compile(r"\bSTL(\.\d+)?\s+\[R1(?:\+(0x[0-9a-f]+))?\]")
+REGISTER = re.compile(r"\bR(\d+)(\.64)?\b")
+STACK_STORE = re.compile(r"\bSTL((?:\.\w+)*)\s+\[R1(?:\+(0x[0-9a-f]+))?\]")
+STORE_BYTES = {"U8": 1, "S8": 1, "U16": 2, "S16": 2, "64": 8, "128": 16}
 # how far back (instructions, in address order) a register's writer is looked for
 WRITER_WINDOW = 300
+MEMORY_OPS = ("LD", "LDG", "LDL", "LDS", "LDC", "ST", "STG", "STL", "STS", "ATOM", "ATOMG", "ATOMS", "RED")
+NO_WRITE_OPS = ("ST", "STG", "STL", "STS", "RED", "BRA", "EXIT", "BAR", "RET", "CALL", "BSSY", "BSYNC", "WARPSYNC")
+WIDE_TYPES = ("F64", "S64", "U64")
 
 
 def register_operands(line: str) -> tuple:
-    """(opcode without modifiers, registers written, registers read) of one SASS line; a 64-bit
-    operand (FP64 opcodes, .64 memory operations) names a register pair and counts as both
-    registers, a .128 operand as four. Stores, branches and barriers write nothing."""
+    """(opcode without modifiers, registers written, registers read) of one SASS line. Each
+    operand's width in registers: a memory operation's data by its .64 / .128 suffix, its address
+    registers one each (two with .64: desc[UR4][R10.64]); FP64 opcodes two each; a conversion
+    (F2F, I2F, F2I) by its destination and source types; .WIDE and CS2R a pair written. Stores,
+    reductions (RED), branches and barriers write nothing; SHFL writes its second operand (the
+    first is a predicate). Uniform registers (UR) and predicates are not registers here."""
     text = OPCODE.search(line)
     if not text:
         return "", set(), set()
     full = text.group(1)
-    op = full.split(".")[0]
+    parts = full.split(".")
+    op = parts[0]
     body = line[text.end():].split(";")[0]
-    operands = [o for o in body.split(",") if o.strip()]
-    width = 4 if ".128" in full else 2 if (".64" in full or op.startswith("D")) else 1
+    operands = [o.strip() for o in body.split(",") if o.strip()]
+    suffix = 4 if "128" in parts else 2 if "64" in parts else 1
 
-    def regs(texts):
-        return {int(r) + k for t in texts for r in REGISTER.findall(t) for k in range(width)}
+    def regs(texts, width):
+        out = set()
+        for t in texts:
+            for r, pair in REGISTER.findall(t):
+                if "[" in t:  # an address: one register, or a pair where it says .64
+                    out |= {int(r), int(r) + 1} if pair else {int(r)}
+                else:
+                    out |= {int(r) + k for k in range(width)}
+        return out
 
-    if not operands or op.startswith(("ST", "BRA", "EXIT", "BAR", "RET", "CALL", "BSSY", "BSYNC", "WARPSYNC")):
-        return op, set(), regs(operands)
-    return op, regs(operands[:1]), regs(operands[1:])
+    if op in MEMORY_OPS:
+        dest_width = src_width = suffix
+    elif op.startswith("D"):
+        dest_width = src_width = 2
+    elif op in ("F2F", "I2F", "F2I", "I2I", "F2IP"):
+        types = [t for t in parts[1:] if t[:1] in "FSU" and t[1:].isdigit()]
+        dest_width = 2 if types and types[0] in WIDE_TYPES and op != "F2I" else 1
+        src_width = 2 if types and types[-1] in WIDE_TYPES and (len(types) > 1 or op == "F2I") else 1
+    elif "WIDE" in parts or op == "CS2R" and "32" not in parts:
+        dest_width, src_width = 2, 1
+    else:
+        dest_width = src_width = 1
+    if not operands or op in NO_WRITE_OPS:
+        return op, set(), regs(operands, src_width)
+    first = 1 if op == "SHFL" else 0
+    written = regs(operands[first:first + 1], dest_width)
+    read = regs(operands[:first] + operands[first + 1:], src_width)
+    if "WIDE" in parts and len(operands) > 3:  # the addend of IMAD.WIDE is a pair
+        read |= regs(operands[3:4], 2)
+    return op, written, read
 
 
 def stack_bytes(sass: str) -> collections.Counter:
@@ -133,13 +165,13 @@ def stack_bytes(sass: str) -> collections.Counter:
         if offset in seen:
             continue
         seen.add(offset)
-        data = set(REGISTER.findall(line.split("]")[-1]))
-        wanted = {int(r) for r in data}
+        wanted = operands[k][2] - {1}  # the stored registers (a pair for .64), not the stack pointer R1
         for j in range(k - 1, max(-1, k - WRITER_WINDOW), -1):
             if operands[j][1] & wanted:
                 where = instr[j][2] or where
                 break
-        out[where] += int(store.group(1)[1:]) // 8 if store.group(1) else 4
+        sizes = [STORE_BYTES[m] for m in store.group(1).split(".") if m in STORE_BYTES]
+        out[where] += sizes[-1] if sizes else 4
     return out
 
 

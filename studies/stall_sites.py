@@ -121,7 +121,7 @@ def waits_on(instr: list, samples: list) -> tuple:
     by_op = collections.Counter()
     by_line = collections.Counter()
     unattributed = 0.0
-    for k, (_op, reasons, _all) in enumerate(samples):
+    for k, (_op, reasons, _all) in enumerate(samples[:len(instr)]):
         waiting = reasons.get("long_sb", 0.0)
         if not waiting:
             continue

@@ -232,9 +232,11 @@ def _ratio_max_kernel(dtype):
 def test_ratio_max_is_the_largest_quotient(dtype):
     """kernels/model_terms.py ratio_max (the error norms' running maximum of num/den kept as a
     fraction, one division per sweep) gives the largest of the terms' quotients, as numpy's
-    maximum of num / den, bit for bit: over random sweeps with positive dens spanning 12 decades,
-    zero numerators, a sweep of zeros (norm 0), NaN terms (dropped, as wp.max drops them) and an
-    infinite numerator (norm inf)."""
+    maximum of num / den, bit for bit: over random sweeps with dens spanning 12 decades, zero
+    numerators, a sweep of zeros (norm 0), NaN terms and NaN dens (dropped, as wp.max drops
+    them), an infinite numerator (norm inf), zero and infinite dens, the error norm's 1e30
+    sentinel, and, in float64, terms whose cross products overflow or underflow (a diverged step:
+    the largest quotient must not be lost)."""
     np_type = np.float64 if dtype == wp.float64 else np.float32
     rng = np.random.default_rng(7)
     rows, terms = 400, 24
@@ -245,12 +247,25 @@ def test_ratio_max_is_the_largest_quotient(dtype):
     num[1, 5] = np.nan
     num[2, ::3] = np.nan
     num[3, 7] = np.inf
+    den[4, 3] = 0.0  # num/0: inf
+    den[5, 3] = np.inf  # num/inf: 0
+    num[5, 0], den[5, 0] = 2.0, np.inf  # the first term 0 (taken), then the others
+    den[6, 9] = np.nan
+    num[7, 4], den[7, 4] = 1.0e30, 1.0  # the sentinel, then smaller terms
+    if dtype == wp.float64:
+        num[8, :2], den[8, :2] = [1e290, 1e300], [1e294, 1e294]  # products overflow: 1e6 wins
+        num[9, :2], den[9, :2] = [1e-200, 2e-200], [1e-124, 1e-124]  # products underflow: 2e-76 wins
+        num[9, 2:] = 0.0
+        num[10, :3], den[10, :3] = [5e-320, 1e-300, 3.0], [1e-10, 1e10, 1e300]  # a subnormal num
     norm = wp.zeros(rows, dtype=dtype, device=DEVICE)
     wp.launch(_ratio_max_kernel(dtype), dim=rows, device=DEVICE,
               inputs=[wp.array(num, dtype=dtype, device=DEVICE), wp.array(den, dtype=dtype, device=DEVICE), norm])
     got = norm.numpy()
-    expected = np.fmax.reduce(num / den, axis=1, initial=0.0).astype(np_type)
-    assert got[0] == 0.0 and np.isinf(got[3]) and np.isfinite(got[[1, 2]]).all()
+    with np.errstate(all="ignore"):
+        expected = np.fmax.reduce(num / den, axis=1, initial=0.0).astype(np_type)
+    assert got[0] == 0.0 and np.isinf(got[[3, 4]]).all() and np.isfinite(got[[1, 2, 5, 6]]).all() and got[7] == 1e30
+    if dtype == wp.float64:
+        assert got[8] == 1e300 / 1e294 and got[9] == 2e-200 / 1e-124
     np.testing.assert_array_equal(got, expected)
 
 

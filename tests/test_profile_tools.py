@@ -167,11 +167,39 @@ CSV_WAITS = """\
 """
 
 
+def test_a_stored_pair_waits_on_the_load_of_the_pair(tmp_path):
+    """A 64-bit store waits for the 64-bit load of its pair, not for a 32-bit stack reload of a
+    register next to the stack pointer (an operand width applied to every operand would read R2
+    in [R1+0x8])."""
+    sass = """\
+\t//## File "/x/kernels/newton.py", line 8
+        /*0000*/                   LDG.E.64 R4, desc[UR4][R10.64] ;
+\t//## File "/x/kernels/esdirk.py", line 3
+        /*0010*/                   LDL R2, [R1+0x30] ;
+        /*0020*/                   STL.64 [R1+0x8], R4 ;
+"""
+    (tmp_path / "s.csv").write_text('"Kernel Name","integrate",\n"Address","Source","Warp Stall Sampling (All Samples)",'
+                                    '"stall_long_sb"\n"0x00","LDG.E.64 R4","1","0"\n"0x10","LDL R2","1","0"\n'
+                                    '"0x20","STL.64 [R1+0x8], R4","9","9"\n')
+    by_op, by_line, unattributed = stall_sites.waits_on(list(sass_sites.instructions(sass)),
+                                                        stall_sites.read_samples(str(tmp_path / "s.csv")))
+    assert by_op == {"LDG": 9} and by_line == {("LDG", "newton.py", 8): 9} and unattributed == 0
+
+
 def test_long_scoreboard_waits_are_given_to_the_load_they_wait_for(tmp_path, monkeypatch, capsys):
-    assert sass_sites.register_operands("/*0000*/ DFMA R2, R4, R6, R2 ;") == ("DFMA", {2, 3}, {2, 3, 4, 5, 6, 7})
-    assert sass_sites.register_operands("/*0000*/ @!P0 LDG.E.128 R8, desc[UR4][R2.64] ;") == ("LDG", {8, 9, 10, 11},
-                                                                                              {2, 3, 4, 5})
-    assert sass_sites.register_operands("/*0000*/ STL [R1+0x8], R5 ;") == ("STL", set(), {1, 5})
+    ops = sass_sites.register_operands
+    assert ops("/*0000*/ DFMA R2, R4, R6, R2 ;") == ("DFMA", {2, 3}, {2, 3, 4, 5, 6, 7})
+    assert ops("/*0000*/ @!P0 LDG.E.128 R8, desc[UR4][R2.64] ;") == ("LDG", {8, 9, 10, 11}, {2, 3})
+    assert ops("/*0000*/ LDG.E R8, desc[UR4][R10.64] ;") == ("LDG", {8}, {10, 11})
+    assert ops("/*0000*/ STL [R1+0x8], R5 ;") == ("STL", set(), {1, 5})
+    assert ops("/*0000*/ STL.64 [R1+0x8], R4 ;") == ("STL", set(), {1, 4, 5})
+    assert ops("/*0000*/ RED.E.ADD.STRONG.GPU desc[UR4][R2.64], R5 ;") == ("RED", set(), {2, 3, 5})
+    assert ops("/*0000*/ SHFL.BFLY PT, R5, R4, 0x1, 0x1f ;") == ("SHFL", {5}, {4})
+    assert ops("/*0000*/ IMAD.WIDE.U32 R10, R3, UR6, R10 ;") == ("IMAD", {10, 11}, {3, 10, 11})
+    assert ops("/*0000*/ CS2R R4, SRZ ;") == ("CS2R", {4, 5}, set())
+    assert ops("/*0000*/ F2F.F64.F32 R4, R2 ;") == ("F2F", {4, 5}, {2})
+    assert ops("/*0000*/ F2I.F64.TRUNC R4, R2 ;") == ("F2I", {4}, {2, 3})
+    assert ops("/*0000*/ ISETP.GE.AND P0, PT, R36, RZ, PT ;") == ("ISETP", set(), {36})
     instr = list(sass_sites.instructions(SASS_WAITS))
     (tmp_path / "s.csv").write_text(CSV_WAITS)
     by_op, by_line, unattributed = stall_sites.waits_on(instr, stall_sites.read_samples(str(tmp_path / "s.csv")))
@@ -189,7 +217,8 @@ def test_long_scoreboard_waits_are_given_to_the_load_they_wait_for(tmp_path, mon
 
 # the stack's slots by the value first stored there: 0x8 holds a pair loaded at newton.py 8 (the
 # store itself sits at integrator.py 2), stored again later (not counted twice); 0x10 a 32-bit sum
-# of esdirk.py 4; 0x18 a 128-bit store of a register no instruction before it writes (its own line)
+# of esdirk.py 4, 0x28 a byte of it; 0x18 a 128-bit store of a register no instruction before it
+# writes (its own line)
 SASS_STACK = """\
 \t//## File "/x/kernels/newton.py", line 8
         /*0000*/                   LDG.E.64 R4, desc[UR4][R10.64] ;
@@ -200,8 +229,9 @@ SASS_STACK = """\
         /*0030*/                   STL [R1+0x10], R7 ;
         /*0040*/                   STL.64 [R1+0x8], R6 ;
         /*0050*/                   STL.128 [R1+0x18], R12 ;
+        /*0060*/                   STL.U8 [R1+0x28], R7 ;
 """
 
 
 def test_stack_bytes_by_the_line_of_the_stored_value():
-    assert sass_sites.stack_bytes(SASS_STACK) == {("newton.py", 8): 8, ("esdirk.py", 4): 4, ("integrator.py", 2): 16}
+    assert sass_sites.stack_bytes(SASS_STACK) == {("newton.py", 8): 8, ("esdirk.py", 4): 5, ("integrator.py", 2): 16}
