@@ -147,6 +147,25 @@ def register_operands(line: str) -> tuple:
     return op, written, read
 
 
+def writer_of(operands: list, k: int, wanted: set, accept: tuple | None = None):
+    """The index of the nearest instruction before k (address order, within WRITER_WINDOW) that
+    writes one of the registers ``wanted``, from register_operands() of each instruction; with
+    ``accept`` (opcodes), only such an instruction counts, and a register another instruction
+    writes first is dropped from the search. None where there is none."""
+    wanted = set(wanted)
+    for j in range(k - 1, max(-1, k - WRITER_WINDOW), -1):
+        op, written, _read = operands[j]
+        hit = written & wanted
+        if not hit:
+            continue
+        if accept is None or op in accept:
+            return j
+        wanted -= hit
+        if not wanted:
+            return None
+    return None
+
+
 def stack_bytes(sass: str) -> collections.Counter:
     """The stack (local memory: spilled registers) by the Python source line of the value first
     stored in each of its slots: for each stack offset, the first STL to it in address order, and
@@ -165,11 +184,9 @@ def stack_bytes(sass: str) -> collections.Counter:
         if offset in seen:
             continue
         seen.add(offset)
-        wanted = operands[k][2] - {1}  # the stored registers (a pair for .64), not the stack pointer R1
-        for j in range(k - 1, max(-1, k - WRITER_WINDOW), -1):
-            if operands[j][1] & wanted:
-                where = instr[j][2] or where
-                break
+        writer = writer_of(operands, k, operands[k][2] - {1})  # the stored registers, not the stack pointer R1
+        if writer is not None:
+            where = instr[writer][2] or where
         sizes = [STORE_BYTES[m] for m in store.group(1).split(".") if m in STORE_BYTES]
         out[where] += sizes[-1] if sizes else 4
     return out

@@ -29,7 +29,7 @@ import sys
 import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from sass_sites import OPCODE, instructions, register_operands, tool  # noqa: E402
+from sass_sites import OPCODE, instructions, register_operands, tool, writer_of  # noqa: E402
 
 # stall reasons shown apart (ncu's column names, "stall_" dropped); the rest is summed as "other"
 REASONS = ("long_sb", "no_inst", "wait", "short_sb", "branch_resolving", "selected", "math", "lg", "mio", "barrier")
@@ -107,14 +107,12 @@ def stall_tables(instr: list, samples: list) -> tuple:
 # loads whose results a long-scoreboard wait can be for: local (the stack: spills), global,
 # generic (the work array in shared memory is reached through a generic pointer), shared, constant
 LOADS = ("LDL", "LDG", "LD", "LDS", "LDC")
-# how far back (instructions, in address order) waits_on looks for the awaited register's load
-WAIT_WINDOW = 300
 def waits_on(instr: list, samples: list) -> tuple:
     """(by load opcode, by the load's source line, unattributed): the long-scoreboard samples of
     each instruction given to the load that wrote the register it waits for, found as the nearest
-    earlier instruction (address order, within WAIT_WINDOW) that writes one of its source
-    registers and is a load (LOADS); a register written by another instruction first is dropped
-    from the search. Address order is not control flow: a value loaded in an earlier loop
+    earlier load (LOADS) that writes one of its source registers (sass_sites.writer_of: address
+    order, within WRITER_WINDOW); a register written by another instruction first is dropped from
+    the search. Address order is not control flow: a value loaded in an earlier loop
     iteration or another branch may be credited to the wrong load, and samples with no load found
     are "unattributed"."""
     operands = [register_operands(line) for line, _sites, _where in instr]
@@ -125,19 +123,7 @@ def waits_on(instr: list, samples: list) -> tuple:
         waiting = reasons.get("long_sb", 0.0)
         if not waiting:
             continue
-        wanted = set(operands[k][2])
-        found = None
-        for j in range(k - 1, max(-1, k - WAIT_WINDOW), -1):
-            op, written, _read = operands[j]
-            hit = written & wanted
-            if not hit:
-                continue
-            if op in LOADS:
-                found = j
-                break
-            wanted -= hit
-            if not wanted:
-                break
+        found = writer_of(operands, k, operands[k][2], LOADS)
         if found is None:
             unattributed += waiting
             continue
