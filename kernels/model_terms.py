@@ -16,6 +16,7 @@ the free edges, so the elastic force sums to zero over the pad exactly.
 """
 
 
+import functools
 from typing import Any
 
 import warp as wp
@@ -48,9 +49,7 @@ def quotient(num: Any, den: Any):
     return wp.where(zero_numerator, wp.where(finite_nonzero, num * den, q * num), q)
 
 
-_OVER_DEN: dict = {}
-
-
+@functools.cache  # one function per type, shared
 def make_over_den(ft):
     """over_den(x, den, inv_den) for scalar type ``ft`` (one function per type, shared): x / den, in
     float64 as x * inv_den (inv_den = 1/den), so that quotients of one denominator cost one division
@@ -58,25 +57,23 @@ def make_over_den(ft):
     Coeffs, the Thomas rows, the stage derivatives' 1/g): the GPU's FP64 division is a long
     dependent sequence. float32 keeps the exact quotient (its round-off decides which hard float32
     members stall: tests/test_trust.py), and inv_den is then unused."""
-    if ft not in _OVER_DEN:
 
-        @wp.func
-        def over_den(x: ft, den: ft, inv_den: ft):
-            if wp.static(ft == wp.float64):
-                return x * inv_den
-            return x / den
+    @wp.func
+    def over_den(x: ft, den: ft, inv_den: ft):
+        if wp.static(ft == wp.float64):
+            return x * inv_den
+        return x / den
 
-        _OVER_DEN[ft] = over_den
-    return _OVER_DEN[ft]
+    return over_den
 
 
-_RATIO_MAX: dict = {}
 # where ratio_max compares cross products: both within [RATIO_PRODUCT_MIN, RATIO_PRODUCT_MAX], far from
 # float64's underflow and overflow, so that each product is exact to a rounding
 RATIO_PRODUCT_MIN = 1.0e-290
 RATIO_PRODUCT_MAX = 1.0e290
 
 
+@functools.cache  # one function per type, shared
 def make_ratio_max(ft):
     """ratio_max(top, bottom, num, den) -> (top, bottom) for scalar type ``ft`` (one function per
     type, shared): the running maximum of num/den over a sweep (num, den >= 0), kept as the fraction
@@ -90,29 +87,27 @@ def make_ratio_max(ft):
     drops it. The maximum is the same quotient as wp.max of the quotients unless two terms lie
     within a rounding of each other (then either one, to an ulp). float32 keeps one quotient per
     term (bottom stays 1), as over_den keeps its quotients."""
-    if ft not in _RATIO_MAX:
 
-        @wp.func
-        def ratio_max(top: ft, bottom: ft, num: ft, den: ft):
-            if wp.static(ft == wp.float64):
-                lhs = num * bottom
-                rhs = top * den
-                low = ft(RATIO_PRODUCT_MIN)
-                high = ft(RATIO_PRODUCT_MAX)
-                if lhs > low and lhs < high and rhs > low and rhs < high:
-                    if lhs > rhs:
-                        return num, den
-                    return top, bottom
-                if num > ft(0.0) and den == den:  # NaN fails both
-                    if top == ft(0.0):
-                        return num, den
-                    if num / den > top / bottom:
-                        return num, den
+    @wp.func
+    def ratio_max(top: ft, bottom: ft, num: ft, den: ft):
+        if wp.static(ft == wp.float64):
+            lhs = num * bottom
+            rhs = top * den
+            low = ft(RATIO_PRODUCT_MIN)
+            high = ft(RATIO_PRODUCT_MAX)
+            if lhs > low and lhs < high and rhs > low and rhs < high:
+                if lhs > rhs:
+                    return num, den
                 return top, bottom
-            return wp.max(top, num / den), bottom
+            if num > ft(0.0) and den == den:  # NaN fails both
+                if top == ft(0.0):
+                    return num, den
+                if num / den > top / bottom:
+                    return num, den
+            return top, bottom
+        return wp.max(top, num / den), bottom
 
-        _RATIO_MAX[ft] = ratio_max
-    return _RATIO_MAX[ft]
+    return ratio_max
 
 
 # ------------------------------------------------------------------------------------------------
