@@ -114,7 +114,6 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
     team_max = team["team_max"]
     barrier = team["barrier"]
     Coeffs = terms["Coeffs"]
-    own_store = terms["own_store"]
     stage_constant = tableau["stage_constant"]
     solution_increment = tableau["solution_increment"]
     error_increment = tableau["error_increment"]
@@ -134,16 +133,15 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         end nodes: a barrier.) A node's values are all read before its constants are written: for
         the compiler a write may alias a later read, so reads after a write wait for it in turn."""
         for i in range(c.first_node, c.end_node):
-            q = own_store(c, i)
             y = vec4()
             k1 = vec4()
             k2 = vec4()
             for comp in range(N_COMPONENTS):
-                y[comp] = state[comp, q, m]
+                y[comp] = state[comp, i, m]
                 if n_terms >= 1:
-                    k1[comp] = K[s1, comp, q, m]
+                    k1[comp] = K[s1, comp, i, m]
                 if n_terms >= 2:
-                    k2[comp] = K[s2, comp, q, m]
+                    k2[comp] = K[s2, comp, i, m]
             for comp in range(N_COMPONENTS):
                 work[comp, i, m] = stage_constant(y[comp], h, a1, k1[comp], a2, k2[comp], n_terms)
             guess = y[C_V]
@@ -153,9 +151,9 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         barrier()
 
     @wp.func
-    def fold_error(c: Coeffs, step_end: array3, comp: int, q: int, m: int, e: ft, y: ft, y_new: ft, g: ft, rtol: ft,
+    def fold_error(c: Coeffs, step_end: array3, comp: int, i: int, m: int, e: ft, y: ft, y_new: ft, g: ft, rtol: ft,
                    top: ft, bottom: ft):
-        """Fold the local error estimate e of component comp at the node stored at q (from y to y_new; g = gamma*h)
+        """Fold the local error estimate e of component comp at node i (from y to y_new; g = gamma*h)
         into the running maximum top/bottom (ratio_max) of |e| / (rtol*(scale + max(|y|, |y_new|))),
         scale the component's natural scale; the velocity's e filtered by min(1, |rho H / (g *
         diag)|) (diag: step_end[E_DIAG]; in float64 as |e| rho H / (weight |g diag|) where the
@@ -167,12 +165,12 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         if comp == C_V:
             scale = c.v_scale
             if wp.static(ft == wp.float64):
-                diag = wp.abs(g * step_end[E_DIAG, q, m])
+                diag = wp.abs(g * step_end[E_DIAG, i, m])
                 if diag > c.rhoH:
                     num = num * c.rhoH
                     den_factor = diag
             else:
-                num = wp.abs(e * wp.min(ft(1.0), wp.abs(c.rhoH / (g * step_end[E_DIAG, q, m]))))
+                num = wp.abs(e * wp.min(ft(1.0), wp.abs(c.rhoH / (g * step_end[E_DIAG, i, m]))))
         if comp == C_TAU:
             scale = c.tau_scale
         if comp == C_PHI:
@@ -202,7 +200,6 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         top = ft(0.0)  # the norm so far, top/bottom (fold_error)
         bottom = ft(1.0)
         for i in range(c.first_node, c.end_node):
-            q = own_store(c, i)
             # a node's values all read before its writes (as in prepare_stage)
             y = vec4()
             k1 = vec4()
@@ -210,16 +207,16 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
             k3 = vec4()
             for comp in range(N_COMPONENTS):
                 if comp != C_V or wp.static(inertia):
-                    y[comp] = state[comp, q, m]
-                    k1[comp] = K[s1, comp, q, m]
-                    k2[comp] = K[s2, comp, q, m]
-                    k3[comp] = K[s3, comp, q, m]
+                    y[comp] = state[comp, i, m]
+                    k1[comp] = K[s1, comp, i, m]
+                    k2[comp] = K[s2, comp, i, m]
+                    k3[comp] = K[s3, comp, i, m]
             for comp in range(N_COMPONENTS):
                 if comp != C_V or wp.static(inertia):
                     y_new = y[comp] + solution_increment(h, k1[comp], k2[comp], k3[comp])
                     if comp != C_V:
                         work[comp, i, m] = y_new
-                    top, bottom = fold_error(c, step_end, comp, q, m, error_increment(h, k1[comp], k2[comp], k3[comp]),
+                    top, bottom = fold_error(c, step_end, comp, i, m, error_increment(h, k1[comp], k2[comp], k3[comp]),
                                              y[comp], y_new, g, rtol, top, bottom)
         return team_max(quotient(top, bottom))
 
@@ -230,17 +227,16 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         h*K[s3]); the velocity is the last stage's (stiffly accurate, and algebraic without inertia).
         The lane's nodes."""
         for i in range(c.first_node, c.end_node):
-            q = own_store(c, i)
             y_new = vec4()  # a node's values all read before its writes (as in prepare_stage)
             for comp in range(N_COMPONENTS):
                 if comp == C_V:
-                    y_new[comp] = K[s3, C_U, q, m]
+                    y_new[comp] = K[s3, C_U, i, m]
                 elif backward_euler == 1:
-                    y_new[comp] = state[comp, q, m] + h * K[s3, comp, q, m]
+                    y_new[comp] = state[comp, i, m] + h * K[s3, comp, i, m]
                 else:
                     y_new[comp] = work[comp, i, m]
             for comp in range(N_COMPONENTS):
-                state[comp, q, m] = y_new[comp]
+                state[comp, i, m] = y_new[comp]
 
     return dict(prepare_stage=prepare_stage, fold_error=fold_error, error_norm=error_norm, advance_state=advance_state)
 
@@ -370,7 +366,6 @@ def make_esdirk4_arrays(ft, model, terms, team, fold_error):
     team_max = team["team_max"]
     barrier = team["barrier"]
     Coeffs = terms["Coeffs"]
-    own_store = terms["own_store"]
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
     vec6 = wp.types.vector(length=6, dtype=ft)
@@ -405,13 +400,12 @@ def make_esdirk4_arrays(ft, model, terms, team, fold_error):
         previous stage's velocity (Y0 = z + gamma*h*K_{i-1})."""
         row = e4_row(i)
         for node in range(c.first_node, c.end_node):
-            q = own_store(c, node)
             for comp in range(N_COMPONENTS):
-                z = state[comp, q, m]
+                z = state[comp, node, m]
                 for j in range(i):
-                    z += h * row[j] * K[(s1 + j) % 6, comp, q, m]
+                    z += h * row[j] * K[(s1 + j) % 6, comp, node, m]
                 work[comp, node, m] = z
-            work[W_V, node, m] = K[(s1 + i - 1) % 6, C_U, q, m]
+            work[W_V, node, m] = K[(s1 + i - 1) % 6, C_U, node, m]
         barrier()
 
     @wp.func
@@ -426,17 +420,16 @@ def make_esdirk4_arrays(ft, model, terms, team, fold_error):
         top = ft(0.0)  # the norm so far, top/bottom (fold_error)
         bottom = ft(1.0)
         for i in range(c.first_node, c.end_node):
-            q = own_store(c, i)
             for comp in range(N_COMPONENTS):
                 if comp != C_V or wp.static(inertia):
                     inc = ft(0.0)
                     e = ft(0.0)
                     for j in range(6):
-                        k = K[(s1 + j) % 6, comp, q, m]
+                        k = K[(s1 + j) % 6, comp, i, m]
                         inc += b[j] * k
                         e += d[j] * k
-                    y = state[comp, q, m]
-                    top, bottom = fold_error(c, step_end, comp, q, m, h * e, y, y + h * inc, g, rtol, top, bottom)
+                    y = state[comp, i, m]
+                    top, bottom = fold_error(c, step_end, comp, i, m, h * e, y, y + h * inc, g, rtol, top, bottom)
         return team_max(quotient(top, bottom))
 
     @wp.func
@@ -444,15 +437,14 @@ def make_esdirk4_arrays(ft, model, terms, team, fold_error):
         """y_{n+1} = y_n + h * sum_j b_j K_j; the velocity is the last stage's (stiffly accurate)."""
         b = vec6(ft(E4_B0), ft(E4_B1), ft(E4_B2), ft(E4_B3), ft(E4_B4), ft(E4_B5))
         for i in range(c.first_node, c.end_node):
-            q = own_store(c, i)
             for comp in range(N_COMPONENTS):
                 if comp == C_V:
-                    state[comp, q, m] = K[(s1 + 5) % 6, C_U, q, m]
+                    state[comp, i, m] = K[(s1 + 5) % 6, C_U, i, m]
                 else:
                     inc = ft(0.0)
                     for j in range(6):
-                        inc += b[j] * K[(s1 + j) % 6, comp, q, m]
-                    state[comp, q, m] = state[comp, q, m] + h * inc
+                        inc += b[j] * K[(s1 + j) % 6, comp, i, m]
+                    state[comp, i, m] = state[comp, i, m] + h * inc
 
     return dict(e4_abscissa=e4_abscissa, prepare_stage4=prepare_stage4, error_norm4=error_norm4,
                 advance_state4=advance_state4)

@@ -37,18 +37,17 @@ def make_node_gates(ft, model):
     array3 = wp.array3d(dtype=ft)
 
     @wp.func
-    def node_gate(gates: array3, q: int, m: int):
-        """The yield gate of the node stored at q over the current step (1 for the gate-less and
-        velocity laws)."""
+    def node_gate(gates: array3, i: int, m: int):
+        """The yield gate of node i over the current step (1 for the gate-less and velocity laws)."""
         if wp.static(stress_gate):
-            return gates[G_GATE, q, m]
+            return gates[G_GATE, i, m]
         return ft(1.0)
 
     @wp.func
-    def node_sliding(gates: array3, q: int, m: int):
-        """1 where the node stored at q slides on the yield surface (stress gate), else 0."""
+    def node_sliding(gates: array3, i: int, m: int):
+        """1 where node i slides on the yield surface (stress gate), else 0."""
         if wp.static(stress_gate):
-            return gates[G_SLIDE, q, m]
+            return gates[G_SLIDE, i, m]
         return ft(0.0)
 
     return dict(node_gate=node_gate, node_sliding=node_sliding)
@@ -85,10 +84,10 @@ def make_switch_test(ft, model, terms, team, node_sliding):
 
     @wp.func
     def test_switch(
-        c: Coeffs, settings: SolverSettings, gates: array3, q: int, m: int, fr: Friction, sigma: ft,
+        c: Coeffs, settings: SolverSettings, gates: array3, i: int, m: int, fr: Friction, sigma: ft,
         velocity: ft, v_disc: ft, h: ft, test: SwitchTest,
     ):
-        """At the end of a step of size h, the node stored at q: store the yield margin z1 (gates[G_MARGIN_END]) and,
+        """At the end of a step of size h, node i: store the yield margin z1 (gates[G_MARGIN_END]) and,
         where the node switched (the only place switch_gates reads it), the slope of its rate with
         respect to the gate (gates[G_DMARGIN]), and fold the node into the step's switch test.
 
@@ -99,14 +98,14 @@ def make_switch_test(ft, model, terms, team, node_sliding):
         ends where that error is 0.5."""
         rtol = ft(wp.min(settings.switch_rtol, wp.float64(1.0e30)))
         z1 = yield_margin(c, fr.stress, fr.area)
-        gates[G_MARGIN_END, q, m] = z1
+        gates[G_MARGIN_END, i, m] = z1
         slip = v_disc - c.kif * velocity
         relax = wp.abs(slip) * c.inv_D
         open_now = ft(0.0)
         if z1 > ft(0.0):
             open_now = ft(1.0)
-        if node_sliding(gates, q, m) == ft(0.0):
-            z0 = gates[G_MARGIN, q, m]
+        if node_sliding(gates, i, m) == ft(0.0):
+            z0 = gates[G_MARGIN, i, m]
             # the switch error per second of wrong gate
             rate = wp.max(
                 wp.abs(fr.elastic_stress) * relax / (rtol * (c.tau_scale + wp.abs(fr.elastic_stress))),
@@ -120,7 +119,7 @@ def make_switch_test(ft, model, terms, team, node_sliding):
                 dtau_dgate = -fr.elastic_stress * relax
                 if wp.static(viscous):
                     dtau_dgate += c.eta_vstar * wp.sign(slip) * wp.log(ft(1.0) + wp.abs(slip) / c.vstar) * darea_dgate
-                gates[G_DMARGIN, q, m] = wp.sign(fr.stress) * dtau_dgate - c.tau_c * darea_dgate
+                gates[G_DMARGIN, i, m] = wp.sign(fr.stress) * dtau_dgate - c.tau_c * darea_dgate
                 theta = ft(0.0)
                 if z0 != z1:
                     theta = wp.clamp(z0 / (z0 - z1), ft(0.0), ft(1.0))
@@ -252,7 +251,6 @@ def make_gate_update(ft, terms, team):
     """After an accepted step: each node's gate regime for the next step, the FSAL correction, the
     first opening time and the contact front's arrival (switch_gates)."""
     Coeffs = terms["Coeffs"]
-    own_store = terms["own_store"]
     team_count = team["team_count"]
     contact_arrival = make_contact_arrival(ft)["contact_arrival"]
     array3 = wp.array3d(dtype=ft)
@@ -293,11 +291,10 @@ def make_gate_update(ft, terms, team):
         h = ft(t_new - t_old)
         switches = int(0)
         for i in range(c.first_node, c.end_node):
-            q = own_store(c, i)
-            z1 = gates[G_MARGIN_END, q, m]
-            z0 = gates[G_MARGIN, q, m]
-            sliding = gates[G_SLIDE, q, m]
-            gate_start = gates[G_GATE, q, m]
+            z1 = gates[G_MARGIN_END, i, m]
+            z0 = gates[G_MARGIN, i, m]
+            sliding = gates[G_SLIDE, i, m]
+            gate_start = gates[G_GATE, i, m]
             gate = gate_start
             new_sliding = ft(0.0)
             new_gate = ft(0.0)
@@ -305,14 +302,14 @@ def make_gate_update(ft, terms, team):
                 # a sliding node stays in the implicit regime: where |tau_f| = tau_c*A cannot hold, its
                 # solved gate is pinned at 1 (open) or 0 (closed), which is the Heaviside value; leaving
                 # the regime would only trade the implicit gate for repeated located switches
-                gate = gates[G_GATE_END, q, m]  # the last stage's solved gate: K[slot] is consistent with it
+                gate = gates[G_GATE_END, i, m]  # the last stage's solved gate: K[slot] is consistent with it
                 new_gate = gate
                 new_sliding = ft(1.0)
             else:
                 if z1 > ft(0.0):
                     new_gate = ft(1.0)
                 if new_gate != gate:  # the node switched: test_switch stored the slope dr for it
-                    dr = gates[G_DMARGIN, q, m]
+                    dr = gates[G_DMARGIN, i, m]
                     if dr < ft(0.0) and h > ft(0.0):
                         r_obs = (z1 - z0) / h
                         rate_far = r_obs + (ft(1.0) - ft(2.0) * gate) * dr  # the rate with the other gate value
@@ -320,9 +317,9 @@ def make_gate_update(ft, terms, team):
                             new_sliding = ft(1.0)
                             new_gate = wp.clamp(gate + (-z1 / h - r_obs) / dr, ft(0.0), ft(1.0))  # start value
             if new_gate != gate:
-                relax = (new_gate - gate) * wp.abs(v_disc - c.kif * state[C_V, q, m]) * c.inv_D
-                K[slot, C_TAU, q, m] = K[slot, C_TAU, q, m] - state[C_TAU, q, m] * relax
-                K[slot, C_PHI, q, m] = K[slot, C_PHI, q, m] - state[C_PHI, q, m] * relax
+                relax = (new_gate - gate) * wp.abs(v_disc - c.kif * state[C_V, i, m]) * c.inv_D
+                K[slot, C_TAU, i, m] = K[slot, C_TAU, i, m] - state[C_TAU, i, m] * relax
+                K[slot, C_PHI, i, m] = K[slot, C_PHI, i, m] - state[C_PHI, i, m] * relax
             if gate_regime(new_gate, new_sliding) != gate_regime(gate, sliding):
                 switches += 1
             # a first opening has gate 0 at the step's start (the gates start closed, and a gate once
@@ -335,14 +332,14 @@ def make_gate_update(ft, terms, team):
                     yield_time[i, m] = t_old + theta * (t_new - t_old)
             if outputs.contact_front == 1 and new_gate > ft(0.0) and gate_regime(gate, sliding) == 0:
                 if not wp.isfinite(arrival[EV_CONTACT, i, m]):
-                    t_cross, t_err = contact_arrival(p, st, t_old, t_new, gates[G_MARGIN_OLD, q, m], z0, z1,
+                    t_cross, t_err = contact_arrival(p, st, t_old, t_new, gates[G_MARGIN_OLD, i, m], z0, z1,
                                                      backward_euler)
                     arrival[EV_CONTACT, i, m] = t_cross
                     arrival_error[EV_CONTACT, i, m] = t_err
-            gates[G_GATE, q, m] = new_gate
-            gates[G_SLIDE, q, m] = new_sliding
-            gates[G_MARGIN_OLD, q, m] = z0
-            gates[G_MARGIN, q, m] = z1
+            gates[G_GATE, i, m] = new_gate
+            gates[G_SLIDE, i, m] = new_sliding
+            gates[G_MARGIN_OLD, i, m] = z0
+            gates[G_MARGIN, i, m] = z1
         st.gate_switches = st.gate_switches + team_count(switches)
         return st
 

@@ -23,8 +23,8 @@ from .gates import make_gates
 from .model_terms import disc_velocity_at, make_model_terms
 from .newton import make_newton
 from .observers import ObserverSet, make_observers, run_finished
-from .team import (EXCHANGES, MAX_TEAM_LANES, TEAM_BUFFER_BYTES, WARP_SIZE, exchanges_by_value, lane_stores, make_team,
-                   node_range, node_store, warps_team)
+from .team import (EXCHANGES, MAX_TEAM_LANES, TEAM_BUFFER_BYTES, WARP_SIZE, exchanges_by_value, make_team, node_range,
+                   warps_team)
 from .types import C_PHI, N_WORK, IntegratorState, MemberParams, OutputSettings, SolverSettings, stage_slots
 
 _CACHE: dict = {}
@@ -438,7 +438,6 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
         outputs: OutputSettings,
         launch_steps: int,
         block_members: int,
-        nodes: int,
         stall_limit: wp.array(dtype=wp.int32),
         record_times: wp.array(dtype=wp.float64),
         # state, read and written (persists between launches)
@@ -458,9 +457,8 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     ):
         """Advance each member by at most ``launch_steps`` attempted steps (or to its end, or until its
         attempts exceed stall_limit[0]).
-        Shapes and units: kernels/types.py; nodes: the member's N (the per-node arrays' node axis is
-        longer in a team: kernels/team.py store_length). A team: every lane keeps the same
-        IntegratorState; lane 0 stores it."""
+        Shapes and units: kernels/types.py. A team: every lane keeps the same IntegratorState; lane
+        0 stores it."""
         if wp.static(shared_on):  # the first tile: reserves the block's dynamic shared memory for the work view below
             wp.tile_empty(shape=(shared_len,), dtype=ft, storage="shared")
         if wp.static(poison_on):  # the check WARPFRIC_TEAM_POISON_SHARED_WORK: all of it NaN, by every thread
@@ -500,18 +498,13 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
         if st.done != 0:
             return
         p = params[m]
-        n = nodes
+        n = state.shape[1]
         c = make_coeffs(p, n)
         if wp.static(team_on):
             c.lane = lane
             first_node, end_node = node_range(lane, lanes, n)
             c.first_node = first_node
             c.end_node = end_node
-            c.store_lanes = lanes
-            store_shift, store_before, store_after = lane_stores(lane, lanes, n)
-            c.store_shift = store_shift
-            c.store_before = store_before
-            c.store_after = store_after
         delta0 = ft(st.delta0)
         tilt = ft(st.tilt)
         attempt_limit = stall_limit[0]
@@ -604,14 +597,12 @@ def make_layout_kernels(ft):
         state[comp, i, m] = value
 
     @wp.kernel(module="unique", enable_backward=False)
-    def member_rows(source: array3, kernel_member: wp.array(dtype=wp.int32), stored: wp.array(dtype=wp.int32),
-                    rows: array3):
-        """rows[k, m, i] = source[k, stored[i], kernel_member[m]]: (slot, stored node, member) ->
-        (slot, member, node), node i being stored at stored[i] (kernels/team.py node_stores) and the
-        caller's member m being the integrate kernel's member kernel_member[m]; launched over rows'
-        shape, so a leading part of source's slots."""
+    def member_rows(source: array3, kernel_member: wp.array(dtype=wp.int32), rows: array3):
+        """rows[k, m, i] = source[k, i, kernel_member[m]]: (slot, node, member) -> (slot, member, node),
+        the caller's member m being the integrate kernel's member kernel_member[m]; launched over
+        rows' shape, so a leading part of source's slots."""
         k, m, i = wp.tid()
-        rows[k, m, i] = source[k, stored[i], kernel_member[m]]
+        rows[k, m, i] = source[k, i, kernel_member[m]]
 
     _LAYOUT_KERNELS[ft] = dict(initial_state=initial_state, member_rows=member_rows, member_columns=member_columns)
     return _LAYOUT_KERNELS[ft]
@@ -627,9 +618,7 @@ def member_columns(source: wp.array2d(dtype=wp.float64), kernel_member: wp.array
 
 
 def make_field_kernel(ft, stages):
-    """The evaluate_fields kernel: the interface stresses of the current state (one thread a member,
-    the state stored as the integrate kernel of the same stages stores it)."""
-    lanes = stages["team"]["lanes"]
+    """The evaluate_fields kernel: the interface stresses of the current state."""
     make_coeffs = stages["terms"]["make_coeffs"]
     state_displacement = stages["observers"]["state_displacement"]
     state_contact = stages["observers"]["state_contact"]
@@ -640,29 +629,27 @@ def make_field_kernel(ft, stages):
         params: wp.array(dtype=MemberParams),
         member_states: wp.array(dtype=IntegratorState),
         state: array3,
-        nodes: int,
         row_of: wp.array(dtype=wp.int32),
         normal_stress_out: wp.array2d(dtype=ft),
         friction_stress_out: wp.array2d(dtype=ft),
     ):
         """Interface normal stress (Pa, contact part max(sigma_n, 0)) and friction stress (Pa) of
         the current state of each member, (member, node): the Dataset's order, the kernel's member m
-        in row row_of[m] (the caller's order: warpfric/engine.py member_order). nodes: N; the state
-        as the integrate kernel stores it (its team's node_store)."""
+        in row row_of[m] (the caller's order: warpfric/engine.py member_order)."""
         m = wp.tid()
         row = row_of[m]
         st = member_states[m]
         p = params[m]
-        n = nodes
+        n = state.shape[1]
         c = make_coeffs(p, n)
         delta0 = ft(st.delta0)
         tilt = ft(st.tilt)
         v_disc = ft(disc_velocity_at(p, st.t, st.t))
         u_l = ft(0.0)
-        u_c = state_displacement(state, 0, node_store(0, lanes, n), n, m)
+        u_c = state_displacement(state, 0, n, m)
         for i in range(n):
-            u_r = state_displacement(state, i + 1, node_store(wp.min(i + 1, n - 1), lanes, n), n, m)
-            ns, fr = state_contact(c, state, i, node_store(i, lanes, n), n, m, u_l, u_c, u_r, delta0, tilt, v_disc)
+            u_r = state_displacement(state, i + 1, n, m)
+            ns, fr = state_contact(c, state, i, n, m, u_l, u_c, u_r, delta0, tilt, v_disc)
             normal_stress_out[row, i] = fr.contact * ns.value
             friction_stress_out[row, i] = fr.stress
             u_l = u_c

@@ -247,14 +247,6 @@ def make_coefficients(ft):
         first_node: wp.int32
         end_node: wp.int32
         lane: wp.int32
-        # where the per-node device arrays (state, K, step_end, gates) hold a node: the lane's own node
-        # i at i * store_lanes + store_shift, the node before its first at store_before and the node
-        # after its last at store_after (lane-interleaved in a team: kernels/team.py node_store; the
-        # node index itself for the thread-per-member kernel)
-        store_lanes: wp.int32
-        store_shift: wp.int32
-        store_before: wp.int32
-        store_after: wp.int32
 
     @wp.func
     def make_coeffs(p: MemberParams, n: int):
@@ -302,28 +294,9 @@ def make_coefficients(ft):
         c.first_node = 0
         c.end_node = n
         c.lane = 0
-        c.store_lanes = 1
-        c.store_shift = 0
-        c.store_before = -1
-        c.store_after = n
         return c
 
-    @wp.func
-    def own_store(c: Coeffs, i: int):
-        """Where the per-node device arrays (state, K, step_end, gates) hold the lane's own node i."""
-        return i * c.store_lanes + c.store_shift
-
-    @wp.func
-    def near_store(c: Coeffs, i: int):
-        """Where the per-node device arrays hold node i, for i from the lane's first node - 1 to its
-        last node + 1."""
-        if i < c.first_node:
-            return c.store_before
-        if i >= c.end_node:
-            return c.store_after
-        return own_store(c, i)
-
-    return dict(Coeffs=Coeffs, make_coeffs=make_coeffs, own_store=own_store, near_store=near_store)
+    return dict(Coeffs=Coeffs, make_coeffs=make_coeffs)
 
 
 def make_grid(ft, Coeffs):
@@ -680,8 +653,6 @@ def make_model_terms(ft, model):
         StencilTerm=stencil["StencilTerm"],
         Friction=at_gate["Friction"],
         make_coeffs=coefficients["make_coeffs"],
-        own_store=coefficients["own_store"],
-        near_store=coefficients["near_store"],
         node_x=grid["node_x"],
         node_weight=grid["node_weight"],
         node_moment_weight=grid["node_moment_weight"],

@@ -336,7 +336,6 @@ def make_stage_equations(ft, model, terms, gates, method="tr_bdf2"):
     normal_force_stage = normal_force_piece if continued else normal_force_in_step
     inertia = bool(model.inertia)
     Coeffs = terms["Coeffs"]
-    own_store = terms["own_store"]
     node_weight = terms["node_weight"]
     node_moment_weight = terms["node_moment_weight"]
     elastic_force = terms["elastic_force"]
@@ -386,12 +385,11 @@ def make_stage_equations(ft, model, terms, gates, method="tr_bdf2"):
         c: Coeffs, settings: SolverSettings, m: int, n: int, work: array3, gates: array3, i: int, u_l: ft,
         u_c: ft, u_r: ft, delta0: ft, tilt: ft, v_disc: ft, g: ft,
     ):
-        """The lane's node i's NodeRow at the stage's current V (work[W_V]), displacements u_{i-1},
-        u_i, u_{i+1} (m) and plate state delta0 (m), tilt (rad); g = gamma*h (s)."""
-        q = own_store(c, i)
+        """Node i's NodeRow at the stage's current V (work[W_V]), displacements u_{i-1}, u_i, u_{i+1}
+        (m) and plate state delta0 (m), tilt (rad); g = gamma*h (s)."""
         vel = work[W_V, i, m]
         ns, fr = contact_terms(c, i, n, u_l, u_c, u_r, delta0, tilt, vel, v_disc, work[W_ZT, i, m],
-                               work[W_ZP, i, m], g, node_gate(gates, q, m), node_sliding(gates, q, m),
+                               work[W_ZP, i, m], g, node_gate(gates, i, m), node_sliding(gates, i, m),
                                ft(settings.sliding_width))
         sigma = ns.value
         ef = elastic_force(c, i, n, u_l, u_c, u_r, delta0, tilt)
@@ -435,7 +433,7 @@ def make_stage_equations(ft, model, terms, gates, method="tr_bdf2"):
         slip = v_disc - c.kif * vel
         slip_start = v_disc - c.kif * work[W_ZV, i, m]
         row.kink = ft(0.0)
-        if sigma <= ft(0.0) or node_sliding(gates, q, m) > ft(0.0) or slip * slip_start <= ft(0.0):
+        if sigma <= ft(0.0) or node_sliding(gates, i, m) > ft(0.0) or slip * slip_start <= ft(0.0):
             row.kink = ft(1.0)
         return row
 
@@ -494,7 +492,6 @@ def make_newton_system(ft, model, terms, team, equations, solver, team_solver):
     lane's part of the team's partitioned solve)."""
     inertia = bool(model.inertia)
     Coeffs = terms["Coeffs"]
-    own_store = terms["own_store"]
     team_on = team["lanes"] > 1
     team_sum_vec12 = team.get("team_sum_vec12", None)
     from_neighbour_lanes = team.get("from_neighbour_lanes", None)
@@ -555,7 +552,7 @@ def make_newton_system(ft, model, terms, team, equations, solver, team_solver):
             u_r = stage_displacement(work, i + 1, n, m, g)
             row = node_row(c, settings, m, n, work, gates, i, u_l, u_c, u_r, delta0, tilt, v_disc, g)
             if wp.static(inertia):
-                step_end[E_DIAG, own_store(c, i), m] = row.jac_center
+                step_end[E_DIAG, i, m] = row.jac_center
             kink = wp.max(kink, row.kink)
             e1 += row.e1
             e2 += row.e2
@@ -755,7 +752,6 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
     stress_gate = model.relaxation_gate == "stress"
     team_on = team["lanes"] > 1
     Coeffs = terms["Coeffs"]
-    own_store = terms["own_store"]
     node_weight = terms["node_weight"]
     contact_terms = terms["contact_terms"]
     node_gate = gates["node_gate"]
@@ -802,24 +798,23 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
             u_l = stage_displacement(work, c.first_node - 1, n, m, g)
         u_c = stage_displacement(work, c.first_node, n, m, g)
         for i in range(c.first_node, c.end_node):
-            q = own_store(c, i)
             u_r = stage_displacement(work, i + 1, n, m, g)
             vel = work[W_V, i, m]
             ns, fr = contact_terms(c, i, n, u_l, u_c, u_r, delta0, tilt, vel, v_disc, work[W_ZT, i, m], work[W_ZP, i, m],
-                                   g, node_gate(gates, q, m), node_sliding(gates, q, m), ft(settings.sliding_width))
+                                   g, node_gate(gates, i, m), node_sliding(gates, i, m), ft(settings.sliding_width))
             sigma = ns.value
             if end_of_step == 1:
-                step_end[E_CONTACT, q, m] = fr.contact  # at the end of the step: fronts skip lifted-off nodes
+                step_end[E_CONTACT, i, m] = fr.contact  # at the end of the step: fronts skip lifted-off nodes
                 if wp.static(stress_gate):
-                    gates[G_GATE_END, q, m] = fr.gate
-                    test = test_switch(c, settings, gates, q, m, fr, sigma, vel, v_disc, h, test)
-            K[slot, C_U, q, m] = vel
+                    gates[G_GATE_END, i, m] = fr.gate
+                    test = test_switch(c, settings, gates, i, m, fr, sigma, vel, v_disc, h, test)
+            K[slot, C_U, i, m] = vel
             if wp.static(inertia):
-                K[slot, C_V, q, m] = over_den(vel - work[W_ZV, i, m], g, inv_g)
+                K[slot, C_V, i, m] = over_den(vel - work[W_ZV, i, m], g, inv_g)
             else:
-                K[slot, C_V, q, m] = ft(0.0)
-            K[slot, C_TAU, q, m] = fr.elastic_stress_rate
-            K[slot, C_PHI, q, m] = fr.contact_age_rate
+                K[slot, C_V, i, m] = ft(0.0)
+            K[slot, C_TAU, i, m] = fr.elastic_stress_rate
+            K[slot, C_PHI, i, m] = fr.contact_age_rate
             wgt = wp.float64(node_weight(c, i, n))
             sums.friction += wgt * wp.float64(fr.stress)
             sums.normal += wgt * wp.float64(fr.contact * sigma)

@@ -112,30 +112,29 @@ def make_state_interface(ft, terms):
     a lane's nodes: the displacement stencil's start and each node's normal stress and friction."""
     Coeffs = terms["Coeffs"]
     contact_terms = terms["contact_terms"]
-    near_store = terms["near_store"]
     array3 = wp.array3d(dtype=ft)
 
     @wp.func
-    def state_displacement(state: array3, i: int, q: int, n: int, m: int):
-        """u_i of the state, stored at q (0 beyond the last node)."""
+    def state_displacement(state: array3, i: int, n: int, m: int):
+        """u_i of the state (0 beyond the last node)."""
         if i >= n:
             return ft(0.0)
-        return state[C_U, q, m]
+        return state[C_U, i, m]
 
     @wp.func
     def lane_stencil_start(c: Coeffs, state: array3, n: int, m: int):
         """(u of the node left of the lane's first node (0 at the pad's left end), u of its first node)."""
         u_l = ft(0.0)
         if c.first_node > 0:
-            u_l = state_displacement(state, c.first_node - 1, c.store_before, n, m)
-        return u_l, state_displacement(state, c.first_node, near_store(c, c.first_node), n, m)
+            u_l = state_displacement(state, c.first_node - 1, n, m)
+        return u_l, state_displacement(state, c.first_node, n, m)
 
     @wp.func
-    def state_contact(c: Coeffs, state: array3, i: int, q: int, n: int, m: int, u_l: ft, u_c: ft, u_r: ft, delta0: ft,
-                      tilt: ft, v_disc: ft):
-        """The interface at node i (stored at q) of the state itself (the friction law at the state: g = 0)."""
-        return contact_terms(c, i, n, u_l, u_c, u_r, delta0, tilt, state[C_V, q, m], v_disc, state[C_TAU, q, m],
-                             state[C_PHI, q, m], ft(0.0), ft(1.0), ft(0.0), ft(1.0))
+    def state_contact(c: Coeffs, state: array3, i: int, n: int, m: int, u_l: ft, u_c: ft, u_r: ft, delta0: ft, tilt: ft,
+                      v_disc: ft):
+        """The interface at node i of the state itself (the friction law at the state: g = 0)."""
+        return contact_terms(c, i, n, u_l, u_c, u_r, delta0, tilt, state[C_V, i, m], v_disc, state[C_TAU, i, m],
+                             state[C_PHI, i, m], ft(0.0), ft(1.0), ft(0.0), ft(1.0))
 
     return dict(state_displacement=state_displacement, lane_stencil_start=lane_stencil_start,
                 state_contact=state_contact)
@@ -144,7 +143,6 @@ def make_state_interface(ft, terms):
 def make_velocity_front(ft, terms, team):
     """The velocity front (OutputSettings.velocity_front): track_fronts."""
     Coeffs = terms["Coeffs"]
-    own_store = terms["own_store"]
     team_max = team["team_max"]
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
@@ -172,17 +170,16 @@ def make_velocity_front(ft, terms, team):
             disc_sign = wp.float64(-1.0)
         w_step = wp.float64(-1.0e300)
         for i in range(c.first_node, c.end_node):
-            q = own_store(c, i)
-            if step_end[E_CONTACT, q, m] == ft(0.0):
+            if step_end[E_CONTACT, i, m] == ft(0.0):
                 continue
-            w_old = detachment_velocity(wp.float64(K[s1, C_U, q, m]), disc_sign, direction)
-            w_new = detachment_velocity(wp.float64(K[s3, C_U, q, m]), disc_sign, direction)
+            w_old = detachment_velocity(wp.float64(K[s1, C_U, i, m]), disc_sign, direction)
+            w_new = detachment_velocity(wp.float64(K[s3, C_U, i, m]), disc_sign, direction)
             w_step = wp.max(w_step, w_new)
             if not wp.isfinite(arrival[EV_VELOCITY, i, m]):
                 if use_stage2 == 1:
                     # quadratic through the step's ends and its second stage (at c2*h): a sharper
                     # crossing time, and its distance to the linear one as the error estimate
-                    w_mid = detachment_velocity(wp.float64(K[s2, C_U, q, m]), disc_sign, direction)
+                    w_mid = detachment_velocity(wp.float64(K[s2, C_U, i, m]), disc_sign, direction)
                     if w_new >= st.front_level or w_mid >= st.front_level:
                         t_cross, t_err = crossing_time_quadratic(
                             st.front_level, t_old, w_old, wp.float64(C2), w_mid, t_new, w_new
@@ -206,8 +203,6 @@ def make_velocity_front(ft, terms, team):
 def make_strength_front(ft, terms, team, interface):
     """The strength front (OutputSettings.strength_front): track_strength."""
     Coeffs = terms["Coeffs"]
-    own_store = terms["own_store"]
-    near_store = terms["near_store"]
     team_count = team["team_count"]
     barrier = team["barrier"]
     state_displacement = interface["state_displacement"]
@@ -238,8 +233,8 @@ def make_strength_front(ft, terms, team, interface):
         rising = int(0)
         u_l, u_c = lane_stencil_start(c, state, n, m)
         for i in range(c.first_node, c.end_node):
-            u_r = state_displacement(state, i + 1, near_store(c, i + 1), n, m)
-            ns, fr = state_contact(c, state, i, own_store(c, i), n, m, u_l, u_c, u_r, delta0, tilt, v_disc)
+            u_r = state_displacement(state, i + 1, n, m)
+            ns, fr = state_contact(c, state, i, n, m, u_l, u_c, u_r, delta0, tilt, v_disc)
             u_l = u_c
             u_c = u_r
             sigma = wp.float64(fr.contact * ns.value)
@@ -281,8 +276,6 @@ def make_strength_front(ft, terms, team, interface):
 def make_recording(ft, terms, team, interface):
     """The recorded fields of a recorded member (IntegratorState.record_slot): record_fields."""
     Coeffs = terms["Coeffs"]
-    own_store = terms["own_store"]
-    near_store = terms["near_store"]
     barrier = team["barrier"]
     state_displacement = interface["state_displacement"]
     lane_stencil_start = interface["lane_stencil_start"]
@@ -312,10 +305,9 @@ def make_recording(ft, terms, team, interface):
         span = t_new - t_old
         u_l, u_c = lane_stencil_start(c, state, n, m)
         for i in range(c.first_node, c.end_node):
-            q = own_store(c, i)
-            u_r = state_displacement(state, i + 1, near_store(c, i + 1), n, m)
-            vel = state[C_V, q, m]
-            ns, fr = state_contact(c, state, i, q, n, m, u_l, u_c, u_r, delta0, tilt, v_disc)
+            u_r = state_displacement(state, i + 1, n, m)
+            vel = state[C_V, i, m]
+            ns, fr = state_contact(c, state, i, n, m, u_l, u_c, u_r, delta0, tilt, v_disc)
             sigma = ns.value
             current = wp.vector(vel, v_disc - c.kif * vel, fr.contact * sigma, fr.stress, length=4, dtype=ft)
             for k in range(st.record_next, k_end):

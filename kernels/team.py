@@ -56,49 +56,6 @@ def node_range(lane: int, lanes: int, n: int):
     return (lane * n) // lanes, ((lane + 1) * n) // lanes
 
 
-# Where the per-node device arrays (state, K, step_end, gates) hold a member's nodes in a team:
-# lane-interleaved, node i of lane k (its j-th node, j = i - first node of k) at j * lanes + k, so
-# that the lanes of a warp, each at its j-th node, read neighbouring addresses (one 256-byte
-# transaction for 32 lanes of float64, where contiguous nodes spread a warp's reads over ~13 cache
-# lines). The node axis of those arrays is store_length(n, lanes) long (the holes of the lanes with
-# fewer nodes are never read); a team of one stores node i at i.
-
-
-def store_length(n: int, lanes: int) -> int:
-    """The node axis of the per-node device arrays of a member of n nodes in a team of ``lanes``."""
-    return lanes * -(-n // lanes)
-
-
-def node_stores(n: int, lanes: int):
-    """The storage index of each of the n nodes (numpy int32 (n,)), as node_store on the device."""
-    import numpy as np
-
-    i = np.arange(n)
-    lane = ((i + 1) * lanes - 1) // n
-    return ((i - (lane * n) // lanes) * lanes + lane).astype(np.int32)
-
-
-@wp.func
-def node_store(i: int, lanes: int, n: int):
-    """The storage index of node i (0 <= i < n) in a team of ``lanes`` lanes (node_stores)."""
-    lane = ((i + 1) * lanes - 1) // n
-    first, _end = node_range(lane, lanes, n)
-    return (i - first) * lanes + lane
-
-
-@wp.func
-def lane_stores(lane: int, lanes: int, n: int):
-    """(shift, before, after) of lane ``lane`` (Coeffs.store_*): its own node i is stored at
-    i * lanes + shift, the node before its first (the previous lane's last) at before (-1 for lane
-    0), the node after its last (the next lane's first) at after."""
-    first, _end = node_range(lane, lanes, n)
-    before = int(-1)
-    if lane > 0:
-        previous_first, _previous_end = node_range(lane - 1, lanes, n)
-        before = (first - 1 - previous_first) * lanes + lane - 1
-    return lane - first * lanes, before, lane + 1
-
-
 @wp.func
 def settle():
     """A barrier that synchronises before it writes (a shared tile's assignment: sync, write,

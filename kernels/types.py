@@ -30,19 +30,12 @@ record_times       (time,)                             f64    recording grid (s)
 record_previous    (record_field, node, recorded)      ft     recorded fields at the last accepted point
 record             (record_field, time, node, recorded) ft    sampled fields (RECORD_FIELDS; NaN: not reached)
 =================  ==================================  =====  ===============================================
-
-The node axis of state, stages, step_end and gates is the stored node: in a team of P lanes the
-nodes are lane-interleaved (kernels/team.py node_store; the axis is store_length(N, P) long), so
-that a warp's lanes read neighbouring addresses; with one lane it is the node itself. The other
-arrays are indexed by the node.
 """
 
 import dataclasses
 
 import numpy as np
 import warp as wp
-
-from .team import store_length
 
 # state components (first index of ``state``, second of ``stages``)
 C_U, C_V, C_TAU, C_PHI = 0, 1, 2, 3
@@ -256,27 +249,25 @@ def member_zeros(shape, ft, member_major: bool):
 
 def allocate(ft, params_np: np.ndarray, n_nodes: int, stress_gate: bool, fronts: bool,
              record_times, n_recorded: int, member_major: bool = False, method: str = "tr_bdf2",
-             strength: bool = False, global_work: bool = True, lanes: int = 1) -> DeviceArrays:
+             strength: bool = False, global_work: bool = True) -> DeviceArrays:
     """Allocate the arrays of a launch on the current Warp device. ``params_np``: MemberParams as a
     numpy structured array (member,); arrays a scene does not need get a (.., 1, 1) placeholder;
     member_major: the state, stages, work and gates arrays hold each member contiguously
     (:func:`member_zeros`); method: the integrator, which sets the stage slots of K (:func:`stage_slots`);
     strength: the strength front's per-node reductions; global_work: the work array in global memory
     (False: a (N_WORK, 1, 1) placeholder, the kernel keeps it in shared memory: kernels/integrator.py
-    team_layout); lanes: the team's lanes, which set the node axis of state, stages, step_end and
-    gates (kernels/team.py store_length: lane-interleaved in a team; n_nodes for one lane)."""
+    team_layout)."""
     n_members = params_np.shape[0]
     times = np.asarray(record_times if n_recorded else [0.0], dtype=np.float64)
     per_node = (n_nodes, n_members)
-    stored = store_length(n_nodes, lanes)
     return DeviceArrays(
         params=wp.array(params_np, dtype=MemberParams),
-        state=member_zeros((N_COMPONENTS, stored, n_members), ft, member_major),
-        stages=member_zeros((stage_slots(method), N_COMPONENTS, stored, n_members), ft, member_major),
+        state=member_zeros((N_COMPONENTS, n_nodes, n_members), ft, member_major),
+        stages=member_zeros((stage_slots(method), N_COMPONENTS, n_nodes, n_members), ft, member_major),
         work=member_zeros((N_WORK, n_nodes, n_members), ft, member_major) if global_work
         else wp.zeros((N_WORK, 1, 1), dtype=ft),
-        step_end=member_zeros((N_STEP_END, stored, n_members), ft, member_major),
-        gates=member_zeros((N_GATE, stored, n_members), ft, member_major) if stress_gate
+        step_end=member_zeros((N_STEP_END, n_nodes, n_members), ft, member_major),
+        gates=member_zeros((N_GATE, n_nodes, n_members), ft, member_major) if stress_gate
         else wp.zeros((N_GATE, 1, 1), dtype=ft),
         # NaN: not set yet (the kernels test isfinite)
         yield_time=wp.full(per_node if stress_gate else (1, 1), np.nan, dtype=wp.float64),

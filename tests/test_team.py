@@ -14,7 +14,6 @@ from conftest import DEVICE, run
 import warpfric as wf
 from warpfric.engine import (AUTO_LANES, AUTO_MIN_NODES, alike_blocks, choose_lanes, cpu_blocks, member_order,
                              morton_key, slower_float32)
-from warpfric.kernels.team import lane_stores, node_store, node_stores, store_length
 
 # the members of studies/outputs_equal.py: e = 0, -0.2 (1000 N), 0.3 (300 N), 0.6 (3000 N: lift-off)
 MEMBERS = {"eccentricity": [0.0, -0.2, 0.3, 0.6], "normal_force": [1000.0, 1000.0, 300.0, 3000.0]}
@@ -191,48 +190,6 @@ def test_a_team_sums_in_its_documented_order(lanes, exchange):
     expected = _sum_in_order(x, lanes)
     assert expected != math.fsum(x)  # the order shows in these bits
     np.testing.assert_array_equal(out.numpy(), np.full(lanes, expected))
-
-
-@wp.kernel(module="unique")
-def _stores_kernel(lanes: int, n: int, general: wp.array(dtype=wp.int32), lane_rows: wp.array2d(dtype=wp.int32)):
-    k = wp.tid()
-    for i in range(n):
-        if k == 0:
-            general[i] = node_store(i, lanes, n)
-    if k < lanes:
-        shift, before, after = lane_stores(k, lanes, n)
-        lane_rows[k, 0] = shift
-        lane_rows[k, 1] = before
-        lane_rows[k, 2] = after
-
-
-@pytest.mark.parametrize("n, lanes", [(30, 1), (30, 4), (30, 7), (16, 8), (200, 32), (200, 96), (130, 64), (41, 20)])
-def test_team_nodes_are_stored_lane_interleaved(n, lanes):
-    """Where the per-node arrays hold each node (kernels/team.py): lane k's j-th node (node_range)
-    at j * lanes + k, every node in its own place inside store_length, the identity for one lane;
-    on the device node_store gives the same places, and lane_stores the shift of a lane's own nodes
-    (i * lanes + shift) and the places of the nodes either side of them (its neighbours')."""
-    expected = np.empty(n, dtype=np.int64)
-    firsts = [(k * n) // lanes for k in range(lanes + 1)]
-    for k in range(lanes):
-        for i in range(firsts[k], firsts[k + 1]):
-            expected[i] = (i - firsts[k]) * lanes + k
-    stored = node_stores(n, lanes)
-    np.testing.assert_array_equal(stored, expected)
-    assert len(set(stored.tolist())) == n and stored.max() < store_length(n, lanes) < n + lanes
-    if lanes == 1:
-        np.testing.assert_array_equal(stored, np.arange(n))
-    general = wp.zeros(n, dtype=wp.int32, device=DEVICE)
-    lane_rows = wp.zeros((lanes, 3), dtype=wp.int32, device=DEVICE)
-    wp.launch(_stores_kernel, dim=lanes, inputs=[lanes, n, general, lane_rows], device=DEVICE)
-    np.testing.assert_array_equal(general.numpy(), expected)
-    rows = lane_rows.numpy()
-    for k in range(lanes):
-        own = np.arange(firsts[k], firsts[k + 1])
-        np.testing.assert_array_equal(own * lanes + rows[k, 0], expected[own])
-        assert rows[k, 1] == (expected[firsts[k] - 1] if k > 0 else -1)
-        if k + 1 < lanes:
-            assert rows[k, 2] == expected[firsts[k + 1]]
 
 
 def test_lanes_is_validated_and_chosen(monkeypatch):

@@ -448,15 +448,14 @@ def host_copy(a, out: np.ndarray | None = None) -> np.ndarray:
     return out
 
 
-def member_rows(layout: dict, source, slots: int, kernel_member, stored, out: np.ndarray | None = None) -> np.ndarray:
-    """The first ``slots`` slots of a (slot, stored node, member) device array (any layout) on the
-    host as (slot, member, node), arranged by the layout kernels' member_rows on the device, node i
-    being stored at stored[i] and the caller's member m being the kernel's kernel_member[m] (int32
-    device arrays); into ``out`` if given."""
+def member_rows(layout: dict, source, slots: int, kernel_member, out: np.ndarray | None = None) -> np.ndarray:
+    """The first ``slots`` slots of a (slot, node, member) device array (any layout) on the host as
+    (slot, member, node), arranged by the layout kernels' member_rows on the device, the caller's
+    member m being the kernel's kernel_member[m] (an int32 device array); into ``out`` if given."""
     import warp as wp
 
-    rows = wp.empty((slots, source.shape[2], stored.shape[0]), dtype=source.dtype, device=source.device)
-    wp.launch(layout["member_rows"], dim=rows.shape, inputs=[source, kernel_member, stored, rows], device=source.device)
+    rows = wp.empty((slots, source.shape[2], source.shape[1]), dtype=source.dtype, device=source.device)
+    wp.launch(layout["member_rows"], dim=rows.shape, inputs=[source, kernel_member, rows], device=source.device)
     return host_copy(rows, out)
 
 
@@ -561,7 +560,6 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     import warp as wp
 
     from warpfric.kernels.integrator import block_threads, get_integrator, team_layout
-    from warpfric.kernels.team import node_stores
     from warpfric.kernels.types import FRONT_EVENTS, G_GATE, N_COMPONENTS, S_MAX, S_RATIO1, IntegratorState, allocate
 
     n_members = values["normal_force"].shape[0]
@@ -610,7 +608,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         arrays = allocate(ft, params_np, n, stress_gate, fronts is not None,
                           record.times if record is not None else None, len(record.members) if record is not None else 0,
                           member_major=team, method=solver.method, strength=strength,
-                          global_work=layout.shared_work is None, lanes=lanes)
+                          global_work=layout.shared_work is None)
         per_member = [arrays.params, arrays.state, arrays.stages]  # not the (.., 1, 1) placeholders
         per_member += [arrays.step_end] + ([arrays.work] if layout.shared_work is None else [])
         per_member += [arrays.gates, arrays.yield_time] if stress_gate else []
@@ -627,8 +625,6 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         back = np.arange(n_members) if order is None else np.argsort(order)
         kernel_member = wp.array(back, dtype=wp.int32)
         row_of = wp.array(np.arange(n_members) if order is None else order, dtype=wp.int32)
-        stored_nodes = wp.array(node_stores(n, lanes), dtype=wp.int32)  # where state and gates hold each node
-        nodes_in_order = wp.array(np.arange(n, dtype=np.int32), dtype=wp.int32)
 
         def launch_integrate(inputs, outputs_):
             if team:
@@ -657,7 +653,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             stall_limit.fill_(NO_STALL_LIMIT)
             last_limit = NO_STALL_LIMIT
             inputs = [arrays.params, settings, outputs if pass_index == 0 else arrival_pass_settings(outputs),
-                      launch_steps(solver, n_members, device), block_members, n, stall_limit, arrays.record_times,
+                      launch_steps(solver, n_members, device), block_members, stall_limit, arrays.record_times,
                       member_states, arrays.state, arrays.stages, arrays.work, arrays.step_end, arrays.gates,
                       arrays.record_previous]
             outputs_ = [arrays.arrival, arrays.arrival_error, arrays.strength, arrays.yield_time, arrays.record]
@@ -692,19 +688,18 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                 # read back in the Dataset's (member, node) order, arranged on the device: the host
                 # writes each value once (docs/performance.md, "Host time around the kernel"); the
                 # fields' device copy is freed before the stresses are allocated
-                fields = member_rows(kern["layout"], arrays.state, N_COMPONENTS, kernel_member, stored_nodes,
-                                     landing["fields"])
+                fields = member_rows(kern["layout"], arrays.state, N_COMPONENTS, kernel_member, landing["fields"])
                 sigma_out = wp.zeros((n_members, n), dtype=ft)
                 tau_out = wp.zeros((n_members, n), dtype=ft)
                 wp.launch(kern["evaluate_fields"], dim=n_members,
-                          inputs=[arrays.params, member_states, arrays.state, n, row_of], outputs=[sigma_out, tau_out])
+                          inputs=[arrays.params, member_states, arrays.state, row_of], outputs=[sigma_out, tau_out])
                 sigma = host_copy(sigma_out, landing["normal_stress"])
                 tau = host_copy(tau_out, landing["friction_stress"])
                 yield_np = gate_np = None
                 if stress_gate:  # float64 (the stress gate refuses float32), like yield_time
                     yield_np = member_rows(kern["layout"], arrays.yield_time.reshape((1, n, n_members)), 1,
-                                           kernel_member, nodes_in_order, landing["yield_time"])[0]
-                    gate_np = member_rows(kern["layout"], arrays.gates, G_GATE + 1, kernel_member, stored_nodes,
+                                           kernel_member, landing["yield_time"])[0]
+                    gate_np = member_rows(kern["layout"], arrays.gates, G_GATE + 1, kernel_member,
                                           landing["gates"])[G_GATE]
         snapshot.close()
         if order is not None:  # the member states and events back into the caller's order (the rest: above, below)
