@@ -45,6 +45,10 @@
 #                  (WARPFRIC_TEAM_BLOCK_MEMBERS=1):
 #                  1 / 1,000 / 10,000 members, the contact front, the gate-less law, two rounds; then the
 #                  GPU tests of tests/test_team.py (outputs bit for bit equal)
+#   footprint      the working set against L1 and L2: Nsight Compute's DRAM, L2 and L1 counters of one
+#                  100-attempt launch of 10,000 members at 8 / 6 / 4 / 2 members a block and in teams of 64
+#                  lanes, and of one wave of 8 members a block on 132 / 66 / 33 SMs (1,056 / 528 / 264
+#                  members); then the wall times of the 10,000-member rows
 #   dask [SWEEP]   2 GPUs: one process against a local Dask cluster of 1 and 2 workers
 #   figures [ARGS] every figure study at full size (ARGS e.g. --relaxation-gate none)
 set -uo pipefail
@@ -251,8 +255,46 @@ for label in ("dask1", "dask2"):
 PY
     rm -f "$OUT"/plain.nc "$OUT"/dask1.nc "$OUT"/dask2.nc
     cat "$OUT/times.txt" ;;
+  footprint)
+    NCU=$(ncu_bin); echo "ncu: $NCU"
+    metrics=dram__bytes_read.sum,dram__bytes_write.sum,lts__t_sector_hit_rate.pct,gpu__time_duration.sum
+    metrics=$metrics,l1tex__t_sector_pipe_lsu_mem_global_op_ld_hit_rate.pct,smsp__inst_executed.sum
+    metrics=$metrics,l1tex__t_sector_pipe_lsu_mem_local_op_ld_hit_rate.pct,launch__grid_size
+    # footprint_row TAG MEMBERS LANES BLOCK_MEMBERS (empty: the engine's choice): the first launch
+    # after the benchmark's one-member warm-up
+    footprint_row() {
+      env ${4:+WARPFRIC_TEAM_BLOCK_MEMBERS=$4} "$NCU" -k regex:integrate --launch-skip 3 --launch-count 1 \
+        --metrics "$metrics" python3 studies/bench_engine.py --device cuda:0 --dtypes float64 --members "$2" \
+        --lanes "$3" --repeat 1 --steps-per-launch 100 --out "$OUT/footprint_$1.json" > "$OUT/footprint_$1.txt" 2>&1
+      python3 - "$1" "$OUT/footprint_$1.txt" <<'PY'
+import re, sys
+units = {"byte": 1e-9, "Kbyte": 1e-6, "Mbyte": 1e-3, "Gbyte": 1.0, "Tbyte": 1e3}
+v = {}
+for line in open(sys.argv[2]):
+    m = re.match(r"\s+(\S+)\s+(\S+)?\s+([\d,.]+)\s*$", line)
+    if m:
+        v[m.group(1)] = float(m.group(3).replace(",", "")) * units.get(m.group(2) or "", 1.0)
+g = lambda k: v.get(k, float("nan"))
+print(f"{sys.argv[1]:>14s} {g('gpu__time_duration.sum'):9.2f} {g('dram__bytes_read.sum'):8.2f} "
+      f"{g('dram__bytes_write.sum'):8.2f} {g('lts__t_sector_hit_rate.pct'):7.2f} "
+      f"{g('l1tex__t_sector_pipe_lsu_mem_global_op_ld_hit_rate.pct'):7.2f} "
+      f"{g('l1tex__t_sector_pipe_lsu_mem_local_op_ld_hit_rate.pct'):7.2f} {g('smsp__inst_executed.sum'):10.4g} "
+      f"{g('launch__grid_size'):6.0f}")
+PY
+    }
+    echo "           row   launch ms  DRAM rd GB  wr GB  L2 hit  L1 gl  L1 stack  warp instr  blocks"
+    for block in 8 6 4 2; do footprint_row "10000_b$block" 10000 32 "$block"; done
+    footprint_row 10000_l64 10000 64 ""
+    for members in 1056 528 264; do footprint_row "${members}_b8" "$members" 32 8; done
+    $E --members 10000 --lanes 32 --repeat 2 --out "$OUT/footprint_b8.json" > "$OUT/footprint_times.log" 2>&1
+    for block in 6 4 2; do
+      WARPFRIC_TEAM_BLOCK_MEMBERS=$block $E --members 10000 --lanes 32 --repeat 2 --out "$OUT/footprint_b$block.json" \
+        >> "$OUT/footprint_times.log" 2>&1
+    done
+    $E --members 10000 --lanes 64 --repeat 2 --out "$OUT/footprint_l64.json" >> "$OUT/footprint_times.log" 2>&1
+    grep -E "^ *[0-9]+ +[0-9]+ +float" "$OUT/footprint_times.log" ;;
   figures)
     python3 studies/figures.py all --device cuda:0 --outdir "$OUT/figures" "$@" 2>&1 | tee "$OUT/figures_gpu.log" | tail -12 ;;
   *)
-    sed -n '2,34p' "$0"; exit 2 ;;
+    awk 'NR > 1 && /^#/ { print } NR > 1 && !/^#/ { exit }' "$0"; exit 2 ;;
 esac
