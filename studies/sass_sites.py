@@ -192,6 +192,17 @@ def stack_bytes(sass: str) -> collections.Counter:
     return out
 
 
+def source_text(kernels: str, name: str, lineno: int, width: int = 70) -> str:
+    """Line ``lineno`` of ``name`` in the folder ``kernels``, stripped and cut to ``width``
+    characters; "" where there is no such file or line (an older profile read against another tree)."""
+    path = os.path.join(kernels, name)
+    if not os.path.exists(path):
+        return ""
+    with open(path) as f:
+        lines = f.read().splitlines()
+    return lines[lineno - 1].strip()[:width] if 0 < lineno <= len(lines) else ""
+
+
 def tool(name: str) -> str:
     """A CUDA binary utility: $CUDA_BIN/name, on the PATH, or /usr/local/cuda/bin/name."""
     if os.environ.get("CUDA_BIN"):
@@ -237,11 +248,10 @@ def main(argv=None):
     total, counts, by_kind, kind_totals = call_sites(sass)
     print(f"SASS instructions {total} ({cubin})")
     print("of which " + ", ".join(f"{k} {kind_totals[k]}" for k in KINDS))
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    kernels = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "kernels")
     print(f"{'instr':>7s} " + " ".join(f"{k:>7s}" for k in KINDS) + "  site")
     for (name, line), n in counts.most_common(args.top):
-        path = os.path.join(root, "kernels", name)
-        src = open(path).read().splitlines()[line - 1].strip()[:80] if os.path.exists(path) else ""
+        src = source_text(kernels, name, line, 80)
         kinds = " ".join(f"{by_kind[k][(name, line)]:7d}" for k in KINDS)
         print(f"{n:7d} {kinds}  {name}:{line}  {src}")
     if args.stack:
@@ -249,9 +259,7 @@ def main(argv=None):
         print(f"\nstack bytes {sum(slots.values())}, by the source line of the value first stored in each slot")
         for where, n in slots.most_common(args.top):
             name, line = where if where else ("?", 0)
-            path = os.path.join(root, "kernels", name)
-            src = open(path).read().splitlines()[line - 1].strip()[:80] if os.path.exists(path) and line else ""
-            print(f"{n:7d}  {name}:{line}  {src}")
+            print(f"{n:7d}  {name}:{line}  {source_text(kernels, name, line, 80)}")
     cuobjdump = tool("cuobjdump")
     if os.path.exists(cuobjdump):
         usage = subprocess.run([cuobjdump, "-res-usage", cubin], capture_output=True, text=True).stdout

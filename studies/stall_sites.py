@@ -29,7 +29,7 @@ import sys
 import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from sass_sites import OPCODE, instructions, register_operands, tool, writer_of  # noqa: E402
+from sass_sites import OPCODE, instructions, register_operands, source_text, tool, writer_of  # noqa: E402
 
 # stall reasons shown apart (ncu's column names, "stall_" dropped); the rest is summed as "other"
 REASONS = ("long_sb", "no_inst", "wait", "short_sb", "branch_resolving", "selected", "math", "lg", "mio", "barrier")
@@ -136,17 +136,6 @@ def waits_on(instr: list, samples: list) -> tuple:
 def opcode_of(line: str) -> str:
     m = OPCODE.search(line)
     return m.group(1) if m else ""
-
-
-def source_text(kernels: str, name: str, lineno: int) -> str:
-    """Line ``lineno`` of ``name`` in the folder ``kernels``, stripped and cut to 70 characters; ""
-    where there is no such file or line (an older profile read against another tree)."""
-    path = os.path.join(kernels, name)
-    if not os.path.exists(path):
-        return ""
-    with open(path) as f:
-        lines = f.read().splitlines()
-    return lines[lineno - 1].strip()[:70] if 0 < lineno <= len(lines) else ""
 
 
 def main(argv=None):
