@@ -48,3 +48,21 @@ def test_no_import_circles_anywhere_in_the_package():
     modules = [m for m in graph if m != "__init__"]
     circles = [(a, b) for a in modules for b in graph[a] if _reaches(graph, b, a)]
     assert circles == [], circles
+
+
+def test_the_documented_submodules_are_reachable_from_the_package_alone():
+    """docs/guide.md writes `warpfric.io.write_ensemble(...)` after `import warpfric as wf`: each
+    documented submodule is an attribute of the package without its own import statement (a fresh
+    interpreter, so that no other test has imported it first)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, warpfric as wf; "
+            "assert 'warpfric.io' not in sys.modules; "
+            "print(wf.io.write_ensemble.__module__, wf.sweep.__name__, wf.sensitivity.__name__, wf.plots.__name__, "
+            "wf.fronts.__name__); "
+            "getattr(wf, 'no_such_module')")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert run.stdout.split() == ["warpfric.io", "warpfric.sweep", "warpfric.sensitivity", "warpfric.plots",
+                                  "warpfric.fronts"], run.stderr
+    assert "AttributeError: module 'warpfric' has no attribute 'no_such_module'" in run.stderr

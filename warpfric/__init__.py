@@ -29,4 +29,17 @@ from .parameters import PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solv
 from .device import default_device  # noqa: E402
 from .simulate import simulate  # noqa: E402
 
+# the documented submodules, imported on first use so that `import warpfric` stays light:
+# `wf.io.write_ensemble(...)` works after `import warpfric as wf` alone (PEP 562)
+_SUBMODULES = ("fronts", "io", "plots", "sensitivity", "sweep")
+
+
+def __getattr__(name: str):
+    if name in _SUBMODULES:
+        import importlib
+
+        return importlib.import_module(f".{name}", __name__)
+    raise AttributeError(f"module 'warpfric' has no attribute {name!r}")
+
+
 __all__ = ["Parameters", "Model", "Solver", "Fronts", "Record", "simulate", "default_device", "PARAMETER_NAMES", "__version__"]
