@@ -160,6 +160,30 @@ def test_recorded_fields_obey_the_plate_balance_and_the_slip_definition():
     assert ds.velocity_history.attrs["units"] == "m s-1" and ds.time.attrs["units"] == "s"
 
 
+def test_recording_times_after_a_members_end_are_nan_and_named_in_one_warning():
+    """With the automatic end a run stops once its detachment is over (~20.26 s at N = 21): the
+    samples after a member's final_time are NaN, those before are real, and one warning names that
+    member with the number of its late times; a window inside every run warns of nothing."""
+    members = {"eccentricity": [0.0, 0.1]}
+    times = tuple(np.linspace(20.0, 20.6, 61))
+    with pytest.warns(UserWarning, match="Record: recording times after a member's end") as caught:
+        ds = run(members, nodes=21, rtol=1e-5, record=wf.Record(members=(1,), times=times))
+    end = float(ds.final_time.values[1])
+    late = np.asarray(times) > end
+    assert 0 < late.sum() < late.size
+    vel = ds.velocity_history.values[0]
+    assert np.isnan(vel[late]).all() and np.isfinite(vel[~late]).all()
+    messages = [str(w.message) for w in caught if "Record:" in str(w.message)]
+    assert len(messages) == 1
+    assert f"member 1: ended at {end:.6g} s, {late.sum()} of {late.size} times later" in messages[0]
+    assert "member 0" not in messages[0]
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # any warning fails the run
+        run(members, nodes=21, rtol=1e-5, record=wf.Record(members=(0, 1), times=tuple(np.linspace(20.0, 20.2, 5))))
+
+
 def test_bad_record_and_fronts_settings():
     with pytest.raises(ValueError, match="threshold"):
         wf.Fronts(threshold=1.5)

@@ -459,7 +459,10 @@ class Record:
 
     members:  member indices (0-based, in the order of simulate's output) to record.
     times:    sampling times in s, non-decreasing. ``Record.window(start, stop, count)`` builds an
-              evenly spaced grid.
+              evenly spaced grid. Times after a member's end (its ``final_time``) are NaN, and
+              ``simulate`` warns which: with the automatic end (``Parameters(end_time=None)``) a run
+              stops once the detachment is over (~20.3 s for the default scene); give ``end_time``
+              to record later.
     """
 
     members: tuple = (0,)

@@ -148,9 +148,29 @@ def simulate(
         _add_record(ds, record, result.record, ds.x, member_offset)
     if solver.dtype == "float32" and solver.float32_fallback:
         _rerun_failed_in_float64(ds, values, scene, model, solver, fronts, record, device)
+    if record is not None:
+        _warn_record_past_end(ds, record, member_offset)
     if fronts is not None and fronts.grid_check:
         _add_grid_check(ds, values, scene, model, solver, fronts, device, progress)
     return ds
+
+
+def _warn_record_past_end(ds: xr.Dataset, record: Record, member_offset: int = 0) -> None:
+    """One warning naming each recorded member whose run ended before some of its recording times:
+    those samples are NaN (nothing was integrated there), which is easy to mistake for a field that
+    is NaN. The usual cause is the automatic end (Parameters(end_time=None): the run stops once the
+    detachment is over)."""
+    members = np.asarray(record.members)
+    times = np.asarray(record.times)
+    final = ds.final_time.values[members]
+    late = (times[None, :] > final[:, None]).sum(axis=1)
+    if not late.any():
+        return
+    which = "; ".join(f"member {member_offset + m}: ended at {t:.6g} s, {n} of {times.size} times later"
+                      for m, t, n in zip(members, final, late) if n)
+    warnings.warn(f"Record: recording times after a member's end are NaN ({which}); a run ends by itself once its "
+                  "detachment is over (Parameters(end_time=None)): give Parameters(end_time=...) past the last "
+                  "recording time to record there", stacklevel=3)
 
 
 def _add_grid_check(ds, values, scene, model, solver, fronts, device, progress) -> None:
