@@ -32,6 +32,9 @@ def simulate(members=None, device=DEVICE, **kw):
         ({"normal_force": [1.0, 2.0], "eccentricity": [0.0, 0.1, 0.2]}, ["broadcast", "normal_force", "eccentricity"]),
         ({"normal_force": []}, ["empty"]),
         ({"normal_force": "lots"}, ["normal_force", "lots"]),
+        ({"normal_forc": [500.0]}, ["normal_forc", "did you mean 'normal_force'?", "valid names"]),
+        ({"eccentricity": [True]}, ["eccentricity", "True", "not a real number", "[-0.6, 0.6]"]),  # not 1.0
+        ({"eccentricity": np.array([False, True])}, ["eccentricity", "not a real number"]),
     ],
 )
 def test_bad_parameters(members, words):
@@ -87,3 +90,19 @@ def test_members_from_xarray_dataset_and_broadcasting():
 def test_unknown_keyword_names_the_valid_ones(cls, typo, right):
     with pytest.raises(TypeError, match=f"unknown parameter '{typo}' \\(did you mean '{right}'\\?\\); valid names: .*{right}"):
         cls(**{typo: 1})
+
+
+@pytest.mark.parametrize("line, words", [
+    ("normal_force = ['500']", ["[grid] normal_force = '500'", "expected a number in (0, inf) N"]),
+    ("eccentricity = [true]", ["[grid] eccentricity = True", "expected a number in [-0.6, 0.6]"]),
+    ("normal_force = {start = '1', stop = 5000, num = 3}", ["[grid] normal_force.start = '1'", "(0, inf) N"]),
+])
+def test_a_sweep_files_non_number_names_the_parameters_range_and_units(tmp_path, line, words):
+    from warpfric.sweep_file import SweepError, load_sweep
+
+    path = tmp_path / "s.toml"
+    path.write_text(f"[grid]\n{line}\n")
+    with pytest.raises(SweepError) as err:
+        load_sweep(path)
+    for w in words:
+        assert w in str(err.value), (w, str(err.value))

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from .parameters import PARAMETER_NAMES, Parameters, resolve_value, validate_value
+from .parameters import PARAMETER_NAMES, Parameters, resolve_value, unknown_parameter, validate_value
 
 
 def _member_arrays(members: Any) -> dict[str, np.ndarray]:
@@ -45,7 +45,7 @@ def resolve_members(members: Any, scene: Parameters) -> tuple[dict[str, np.ndarr
     given = _member_arrays(members)
     for name in given:
         if name not in PARAMETER_NAMES:
-            raise ValueError(f"unknown parameter {name!r}; valid names: {', '.join(PARAMETER_NAMES)}")
+            raise ValueError(unknown_parameter(name))
     arrays: dict[str, np.ndarray] = {}
     for name in given:
         arr = resolve_value(name, given[name])

@@ -132,6 +132,20 @@ def _range_text(meta) -> str:
     return f"{lo}{meta['low']:g}, {meta['high']:g}{hi}"
 
 
+def parameter_range_text(name: str) -> str:
+    """The valid range of parameter ``name`` as the error messages write it, e.g. '(0, inf)' (N)."""
+    return _range_text(_FIELDS[name].metadata)
+
+
+def unknown_parameter(name: str) -> str:
+    """The message for a parameter name that is not one: the valid names and the closest match."""
+    import difflib
+
+    close = difflib.get_close_matches(name, PARAMETER_NAMES, n=1)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    return f"unknown parameter {name!r}{hint}; valid names: {', '.join(PARAMETER_NAMES)}"
+
+
 def resolve_value(name: str, value: Any, scene: Parameters | None = None):
     """Return ``value`` as a float64 array, with None replaced by what None means for ``name``."""
     if value is None:
@@ -142,7 +156,7 @@ def resolve_value(name: str, value: Any, scene: Parameters | None = None):
             raise ValueError(f"parameter {name!r}: value None is not allowed; valid range {_range_text(meta)}")
         return np.asarray(meta["none_means"], dtype=np.float64)
     arr = np.asarray(value)
-    if arr.dtype.kind not in "biuf":
+    if arr.dtype.kind not in "iuf":  # booleans too: True would pass as 1.0 and False as 0.0
         raise ValueError(
             f"parameter {name!r}: value {value!r} is not a real number; valid range {_range_text(_FIELDS[name].metadata)}"
         )
@@ -152,7 +166,7 @@ def resolve_value(name: str, value: Any, scene: Parameters | None = None):
 def validate_value(name: str, value: np.ndarray) -> None:
     """Raise ValueError naming ``name``, the first bad value and the valid range."""
     if name not in _FIELDS:
-        raise ValueError(f"unknown parameter {name!r}; valid names: {', '.join(PARAMETER_NAMES)}")
+        raise ValueError(unknown_parameter(name))
     meta = _FIELDS[name].metadata
     arr = np.asarray(value, dtype=np.float64)
     lo, hi = meta["low"], meta["high"]

@@ -27,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
+import re
 import tomllib
 import zlib
 from dataclasses import dataclass
@@ -35,7 +36,8 @@ from pathlib import Path
 import numpy as np
 
 from .members import resolve_members
-from .parameters import PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solver
+from .parameters import (PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solver, parameter_range_text, parameter_units,
+                         units_text)
 
 TOP_KEYS = ("title", "description", "scene", "model", "solver", "fronts", "record", "grid", "zip", "sample", "design",
             "run")
@@ -80,7 +82,10 @@ def _where(table: str, key: str | None = None) -> str:
 
 def _number(value, where: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise SweepError(f"{where} = {value!r}: expected a number")
+        key = re.split(r"[.\[]", where.split("] ")[-1])[0]  # '[grid] normal_force.start' -> normal_force
+        valid = (f" in {parameter_range_text(key)} {units_text(parameter_units(key))}".rstrip()
+                 if key in PARAMETER_NAMES else "")
+        raise SweepError(f"{where} = {value!r}: expected a number{valid}")
     return float(value)
 
 
