@@ -1,12 +1,17 @@
 """Plots a scientist would put in a talk: a second swept parameter as colour (legend or colour bar),
 log axes where a parameter spans a decade or more, a legend on every curve plot. Synthetic
-ensembles (no run): the figures only read the Dataset."""
+ensembles (no run): the figures only read the Dataset; the space-time maps read small recorded runs
+(N = 21, through a file, as `warpfric plot` does)."""
 
 import numpy as np
 import pytest
 import xarray as xr
+from conftest import run
+from matplotlib.contour import ContourSet
 
+import warpfric as wf
 from warpfric import plots
+from warpfric.io import open_ensemble, write_ensemble
 
 
 def ensemble(force, ecc, nodes=11, seed=0):
@@ -94,3 +99,94 @@ def test_quick_look_writes_every_figure(grid, tmp_path):
     assert all(p.stat().st_size > 10_000 for p in written)
     one = grid.assign_attrs(varying_parameters="")
     assert [p.name for p in plots.quick_look(one, tmp_path / "none")] == ["mu_s_histogram.png", "arrival_times.png"]
+
+
+def recorded_run(path, fronts):
+    """Two recorded members through a file: member 0 detaches at t ~ 20.13 s; member 1's disc stops
+    at 5 s, long before, so it has no front (status no_peak, every arrival time NaN)."""
+    ds = run({"stop_time": [np.inf, 5.0]}, scene=wf.Parameters(end_time=20.3), nodes=21, fronts=fronts,
+             record=wf.Record.window(20.05, 20.3, 51, members=(0, 1)))
+    write_ensemble(ds, path)
+    return open_ensemble(path)
+
+
+@pytest.fixture(scope="module")
+def contact_run(tmp_path_factory):
+    return recorded_run(tmp_path_factory.mktemp("contact") / "rec.nc", wf.Fronts())  # the default front
+
+
+def arrival_lines(ax):
+    """{legend label: (x, y)} of the curves on a space-time map."""
+    return {line.get_label(): tuple(np.asarray(d, dtype=float) for d in line.get_data()) for line in ax.get_lines()}
+
+
+def contours(ax):
+    return [c for c in ax.collections if isinstance(c, ContourSet)]
+
+
+def test_the_space_time_map_draws_the_contact_fronts_arrival_times(contact_run):
+    ds = contact_run
+    assert ds.attrs["fronts_event"] == "contact" and "event_max_velocity" not in ds  # only the velocity event has it
+    ta = ds.arrival_time.values[0]
+    assert np.isfinite(ta).all()
+    fig = plots.space_time_figure(ds, 0)
+    ax = fig.axes[0]
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("x (mm)", "t (s)")
+    lines = arrival_lines(ax)
+    assert list(lines) == ["contact front: arrival time t_a"]
+    x, t = lines["contact front: arrival time t_a"]
+    np.testing.assert_array_equal(x, ds.x.values * 1e3)  # x along the horizontal axis, in mm
+    np.testing.assert_array_equal(t, ta)  # t_a (s) along the vertical one
+    lo, hi = ax.get_ylim()
+    assert lo <= ta.min() and ta.max() <= hi  # inside the recorded window, not stretching it
+    assert (lo, hi) == pytest.approx((20.05 - 0.0025, 20.3 + 0.0025))
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["contact front: arrival time t_a"]
+    assert not contours(ax)  # the threshold contour belongs to the velocity event
+    assert plots.arrival_times_figure(ds).axes[0].get_title() == "contact front arrival times (1 of 1 members)"
+
+
+def test_the_curve_skips_nodes_the_front_did_not_reach_and_keeps_the_recorded_window(contact_run):
+    ta = contact_run.arrival_time.values.copy()
+    ta[0, 8:12] = np.nan  # a front that reached both ends but not the middle
+    ds = contact_run.assign(arrival_time=contact_run.arrival_time.copy(data=ta))
+    (x, t), = arrival_lines(plots.space_time_figure(ds, 0).axes[0]).values()
+    assert np.isnan(x).sum() == np.isnan(t).sum() == 1  # one break in the line, not a line across the gap
+    reached = np.isfinite(ta[0])
+    np.testing.assert_array_equal(x[np.isfinite(x)], ds.x.values[reached] * 1e3)
+    np.testing.assert_array_equal(t[np.isfinite(t)], ta[0, reached])
+    later = contact_run.assign_coords(time=contact_run.time + 1.0)  # a window after the front
+    ax = plots.space_time_figure(later, 0).axes[0]
+    assert list(arrival_lines(ax)) == ["contact front: arrival time t_a (outside the recorded times)"]
+    assert ax.get_ylim() == pytest.approx((21.05 - 0.0025, 21.3 + 0.0025))
+
+
+def test_a_member_without_a_front_gets_no_curve(contact_run, tmp_path):
+    ds = contact_run
+    assert np.isnan(ds.arrival_time.values[1]).all()
+    ax = plots.space_time_figure(ds, 1).axes[0]
+    assert not ax.get_lines() and not contours(ax)
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["no contact front"]
+    written = plots.quick_look(ds, tmp_path)
+    assert {"space_time_member0.png", "space_time_member1.png"} <= {p.name for p in written}
+    # a run without fronts at all: the map alone
+    bare = ds.drop_vars([name for name in ds.data_vars if "member" in ds[name].dims and "x" in ds[name].dims])
+    ax = plots.space_time_figure(bare, 0).axes[0]
+    assert not ax.get_lines() and ax.get_legend() is None
+
+
+def test_the_velocity_event_adds_its_threshold_contour(tmp_path):
+    """Velocity first (its outputs unprefixed), contact second (``contact_arrival_time``): both curves,
+    and the contour of threshold x event_max_velocity on the recorded field."""
+    ds = recorded_run(tmp_path / "rec.nc", wf.Fronts(event=("velocity", "contact")))
+    assert np.isfinite(ds.event_max_velocity.values[0]) and np.isfinite(ds.contact_arrival_time.values[0]).all()
+    ax = plots.space_time_figure(ds, 0).axes[0]
+    lines = arrival_lines(ax)
+    assert sorted(lines) == ["contact front: arrival time t_a", "velocity front: arrival time t_a"]
+    ta = ds.arrival_time.values[0]
+    np.testing.assert_array_equal(lines["velocity front: arrival time t_a"][1], ta[np.isfinite(ta)])
+    np.testing.assert_array_equal(lines["contact front: arrival time t_a"][1], ds.contact_arrival_time.values[0])
+    assert len(contours(ax)) == 1 and contours(ax)[0].levels == pytest.approx([0.4 * ds.event_max_velocity.values[0]])
+    assert "velocity front: 0.4 x event maximum (recorded)" in [text.get_text() for text in ax.get_legend().get_texts()]
+    ax = plots.space_time_figure(ds, 1).axes[0]
+    assert not ax.get_lines() and not contours(ax)
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["no velocity front", "no contact front"]

@@ -4,11 +4,13 @@ Against each swept parameter: mu_s, and the front speeds in one panel per segmen
 parameter is the colour (a legend where it takes at most MAX_LEGEND values, each value's members
 joined along the x axis, else a colour bar). An axis is logarithmic where its positive values span
 a decade or more. Arrival-time curves of up to MAX_CURVES members spread over the ensemble, each
-labelled with its swept values; the space-time map of every recorded member.
+labelled with its swept values; the space-time map of every recorded member, with its arrival-time
+curve of each front event in the Dataset and, for the velocity event, the threshold contour.
 """
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -19,6 +21,9 @@ MAX_CURVES = 8  # arrival-time curves in one figure
 _SYMBOLS = {"normal_force": "F", "eccentricity": "2e/L", "disc_velocity": "v", "shear_strength": "tau_c",
             "length": "L", "height": "h", "stop_time": "t_stop"}
 _UNITS = {"1": "", "m s-1": "m/s", "s-1": "1/s", "m2": "m^2"}
+# each front event's arrival-time curve on a space-time map: (colour, line style); the velocity
+# event's lies on its black threshold contour
+_ARRIVAL_STYLES = {"contact": ("k", "--"), "strength": ("tab:green", "-."), "velocity": ("w", ":")}
 
 
 def _plt():
@@ -86,6 +91,27 @@ def _value(ds, name: str, value: float) -> str:
     """Legend entry: 'F = 1000 N'."""
     units = _units(ds, name)
     return f"{_SYMBOLS.get(name, name)} = {_number(value)}{' ' + units if units else ''}"
+
+
+def front_events(ds) -> list:
+    """(event, prefix) of each front event whose arrival times ``ds`` holds, the primary event (its
+    outputs unprefixed: ``arrival_time``) first, each other one's outputs prefixed ``event_``
+    (``strength_arrival_time``). The events are the attribute ``fronts_event`` (every run with fronts
+    writes it, the primary first); without it, the event that arrival_time's long_name names, else
+    'velocity' where event_max_velocity exists, else None (not known)."""
+    events = ds.attrs.get("fronts_event", "").split()
+    if not events and "arrival_time" in ds:
+        named = re.search(r"of the (\w+) front", ds.arrival_time.attrs.get("long_name", ""))
+        events = [named.group(1) if named else "velocity" if "event_max_velocity" in ds else None]
+    prefixes = ["" if k == 0 else f"{event}_" for k, event in enumerate(events)]
+    return [(event, prefix) for event, prefix in zip(events, prefixes) if f"{prefix}arrival_time" in ds]
+
+
+def _front_name(ds) -> str:
+    """The primary front event's outputs (arrival_time, v_*) in a title: 'contact front', or
+    'detachment front' where the event is not known."""
+    events = front_events(ds)
+    return f"{events[0][0]} front" if events and events[0][0] else "detachment front"
 
 
 def _per_member(ds, name: str) -> np.ndarray:
@@ -209,7 +235,7 @@ def front_speeds_figure(ds, pname: str, colour_by: str | None = None):
         axes = [ax]
         ax.legend(fontsize=8)
         ax.set_ylabel("front speed (m/s)")
-        ax.set_title(f"detachment front speeds ({ok.sum()} ok members)", fontsize=10)
+        ax.set_title(f"{_front_name(ds)} speeds ({ok.sum()} ok members)", fontsize=10)
     else:
         colours = _Colours(ds, colour_by, ok)
         fig, axes = plt.subplots(1, 3, figsize=(11.5, 3.6), sharex=True, sharey=True)
@@ -256,7 +282,7 @@ def arrival_times_figure(ds, max_curves: int = MAX_CURVES):
     ax.set_xlabel("x (mm)" if metres else "x / L")
     ax.set_ylabel("t_a - first arrival (ms)")
     shown = f"{candidates.size} of {int((ok & arrived).sum())} members" if candidates.size else "no member with a front"
-    ax.set_title(f"detachment front arrival times ({shown})", fontsize=10)
+    ax.set_title(f"{_front_name(ds)} arrival times ({shown})", fontsize=10)
     ax.grid(alpha=0.3)
     if candidates.size:
         ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, frameon=False)
@@ -297,8 +323,20 @@ def quick_look(ds, outdir, max_curves: int = MAX_CURVES) -> list:
 
 
 def space_time_map(ds, recorded_index: int, path) -> Path:
-    """Pad velocity over (x, t) of one recorded member, with the front's threshold contour when the
-    dataset has front metrics (the paper's Fig. 3 style)."""
+    """:func:`space_time_figure` of one recorded member, written to ``path``."""
+    fig = space_time_figure(ds, recorded_index)
+    fig.savefig(path, dpi=130)
+    _plt().close(fig)
+    return Path(path)
+
+
+def space_time_figure(ds, recorded_index: int):
+    """Pad velocity over (x, t) of one recorded member (the paper's Fig. 3 style), with the member's
+    arrival-time curve t_a(x) of each front event the Dataset holds (over the nodes the front
+    reached; none where it reached none: 'no contact front' in the legend) and, for the velocity
+    event, the contour of threshold x its event maximum on the recorded field (event_max_velocity
+    exists only for that event). The legend names the event of each curve; the axes keep the
+    recorded window."""
     from matplotlib.lines import Line2D
 
     plt = _plt()
@@ -306,26 +344,42 @@ def space_time_map(ds, recorded_index: int, path) -> Path:
     position = int(np.flatnonzero(ds.member.values == member)[0])  # member numbers may start past 0
     v = ds.velocity_history.values[recorded_index]
     t = ds.time.values
-    x = ds.x.values * (1e3 if ds.x.attrs.get("units") == "m" else 1.0)
+    metres = ds.x.attrs.get("units") == "m"
+    x = ds.x.values * (1e3 if metres else 1.0)
     fig, ax = plt.subplots(figsize=(6, 4))
     scale = np.nanmax(np.abs(v)) or 1.0
     mesh = ax.pcolormesh(x, t, v * 1e9, cmap="RdBu_r", vmin=-scale * 1e9, vmax=scale * 1e9, shading="nearest")
     fig.colorbar(mesh, ax=ax, label="pad velocity (nm/s)")
-    if "event_max_velocity" in ds and np.isfinite(float(ds.event_max_velocity[position])):
-        sign = -np.sign(float(ds.disc_velocity[position] if ds.disc_velocity.ndim else ds.disc_velocity))
-        threshold = float(ds.attrs.get("fronts_threshold", 0.4))
-        level = threshold * float(ds.event_max_velocity[position])
-        handles = []
-        if ds.attrs.get("fronts_direction", "against_disc") == "against_disc" and np.nanmax(sign * v) >= level:
-            ax.contour(x, t, sign * v, levels=[level], colors="k", linewidths=1)
-            handles.append(Line2D([], [], color="k", lw=1, label=f"{threshold:g} x event maximum (recorded)"))
-        ta = ds.arrival_time.values[position]
-        handles += ax.plot(x, ta, color="w", ls=":", lw=1.5, label="arrival time t_a")
+    window = ax.get_xlim(), ax.get_ylim()
+    handles = []
+    for event, prefix in front_events(ds):
+        front = f"{event} front" if event else "front"
+        event_max = f"{prefix}event_max_velocity"  # the velocity event's: its threshold contour
+        if event_max in ds and np.isfinite(float(ds[event_max][position])):
+            sign = -np.sign(_per_member(ds, "disc_velocity")[position])
+            threshold = float(ds.attrs.get("fronts_threshold", 0.4))
+            level = threshold * float(ds[event_max][position])
+            if ds.attrs.get("fronts_direction", "against_disc") == "against_disc" and np.nanmax(sign * v) >= level:
+                ax.contour(x, t, sign * v, levels=[level], colors="k", linewidths=1)
+                handles.append(Line2D([], [], color="k", lw=1,
+                                      label=f"{front}: {threshold:g} x event maximum (recorded)"))
+        ta = np.asarray(ds[f"{prefix}arrival_time"].values[position], dtype=float)
+        reached = np.flatnonzero(np.isfinite(ta))
+        if not reached.size:  # no curve; the legend says so
+            handles.append(Line2D([], [], ls="none", label=f"no {front}"))
+            continue
+        gaps = np.flatnonzero(np.diff(reached) > 1) + 1  # no line across nodes the front did not reach
+        colour, style = _ARRIVAL_STYLES.get(event, ("k", ":"))
+        seen = (ta[reached] >= t.min()) & (ta[reached] <= t.max())
+        handles += ax.plot(np.insert(x[reached], gaps, np.nan), np.insert(ta[reached], gaps, np.nan), color=colour,
+                           ls=style, lw=1.5, label=f"{front}: arrival time t_a"
+                           + ("" if seen.any() else " (outside the recorded times)"))
+    ax.set_xlim(window[0])
+    ax.set_ylim(window[1])
+    if handles:
         ax.legend(handles=handles, fontsize=7, loc="upper right", framealpha=0.8)
-    ax.set_xlabel("x (mm)")
+    ax.set_xlabel("x (mm)" if metres else "x / L")
     ax.set_ylabel("t (s)")
     ax.set_title(f"member {member}: pad velocity")
     fig.tight_layout()
-    fig.savefig(path, dpi=130)
-    plt.close(fig)
-    return Path(path)
+    return fig
