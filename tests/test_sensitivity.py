@@ -42,6 +42,20 @@ def test_ishigami_sobol_indices_within_confidence():
     assert abs(float(res.ST.sel(parameter="x4"))) < 0.01
 
 
+def test_a_small_base_size_warns_that_the_indices_are_not_resolved():
+    """At n = 8 the Ishigami indices have half-widths of ~0.6 (S1 of x3 below 0): one warning names
+    the output and its half-width; at n = 1024 (half-widths <= 0.08) there is none."""
+    import warnings
+
+    with pytest.warns(UserWarning, match=r"not resolved at base size n = 8: confidence half-widths up to 'y' \+- 0\.6"):
+        res = analyse(ishigami_dataset(n=8), ("y",))
+    assert float(np.maximum(res.S1_conf, res.ST_conf).max()) > 0.1
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        res = analyse(ishigami_dataset(n=1024), ("y",))
+    assert float(np.maximum(res.S1_conf, res.ST_conf).max()) <= 0.1
+
+
 def test_morris_ranks_the_dummy_last():
     res = analyse(ishigami_dataset("morris", n=200), ("y",)).sel(output="y")
     mu_star = res.mu_star.values
@@ -54,7 +68,8 @@ def test_failed_members_are_refused_or_filled_explicitly():
     ds["status"].values[5] = 1
     with pytest.raises(ValueError, match="3 of .* members failed or lack it .*3, 5, 10"):
         analyse(ds, ("y",))
-    res = analyse(ds, ("y",), on_failure="fill-mean")
+    with pytest.warns(UserWarning, match="not resolved at base size n = 64"):  # a small design, on purpose
+        res = analyse(ds, ("y",), on_failure="fill-mean")
     assert int(res.filled_members.sel(output="y")) == 3
 
 

@@ -208,9 +208,31 @@ def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: in
     data["filled_members"] = (("output",), np.array([filled[o] for o in outputs]),
                               {"long_name": f"members replaced by the mean ({on_failure})"})
     res = xr.Dataset(data, coords={"output": list(outputs), "parameter": names, "parameter_2": names})
+    if design["method"] == "saltelli":
+        _warn_unresolved(res, design["n"])
     res.attrs.update({DESIGN_ATTR: ds.attrs[DESIGN_ATTR], "conf_level": conf_level, "num_resamples": num_resamples,
                       "on_failure": on_failure, "members": rows, "output_transform": "log" if log else "none"})
     return res
+
+
+# a Sobol index whose confidence half-width exceeds this is not resolved (the indices lie in [0, 1])
+UNRESOLVED_HALF_WIDTH = 0.1
+
+
+def _warn_unresolved(res, n: int) -> None:
+    """One warning naming each output whose first-order or total indices have a confidence half-width
+    above UNRESOLVED_HALF_WIDTH: at a small base size n the estimates can leave [0, 1] or give
+    S1 > ST, and read as results. The half-width falls about as 1/sqrt(n)."""
+    import warnings
+
+    widest = np.maximum(res.S1_conf.max("parameter"), res.ST_conf.max("parameter")).values
+    loose = [(str(o), float(w)) for o, w in zip(res.output.values, widest) if not w <= UNRESOLVED_HALF_WIDTH]
+    if loose:
+        which = ", ".join(f"{o!r} +- {w:.2g}" for o, w in loose)
+        factor = max(w for _, w in loose) / UNRESOLVED_HALF_WIDTH
+        warnings.warn(f"Sobol indices not resolved at base size n = {n}: confidence half-widths up to {which} "
+                      f"(above {UNRESOLVED_HALF_WIDTH:g}); the half-width falls about as 1/sqrt(n), so n of about "
+                      f"{n * factor ** 2:.0f} or more would resolve them", stacklevel=3)
 
 
 def bar_plot(res, path) -> None:
