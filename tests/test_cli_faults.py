@@ -200,7 +200,7 @@ def test_a_full_disk_in_a_chunk_exits_3_and_keeps_the_finished_chunks(tmp_path, 
     code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--chunk", 1, "--device", DEVICE, "--quiet")
     assert code == 3
     _error_line(err, "disk full while writing", "chunk-000001.nc", "0 bytes free", "its partial file removed",
-                "the 1 finished chunks are kept", "free some space, then", "--resume")
+                "the 1 finished chunk is kept", "free some space, then", "--resume")
     assert _files(tmp_path) == ["s.nc.parts", "s.nc.parts/chunk-000000.nc", "s.nc.parts/manifest.json", "s.toml"]
     monkeypatch.undo()
     code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE, "--quiet")
@@ -258,7 +258,7 @@ def test_too_little_free_space_is_refused_before_the_run(tmp_path, sweep, capsys
 
 @pytest.mark.parametrize("size, words", [
     ("300k", ["disk full: 29", "free in", "needs about 851.2 KiB"]),  # refused before the run
-    ("500k", ["disk full while writing", "finished chunks are kept", "--resume"]),  # the run fills it
+    ("500k", ["disk full while writing", "finished chunk", "--resume"]),  # the run fills it
 ])
 def test_a_really_full_disk(tmp_path, capsys, size, words):
     """A small tmpfs (where this process may mount one): too small for the estimate, the run is

@@ -1,15 +1,18 @@
 """The command line does what it is told or says why not (issue 22, part 2): scene options with a
 sweep file are refused (as --grid-check is) naming the sweep-file key, options that do not apply
 without a sweep file are refused, negative numbers follow their option, --cpu-workers reaches
-simulate(workers=...), and every option and argument has help text."""
+simulate(workers=...), --front-event picks the front, warnings are one line each and said once, and
+every option and argument has help text."""
 
 import importlib
+import warnings
 
 import pytest
 from conftest import DEVICE, one_line_error, run_cli, TINY_SWEEP
 
 from warpfric.cli import build_parser, join_negative_values, main
 from warpfric.io import open_ensemble
+from warpfric.parameters import Model, Solver
 
 SIMULATE_MODULE = importlib.import_module("warpfric.simulate")
 
@@ -30,6 +33,8 @@ def no_simulation(monkeypatch):
     (["--dtype", "float32"], ["--dtype", "[solver] dtype = 'float32'"]),
     (["--relaxation-gate", "none"], ["--relaxation-gate", "[model] relaxation_gate = 'none'"]),
     (["--grid-check"], ["--grid-check", "[fronts] grid_check = true"]),
+    (["--front-event", "strength"], ["--front-event", "[fronts] event = 'strength'"]),
+    (["--front-event", "off"], ["--front-event", "fronts = false"]),
     (["--nodes", "21", "--rtol", "1e-3", "--eccentricity", "0.3"],  # the issue's case: all three named
      ["--eccentricity, --nodes, --rtol", "[scene] eccentricity = 0.3, [solver] nodes = 21, [solver] rtol = 0.001"]),
 ])
@@ -48,6 +53,7 @@ def test_scene_options_with_a_sweep_file_are_refused(tmp_path, capsys, no_simula
     (["--resume", "--chunk", "3"], ["sweep file"]),
     (["--overwrite"], ["--overwrite", "-o OUT.nc"]),
     (["--cpu-workers", "0"], ["--cpu-workers 0", "integer >= 1"]),
+    (["--front-event", "off", "--grid-check"], ["--grid-check", "--front-event off"]),
 ])
 def test_options_that_do_not_apply_without_a_sweep_file_are_refused(tmp_path, capsys, no_simulation, args, words):
     out = [] if "--overwrite" in args else ["-o", tmp_path / "x.nc"]
@@ -126,3 +132,77 @@ def test_help_shows_the_exit_codes(capsys):
     text = capsys.readouterr().out
     for code in ("0 ", "1 ", "2 ", "3 ", "4 ", "130"):
         assert f"\n  {code}" in text, code
+
+
+def test_front_event_picks_the_front(tmp_path, capsys):
+    """--front-event strength reads a front under the gate-less law (the contact front has none
+    there), without a warning; off computes none; the default is simulate's, the contact front."""
+    out = tmp_path / "strength.nc"
+    code, stdout, err = run_cli(capsys, "run", "--relaxation-gate", "none", "--front-event", "strength", "--nodes", 11,
+                                "-o", out, "--device", DEVICE, "--quiet")
+    assert code == 0 and not _warnings(err), err
+    ds = open_ensemble(out)
+    assert ds.attrs["fronts_event"] == "strength" and ds.attrs["model_relaxation_gate"] == "none"
+    assert ds.front_start_time.values[0] > 20 and "strength front nucleates" in "\n".join(stdout)
+    code, stdout, _ = run_cli(capsys, "run", "--front-event", "off", "--nodes", 11, "-o", tmp_path / "off.nc",
+                              "--device", DEVICE, "--quiet")
+    assert code == 0 and "front     : not computed (--front-event off)" in stdout
+    off = open_ensemble(tmp_path / "off.nc")
+    assert "v_middle" not in off and "arrival_time" not in off and "fronts_event" not in off.attrs
+    code, stdout, _ = run_cli(capsys, "run", "--nodes", 11, "-o", tmp_path / "default.nc", "--device", DEVICE,
+                              "--quiet")
+    assert code == 0 and open_ensemble(tmp_path / "default.nc").attrs["fronts_event"] == "contact"
+    assert any(line.startswith("front     : contact front nucleates") for line in stdout), stdout
+
+
+def _warnings(err):
+    """The warning lines of stderr: warpfric's, and Python's own ('...: UserWarning: ...')."""
+    return [line for line in err if line.startswith("warpfric: warning:") or "Warning:" in line]
+
+
+def test_a_warning_is_one_line_said_once(tmp_path, capsys):
+    """The gate-less law's contact front (no such front): one line 'warpfric: warning: ...', no source
+    line, and the front line says which option reads a front; a sweep file of three chunks (each warns,
+    and so did the kernels' warm-up) says it once too."""
+    code, stdout, err = run_cli(capsys, "run", "--relaxation-gate", "none", "--nodes", 11, "--device", DEVICE,
+                                "--quiet")
+    assert code == 0
+    warned = _warnings(err)
+    assert len(warned) == 1 and warned[0].startswith("warpfric: warning: fronts event 'contact' with "
+                                                     "relaxation_gate='none': this law has no yield threshold"), err
+    assert not any("cli.py" in line or "simulate(" in line or "UserWarning" in line for line in err), err
+    assert any(line.startswith("front     : absent") and "--front-event strength" in line for line in stdout), stdout
+    sweep = tmp_path / "s.toml"
+    sweep.write_text(TINY_SWEEP.replace("fronts = false", "[model]\nrelaxation_gate = 'none'"))
+    code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--chunk", 1, "--device", DEVICE, "--quiet")
+    warned = _warnings(err)
+    assert code == 0 and len(warned) == 1 and warned[0].startswith("warpfric: warning: fronts event 'contact'"), err
+    assert not any("runner.py" in line for line in err), err
+
+
+def test_the_size_warning_is_one_line(capsys):
+    code, _, err = run_cli(capsys, "run", "--nodes", 8000, "--end-time", 20.0001, "--device", "cpu", "--quiet")
+    assert code == 1  # no peak in 0.1 ms of sliding: status no_peak
+    warned = _warnings(err)
+    assert len(warned) == 1 and warned[0].startswith("warpfric: warning: 1 member x 8000 nodes is far beyond the "
+                                                     "usual size"), err
+    assert "--grid-check" in warned[0]
+
+
+def test_the_python_api_keeps_python_warnings(capsys):
+    """Only the command line formats warnings: afterwards simulate() warns as Python does."""
+    shown = warnings.showwarning
+    run_cli(capsys, "run", "--relaxation-gate", "none", "--nodes", 11, "--device", DEVICE, "--quiet")
+    assert warnings.showwarning is shown
+    with pytest.warns(UserWarning, match="fronts event 'contact' with relaxation_gate='none'"):
+        SIMULATE_MODULE.simulate(model=Model(relaxation_gate="none"), solver=Solver(nodes=11), device=DEVICE,
+                                 progress=False)
+
+
+def test_the_relaxation_gate_help_says_what_each_law_is(capsys):
+    with pytest.raises(SystemExit):
+        main(["run", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "SPEC" not in text
+    assert "none: the friction law without the yield gate, relaxation and rejuvenation at every stress" in text
+    assert "--front-event {contact,strength,velocity,off}" in text

@@ -14,7 +14,7 @@ import xarray as xr
 from conftest import DEVICE, run
 
 import warpfric as wf
-from warpfric.cli import main
+from warpfric.cli import main, summary
 from warpfric.io import open_ensemble, write_ensemble
 
 TINY = """
@@ -193,3 +193,61 @@ def test_example_sweeps_parse():
             continue
         sizes[f.stem] = load_sweep(f).n_members
     assert sizes["map_gpu"] >= 10_000 and sizes["tiny"] == 6 and sizes["fig4_eccentricity"] == 29
+
+
+def test_progress_on_a_terminal_of_zero_size(tmp_path):
+    """A chunked run under a pseudo-terminal nobody sized (`script -qc "warpfric run ..."`: stty size
+    0 0): every chunk draws its bar, 80 columns wide, instead of an empty line."""
+    sweep = tmp_path / "s.toml"
+    sweep.write_text(TINY)
+    master, slave = os.openpty()
+    if tuple(os.get_terminal_size(slave)) != (0, 0):
+        pytest.skip("this system sizes a new pseudo-terminal")
+    env = {k: v for k, v in os.environ.items() if k not in ("COLUMNS", "LINES")}
+    proc = subprocess.Popen([sys.executable, "-m", "warpfric", "run", str(sweep), "-o", str(tmp_path / "s.nc"),
+                             "--chunk", "3", "--device", DEVICE], stdin=slave, stdout=slave, stderr=slave,
+                            env={**env, "PYTHONWARNINGS": "ignore"})
+    os.close(slave)
+    data = b""
+    while True:
+        try:
+            block = os.read(master, 65536)
+        except OSError:  # the child closed the terminal (Linux: EIO)
+            break
+        if not block:
+            break
+        data += block
+    os.close(master)
+    assert proc.wait(timeout=300) == 0, data
+    lines = data.decode().replace("\r\n", "\n").split("\n")
+    bars = [line.split("\r")[-1] for line in lines if "warpfric chunk" in line]
+    assert [bar[:18] for bar in bars] == ["warpfric chunk 1/2", "warpfric chunk 2/2"], lines
+    assert all("100.0%|" in bar and len(bar) == 80 for bar in bars), bars
+    assert "" not in [line.strip() for line in lines[:-1]], lines
+
+
+def test_info_and_run_speak_plainly(tmp_path, capsys):
+    """One member and one chunk in the singular, the swept parameters in the sweep file's order
+    (its [grid] lists eccentricity first), no trailing blanks, and a short run's wall time in two
+    significant digits."""
+    sweep = tmp_path / "s.toml"
+    sweep.write_text("[model]\nrelaxation_gate = 'none'\n[solver]\nnodes = 11\n[grid]\neccentricity = [0.0, 0.1]\n"
+                     "normal_force = [500.0, 600.0]\n")  # the gate-less law: no contact front, 0 of 4 present
+    assert main(["run", str(sweep), "-o", str(tmp_path / "s.nc"), "--device", DEVICE, "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "4 members (numbers 0..3) in 1 chunk of <= 4," in err and "swept: eccentricity, normal_force" in err
+    assert main(["info", str(tmp_path / "s.nc")]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    swept = lines.index("  swept parameters:")
+    assert [line.split()[0] for line in lines[swept + 1:swept + 3]] == ["eccentricity", "normal_force"]
+    assert "  middle front present in 0/4 members" in lines and not [line for line in lines if line != line.rstrip()]
+    one = tmp_path / "one.toml"
+    one.write_text("fronts = false\n[scene]\n[solver]\nnodes = 11\n")
+    assert main(["run", str(one), "-o", str(tmp_path / "one.nc"), "--member-offset", "7", "--device", DEVICE,
+                 "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "1 member (number 7) in 1 chunk of <= 1," in err and "(1 member, " in err, err
+    ds = open_ensemble(tmp_path / "one.nc")
+    ds.attrs["wall_time_s"] = 0.0432
+    text = summary(ds, "one.nc")
+    assert text.startswith("one.nc: 1 member (number 7), 11 nodes, complete") and "wall 0.043 s" in text, text

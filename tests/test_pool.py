@@ -15,6 +15,9 @@ import pytest
 import warpfric as wf
 from warpfric import pool
 from warpfric.progress import SizeWarning
+from warpfric import progress
+from test_progress import FakeTerminal, drawn
+from conftest import TINY_SWEEP, run_cli
 
 TIMING = {"wall_time_s", "kernel_build_time_s", "workers", "worker_chunks", "worker_start_time_s"}
 
@@ -125,3 +128,52 @@ def test_ctrl_c_stops_the_workers_at_once(monkeypatch):
         return True
 
     assert not any(exists(p.pid) for p in processes)
+
+
+# a split CPU run's warnings and progress line
+def test_a_split_runs_warnings_come_once_from_the_parent():
+    """Each worker's warning is raised once, in the parent, at simulate()'s caller (it printed once per
+    worker process, with pool.py's source line)."""
+    with pytest.warns(UserWarning) as caught:
+        wf.simulate({"eccentricity": [0.0, 0.1, 0.2, 0.3]}, model=wf.Model(relaxation_gate="none"),
+                    solver=wf.Solver(nodes=11), device="cpu", workers=2, progress=False)
+    contact = [w for w in caught if str(w.message).startswith("fronts event 'contact'")]
+    assert len(contact) == 1 and contact[0].filename == __file__
+
+
+def test_a_split_sweep_on_the_command_line_warns_once(tmp_path, capsys):
+    sweep = tmp_path / "s.toml"
+    sweep.write_text(TINY_SWEEP.replace("fronts = false", "[model]\nrelaxation_gate = 'none'"))
+    code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--cpu-workers", 2, "--device", "cpu",
+                           "--quiet")
+    warned = [line for line in err if line.startswith("warpfric: warning:") or "Warning:" in line]
+    assert code == 0 and len(warned) == 1 and warned[0].startswith("warpfric: warning: fronts event 'contact'"), err
+
+
+def test_the_line_of_a_split_run_counts_members_only(monkeypatch):
+    """A sweep's chunk says 'chunk 1/4'; the worker processes' share of it is not another 'chunks' count."""
+    terminal = FakeTerminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    monkeypatch.setattr(progress.Line, "interval", 0.0)  # every update redrawn
+    monkeypatch.setenv("COLUMNS", "120")  # the whole line
+    wf.simulate({"eccentricity": [-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3, 0.25]}, solver=wf.Solver(nodes=61),
+                device="cpu", workers=2, progress="chunk 1/4 (members 0..7)")
+    frames = drawn(terminal)
+    assert len(frames) >= 3 and not [text for _, text in frames if "chunks" in text], frames
+
+
+
+def test_a_split_run_warns_of_late_recording_times_once_for_the_ensemble():
+    """Each worker piece would name only its own recorded members: the parent warns once, with every
+    recorded member whose run ended before some recording times, in the order recorded."""
+    times = tuple(np.linspace(20.1, 20.4, 7))
+    with pytest.warns(UserWarning) as caught:
+        ds = wf.simulate({"eccentricity": [-0.3, -0.1, 0.1, 0.3]}, solver=wf.Solver(nodes=11), device="cpu",
+                         workers=2, progress=False, record=wf.Record(members=(3, 0), times=times))
+    late = [str(w.message) for w in caught if str(w.message).startswith("Record:")]
+    assert len(late) == 1, late
+    ends = ds.final_time.values
+    named = [f"member {m}: ended at {ends[m]:.6g} s, {int((np.asarray(times) > ends[m]).sum())} of 7 times later"
+             for m in (3, 0)]
+    assert all(0 < int((np.asarray(times) > ends[m]).sum()) for m in (3, 0))
+    assert late[0].index(named[0]) < late[0].index(named[1]), late[0]

@@ -3,6 +3,7 @@ left, redraws at least every ~2 s in a terminal and stays quiet elsewhere; the w
 far beyond the usual size; launches short enough on the CPU to keep the line moving."""
 
 import io
+import os
 import re
 import sys
 import warnings
@@ -161,3 +162,44 @@ def test_a_slow_single_member_shows_its_pace_and_tenths_of_a_percent(clock):
     line.show(0.001, 0)
     percentage, text = drawn(out)[-1]
     assert percentage == 0.1 and "2.8 h per member" in text and "0/1 done" in text, text
+
+
+class UnsizedTerminal(FakeTerminal):
+    """A pseudo-terminal nobody gave a size (`script -qc ...`, some CI runners): stty size says 0 0."""
+
+    def fileno(self):
+        return 2
+
+
+def test_a_terminal_of_zero_size_draws_80_columns(clock, monkeypatch):
+    """tqdm read 0 x 0 as -1 rows and drew nothing: every line came out empty."""
+    terminal = UnsizedTerminal()
+    monkeypatch.setattr(sys, "stderr", terminal)  # where tqdm measures the terminal itself
+    monkeypatch.setattr(os, "get_terminal_size", lambda fd=None: os.terminal_size((0, 0)))
+    monkeypatch.delenv("COLUMNS", raising=False)
+    monkeypatch.delenv("LINES", raising=False)
+    line = progress.Line(1200, "chunk 1/4 (members 0..1199)", clock=clock)
+    clock.now += 1.0
+    line.show(0.5, 600)
+    line.close()
+    frames = drawn(terminal)
+    assert len(frames) >= 3 and all(len(text.rstrip("\n")) == 80 for _, text in frames), frames
+    assert frames[-1][0] == 100 and frames[-1][1].startswith("warpfric chunk 1/4 (members 0..1199): 100.0%|")
+    monkeypatch.setenv("COLUMNS", "60")  # a size the environment gives
+    assert progress._terminal_size(terminal) == (60, 24)
+
+
+def test_durations_and_counts_read_as_words():
+    assert [progress.seconds_text(t) for t in (0.0432, 0.00561, 0.999, 1.0, 12.34)] == ["0.043", "0.0056", "1.0", "1.0",
+                                                                                         "12.3"]
+    assert progress.plural(1, "chunk") == "1 chunk" and progress.plural(3, "chunk") == "3 chunks"
+    assert progress.member_range(1, 7, 7) == "1 member (number 7)"
+    assert progress.member_range(3, 0, 2) == "3 members (numbers 0..2)"
+
+
+def test_the_summary_of_a_short_run_shows_its_time(clock):
+    out = io.StringIO()
+    line = progress.Line(1, "tiny", stream=out, clock=clock)
+    clock.now += 0.04
+    line.close()
+    assert out.getvalue().startswith("warpfric tiny: 1 member in 0.04 s (25 members/s)")

@@ -27,11 +27,13 @@ import contextlib
 import re
 import shlex
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
 
 from .parameters import RELAXATION_GATES, Fronts, Model, Parameters, Solver, units_text
+from .progress import member_range, plural as _plural, seconds_text as _seconds
 
 
 EXIT_FAILED_MEMBERS = 1
@@ -50,8 +52,10 @@ SCENE_OPTIONS = {
     "dtype": ("--dtype", "[solver] dtype"),
     "rtol": ("--rtol", "[solver] rtol"),
     "relaxation_gate": ("--relaxation-gate", "[model] relaxation_gate"),
+    "front_event": ("--front-event", "[fronts] event"),
     "grid_check": ("--grid-check", "[fronts] grid_check"),
 }
+FRONT_EVENTS = ("contact", "strength", "velocity", "off")  # --front-event; off: no front metrics (fronts=None)
 # a negative number as an option's value: argparse takes "-1e-4" for an option (it knows only -1 and -1.5)
 NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-inf(inity)?$", re.IGNORECASE)
 
@@ -63,6 +67,28 @@ class UsageError(ValueError):
 def _fail(message: str, code: int = EXIT_BAD_INPUT) -> int:
     print(f"warpfric: error: {message}", file=sys.stderr)
     return code
+
+
+@contextlib.contextmanager
+def one_line_warnings():
+    """While a command runs: each Python warning as one line on stderr, ``warpfric: warning: <message>``
+    (no file, line number or source line), each distinct message once. The filters are left as they
+    are (-W, PYTHONWARNINGS); the Python API keeps Python's usual warnings."""
+    seen = set()
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        text = " ".join(str(message).split())
+        if text in seen:
+            return
+        seen.add(text)
+        try:
+            print(f"warpfric: warning: {text}", file=sys.stderr, flush=True)
+        except (OSError, ValueError):  # stderr closed: a warning is not worth a traceback
+            pass
+
+    with warnings.catch_warnings():
+        warnings.showwarning = show
+        yield
 
 
 def _status_name(ds, code: int) -> str:
@@ -82,9 +108,17 @@ def _print_member(ds, solver: Solver) -> None:
     print(f"mu_s      = {_fmt(m.mu_s, spec='.6f')}  (static friction coefficient)")
     print(f"mu_s_time = {_fmt(m.mu_s_time, 's', '.5f')}")
     print(f"mu_final  = {_fmt(m.mu_final, spec='.6f')}  (at t = {float(m.final_time):g} s)")
-    if "v_middle" in m:
+    event = ds.attrs.get("fronts_event", "").split()[:1]
+    gate = ds.attrs["model_relaxation_gate"]
+    if "v_middle" not in m:
+        print("front     : not computed (--front-event off)")
+    elif event == ["contact"] and gate != "stress" and not np.isfinite(float(m.front_start_time)):
+        print(f"front     : absent: the contact front needs the yield gate (--relaxation-gate stress); under "
+              f"relaxation gate {gate} --front-event strength reads a front")
+    else:
         edge = {-1: "left edge", 0: "interior", 1: "right edge", -2: "none"}[int(m.nucleation_edge)]
-        print(f"front     : nucleates at x = {_fmt(float(m.nucleation_position) * 1e3, 'mm', '.1f')} ({edge}), "
+        what = f"{event[0]} front " if event else ""
+        print(f"front     : {what}nucleates at x = {_fmt(float(m.nucleation_position) * 1e3, 'mm', '.1f')} ({edge}), "
               f"t = {_fmt(m.front_start_time, 's', '.5f')} .. {_fmt(m.front_end_time, 's', '.5f')}")
         for seg in ("left", "middle", "right"):
             start, end = float(m[f"{seg}_front_start"]), float(m[f"{seg}_front_end"])
@@ -96,8 +130,9 @@ def _print_member(ds, solver: Solver) -> None:
         if "v_middle_grid_error" not in m:
             print("  (+- : time-discretisation error only; --grid-check adds the grid's, usually the larger)")
     print(f"status    = {_status_name(ds, m.status)}; steps accepted {int(m.steps_accepted)}, rejected "
-          f"{int(m.steps_rejected)}; lift-off {'yes' if int(m.lift_off) else 'no'}; wall {ds.attrs['wall_time_s']:.2f} s "
-          f"(+ {ds.attrs.get('kernel_build_time_s', 0.0):.2f} s compiling/loading kernels; "
+          f"{int(m.steps_rejected)}; lift-off {'yes' if int(m.lift_off) else 'no'}; "
+          f"wall {_seconds(ds.attrs['wall_time_s'])} s "
+          f"(+ {_seconds(ds.attrs.get('kernel_build_time_s', 0.0))} s compiling/loading kernels; "
           f"{ds.attrs.get('device_bytes_per_member', 0.0) / 1024:.1f} KiB device memory per member)")
 
 
@@ -118,7 +153,12 @@ def _run_default(args) -> int:
                           if given[k] is not None})
     model = Model(**({"relaxation_gate": given["relaxation_gate"]} if given["relaxation_gate"] else {}))
     solver = Solver(**{k: given[k] for k in ("nodes", "dtype", "rtol") if given[k] is not None})
-    fronts = Fronts(grid_check=bool(args.grid_check))
+    event = given["front_event"]
+    if event == "off" and args.grid_check:
+        raise UsageError("--grid-check checks the front speeds; --front-event off computes none (give --front-event "
+                         "contact, strength or velocity, or leave --grid-check out)")
+    fronts = None if event == "off" else Fronts(**({"event": event} if event else {}),
+                                                grid_check=bool(args.grid_check))
     offset = args.member_offset or 0
     check_member_offset(offset, 1, "--member-offset")
     output = Path(args.output) if args.output else None
@@ -176,7 +216,8 @@ def _run(args) -> int:
              if getattr(args, name) not in (None, False)]
     if given:
         flags = ", ".join(flag for flag, _, _ in given)
-        keys = ", ".join(f"{key} = {_toml_value(value)}" for _, key, value in given)
+        keys = ", ".join("fronts = false (top level)" if (flag, value) == ("--front-event", "off") else
+                         f"{key} = {_toml_value(value)}" for flag, key, value in given)
         raise UsageError(f"{flags}: for the default scene only; a sweep file sets its own (write {keys} in "
                          f"{args.sweep}), so that the file it writes can be run again from its sweep_toml")
     if args.cpu_workers is not None and (args.scheduler or args.local_cluster):
@@ -204,8 +245,9 @@ def _info(args) -> int:
     path = Path(args.file[0])
     if not path.exists() and parts_dir(path).exists():
         store = ChunkStore.load(parts_dir(path))
-        print(f"{path}: INCOMPLETE run: {store.done_count()}/{store.n_chunks} chunks of <= {store.chunk} members "
-              f"finished ({store.n_members} members in all) in {parts_dir(path)}; finish it with "
+        print(f"{path}: INCOMPLETE run: {store.done_count()}/{_plural(store.n_chunks, 'chunk')} of <= "
+              f"{_plural(store.chunk, 'member')} finished ({_plural(store.n_members, 'member')} in all) in "
+              f"{parts_dir(path)}; finish it with "
               f"`{resume_command(store, path)}`")
         return 1
     ds = open_ensemble(path)
@@ -213,15 +255,32 @@ def _info(args) -> int:
     return 0
 
 
+def file_order(names, sweep_toml: str | None = None) -> list:
+    """The swept parameters ``names`` in their sweep file's order (its [grid], [zip], [sample] keys and
+    [design.parameters], as written) where the file's text ``sweep_toml`` is at hand; the others after
+    them, as given."""
+    import tomllib
+
+    order = []
+    try:
+        doc = tomllib.loads(sweep_toml) if sweep_toml else {}
+    except tomllib.TOMLDecodeError:
+        doc = {}
+    for table in (doc.get("grid"), doc.get("zip"), doc.get("sample"), (doc.get("design") or {}).get("parameters")):
+        if isinstance(table, dict):
+            order += [key for key in table if key in names and key not in order]
+    return order + [key for key in names if key not in order]
+
+
 def summary(ds, name: str) -> str:
     """Text summary of an ensemble: members, swept parameters, status counts, mu_s and fronts."""
     numbers = ds.member.values
-    lines = [f"{name}: {ds.sizes['member']} members (numbers {numbers.min()}..{numbers.max()}), "
+    lines = [f"{name}: {member_range(ds.sizes['member'], numbers.min(), numbers.max())}, "
              f"{ds.sizes.get('x', 0)} nodes, complete"]
     lines.append(f"  title: {ds.attrs.get('title', '')}; device {ds.attrs.get('device')}, warpfric "
                  f"{ds.attrs.get('warpfric_version')}, warp {ds.attrs.get('warp_version')}, "
-                 f"wall {float(ds.attrs.get('wall_time_s', float('nan'))):.1f} s")
-    swept = ds.attrs.get("varying_parameters", "").split()
+                 f"wall {_seconds(ds.attrs.get('wall_time_s', float('nan')))} s")
+    swept = file_order(ds.attrs.get("varying_parameters", "").split(), ds.attrs.get("sweep_toml"))
     lines.append("  swept parameters:" + ("" if swept else " none"))
     for pname in swept:
         v = ds[pname].values
@@ -240,8 +299,9 @@ def summary(ds, name: str) -> str:
         for seg in ("left", "middle", "right"):
             v = ds[f"v_{seg}"].values
             ok = np.isfinite(v)
-            text = f"median {np.median(v[ok]):.3g} m/s, range [{v[ok].min():.3g}, {v[ok].max():.3g}]" if ok.any() else ""
-            lines.append(f"  {seg} front present in {ok.sum()}/{v.size} members {text}")
+            text = (f": median {np.median(v[ok]):.3g} m/s, range [{v[ok].min():.3g}, {v[ok].max():.3g}]"
+                    if ok.any() else "")
+            lines.append(f"  {seg} front present in {ok.sum()}/{_plural(v.size, 'member')}{text}")
     if "sensitivity_design" in ds.attrs:
         import json
 
@@ -350,7 +410,15 @@ def build_parser() -> tuple[argparse.ArgumentParser, set]:
     add(scene, "--grid-check", action="store_true",
         help="also run on about half the nodes and report each front speed's change (its grid error)")
     add(scene, "--relaxation-gate", default=None, choices=RELAXATION_GATES,
-        help=f"friction law's gate (default {Model.relaxation_gate}: GRL 2012; none: the SPEC v1 law)")
+        help=f"what gates the friction law's relaxation and rejuvenation (default {Model.relaxation_gate}): "
+             "stress: the yield gate (Bar-Sinai et al., GRL 2012), only where the friction stress exceeds the "
+             "shear strength; none: the friction law without the yield gate, relaxation and rejuvenation at "
+             "every stress; velocity: a smooth gate sqrt(s^2 + v0^2) of the slip rate s (PRE 2013)")
+    add(scene, "--front-event", default=None, choices=FRONT_EVENTS,
+        help=f"which detachment front is read (default {Fronts.event}): contact: each node's stick-to-slip "
+             "transition (the stress gate only: the other laws have none); strength: each node's peak of "
+             "tau_f/sigma_n, under every law; velocity: the paper's 40 %% velocity rule (a second pass); "
+             "off: no front metrics")
     info = sub.add_parser("info", help="summary of an ensemble file (or of an interrupted run, or of several files combined)")
     add(info, "file", nargs="+", metavar="FILE",
         help="ensemble file (OUT.nc, or the OUT.nc of an interrupted run); several: their combination")
@@ -388,7 +456,8 @@ def main(argv=None) -> int:
     args.command_line = shlex.join(["warpfric", *argv])  # the files' history attribute
     handlers = {"run": _run, "info": _info, "plot": _plot, "sensitivity": _sensitivity}
     try:
-        return handlers[args.command](args)
+        with one_line_warnings():
+            return handlers[args.command](args)
     except ValueError as err:  # bad input, or an output folder that cannot be written: one line, exit 2
         return _fail(str(err))
     except OutputWriteError as err:  # disk full (or another I/O error) while writing

@@ -503,6 +503,11 @@ class Record:
         object.__setattr__(self, "times", tuple(float(t) for t in times))
 
 
+# how simulate's warning of recording times after a member's end begins (warpfric/pool.py drops the
+# workers' own, and the parent warns once for the whole ensemble)
+RECORD_PAST_END = "Record: recording times after a member's end are NaN"
+
+
 def _with_named_keywords(cls):
     """Wrap a dataclass's __init__ so that an unknown keyword raises a TypeError that names the
     valid ones and the closest match (the default message names neither)."""

@@ -41,11 +41,13 @@ import sys
 import threading
 import time
 import types
+import warnings
 
 import numpy as np
 
 from . import progress as progress_module
 from .device import init_warp
+from .parameters import RECORD_PAST_END
 
 # split when one core would take at least this long (s, by progress.cpu_seconds). Measured on this
 # project's 2-core machine (studies/bench_cpu_workers.py, fronts on, N = 100, fresh processes): 100
@@ -147,11 +149,15 @@ class _Sink:
 
 
 def _run_chunk(runner, run_id: int, chunk: int, members: dict, record, member_offset: int, show: bool, common: dict):
-    """In a worker: one chunk's Dataset, ``runner`` being warpfric.simulate.simulate (passed by the
-    parent, pickled by reference, so that this module imports no simulate)."""
+    """In a worker: one chunk's Dataset and the warnings it raised ((message, category) each, for the
+    parent to raise: a worker's own would print once per worker, with its source line), ``runner``
+    being warpfric.simulate.simulate (passed by the parent, pickled by reference, so that this module
+    imports no simulate)."""
     progress_module.SINK = _Sink(run_id, chunk) if show else None
     try:
-        return runner(members, record=record, member_offset=member_offset, progress=show, workers=1, **common)
+        with warnings.catch_warnings(record=True) as caught:
+            ds = runner(members, record=record, member_offset=member_offset, progress=show, workers=1, **common)
+        return ds, [(str(w.message), w.category) for w in caught if not str(w.message).startswith(RECORD_PAST_END)]
     finally:
         progress_module.SINK = None
 
@@ -266,16 +272,16 @@ def run(n_workers: int, values: dict, *, scene, model, solver, fronts, record, d
                     fractions[k], done[k] = 1.0, sizes[k]
                     finished += 1
             if line is not None:
-                line.show(float(fractions @ sizes) / n, int(done.sum()),
-                          f"{n_workers} workers, {finished}/{len(bounds)} chunks")
+                line.show(float(fractions @ sizes) / n, int(done.sum()), f"{n_workers} workers")
             if finished == len(futures):
                 break
-        parts = [future.result() for future in futures]
+        results = [future.result() for future in futures]
     except BaseException:
         if line is not None:
             line.stop()
         shutdown(terminate=True)
         raise
+    parts = [part for part, _ in results]
     ds = join(parts, [chosen for _, chosen in records], x, varying_parameters)
     orders = {p.attrs.get("member_order", "given") for p in parts}  # each chunk's engine chose its own
     ds.attrs["member_order"] = orders.pop() if len(orders) == 1 else "mixed"
@@ -287,6 +293,8 @@ def run(n_workers: int, values: dict, *, scene, model, solver, fronts, record, d
     ds.attrs["worker_start_time_s"] = (pool.ready_at - t0) if started_here and pool.ready_at is not None else 0.0
     if line is not None:
         line.close(f"{n_workers} workers")
+    for message, category in dict.fromkeys(w for _, caught in results for w in caught):  # each once, in order
+        warnings.warn(message, category, stacklevel=3)  # at simulate()'s caller, after the progress line
     return ds
 
 

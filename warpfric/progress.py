@@ -91,6 +91,22 @@ def _duration(seconds: float) -> str:
     return f"{seconds / 86400:.1f} days"
 
 
+def plural(n: int, word: str) -> str:
+    """'1 member', '3 members'."""
+    return f"{n} {word}{'' if n == 1 else 's'}"
+
+
+def member_range(n: int, first, last) -> str:
+    """'3 members (numbers 0..2)', '1 member (number 5)'."""
+    return f"{n} members (numbers {first}..{last})" if n != 1 else f"1 member (number {first})"
+
+
+def seconds_text(value) -> str:
+    """A duration in s without its unit: 2 significant digits below 1 s (0.043), else one decimal (12.3)."""
+    v = float(value)
+    return f"{v:.2g}" if math.isfinite(v) and abs(v) < 0.995 else f"{v:.1f}"  # 0.999: "1.0", not "1"
+
+
 def _size(n_bytes: float) -> str:
     for unit, scale in (("TB", 1e12), ("GB", 1e9), ("MB", 1e6)):
         if n_bytes >= scale:
@@ -118,8 +134,8 @@ def size_warning(n_members: int, solver, passes: float, device, workers: int = 1
     else:
         when = f"{_size(device_bytes)} of device memory and {_size(host_bytes)} on the host (GPU time not estimated)"
     message = (f"{what} is far beyond the usual size ({usual}): expect {when}. Fewer nodes or members give a "
-               "quick first look; the fronts' grid check (Fronts(grid_check=True)) says whether a finer grid changes "
-               "the result")
+               "quick first look; the fronts' grid check (Fronts(grid_check=True), on the command line --grid-check) "
+               "says whether a finer grid changes the result")
     warnings.warn(message, SizeWarning, stacklevel=4)
     return message
 
@@ -132,13 +148,28 @@ def _isatty(stream) -> bool:
         return False
 
 
-def _columns(stream) -> int:
-    """The terminal's width (at most 120), or 100 where it reads as 0 or cannot be read."""
+FALLBACK_COLUMNS, FALLBACK_ROWS = 80, 24
+
+
+def _terminal_size(stream) -> tuple[int, int]:
+    """(columns, rows) of the terminal of ``stream``, columns at most 120. A size that reads as 0 (a
+    pseudo-terminal nobody sized: `script`, some CI runners and containers) or cannot be read: the
+    environment's COLUMNS and LINES, else 80 x 24."""
     try:
-        columns = os.get_terminal_size(stream.fileno()).columns
+        columns, rows = os.get_terminal_size(stream.fileno())
     except (AttributeError, ValueError, OSError, io.UnsupportedOperation):
-        columns = 0
-    return min(columns, 120) if columns > 0 else 100
+        columns, rows = 0, 0
+
+    def fallback(name: str, default: int) -> int:
+        try:
+            value = int(os.environ.get(name, ""))
+        except ValueError:
+            return default
+        return value if value > 0 else default
+
+    columns = columns if columns > 0 else fallback("COLUMNS", FALLBACK_COLUMNS)
+    rows = rows if rows > 0 else fallback("LINES", FALLBACK_ROWS)
+    return min(columns, 120), rows
 
 
 class Line:
@@ -167,8 +198,11 @@ class Line:
             class _Bar(tqdm):
                 monitor_interval = 0  # no monitor thread: this class throttles the redraws itself
 
+            # both given: tqdm does not read the size itself (a terminal of 0 x 0 gave it -1 rows, and then
+            # it drew nothing)
+            columns, rows = _terminal_size(self.stream)
             self.bar = _Bar(total=self.n, desc=self.label, unit=" members", file=self.stream, mininterval=0,
-                            miniters=0, smoothing=0.1, ncols=_columns(self.stream), leave=True,
+                            miniters=0, smoothing=0.1, ncols=columns, nrows=rows, leave=True,
                             bar_format="{desc}: {percentage:5.1f}%|{bar}| [{elapsed}<{remaining}{postfix}]")
             self.bar.set_postfix_str(self._postfix(), refresh=True)
 
@@ -213,7 +247,7 @@ class Line:
             self.bar.close()
             return
         elapsed = max(self.clock() - self.t0, 1e-9)
-        self.stream.write(f"{self.label}: {self.n} member{'s' if self.n != 1 else ''} in {elapsed:.1f} s "
+        self.stream.write(f"{self.label}: {plural(self.n, 'member')} in {seconds_text(elapsed)} s "
                           f"({self.n / elapsed:.3g} members/s){', ' + summary if summary else ''}\n")
         self.stream.flush()
 

@@ -21,9 +21,12 @@ import dataclasses
 import os
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
+
+from .progress import member_range, plural, seconds_text
 
 FINAL_FIELDS = ("displacement", "velocity", "elastic_stress", "contact_age", "normal_stress", "friction_stress")
 
@@ -49,6 +52,11 @@ class ChunkJob:
     progress: bool
     cpu_workers: int | None = None  # simulate(workers=...): CPU worker processes for this chunk
     run_id: str | None = None  # the run's id in the member labels (warpfric.io.member_labels)
+
+
+def _members(start: int, stop: int) -> str:
+    """The members of a chunk, as a person reads them: 'members 0..1199', 'member 7'."""
+    return f"members {start}..{stop - 1}" if stop - start != 1 else f"member {start}"
 
 
 def worker_device(worker=None) -> str:
@@ -96,7 +104,7 @@ def run_chunk(job: ChunkJob) -> dict:
                            f"but this worker (pid {os.getpid()}) has no CUDA device")
     sl = slice(job.start, job.stop)
     record = chunk_record(sweep.record, sl)
-    label = (f"chunk {job.index + 1}/{job.n_chunks} (members {job.start}..{job.stop - 1})" if job.progress else False)
+    label = f"chunk {job.index + 1}/{job.n_chunks} ({_members(job.start, job.stop)})" if job.progress else False
     ds = simulate(sweep.member_slice(sl) or None, scene=sweep.scene, model=sweep.model, solver=sweep.solver,
                   fronts=sweep.fronts, record=record, device=device, progress=label,
                   member_offset=job.member_offset + job.start, workers=job.cpu_workers)
@@ -133,9 +141,11 @@ def prepare_worker(sweep_text: str, sweep_name: str, device: str | None) -> dict
     sweep = parse_sweep(sweep_text, sweep_name)
     device = device or worker_device()
     fronts = dc.replace(sweep.fronts, grid_check=False) if sweep.fronts is not None else None
-    simulate(sweep.member_slice(slice(0, 1)) or None, scene=sweep.scene, model=sweep.model,
-             solver=dc.replace(sweep.solver, max_steps=2, float32_fallback=False), fronts=fronts, device=device,
-             progress=False, workers=1)
+    with warnings.catch_warnings():  # the chunks give the run's warnings; the warm-up would repeat them
+        warnings.simplefilter("ignore")
+        simulate(sweep.member_slice(slice(0, 1)) or None, scene=sweep.scene, model=sweep.model,
+                 solver=dc.replace(sweep.solver, max_steps=2, float32_fallback=False), fronts=fronts, device=device,
+                 progress=False, workers=1)
     return dict(device=device, pid=os.getpid(), seconds=time.perf_counter() - t0)
 
 
@@ -200,7 +210,7 @@ def run_on_client(jobs: list, client, quiet: bool = False) -> tuple[list, list]:
             report = future.result()
         except Exception as err:  # noqa: BLE001 - reported by member range, the rest goes on
             errors.append(dict(index=job.index, start=job.start, stop=job.stop, error=f"{type(err).__name__}: {err}"))
-            _say(f"chunk {job.index + 1}/{job.n_chunks} (members {job.start}..{job.stop - 1}) FAILED: "
+            _say(f"chunk {job.index + 1}/{job.n_chunks} ({_members(job.start, job.stop)}) FAILED: "
                  f"{type(err).__name__}: {err}", False)
             if isinstance(err, OutputWriteError):
                 # raised below, once every chunk has ended: not cancelled, since a chunk still being
@@ -212,7 +222,8 @@ def run_on_client(jobs: list, client, quiet: bool = False) -> tuple[list, list]:
         members_done += report["members"]
         elapsed = time.perf_counter() - t0
         in_flight = len(jobs) - len(reports) - len(errors)
-        _say(f"{len(reports)}/{len(jobs)} chunks done ({members_done} members, {members_done / elapsed:.1f} members/s), "
+        _say(f"{len(reports)}/{plural(len(jobs), 'chunk')} done ({plural(members_done, 'member')}, "
+             f"{members_done / elapsed:.1f} members/s), "
              f"{in_flight} to go; chunk {job.index + 1} ran on {report['device']} (pid {report['pid']}) in "
              f"{report['wall_s']:.1f} s", quiet)
     if write_error is not None:
@@ -412,8 +423,8 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         missing = [i for i in range(store.n_chunks) if not store.is_done(i)]
         if errors or missing:
             ranges = ", ".join(f"{store.members(i).start}..{store.members(i).stop - 1}" for i in missing)
-            _say(f"{len(missing)} chunks missing (members {ranges}; {len(errors)} raised, see above); the finished "
-                 f"chunks are kept in {parts}: `{resume_command}` runs the rest", False)
+            _say(f"{plural(len(missing), 'chunk')} missing (members {ranges}; {len(errors)} raised, see above); the "
+                 f"finished chunks are kept in {parts}: `{resume_command}` runs the rest", False)
             return RunReport(chunks=reports, errors=errors, output=None, wall_s=wall)
         store.combine(out, command=command)
     except BaseException as err:  # noqa: BLE001 - cleaned up, then raised again
@@ -421,7 +432,8 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         if not isinstance(err, (OutputWriteError, KeyboardInterrupt)):
             raise
         first = "free some space, then " if getattr(err, "disk_full", False) else ""
-        what = (f"the {kept} finished chunks are kept in {str(parts)!r}; {first}`{resume_command}` goes on from them"
+        what = (f"the {plural(kept, 'finished chunk')} {'is' if kept == 1 else 'are'} kept in {str(parts)!r}; "
+                f"{first}`{resume_command}` goes on from them"
                 if kept else "nothing was kept")
         if isinstance(err, KeyboardInterrupt):
             raise RunInterrupted(f"interrupted; {what}") from None
@@ -433,8 +445,8 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
             if cluster is not None:
                 cluster.close()
     report = RunReport(chunks=reports, errors=[], output=out, wall_s=wall)
-    _say(f"wrote {out} ({sweep.n_members} members, {wall:.1f} s this run, {report.failed_members} failed members in "
-         "the chunks run now)", False)
+    _say(f"wrote {out} ({plural(sweep.n_members, 'member')}, {seconds_text(wall)} s this run, "
+         f"{plural(report.failed_members, 'failed member')} in the chunks run now)", False)
     return report
 
 
@@ -458,8 +470,9 @@ def _run_chunks(sweep, sweep_file, store, chunk, offset, device, client, quiet, 
     if client is not None:
         n_workers = len(client.scheduler_info().get("workers", {}))
         place = f"Dask cluster {client.scheduler.address} ({n_workers} workers, dashboard {client.dashboard_link})"
-    _say(f"{sweep.n_members} members (numbers {offset}..{offset + sweep.n_members - 1}) in {store.n_chunks} chunks "
-         f"of <= {chunk}, {len(todo)} to run on {place}; swept: {', '.join(sweep.varying) or 'nothing'}", False)
+    swept = [name for name in sweep.members if name in sweep.varying]  # the sweep file's order
+    _say(f"{member_range(sweep.n_members, offset, offset + sweep.n_members - 1)} in {plural(store.n_chunks, 'chunk')} "
+         f"of <= {chunk}, {len(todo)} to run on {place}; swept: {', '.join(swept) or 'nothing'}", False)
     if client is not None and todo:
         t_ready = time.perf_counter()
         try:  # every worker loads its kernels once, outside the timed run (a task each: heartbeats go on)
@@ -468,7 +481,7 @@ def _run_chunks(sweep, sweep_file, store, chunk, offset, device, client, quiet, 
             ready = client.gather([client.submit(prepare_worker, sweep.text, str(sweep_file), device, workers=[a],
                                                  allow_other_workers=True, pure=False) for a in addresses])
             devices = sorted({r["device"] for r in ready})
-            _say(f"{len(ready)} workers ready in {time.perf_counter() - t_ready:.1f} s (kernels loaded on "
+            _say(f"{plural(len(ready), 'worker')} ready in {time.perf_counter() - t_ready:.1f} s (kernels loaded on "
                  f"{', '.join(devices)})", quiet)
         except Exception as err:  # noqa: BLE001 - the chunks report it by member range
             _say(f"preparing the workers failed ({type(err).__name__}: {err}); running the chunks anyway", quiet)

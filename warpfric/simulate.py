@@ -15,7 +15,8 @@ from . import __version__
 from .device import check_device, init_warp
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
-from .parameters import Fronts, Model, Parameters, Record, Solver, parameter_long_name, parameter_units
+from .parameters import (RECORD_PAST_END, Fronts, Model, Parameters, Record, Solver, parameter_long_name,
+                         parameter_units)
 
 
 def simulate(
@@ -103,10 +104,13 @@ def simulate(
 
     n_workers = pool.plan(workers, device, values["normal_force"].shape[0], solver, fronts, record)
     if n_workers > 1:
-        return pool.run(n_workers, values, scene=scene, model=model, solver=solver, fronts=fronts,
-                        record=record, device=device, progress=progress, member_offset=member_offset,
-                        runner=simulate, x=_x_coordinate(values["length"], solver.nodes),
-                        varying_parameters=_varying_parameters(values, varying))
+        ds = pool.run(n_workers, values, scene=scene, model=model, solver=solver, fronts=fronts,
+                      record=record, device=device, progress=progress, member_offset=member_offset,
+                      runner=simulate, x=_x_coordinate(values["length"], solver.nodes),
+                      varying_parameters=_varying_parameters(values, varying))
+        if record is not None:  # once for the ensemble (the workers' own are dropped)
+            _warn_record_past_end(ds, record, member_offset)
+        return ds
     from warpfric.kernels.types import STATUS_MEANINGS
 
     from . import engine
@@ -168,7 +172,7 @@ def _warn_record_past_end(ds: xr.Dataset, record: Record, member_offset: int = 0
         return
     which = "; ".join(f"member {member_offset + m}: ended at {t:.6g} s, {n} of {times.size} times later"
                       for m, t, n in zip(members, final, late) if n)
-    warnings.warn(f"Record: recording times after a member's end are NaN ({which}); a run ends by itself once its "
+    warnings.warn(f"{RECORD_PAST_END} ({which}); a run ends by itself once its "
                   "detachment is over (Parameters(end_time=None)): give Parameters(end_time=...) past the last "
                   "recording time to record there", stacklevel=3)
 
