@@ -265,8 +265,9 @@ class Solver:
                       implicitly; its limit 0 is the sharp equivalent gate (docs/model.md, "Gate switches").
     steps_per_launch: attempted steps per kernel launch (progress granularity; no effect on results).
     stall_factor:     once half of an ensemble has ended ok, a member still running after more than
-                      max(stall_min_steps, stall_factor * their median) attempted steps stops with
-                      status 'stalled' (NaN outputs), so that one straggler cannot hold a launch.
+                      max(stall_min_steps, stall_factor * the ensemble's median) attempted steps
+                      (running members counted at their attempts so far) stops with status 'stalled'
+                      (NaN outputs), so that one straggler cannot hold a launch; inf: never.
     stall_min_steps:  see stall_factor.
     step_safety, step_min_factor, step_max_factor:
                       step-size controller (kernels/controller.py): after a step with error norm err
