@@ -23,7 +23,8 @@ final_time (0 by construction) in claims["peak_check"].
 Straggler rule: the engine's stall_factor (default 10) stays on except in the studies that
 deliberately mix in members that are legitimately far more expensive than their peers: fig10 and
 fig12 hold viscous_coefficient = 0 members, which under the stress gate are a dynamic rupture (many
-more steps than the strengthening members); those two run with stall_factor = inf.
+more steps than the strengthening members), and the map's slowest disc velocity makes members ~10x
+as expensive as its median one; those three run with stall_factor = inf.
 """
 
 from __future__ import annotations

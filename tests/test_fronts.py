@@ -6,7 +6,7 @@ import pytest
 from conftest import DEVICE, run, trapezoid_weights
 
 import warpfric as wf
-from warpfric.fronts import arrival_times_from_history, segment
+from warpfric.fronts import arrival_times_from_history, front_collisions, segment
 
 L = 0.2
 N = 101  # dx = 2 mm
@@ -175,7 +175,7 @@ def test_recording_times_after_a_members_end_are_nan_and_named_in_one_warning():
     assert np.isnan(vel[late]).all() and np.isfinite(vel[~late]).all()
     messages = [str(w.message) for w in caught if "Record:" in str(w.message)]
     assert len(messages) == 1
-    assert f"member 1: ended at {end:.6g} s, {late.sum()} of {late.size} times later" in messages[0]
+    assert f"member 1: ended at {end:.6g} s (the automatic end), {late.sum()} of {late.size} times later" in messages[0]
     assert "member 0" not in messages[0]
     import warnings
 
@@ -383,3 +383,38 @@ def test_speed_error_estimate_by_hand():
     np.testing.assert_array_equal(out["v_main_error"], out["v_middle_error"])
     assert np.isnan(out["v_left_error"]).all() and np.isnan(out["v_precursor_error"]).all()
     assert np.isnan(out["arrival_time_error"][2, 8]) and out["arrival_time_error"][0, 3] == e[3]
+
+
+def test_front_collisions_count_the_fronts_and_place_where_they_meet():
+    """One front from the right edge: one front, no collision. Two fronts (from both edges, 5 and
+    30 m/s) meet where their arrival times are equal, the interior maximum of t_a(x): the node there
+    and its time. A gap of unreached nodes does not make a front of its own, and a member that no
+    front reached has NaN."""
+    one = piecewise_arrival(X, [], [20.0], x0=L / 2)
+    left = 20.0 + (X + L / 2) / 5.0
+    right = 20.001 + (L / 2 - X) / 30.0
+    two = np.minimum(left, right)
+    gap = two.copy()
+    gap[60:64] = np.nan
+    none = np.full(N, np.nan)
+    out = front_collisions(np.stack([one, two, gap, none]), L)
+    np.testing.assert_array_equal(out["front_count"][:3], [1, 2, 2])
+    assert np.isnan(out["front_count"][3]) and np.isnan(out["collision_position"][[0, 3]]).all()
+    meet = int(np.argmax(two))
+    assert left[meet - 1] < right[meet - 1] and left[meet + 1] > right[meet + 1]  # the crossing lies there
+    np.testing.assert_allclose(out["collision_position"][1:3], X[meet], rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(out["collision_time"][1:3], two[meet])
+
+
+def test_the_default_scenes_contact_front_is_two_fronts_that_meet():
+    """The default scene: the contact front starts at the trailing edge and, ~9 ms later, a second
+    one at the leading edge; they meet at about -60 mm (N = 41: -60 mm, N = 100: -61.6 mm), the
+    latest arrival between the two starts."""
+    ds = run(nodes=41, rtol=1e-5, fronts=wf.Fronts())
+    ta, x = ds.arrival_time.values[0], ds.x.values
+    assert int(ds.front_count.values[0]) == 2
+    assert ta[-1] < ta[0] < ds.collision_time.values[0] and ta[-1] == np.nanmin(ta)
+    at = int(np.argmin(np.abs(x - ds.collision_position.values[0])))
+    assert abs(x[at] - ds.collision_position.values[0]) < 1e-12
+    assert ds.collision_time.values[0] == ta[at] == np.nanmax(ta)
+    assert -0.07 < float(ds.collision_position.values[0]) < -0.05

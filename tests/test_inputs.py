@@ -35,6 +35,8 @@ def simulate(members=None, device=DEVICE, **kw):
         ({"normal_forc": [500.0]}, ["normal_forc", "did you mean 'normal_force'?", "valid names"]),
         ({"eccentricity": [True]}, ["eccentricity", "True", "not a real number", "[-0.6, 0.6]"]),  # not 1.0
         ({"eccentricity": np.array([False, True])}, ["eccentricity", "not a real number"]),
+        ({"normal_force": [True, 500.0]}, ["normal_force", "True", "not a real number"]),  # numpy: [1.0, 500.0]
+        ({"normal_force": [[500.0], [False]]}, ["normal_force", "not a real number"]),
     ],
 )
 def test_bad_parameters(members, words):

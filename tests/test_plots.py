@@ -165,7 +165,13 @@ def test_a_member_without_a_front_gets_no_curve(contact_run, tmp_path):
     assert np.isnan(ds.arrival_time.values[1]).all()
     ax = plots.space_time_figure(ds, 1).axes[0]
     assert not ax.get_lines() and not contours(ax)
-    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["no contact front"]
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["no contact front"]  # no_peak: no failure
+    failed = ds.copy()
+    failed["status"] = failed.status.copy(data=np.where(np.arange(failed.sizes["member"]) == 1,
+                                                          failed.status.attrs["flag_meanings"].split().index("stalled"),
+                                                          failed.status.values))
+    ax = plots.space_time_figure(failed, 1).axes[0]
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["no contact front (status stalled)"]
     written = plots.quick_look(ds, tmp_path)
     assert {"space_time_member0.png", "space_time_member1.png"} <= {p.name for p in written}
     # a run without fronts at all: the map alone

@@ -173,7 +173,8 @@ def test_a_split_run_warns_of_late_recording_times_once_for_the_ensemble():
     late = [str(w.message) for w in caught if str(w.message).startswith("Record:")]
     assert len(late) == 1, late
     ends = ds.final_time.values
-    named = [f"member {m}: ended at {ends[m]:.6g} s, {int((np.asarray(times) > ends[m]).sum())} of 7 times later"
+    named = [f"member {m}: ended at {ends[m]:.6g} s (the automatic end), {int((np.asarray(times) > ends[m]).sum())} "
+             "of 7 times later"
              for m in (3, 0)]
     assert all(0 < int((np.asarray(times) > ends[m]).sum()) for m in (3, 0))
     assert late[0].index(named[0]) < late[0].index(named[1]), late[0]

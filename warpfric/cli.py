@@ -105,7 +105,8 @@ def _print_member(ds, solver: Solver) -> None:
     print(f"scene: F = {float(m.normal_force):g} N, 2e/L = {float(m.eccentricity):g}, "
           f"v_d = {float(m.disc_velocity):g} m/s, relaxation gate {ds.attrs['model_relaxation_gate']}, "
           f"N = {solver.nodes}, {solver.dtype}, rtol = {solver.rtol:g}, device {ds.attrs['device']}")
-    print(f"mu_s      = {_fmt(m.mu_s, spec='.6f')}  (static friction coefficient)")
+    grid = f" +- {_fmt(m.mu_s_grid_error, '', '.2g')} (grid)" if "mu_s_grid_error" in m else ""
+    print(f"mu_s      = {_fmt(m.mu_s, spec='.6f')}{grid}  (static friction coefficient)")
     print(f"mu_s_time = {_fmt(m.mu_s_time, 's', '.5f')}")
     print(f"mu_final  = {_fmt(m.mu_final, spec='.6f')}  (at t = {float(m.final_time):g} s)")
     event = ds.attrs.get("fronts_event", "").split()[:1]
@@ -123,12 +124,18 @@ def _print_member(ds, solver: Solver) -> None:
         for seg in ("left", "middle", "right"):
             start, end = float(m[f"{seg}_front_start"]), float(m[f"{seg}_front_end"])
             where = f"x = {start * 1e3:.1f} .. {end * 1e3:.1f} mm" if np.isfinite(start) else "absent"
-            err = f"+- {_fmt(m[f'v_{seg}_error'], '', '.2g')}" if f"v_{seg}_error" in m and np.isfinite(float(m[f"v_{seg}"])) else ""
+            err = ""
             if f"v_{seg}_grid_error" in m and np.isfinite(float(m[f"v_{seg}"])):
-                err += f" (grid: {_fmt(m[f'v_{seg}_grid_error'], '', '.2g')})"
+                change = float(m[f"v_{seg}_grid_error"])  # inf: this segment is absent on the coarse grid
+                err = f"+- {change:.2g}" if np.isfinite(change) else "+- ? (not on the coarse grid)"
             print(f"  v_{seg:<6} = {_fmt(m[f'v_{seg}'], 'm/s', '.3g'):>10} {err:<10} {where}")
-        if "v_middle_grid_error" not in m:
-            print("  (+- : time-discretisation error only; --grid-check adds the grid's, usually the larger)")
+        if "front_count" in m and float(m.front_count) > 1:
+            print(f"  {int(m.front_count)} fronts: the first two meet at x = {float(m.collision_position) * 1e3:.1f} mm, "
+                  f"t = {float(m.collision_time):.5f} s; a segment across that point averages both")
+        if "v_middle_grid_error" in m:
+            print("  (+- : the change on a grid of half the nodes, an estimate of the spatial error)")
+        else:
+            print("  (no error estimate: --grid-check estimates the speeds' spatial error, usually the largest)")
     print(f"status    = {_status_name(ds, m.status)}; steps accepted {int(m.steps_accepted)}, rejected "
           f"{int(m.steps_rejected)}; lift-off {'yes' if int(m.lift_off) else 'no'}; "
           f"wall {_seconds(ds.attrs['wall_time_s'])} s "
@@ -216,6 +223,8 @@ def _run(args) -> int:
              if getattr(args, name) not in (None, False)]
     if given:
         flags = ", ".join(flag for flag, _, _ in given)
+        if ("--front-event", "off") in [(flag, value) for flag, _, value in given]:
+            given = [g for g in given if g[0] != "--grid-check"]  # no fronts: nothing to check on a grid
         keys = ", ".join("fronts = false (top level)" if (flag, value) == ("--front-event", "off") else
                          f"{key} = {_toml_value(value)}" for flag, key, value in given)
         raise UsageError(f"{flags}: for the default scene only; a sweep file sets its own (write {keys} in "

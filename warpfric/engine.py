@@ -361,20 +361,23 @@ def straggler_limit(st: np.ndarray, solver: Solver) -> int:
     ``stalled``; the integrate kernel applies it), from a snapshot of the member states.
 
     Once at least half of the members have ended ok, the limit is max(stall_min_steps,
-    stall_factor * the median attempted steps of all members), a running member counted at its
-    attempts so far: one member can then cost a launch at most about stall_factor times a typical
-    member. The members advance in step (each launch gives every running member the same attempts),
-    so a running member has made at least as many attempts as any that has ended, and the median of
-    those counts is the ensemble's own: the limit does not depend on which launch's snapshot it is
-    taken from. (The median of the ended members alone is that of the faster half when half have
-    ended, and grew from launch to launch: a member needing 9.5x the ensemble's median was stopped
-    in one run and not in another.) Before half have ended, and for a lone member (no peers), there
-    is none (NO_STALL_LIMIT; max_steps still bounds every member)."""
+    stall_factor * the lower median of the attempted steps of the members that ended ok or still
+    run, a running member counted at its attempts so far); failed members do not count. One member
+    can then cost a launch at most about stall_factor times a typical member. The members advance in
+    step (each launch gives every running member the same attempts), so a running member has made at
+    least as many attempts as any that has ended, and the lower median is an ended member's final
+    count, the ensemble's own, whichever launch's snapshot it is read from. (The median of the ended
+    members alone is that of the faster half when half have ended, and grew from launch to launch: a
+    member needing 9.6x the ensemble's median was stopped in one run and not in another; the plain
+    median of all counts would, with exactly half ended, average in a running member's count and
+    follow it.) Before half have ended, and for a lone member (no peers), there is none
+    (NO_STALL_LIMIT; max_steps still bounds every member)."""
     finished = (st["done"] != 0) & (st["status"] == 0)
     if finished.sum() * 2 < st.shape[0] or not finished.any() or not np.isfinite(solver.stall_factor):
         return NO_STALL_LIMIT
-    attempts = st["steps_accepted"].astype(np.int64) + st["steps_rejected"]
-    limit = max(solver.stall_min_steps, solver.stall_factor * float(np.median(attempts)))
+    counted = finished | (st["done"] == 0)
+    attempts = np.sort((st["steps_accepted"].astype(np.int64) + st["steps_rejected"])[counted])
+    limit = max(solver.stall_min_steps, solver.stall_factor * float(attempts[(attempts.size - 1) // 2]))
     return int(min(limit, NO_STALL_LIMIT))
 
 

@@ -127,8 +127,41 @@ def arrival_times_from_history(times, velocity, disc_velocity=1.0, fronts: Front
         return arrival.numpy().T.copy(), event_max.numpy()
 
 
+def front_collisions(arrival_time, length) -> dict:
+    """Separate fronts in arrival times (members, nodes) s, NaN where never reached, nodes evenly
+    spaced over [-L/2, L/2] (``length`` L in m, scalar or (members,)). A front starts at each local
+    minimum of t_a(x) over the nodes reached (an edge counts when its neighbour arrives later) and two
+    fronts meet at each interior local maximum. Returns (members,) float64 arrays: ``front_count``
+    (the minima; NaN where no node was reached), ``collision_position`` (m) and ``collision_time`` (s)
+    of the earliest meeting (NaN with one front). The segmentation (:func:`segment`) assumes one front
+    spreading from one nucleation node: a segment that spans a collision averages two fronts."""
+    ta = np.atleast_2d(np.asarray(arrival_time, dtype=np.float64))
+    n_members, n = ta.shape
+    finite = np.isfinite(ta)
+    index = np.broadcast_to(np.arange(n), ta.shape)
+    # the nearest reached node before and after each node (-1 / n: none)
+    before = np.maximum.accumulate(np.where(finite, index, -1), axis=1)
+    before = np.concatenate([np.full((n_members, 1), -1), before[:, :-1]], axis=1)
+    after = np.minimum.accumulate(np.where(finite, index, n)[:, ::-1], axis=1)[:, ::-1]
+    after = np.concatenate([after[:, 1:], np.full((n_members, 1), n)], axis=1)
+    t_before = np.where(before >= 0, np.take_along_axis(ta, np.maximum(before, 0), axis=1), np.nan)
+    t_after = np.where(after < n, np.take_along_axis(ta, np.minimum(after, n - 1), axis=1), np.nan)
+    with np.errstate(invalid="ignore"):
+        starts = finite & ((before < 0) | (ta < t_before)) & ((after >= n) | (ta <= t_after))
+        meets = finite & (before >= 0) & (after < n) & (ta > t_before) & (ta >= t_after)
+    count = np.where(finite.any(axis=1), starts.sum(axis=1), np.nan).astype(np.float64)
+    meet_time = np.where(meets, ta, np.inf)
+    first = np.argmin(meet_time, axis=1)
+    has = meets.any(axis=1)
+    length = np.broadcast_to(np.asarray(length, dtype=np.float64), (n_members,))
+    position = -0.5 * length + first * (length / (n - 1))
+    return dict(front_count=count, collision_position=np.where(has, position, np.nan),
+                collision_time=np.where(has, meet_time[np.arange(n_members), first], np.nan))
+
+
 def speed_errors(metrics: dict, arrival_time, arrival_error, length) -> dict:
-    """Estimates of the time-discretisation error of the segment speeds (m/s), (members,) each.
+    """The interpolation error of the segment speeds (m/s), (members,) each: a lower bound of their
+    error, which the trajectory's error at rtol and the grid's (Fronts.grid_check) exceed.
 
     ``arrival_error`` ((members, nodes) s) estimates each t_a's error: the distance between the
     crossings of the quadratic (through the step's ends and its second stage) and of the linear

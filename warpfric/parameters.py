@@ -146,6 +146,13 @@ def unknown_parameter(name: str) -> str:
     return f"unknown parameter {name!r}{hint}; valid names: {', '.join(PARAMETER_NAMES)}"
 
 
+def _holds_bool(value) -> bool:
+    """Whether a (nested) list or tuple holds a boolean: numpy turns [True, 500.0] into [1.0, 500.0]."""
+    if isinstance(value, (list, tuple)):
+        return any(_holds_bool(v) for v in value)
+    return isinstance(value, (bool, np.bool_))
+
+
 def resolve_value(name: str, value: Any, scene: Parameters | None = None):
     """Return ``value`` as a float64 array, with None replaced by what None means for ``name``."""
     if value is None:
@@ -156,7 +163,7 @@ def resolve_value(name: str, value: Any, scene: Parameters | None = None):
             raise ValueError(f"parameter {name!r}: value None is not allowed; valid range {_range_text(meta)}")
         return np.asarray(meta["none_means"], dtype=np.float64)
     arr = np.asarray(value)
-    if arr.dtype.kind not in "iuf":  # booleans too: True would pass as 1.0 and False as 0.0
+    if arr.dtype.kind not in "iuf" or _holds_bool(value):  # booleans: True would pass as 1.0, False as 0.0
         raise ValueError(
             f"parameter {name!r}: value {value!r} is not a real number; valid range {_range_text(_FIELDS[name].metadata)}"
         )
@@ -265,9 +272,10 @@ class Solver:
                       implicitly; its limit 0 is the sharp equivalent gate (docs/model.md, "Gate switches").
     steps_per_launch: attempted steps per kernel launch (progress granularity; no effect on results).
     stall_factor:     once half of an ensemble has ended ok, a member still running after more than
-                      max(stall_min_steps, stall_factor * the ensemble's median) attempted steps
-                      (running members counted at their attempts so far) stops with status 'stalled'
-                      (NaN outputs), so that one straggler cannot hold a launch; inf: never.
+                      max(stall_min_steps, stall_factor * the lower median of the ok and running
+                      members' attempted steps, running ones counted so far) attempted steps stops
+                      with status 'stalled' (NaN outputs), so that one straggler cannot hold a
+                      launch; inf: never.
     stall_min_steps:  see stall_factor.
     step_safety, step_min_factor, step_max_factor:
                       step-size controller (kernels/controller.py): after a step with error norm err

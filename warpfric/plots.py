@@ -366,7 +366,11 @@ def space_time_figure(ds, recorded_index: int):
         ta = np.asarray(ds[f"{prefix}arrival_time"].values[position], dtype=float)
         reached = np.flatnonzero(np.isfinite(ta))
         if not reached.size:  # no curve; the legend says so
-            handles.append(Line2D([], [], ls="none", label=f"no {front}"))
+            status = int(_per_member(ds, "status")[position]) if "status" in ds else 0
+            meanings = ds.status.attrs.get("flag_meanings", "").split() if "status" in ds else []
+            meaning = meanings[status] if status < len(meanings) else str(status)
+            why = f" (status {meaning})" if meaning not in ("ok", "no_peak") else ""  # failed before any front
+            handles.append(Line2D([], [], ls="none", label=f"no {front}{why}"))
             continue
         gaps = np.flatnonzero(np.diff(reached) > 1) + 1  # no line across nodes the front did not reach
         colour, style = _ARRIVAL_STYLES.get(event, ("k", ":"))

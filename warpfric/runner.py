@@ -422,8 +422,8 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
                                             cpu_workers)
         missing = [i for i in range(store.n_chunks) if not store.is_done(i)]
         if errors or missing:
-            ranges = ", ".join(f"{store.members(i).start}..{store.members(i).stop - 1}" for i in missing)
-            _say(f"{plural(len(missing), 'chunk')} missing (members {ranges}; {len(errors)} raised, see above); the "
+            ranges = ", ".join(_members(store.members(i).start, store.members(i).stop) for i in missing)
+            _say(f"{plural(len(missing), 'chunk')} missing ({ranges}; {len(errors)} raised, see above); the "
                  f"finished chunks are kept in {parts}: `{resume_command}` runs the rest", False)
             return RunReport(chunks=reports, errors=errors, output=None, wall_s=wall)
         store.combine(out, command=command)

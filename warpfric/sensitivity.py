@@ -230,9 +230,10 @@ def _warn_unresolved(res, n: int) -> None:
     if loose:
         which = ", ".join(f"{o!r} +- {w:.2g}" for o, w in loose)
         factor = max(w for _, w in loose) / UNRESOLVED_HALF_WIDTH
+        needed = 2 ** math.ceil(math.log2(n * factor ** 2))  # Saltelli's base size is a power of two
         warnings.warn(f"Sobol indices not resolved at base size n = {n}: confidence half-widths up to {which} "
-                      f"(above {UNRESOLVED_HALF_WIDTH:g}); the half-width falls about as 1/sqrt(n), so n of about "
-                      f"{n * factor ** 2:.0f} or more would resolve them", stacklevel=3)
+                      f"(above {UNRESOLVED_HALF_WIDTH:g}); the half-width falls about as 1/sqrt(n): n = {needed} "
+                      "at least (a power of two; the estimate of a small design is itself rough)", stacklevel=3)
 
 
 def bar_plot(res, path) -> None:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import re
 import sys
 import time
 import warnings
@@ -160,21 +161,36 @@ def simulate(
 
 
 def _warn_record_past_end(ds: xr.Dataset, record: Record, member_offset: int = 0) -> None:
-    """One warning naming each recorded member whose run ended before some of its recording times:
-    those samples are NaN (nothing was integrated there), which is easy to mistake for a field that
-    is NaN. The usual cause is the automatic end (Parameters(end_time=None): the run stops once the
-    detachment is over)."""
+    """One warning naming each recorded member whose run ended before some of its recording times,
+    and why it ended there: those samples are NaN (nothing was integrated there), which is easy to
+    mistake for a field that is NaN. The causes: the automatic end (Parameters(end_time=None): the run
+    stops once the detachment is over), the member's own end_time, or a failure (its status)."""
+    from warpfric.kernels.types import STATUS_MEANINGS
+
     members = np.asarray(record.members)
     times = np.asarray(record.times)
     final = ds.final_time.values[members]
     late = (times[None, :] > final[:, None]).sum(axis=1)
     if not late.any():
         return
-    which = "; ".join(f"member {member_offset + m}: ended at {t:.6g} s, {n} of {times.size} times later"
-                      for m, t, n in zip(members, final, late) if n)
-    warnings.warn(f"{RECORD_PAST_END} ({which}); a run ends by itself once its "
-                  "detachment is over (Parameters(end_time=None)): give Parameters(end_time=...) past the last "
-                  "recording time to record there", stacklevel=3)
+    end_time = np.broadcast_to(ds.end_time.values, ds.final_time.shape)[members]
+    status = ds.status.values[members]
+    parts, automatic = [], False
+    for m, t, n, end, code in zip(members, final, late, end_time, status):
+        if not n:
+            continue
+        meaning = STATUS_MEANINGS[int(code)]
+        if meaning not in ("ok", "no_peak"):
+            why = f"status {meaning}"
+        elif np.isfinite(end) and t >= end:
+            why = "its end_time"
+        else:
+            why, automatic = "the automatic end", True
+        parts.append(f"member {member_offset + m}: ended at {t:.6g} s ({why}), {n} of {times.size} times later")
+    advice = ("; a run ends by itself once its detachment is over (end_time None): an end_time past the last "
+              "recording time (Parameters(end_time=...), [scene] end_time in a sweep file) records there"
+              if automatic else "")
+    warnings.warn(f"{RECORD_PAST_END} ({'; '.join(parts)}){advice}", stacklevel=3)
 
 
 def _add_grid_check(ds, values, scene, model, solver, fronts, device, progress) -> None:
@@ -226,8 +242,10 @@ def _rerun_failed_in_float64(ds, values, scene, model, solver, fronts, record, d
             sub_record = dataclasses.replace(record, members=tuple(position[int(record.members[k])] for k in chosen))
             recorded_pos = chosen
     sub_fronts = dataclasses.replace(fronts, grid_check=False) if fronts is not None else None
-    sub = simulate(sub_members, scene=scene, model=model, solver=dataclasses.replace(solver, dtype="float64"),
-                   fronts=sub_fronts, record=sub_record, device=device, progress=False, workers=1)
+    with warnings.catch_warnings():  # the outer call warns of late recording times, with the members' numbers
+        warnings.filterwarnings("ignore", message=re.escape(RECORD_PAST_END))
+        sub = simulate(sub_members, scene=scene, model=model, solver=dataclasses.replace(solver, dtype="float64"),
+                       fronts=sub_fronts, record=sub_record, device=device, progress=False, workers=1)
     for name, var in sub.data_vars.items():
         if name not in ds.data_vars:
             continue
@@ -252,7 +270,7 @@ def _front_metrics(fronts: Fronts, model: Model, values, result, device: str) ->
     with the event's name (e.g. ``strength_v_main``)."""
     from warpfric.kernels.types import FRONT_EVENTS
 
-    from .fronts import segment_nodes_first, speed_errors
+    from .fronts import front_collisions, segment_nodes_first, speed_errors
 
     out = {}
     for k, event in enumerate(fronts.events):
@@ -269,6 +287,7 @@ def _front_metrics(fronts: Fronts, model: Model, values, result, device: str) ->
         metrics = segment_nodes_first(result.arrival[row], values["length"], fronts, device=device)
         metrics["arrival_time"] = arrival_time
         metrics.update(speed_errors(metrics, arrival_time, result.arrival_error[row].T, values["length"]))
+        metrics.update(front_collisions(arrival_time, values["length"]))
         if event == "velocity":
             metrics["event_max_velocity"] = np.where(result.event, result.member_states["front_max"], np.nan)
         if event == "strength":
@@ -284,7 +303,8 @@ _EVENT_WORDS = {
 }
 _FRONT_ATTRS = {
     "arrival_time": ("s", "arrival time t_a of the {front} at each node (NaN: never reached)"),
-    "arrival_time_error": ("s", "estimated time-discretisation error of t_a"),
+    "arrival_time_error": ("s", "interpolation error of t_a inside its step (a lower bound: the trajectory's "
+                           "error at rtol and the grid's move t_a further)"),
     "event_max_velocity": ("m s-1", "maximum of the detachment velocity w over the pad and the event window"),
     "strength_peak": ("1", "peak of tau_f/sigma_n at each node: its own static friction coefficient (NaN: no "
                            "confirmed peak in the run)"),
@@ -292,6 +312,11 @@ _FRONT_ATTRS = {
     "front_start_time": ("s", "first arrival time of the {front}"),
     "front_end_time": ("s", "last arrival time of the {front} (over the nodes it reached)"),
     "detached_fraction": ("1", "fraction of the nodes the {front} reached"),
+    "front_count": ("1", "separate fronts of the {front}: local minima of t_a(x), each a nucleation (2: a second "
+                    "front, e.g. from the other edge, meets the first; the segments' speeds then span the collision)"),
+    "collision_position": ("m", "where the first two fronts of the {front} meet (the earliest interior maximum of "
+                           "t_a(x)); NaN: one front"),
+    "collision_time": ("s", "when the first two fronts of the {front} meet; NaN: one front"),
 }
 _SEGMENT_WORDS = {"left": "left (smaller x)", "middle": "middle", "right": "right (larger x)",
                   "precursor": "precursor (the slow segment at the nucleation edge)", "main": "main (middle)",
@@ -301,8 +326,10 @@ for _seg, _words in _SEGMENT_WORDS.items():
     _FRONT_ATTRS[f"{_seg}_front_end"] = ("m", f"end (larger x) of the {_words} segment of the {{front}}")
     _FRONT_ATTRS[f"{_seg}_front_length"] = ("m", f"length of the {_words} segment of the {{front}}")
     _FRONT_ATTRS[f"v_{_seg}"] = ("m s-1", f"mean speed of the {_words} segment of the {{front}} (1/|slope| of t_a(x))")
-    _FRONT_ATTRS[f"v_{_seg}_error"] = ("m s-1", f"estimated time-discretisation error of v_{_seg}, from the "
-                                       "arrival_time_error of its end (and nucleation) nodes; inf: not resolved")
+    _FRONT_ATTRS[f"v_{_seg}_error"] = ("m s-1", f"interpolation error of v_{_seg}, from the arrival_time_error of "
+                                       "its end (and nucleation) nodes: a lower bound, not the speed's error "
+                                       "(v_*_grid_error from Fronts(grid_check=True) is usually far larger); inf: "
+                                       "not resolved")
 
 
 def _add_fronts(ds: xr.Dataset, front: dict, fronts: Fronts) -> None:

@@ -27,7 +27,6 @@ from __future__ import annotations
 import dataclasses
 import itertools
 import math
-import re
 import tomllib
 import zlib
 from dataclasses import dataclass
@@ -82,9 +81,10 @@ def _where(table: str, key: str | None = None) -> str:
 
 def _number(value, where: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        key = re.split(r"[.\[]", where.split("] ")[-1])[0]  # '[grid] normal_force.start' -> normal_force
+        key, _, part = where.split("] ")[-1].partition(".")  # '[grid] normal_force.start' -> normal_force, start
+        value_of_parameter = key in PARAMETER_NAMES and part in ("", "start", "stop", "mean", "low", "high")
         valid = (f" in {parameter_range_text(key)} {units_text(parameter_units(key))}".rstrip()
-                 if key in PARAMETER_NAMES else "")
+                 if value_of_parameter else "")  # a spread (std, ...) is no value of the parameter
         raise SweepError(f"{where} = {value!r}: expected a number{valid}")
     return float(value)
 
