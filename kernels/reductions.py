@@ -419,10 +419,13 @@ def segment_fronts(
         t_last = wp.max(t_last, arrival[i, m])
     x_first = -wp.float64(0.5) * L + wp.float64(i_first) * dx
     out[FM_NUCLEATION_POSITION, m] = x_first
+    # in node spacings from each edge, with a relative slack of 1e-9: a node on the zone's boundary
+    # counts as the edge on either side (its position from -L/2 + i*dx rounds either way)
+    zone_nodes = settings.edge_zone / dx * (wp.float64(1.0) + wp.float64(1.0e-9))
     edge = wp.float64(0.0)
-    if x_first <= -wp.float64(0.5) * L + settings.edge_zone:
+    if wp.float64(i_first) <= zone_nodes:
         edge = wp.float64(-1.0)
-    elif x_first >= wp.float64(0.5) * L - settings.edge_zone:
+    elif wp.float64(n - 1 - i_first) <= zone_nodes:
         edge = wp.float64(1.0)
     out[FM_NUCLEATION_EDGE, m] = edge
     out[FM_FIRST_ARRIVAL, m] = t0

@@ -418,3 +418,13 @@ def test_the_default_scenes_contact_front_is_two_fronts_that_meet():
     assert abs(x[at] - ds.collision_position.values[0]) < 1e-12
     assert ds.collision_time.values[0] == ta[at] == np.nanmax(ta)
     assert -0.07 < float(ds.collision_position.values[0]) < -0.05
+
+
+def test_a_nucleation_on_the_edge_zones_boundary_counts_as_that_edge_on_either_side():
+    """N = 41, L = 0.2 m, edge zone 0.1 L = 4 node spacings: nucleation at node 4 or 36 lies on the
+    zone's boundary, whose position -L/2 + i*dx rounds either way (x = 0.07999999999999999 at node
+    36). Mirror images get mirrored edges, and node 5 / 35 are interior."""
+    x = np.linspace(-0.1, 0.1, 41)
+    rows = [20.0 + np.abs(x - x[k]) / 30.0 for k in (4, 36, 5, 35)]
+    m = segment(np.stack(rows), 0.2)
+    np.testing.assert_array_equal(m["nucleation_edge"], [-1, 1, 0, 0])
