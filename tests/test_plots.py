@@ -59,6 +59,19 @@ def test_a_decade_spanning_parameter_gets_a_log_axis_and_the_second_a_legend(gri
     assert texts == ["F = 100 N", "F = 300 N", "F = 1000 N", "F = 3000 N", "F = 10000 N"]
 
 
+def test_a_third_swept_parameter_is_named_in_the_titles(grid):
+    """Three swept parameters: x and colour show two, the third's members share the axes; the titles
+    say so, with its number of values (a constant one is not named)."""
+    three = grid.assign(disc_velocity=("member", np.tile([1e-4, 1e-3, 1e-2], 5), {"units": "m s-1"}),
+                        damping=("member", np.zeros(grid.sizes["member"]), {"units": "Pa s m-1"}))
+    note = "also varying, not told apart: v (3 values)"
+    fig = plots.mu_s_figure(three, "normal_force", "eccentricity", mixed=("disc_velocity", "damping"))
+    assert fig.axes[0].get_title().endswith("\n" + note)
+    fig = plots.front_speeds_figure(three, "normal_force", "eccentricity", mixed=("disc_velocity",))
+    assert fig._suptitle.get_text() == note
+    assert "also varying" not in plots.mu_s_figure(grid, "normal_force", "eccentricity").axes[0].get_title()
+
+
 def test_many_values_of_the_second_parameter_get_a_colour_bar():
     rng = np.random.default_rng(1)
     ds = ensemble(np.exp(rng.uniform(np.log(200), np.log(5000), 40)), rng.uniform(-0.2, 0.2, 40))

@@ -194,8 +194,17 @@ def _finish(fig, path, written: list) -> None:
     written.append(Path(path))
 
 
-def mu_s_figure(ds, pname: str, colour_by: str | None = None):
-    """mu_s against ``pname`` (ok members), coloured by ``colour_by``."""
+def _mixed_note(ds, names, ok: np.ndarray) -> str:
+    """The swept parameters a figure neither plots nor colours, for its title: their members lie on
+    the same axes, not told apart."""
+    counts = [(name, np.unique(_per_member(ds, name)[ok]).size) for name in names]
+    mixed = [f"{_SYMBOLS.get(name, name)} ({n} values)" for name, n in counts if n > 1]
+    return f"\nalso varying, not told apart: {', '.join(mixed)}" if mixed else ""
+
+
+def mu_s_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
+    """mu_s against ``pname`` (ok members), coloured by ``colour_by``; the title names the other
+    swept parameters ``mixed`` (their members share the axes)."""
     plt = _plt()
     ok = ds.status.values == 0
     x, mu = _per_member(ds, pname), np.asarray(ds.mu_s.values, dtype=float)
@@ -206,7 +215,8 @@ def mu_s_figure(ds, pname: str, colour_by: str | None = None):
     _scale(ax, "y", mu[ok])
     ax.set_xlabel(_label(ds, pname))
     ax.set_ylabel("static friction coefficient mu_s")
-    ax.set_title(f"mu_s against {pname.replace('_', ' ')} ({ok.sum()} of {ok.size} members ok)", fontsize=10)
+    ax.set_title(f"mu_s against {pname.replace('_', ' ')} ({ok.sum()} of {ok.size} members ok)"
+                 + _mixed_note(ds, mixed, ok), fontsize=10)
     ax.grid(alpha=0.3, which="both" if ax.get_xscale() == "log" else "major")
     if colours is not None:
         colours.explain(fig, [ax])
@@ -218,9 +228,10 @@ def mu_s_figure(ds, pname: str, colour_by: str | None = None):
 _SEGMENTS = (("left", "v"), ("middle", "o"), ("right", "^"))
 
 
-def front_speeds_figure(ds, pname: str, colour_by: str | None = None):
+def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     """v_left, v_middle, v_right against ``pname``: one panel, the segments as markers; with
-    ``colour_by``, one panel per segment, coloured by it."""
+    ``colour_by``, one panel per segment, coloured by it; the title names the other swept
+    parameters ``mixed``."""
     plt = _plt()
     ok = ds.status.values == 0
     x = _per_member(ds, pname)
@@ -245,6 +256,9 @@ def front_speeds_figure(ds, pname: str, colour_by: str | None = None):
             ax.set_title(f"{seg} segment, {present.sum()} members", fontsize=10)
         axes[0].set_ylabel("front speed (m/s)")
         colours.explain(fig, axes)
+        note = _mixed_note(ds, mixed, ok)
+        if note:
+            fig.suptitle(note.strip(), fontsize=9)
     for ax in axes:
         _scale(ax, "x", x[ok])
         _scale(ax, "y", every)
@@ -302,9 +316,10 @@ def quick_look(ds, outdir, max_curves: int = MAX_CURVES) -> list:
     for pname in swept:
         others = [name for name in swept if name != pname]
         colour_by = others[0] if others else None
-        _finish(mu_s_figure(ds, pname, colour_by), outdir / f"mu_s_vs_{pname}.png", written)
+        _finish(mu_s_figure(ds, pname, colour_by, others[1:]), outdir / f"mu_s_vs_{pname}.png", written)
         if "v_middle" in ds:
-            _finish(front_speeds_figure(ds, pname, colour_by), outdir / f"front_speeds_vs_{pname}.png", written)
+            _finish(front_speeds_figure(ds, pname, colour_by, others[1:]), outdir / f"front_speeds_vs_{pname}.png",
+                    written)
     if not swept and ds.sizes["member"] > 1:
         fig, ax = plt.subplots(figsize=(5.6, 3.8))
         mu = ds.mu_s.values[ok & np.isfinite(ds.mu_s.values)]
