@@ -182,3 +182,17 @@ def test_cluster_options_that_cannot_work_are_refused(reference, tmp_path, capsy
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and all(w in err[0] for w in words), err
+
+
+def test_workers_warnings_are_raised_once_by_the_client(client, tmp_path, capfd):
+    """Each Dask worker process would print a chunk's warning itself, raw and once per worker: the
+    chunks return them and the command prints each distinct one once, as its one-line warning."""
+    from warpfric.cli import main
+
+    sweep = tmp_path / "gateless.toml"
+    sweep.write_text(SWEEP.replace('title = "dask test"', 'title = "dask test"\n[model]\nrelaxation_gate = "none"'))
+    code = main(["run", str(sweep), "-o", str(tmp_path / "g.nc"), "--scheduler", client.scheduler.address, "--quiet"])
+    err = capfd.readouterr().err
+    assert code == 0
+    warned = [line for line in err.splitlines() if "Warning" in line or line.startswith("warpfric: warning:")]
+    assert len(warned) == 1 and warned[0].startswith("warpfric: warning: fronts event 'contact'"), err

@@ -17,6 +17,7 @@ compiled kernels between chunks (one Warp module cache per process).
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import os
 import sys
@@ -52,6 +53,9 @@ class ChunkJob:
     progress: bool
     cpu_workers: int | None = None  # simulate(workers=...): CPU worker processes for this chunk
     run_id: str | None = None  # the run's id in the member labels (warpfric.io.member_labels)
+    # set by run_on_client: a chunk run in another process returns its warnings in the report, for
+    # that process to raise each once (a worker's own would print once per worker, with its source line)
+    parent_pid: int | None = None
 
 
 def _members(start: int, stop: int) -> str:
@@ -105,9 +109,11 @@ def run_chunk(job: ChunkJob) -> dict:
     sl = slice(job.start, job.stop)
     record = chunk_record(sweep.record, sl)
     label = f"chunk {job.index + 1}/{job.n_chunks} ({_members(job.start, job.stop)})" if job.progress else False
-    ds = simulate(sweep.member_slice(sl) or None, scene=sweep.scene, model=sweep.model, solver=sweep.solver,
-                  fronts=sweep.fronts, record=record, device=device, progress=label,
-                  member_offset=job.member_offset + job.start, workers=job.cpu_workers)
+    collect = job.parent_pid is not None and job.parent_pid != os.getpid()  # not a thread of the parent
+    with warnings.catch_warnings(record=True) if collect else contextlib.nullcontext() as caught:
+        ds = simulate(sweep.member_slice(sl) or None, scene=sweep.scene, model=sweep.model, solver=sweep.solver,
+                      fronts=sweep.fronts, record=record, device=device, progress=label,
+                      member_offset=job.member_offset + job.start, workers=job.cpu_workers)
     if record is not None:  # member numbers, as the member coordinate
         ds = ds.assign_coords(recorded_member=ds.recorded_member.copy(data=ds.member.values[list(record.members)]))
     ds.attrs["title"] = sweep.title or ds.attrs["title"]
@@ -125,7 +131,8 @@ def run_chunk(job: ChunkJob) -> dict:
         ds = ds.drop_vars([v for v in FINAL_FIELDS if v in ds])
     write_ensemble(ds, job.path, varying=sweep.varying, command=job.command, run_id=job.run_id)
     return dict(index=job.index, members=job.stop - job.start, failed=failed, device=device,
-                wall_s=time.perf_counter() - t0, pid=os.getpid())
+                wall_s=time.perf_counter() - t0, pid=os.getpid(),
+                warnings=[(str(w.message), w.category) for w in caught] if collect else [])
 
 
 def prepare_worker(sweep_text: str, sweep_name: str, device: str | None) -> dict:
@@ -200,7 +207,7 @@ def run_on_client(jobs: list, client, quiet: bool = False) -> tuple[list, list]:
     futures = {}
     for job in jobs:
         key = f"warpfric-chunk-{job.index:06d}-{Path(job.path).parent.name}-{os.getpid()}-{time.time_ns()}"
-        futures[client.submit(run_chunk, job, key=key, pure=False)] = job
+        futures[client.submit(run_chunk, dataclasses.replace(job, parent_pid=os.getpid()), key=key, pure=False)] = job
     reports, errors = [], []
     write_error = None
     members_done = 0
@@ -226,6 +233,8 @@ def run_on_client(jobs: list, client, quiet: bool = False) -> tuple[list, list]:
              f"{members_done / elapsed:.1f} members/s), "
              f"{in_flight} to go; chunk {job.index + 1} ran on {report['device']} (pid {report['pid']}) in "
              f"{report['wall_s']:.1f} s", quiet)
+    for message, category in dict.fromkeys(w for report in reports for w in report["warnings"]):  # each once
+        warnings.warn(message, category, stacklevel=2)
     if write_error is not None:
         raise write_error
     return reports, errors
