@@ -148,6 +148,20 @@ class _Sink:
             _INBOX.put(("progress", self.run_id, self.chunk, float(fraction), int(done)))
 
 
+def warning_pairs(caught) -> list:
+    """Warnings recorded in another process (``warnings.catch_warnings(record=True)``) as picklable
+    (message, category) pairs, for the process that started it to raise with :func:`warn_once`."""
+    return [(str(w.message), w.category) for w in caught]
+
+
+def warn_once(pairs, stacklevel: int = 1) -> None:
+    """Raise each distinct (message, category) of ``pairs`` once, in order: the warnings of several
+    worker processes, which would each print their own, with their own source line.
+    ``stacklevel`` as for warnings.warn, counted from the caller of this function."""
+    for message, category in dict.fromkeys(pairs):
+        warnings.warn(message, category, stacklevel=stacklevel + 1)
+
+
 def _run_chunk(runner, run_id: int, chunk: int, members: dict, record, member_offset: int, show: bool, common: dict):
     """In a worker: one chunk's Dataset and the warnings it raised ((message, category) each, for the
     parent to raise: a worker's own would print once per worker, with its source line), ``runner``
@@ -157,7 +171,7 @@ def _run_chunk(runner, run_id: int, chunk: int, members: dict, record, member_of
     try:
         with warnings.catch_warnings(record=True) as caught:
             ds = runner(members, record=record, member_offset=member_offset, progress=show, workers=1, **common)
-        return ds, [(str(w.message), w.category) for w in caught if not str(w.message).startswith(RECORD_PAST_END)]
+        return ds, [(m, c) for m, c in warning_pairs(caught) if not m.startswith(RECORD_PAST_END)]
     finally:
         progress_module.SINK = None
 
@@ -293,8 +307,7 @@ def run(n_workers: int, values: dict, *, scene, model, solver, fronts, record, d
     ds.attrs["worker_start_time_s"] = (pool.ready_at - t0) if started_here and pool.ready_at is not None else 0.0
     if line is not None:
         line.close(f"{n_workers} workers")
-    for message, category in dict.fromkeys(w for _, caught in results for w in caught):  # each once, in order
-        warnings.warn(message, category, stacklevel=3)  # at simulate()'s caller, after the progress line
+    warn_once((w for _, caught in results for w in caught), stacklevel=3)  # at simulate()'s caller, after the line
     return ds
 
 

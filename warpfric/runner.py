@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .pool import warn_once, warning_pairs
 from .progress import member_range, plural, seconds_text
 
 FINAL_FIELDS = ("displacement", "velocity", "elastic_stress", "contact_age", "normal_stress", "friction_stress")
@@ -132,7 +133,7 @@ def run_chunk(job: ChunkJob) -> dict:
     write_ensemble(ds, job.path, varying=sweep.varying, command=job.command, run_id=job.run_id)
     return dict(index=job.index, members=job.stop - job.start, failed=failed, device=device,
                 wall_s=time.perf_counter() - t0, pid=os.getpid(),
-                warnings=[(str(w.message), w.category) for w in caught] if collect else [])
+                warnings=warning_pairs(caught) if collect else [])
 
 
 def prepare_worker(sweep_text: str, sweep_name: str, device: str | None) -> dict:
@@ -233,8 +234,7 @@ def run_on_client(jobs: list, client, quiet: bool = False) -> tuple[list, list]:
              f"{members_done / elapsed:.1f} members/s), "
              f"{in_flight} to go; chunk {job.index + 1} ran on {report['device']} (pid {report['pid']}) in "
              f"{report['wall_s']:.1f} s", quiet)
-    for message, category in dict.fromkeys(w for report in reports for w in report["warnings"]):  # each once
-        warnings.warn(message, category, stacklevel=2)
+    warn_once((w for report in reports for w in report["warnings"]), stacklevel=2)
     if write_error is not None:
         raise write_error
     return reports, errors
