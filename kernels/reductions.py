@@ -176,8 +176,17 @@ FM_NUCLEATION_EDGE = 1
 FM_FIRST_ARRIVAL = 2
 FM_LAST_ARRIVAL = 3
 FM_ARRIVED_FRACTION = 4
-FM_SEGMENTS = 5  # then start, end, length, speed for left, middle, right
-N_FRONT_METRICS = FM_SEGMENTS + 12
+# then start, end, length, speed of the first front's left, middle and right segments, of the whole
+# first front and of the whole second front (write_segment's index 0..4)
+FM_SEGMENTS = 5
+SEGMENT_FIRST = 3
+SEGMENT_SECOND = 4
+FM_FRONT_COUNT = FM_SEGMENTS + 20
+FM_COLLISION_POSITION = FM_SEGMENTS + 21
+FM_COLLISION_TIME = FM_SEGMENTS + 22
+FM_SECOND_NUCLEATION_POSITION = FM_SEGMENTS + 23
+FM_SECOND_FIRST_ARRIVAL = FM_SEGMENTS + 24
+N_FRONT_METRICS = FM_SEGMENTS + 25
 MODE_WIDTH = 0.0953  # log(1.1): local speeds within 10 % count to the same plateau
 
 
@@ -276,6 +285,55 @@ def front_run(arrival: wp.array2d(dtype=wp.float64), m: int, n: int, i_first: in
             break
         hi += 1
     return lo, hi
+
+
+@wp.func
+def front_basin(arrival: wp.array2d(dtype=wp.float64), m: int, lo: int, hi: int, i_start: int):
+    """The nodes a..b of lo..hi that the front nucleating at i_start reaches before any other: from
+    i_start outwards while t_a does not fall. A node whose outer neighbour arrived earlier is a
+    meeting point with another front (a maximum of t_a(x)) and belongs to both."""
+    a = i_start
+    while a > lo:
+        if arrival[a - 1, m] < arrival[a, m]:
+            break
+        a -= 1
+    b = i_start
+    while b < hi:
+        if arrival[b + 1, m] < arrival[b, m]:
+            break
+        b += 1
+    return a, b
+
+
+@wp.func
+def count_fronts(
+    arrival: wp.array2d(dtype=wp.float64), m: int, lo: int, hi: int, L: wp.float64, dx: wp.float64,
+    out: wp.array2d(dtype=wp.float64),
+):
+    """Fronts in lo..hi into out: their number (the minima of t_a(x): a node earlier than its left
+    neighbour and not later than its right one; an end node when its one neighbour is not earlier)
+    and where and when the first two meet (the earliest maximum: later than its left neighbour, not
+    earlier than its right one; NaN with one front)."""
+    count = int(0)
+    t_meet = wp.float64(wp.inf)
+    i_meet = int(-1)
+    for i in range(lo, hi + 1):
+        t = arrival[i, m]
+        starts = True
+        if i > lo:
+            starts = t < arrival[i - 1, m]
+        if i < hi:
+            starts = starts and t <= arrival[i + 1, m]
+        if starts:
+            count += 1
+        if i > lo and i < hi:
+            if t > arrival[i - 1, m] and t >= arrival[i + 1, m] and t < t_meet:
+                t_meet = t
+                i_meet = i
+    out[FM_FRONT_COUNT, m] = wp.float64(count)
+    if i_meet >= 0:
+        out[FM_COLLISION_POSITION, m] = -wp.float64(0.5) * L + wp.float64(i_meet) * dx
+        out[FM_COLLISION_TIME, m] = t_meet
 
 
 @wp.func
@@ -393,9 +451,13 @@ def segment_fronts(
 ):
     """Front metrics of each member from its arrival times t_a (s, nodes x members; NaN = never).
 
-    The front is the run of arrived nodes around the nucleation node (the earliest arrival); nodes
+    The event is the run of arrived nodes around the nucleation node (the earliest arrival); nodes
     beyond an unreached node are not part of it (detached_fraction still counts every arrived node).
-    Works on the intervals between neighbouring nodes of that run, each
+    A second front may nucleate elsewhere in the run and meet the first at a maximum of t_a(x)
+    (count_fronts): the first front is the nodes it reaches first (front_basin), and the segments
+    are the first front's; the first front is also reported whole (SEGMENT_FIRST). The second front
+    is the one that nucleates next; its extent and mean speed are reported whole (SEGMENT_SECOND).
+    The segmentation works on the intervals between neighbouring nodes of the first front, each
     with its local speed c_j = dx / |t_a(x_{j+1}) - t_a(x_j)|. v_fast is the plateau (mode within
     10 %) of the local speeds among the fastest fast_fraction of the intervals: the sustained speed
     of the fast front, not the unbounded local speed at an interior nucleation point. An interval is slow when its local speed,
@@ -430,12 +492,26 @@ def segment_fronts(
     out[FM_NUCLEATION_EDGE, m] = edge
     out[FM_FIRST_ARRIVAL, m] = t0
     out[FM_LAST_ARRIVAL, m] = t_last
+    count_fronts(arrival, m, lo, hi, L, dx, out)
     # rows of sums: 0, 1 the prefix sums, 2 the log slowness (interval_sums); 3, 4 its running medians
     interval_sums(arrival, sums, m, n, dx)
-    if hi == lo:
+    a, e = front_basin(arrival, m, lo, hi, i_first)  # the first front: intervals a..e-1
+    if e > a:
+        write_segment(out, m, SEGMENT_FIRST, a, e, L, dx, segment_speed(arrival, sums, m, a, e, dx, i_first))
+    # the second front: the earliest arrival outside the first front's nodes
+    i_second = int(-1)
+    t_second = wp.float64(wp.inf)
+    for i in range(lo, hi + 1):
+        if (i < a or i > e) and arrival[i, m] < t_second:
+            t_second = arrival[i, m]
+            i_second = i
+    if i_second >= 0:
+        a2, e2 = front_basin(arrival, m, lo, hi, i_second)
+        out[FM_SECOND_NUCLEATION_POSITION, m] = -wp.float64(0.5) * L + wp.float64(i_second) * dx
+        out[FM_SECOND_FIRST_ARRIVAL, m] = t_second
+        write_segment(out, m, SEGMENT_SECOND, a2, e2, L, dx, segment_speed(arrival, sums, m, a2, e2, dx, i_second))
+    if e == a:
         return
-    a = lo
-    e = hi  # intervals lo..hi-1
     q_fast = fast_log_slowness(sums, m, a, e, settings.fast_fraction)
     slow_q = wp.log(settings.speed_ratio) + q_fast  # q above this: slower than v_fast / ratio
     smooth_pass(sums, m, 2, 3, a, e)

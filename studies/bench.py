@@ -146,8 +146,9 @@ def launch_chunks(argv):
 
 
 def front_events_grid(argv):
-    """Each front event's precursor / main / far speeds (m/s) against N, default scene at
-    e = -0.2 and 0, stress gate, rtol 1e-5 (docs/performance.md, "Fronts: cost and convergence")."""
+    """Each front event's precursor / main / far speeds of the first front, and the first and second
+    fronts' whole speeds (m/s), against N, default scene at e = -0.2 and 0, stress gate, rtol 1e-5
+    (docs/performance.md, "Fronts: cost and convergence")."""
     import warpfric as wf
 
     ap = argparse.ArgumentParser(prog="bench.py front-events-grid", description=front_events_grid.__doc__)
@@ -164,7 +165,9 @@ def front_events_grid(argv):
             row = dict(nodes=n, e=float(e))
             for i, ev in enumerate(events):
                 pre = "" if i == 0 else ev + "_"
-                row[ev] = {seg: float(ds[f"{pre}v_{seg}"].values[k]) for seg in ("precursor", "main", "far")}
+                row[ev] = {seg: float(ds[f"{pre}v_{seg}"].values[k])
+                           for seg in ("precursor", "main", "far", "first", "second")}
+                row[ev]["collision_position"] = float(ds[f"{pre}collision_position"].values[k])
             rows.append(row)
             print(json.dumps(row), flush=True)
     Path(args.out).write_text(json.dumps(rows, indent=1))

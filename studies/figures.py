@@ -101,12 +101,27 @@ def linfit(x, y):
 
 
 def segments_summary(ds) -> dict:
+    """Per segment of the first front (left, middle, right) and per whole front (first, second): how
+    many members have it and its median speed (m/s); how many members have two fronts or more."""
     out = {}
-    for seg in ("left", "middle", "right"):
+    for seg in ("left", "middle", "right", "first", "second"):
         v = ds[f"v_{seg}"].values
         out[f"{seg}_present"] = int(np.isfinite(v).sum())
         out[f"v_{seg}_median"] = float(np.nanmedian(v)) if np.isfinite(v).any() else float("nan")
+    out["members_with_two_fronts"] = int((ds.front_count.values >= 2).sum())
     return out
+
+
+def left_edge_front_speed(ds) -> np.ndarray:
+    """(members,) m/s: the mean speed of the front that starts at the left edge (-L/2, within the
+    edge zone of 0.1 L), whether it is the first front (v_first) or the second (v_second); NaN where
+    no front starts there. The paper's left precursor is a slow front from the left edge; with two
+    fronts, ours is often the second one (studies/README.md, "Summary")."""
+    zone = ds.attrs.get("fronts_edge_zone_fraction", 0.1) * ds.length.values
+    left = -0.5 * ds.length.values
+    first = ds.nucleation_position.values <= left + zone * (1 + 1e-9)
+    second = ds.second_nucleation_position.values <= left + zone * (1 + 1e-9)
+    return np.where(first, ds.v_first.values, np.where(second, ds.v_second.values, np.nan))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -117,7 +132,9 @@ def fig3(quick, device, model=None):
     m = ds.isel(member=0)
     claims = {k: float(m[k]) for k in ("mu_s", "mu_s_time", "nucleation_position", "left_front_end",
                                         "right_front_start", "v_left", "v_middle", "v_right",
-                                        "front_start_time", "front_end_time")}
+                                        "front_start_time", "front_end_time", "front_count", "v_first",
+                                        "v_second", "second_nucleation_position", "second_front_start_time",
+                                        "collision_position", "collision_time")}
     claims["nucleation_edge"] = int(m.nucleation_edge)
     from warpfric.plots import space_time_map
 
@@ -173,6 +190,15 @@ def fig5_8(quick, device, model=None):
     claims["shear_wave_speed"] = SHEAR_WAVE_SPEED
     for seg in ("left", "middle", "right"):
         claims[f"fig8_log_v_{seg}_vs_log_force"] = linfit(np.log(F), np.log(ds[f"v_{seg}"].values))
+    # the front from the left edge, first or second (not the paper's reading of a precursor segment:
+    # an observation beside it)
+    v_edge = left_edge_front_speed(ds)
+    claims["left_edge_front_speed_by_force"] = [float(v) for v in v_edge]
+    claims["left_edge_front_is_the_second"] = [bool(np.isfinite(v) and np.isfinite(w) and v == w)
+                                               for v, w in zip(v_edge, ds.v_second.values)]
+    edge_present = np.isfinite(v_edge)
+    claims["lowest_force_with_left_edge_front"] = float(F[edge_present].min()) if edge_present.any() else float("nan")
+    claims["log_left_edge_front_speed_vs_log_force"] = linfit(np.log(F[edge_present]), np.log(v_edge[edge_present]))
 
     def draw(path):
         plt = _plt()
@@ -182,7 +208,8 @@ def fig5_8(quick, device, model=None):
         ax[0].set_ylabel("mu_s")
         ax[0].set_title("Fig. 5: e = 0, v = 0.1 mm/s")
         for seg, mk in (("left", "v"), ("middle", "o"), ("right", "^")):
-            ax[1].loglog(F, ds[f"v_{seg}"], mk + "-", ms=3, label=f"v_{seg}")
+            ax[1].loglog(F, ds[f"v_{seg}"], mk + "-", ms=3, label=f"v_{seg} (first front)")
+        ax[1].loglog(F, v_edge, "s--", ms=4, mfc="none", color="k", label="front from the left edge")
         ax[1].axhline(SHEAR_WAVE_SPEED, color="k", ls=":", label="shear wave speed")
         ax[1].set_xlabel("normal force (N)")
         ax[1].set_ylabel("front speed (m/s)")

@@ -341,18 +341,29 @@ def test_every_front_event_obeys_the_mirror_symmetry():
 
 
 def test_contact_front_speed_converges_with_the_grid_on_a_hard_case():
-    """e = -0.2, the case whose velocity-front middle speed scatters by 5x over N = 50..400: the
-    contact front's main speed changes by less than 20 % from N = 50 to 100 to 200 (measured
-    30.5, 35.5, 33.3 m/s), and its time error at rtol 1e-5 is below 1 %."""
-    speeds = {}
+    """e = -0.2, the case whose velocity-front middle speed scatters by 5x over N = 50..400. Its
+    contact front is two fronts (from the trailing edge, then from the leading edge) that meet near
+    -56 mm. Each front's whole speed is well conditioned: over N = 50, 100, 200 v_first 4.94, 4.93,
+    4.92 m/s and v_second 11.76, 11.59, 11.53 m/s, and from rtol 1e-5 to 1e-7 (N = 100) they move by
+    0.1 % and 0.04 %. The first front accelerates smoothly from ~1 m/s to ~300 m/s, so its
+    precursor-main boundary is a threshold crossing of a gradual change: v_main is 13.85, 13.25,
+    13.11 m/s over N, and from rtol 1e-5 to 1e-7 the boundary moves 2 nodes (15.2 -> 19.2 mm) and
+    v_main by 3.9 %."""
+    runs = {}
     for nodes in (50, 100, 200):
-        ds = run({"eccentricity": [-0.2]}, nodes=nodes, rtol=1e-5, fronts=wf.Fronts())
-        speeds[nodes] = float(ds.v_main.values[0])
-        assert ds.nucleation_edge.values[0] == 1  # the trailing edge, on every grid
-    ref = speeds[200]
-    assert all(abs(v / ref - 1) < 0.2 for v in speeds.values()), speeds
+        runs[nodes] = run({"eccentricity": [-0.2]}, nodes=nodes, rtol=1e-5, fronts=wf.Fronts())
+        assert runs[nodes].nucleation_edge.values[0] == 1  # the trailing edge, on every grid
+        assert int(runs[nodes].front_count.values[0]) == 2
     tight = run({"eccentricity": [-0.2]}, nodes=100, rtol=1e-7, fronts=wf.Fronts())
-    assert abs(speeds[100] / float(tight.v_main.values[0]) - 1) < 0.01
+    for name, grid_tol, rtol_tol in (("v_first", 0.01, 0.01), ("v_second", 0.03, 0.01), ("v_main", 0.1, 0.05)):
+        speeds = {nodes: float(ds[name].values[0]) for nodes, ds in runs.items()}
+        assert all(abs(v / speeds[200] - 1) < grid_tol for v in speeds.values()), (name, speeds)
+        assert abs(speeds[100] / float(tight[name].values[0]) - 1) < rtol_tol, (name, speeds[100], float(tight[name]))
+    dx = float(runs[100].x[1] - runs[100].x[0])
+    assert abs(float(runs[100].middle_front_end.values[0]) - float(tight.middle_front_end.values[0])) <= 2 * dx + 1e-12
+    # the first front ends where the second begins to be first: the collision point
+    assert float(runs[100].first_front_start.values[0]) == float(runs[100].collision_position.values[0]) \
+        == float(runs[100].second_front_end.values[0])
 
 
 def test_speed_error_estimate_by_hand():
@@ -406,6 +417,32 @@ def test_front_collisions_count_the_fronts_and_place_where_they_meet():
     np.testing.assert_array_equal(out["collision_time"][1:3], two[meet])
 
 
+def test_a_second_front_ends_the_first_ones_segments_and_gets_its_own_speed():
+    """A front from the left edge at t = 20 s (a 5 m/s precursor over 30 mm, then 30 m/s) and a
+    second from the right edge at 20.005 s (20 m/s) meet at x = 20 mm, t = 20.009 s. The first
+    front's segments end at the meeting point: precursor 5 m/s, main 30 m/s, the whole first front
+    120 mm / 9 ms; the second front is 80 mm / 4 ms = 20 m/s. Mirrored, the same speeds with the
+    edges swapped."""
+    first = 20.0 + np.where(X < -0.07, (X + L / 2) / 5.0, 0.03 / 5.0 + (X + 0.07) / 30.0)
+    second = 20.005 + (L / 2 - X) / 20.0
+    ta = np.minimum(first, second)
+    m = segment(np.stack([ta, ta[::-1]]), L)
+    meet = int(np.argmax(ta))
+    assert abs(X[meet] - 0.02) < 1e-12
+    expected = dict(v_precursor=5.0, v_main=30.0, v_first=0.12 / 0.009, v_second=20.0, front_count=2.0,
+                    collision_time=ta[meet], second_front_start_time=20.005)
+    for name, value in expected.items():
+        np.testing.assert_allclose(m[name], value, rtol=1e-9, err_msg=name)
+    np.testing.assert_allclose(m["v_left"][0], 5.0, rtol=1e-9)
+    np.testing.assert_allclose(m["v_right"][1], 5.0, rtol=1e-9)
+    assert np.isnan(m["v_far"]).all()
+    np.testing.assert_allclose([m["middle_front_start"][0], m["middle_front_end"][0]], [-0.07, 0.02], atol=1e-12)
+    np.testing.assert_allclose([m["first_front_start"][0], m["first_front_end"][0]], [-0.1, 0.02], atol=1e-12)
+    np.testing.assert_allclose([m["second_front_start"][0], m["second_front_end"][0]], [0.02, 0.1], atol=1e-12)
+    np.testing.assert_allclose(m["collision_position"], [0.02, -0.02], atol=1e-12)
+    np.testing.assert_allclose(m["second_nucleation_position"], [0.1, -0.1], atol=1e-12)
+
+
 def test_the_default_scenes_contact_front_is_two_fronts_that_meet():
     """The default scene: the contact front starts at the trailing edge and, ~9 ms later, a second
     one at the leading edge; they meet at about -60 mm (N = 41: -60 mm, N = 100: -61.6 mm), the
@@ -418,6 +455,12 @@ def test_the_default_scenes_contact_front_is_two_fronts_that_meet():
     assert abs(x[at] - ds.collision_position.values[0]) < 1e-12
     assert ds.collision_time.values[0] == ta[at] == np.nanmax(ta)
     assert -0.07 < float(ds.collision_position.values[0]) < -0.05
+    # each front's speed is its own distance over its own time, from its start to the meeting point
+    meet, start2 = float(ds.collision_position.values[0]), float(ds.second_nucleation_position.values[0])
+    assert start2 == x[0] and float(ds.second_front_start_time.values[0]) == ta[0]
+    np.testing.assert_allclose(ds.v_first.values[0], (x[-1] - meet) / (ta[at] - ta[-1]), rtol=1e-12)
+    np.testing.assert_allclose(ds.v_second.values[0], (meet - x[0]) / (ta[at] - ta[0]), rtol=1e-12)
+    assert float(ds.middle_front_start.values[0]) >= meet  # no segment of the first front crosses the meeting
 
 
 def test_a_nucleation_on_the_edge_zones_boundary_counts_as_that_edge_on_either_side():

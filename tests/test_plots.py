@@ -86,12 +86,24 @@ def test_many_values_of_the_second_parameter_get_a_colour_bar():
 def test_front_speeds_one_panel_per_segment_with_every_value_in_the_legend(grid):
     fig = plots.front_speeds_figure(grid, "normal_force", colour_by="eccentricity")
     panels = fig.axes
-    assert [ax.get_title().split(" segment")[0] for ax in panels] == ["left", "middle", "right"]
+    assert [ax.get_title().split(" segment")[0] for ax in panels] == [
+        "first front's left", "first front's middle", "first front's right"]
     # v_left is absent at 2e/L = 0.2; the legend (on the last panel) still names it
     texts = [t.get_text() for t in panels[-1].get_legend().get_texts()]
     assert texts == ["2e/L = -0.2", "2e/L = 0", "2e/L = 0.2"]
     single = plots.front_speeds_figure(grid, "normal_force")
     assert len(single.axes) == 1 and len(single.axes[0].get_legend().get_texts()) == 3
+
+
+def test_a_second_front_gets_its_own_panel_where_a_member_has_one(grid):
+    """v_second is drawn where some ok member has a second front (4 panels), not where none has."""
+    two = grid.assign(v_second=("member", np.where(grid.eccentricity.values < 0, 30.0, np.nan), {"units": "m s-1"}))
+    fig = plots.front_speeds_figure(two, "normal_force", colour_by="eccentricity")
+    assert [ax.get_title() for ax in fig.axes][3] == "second front (whole), 5 members"
+    single = plots.front_speeds_figure(two, "normal_force")
+    assert [t.get_text() for t in single.axes[0].get_legend().get_texts()][-1] == "v_second (5 members)"
+    none = grid.assign(v_second=("member", np.full(grid.sizes["member"], np.nan), {"units": "m s-1"}))
+    assert len(plots.front_speeds_figure(none, "normal_force", colour_by="eccentricity").axes) == 3
 
 
 def test_arrival_time_curves_have_a_legend_with_their_swept_values(grid):

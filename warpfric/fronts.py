@@ -20,11 +20,16 @@ FRONT_METRIC_NAMES = (
     "left_front_start", "left_front_end", "left_front_length", "v_left",
     "middle_front_start", "middle_front_end", "middle_front_length", "v_middle",
     "right_front_start", "right_front_end", "right_front_length", "v_right",
+    "first_front_start", "first_front_end", "first_front_length", "v_first",
+    "second_front_start", "second_front_end", "second_front_length", "v_second",
+    "front_count", "collision_position", "collision_time", "second_nucleation_position", "second_front_start_time",
 )
+# the first front's segments by position; the first and the second front are also reported whole
 POSITION_SEGMENTS = ("left", "middle", "right")
+WHOLE_FRONTS = ("first", "second")
 # the segments named from where the front starts (nucleation_edge -1: left, +1: right)
 START_SEGMENTS = ("precursor", "main", "far")
-SEGMENT_NAMES = POSITION_SEGMENTS + START_SEGMENTS
+SEGMENT_NAMES = POSITION_SEGMENTS + START_SEGMENTS + WHOLE_FRONTS
 
 
 def _segment_fields(seg: str) -> tuple:
@@ -127,36 +132,16 @@ def arrival_times_from_history(times, velocity, disc_velocity=1.0, fronts: Front
         return arrival.numpy().T.copy(), event_max.numpy()
 
 
-def front_collisions(arrival_time, length) -> dict:
-    """Separate fronts in arrival times (members, nodes) s, NaN where never reached, nodes evenly
-    spaced over [-L/2, L/2] (``length`` L in m, scalar or (members,)). A front starts at each local
-    minimum of t_a(x) over the nodes reached (an edge counts when its neighbour arrives later) and two
-    fronts meet at each interior local maximum. Returns (members,) float64 arrays: ``front_count``
-    (the minima; NaN where no node was reached), ``collision_position`` (m) and ``collision_time`` (s)
-    of the earliest meeting (NaN with one front). The segmentation (:func:`segment`) assumes one front
-    spreading from one nucleation node: a segment that spans a collision averages two fronts."""
-    ta = np.atleast_2d(np.asarray(arrival_time, dtype=np.float64))
-    n_members, n = ta.shape
-    finite = np.isfinite(ta)
-    index = np.broadcast_to(np.arange(n), ta.shape)
-    # the nearest reached node before and after each node (-1 / n: none)
-    before = np.maximum.accumulate(np.where(finite, index, -1), axis=1)
-    before = np.concatenate([np.full((n_members, 1), -1), before[:, :-1]], axis=1)
-    after = np.minimum.accumulate(np.where(finite, index, n)[:, ::-1], axis=1)[:, ::-1]
-    after = np.concatenate([after[:, 1:], np.full((n_members, 1), n)], axis=1)
-    t_before = np.where(before >= 0, np.take_along_axis(ta, np.maximum(before, 0), axis=1), np.nan)
-    t_after = np.where(after < n, np.take_along_axis(ta, np.minimum(after, n - 1), axis=1), np.nan)
-    with np.errstate(invalid="ignore"):
-        starts = finite & ((before < 0) | (ta < t_before)) & ((after >= n) | (ta <= t_after))
-        meets = finite & (before >= 0) & (after < n) & (ta > t_before) & (ta >= t_after)
-    count = np.where(finite.any(axis=1), starts.sum(axis=1), np.nan).astype(np.float64)
-    meet_time = np.where(meets, ta, np.inf)
-    first = np.argmin(meet_time, axis=1)
-    has = meets.any(axis=1)
-    length = np.broadcast_to(np.asarray(length, dtype=np.float64), (n_members,))
-    position = -0.5 * length + first * (length / (n - 1))
-    return dict(front_count=count, collision_position=np.where(has, position, np.nan),
-                collision_time=np.where(has, meet_time[np.arange(n_members), first], np.nan))
+def front_collisions(arrival_time, length, device: str | None = "cpu") -> dict:
+    """How many fronts the arrival times (members, nodes) s hold and where the first two meet (nodes
+    evenly spaced over [-L/2, L/2], ``length`` L in m, scalar or (members,)): the ``front_count``,
+    ``collision_position`` (m) and ``collision_time`` (s) of :func:`segment`, (members,) float64
+    each. Within the run of arrived nodes around the nucleation node, a front starts at each local
+    minimum of t_a(x) (an end node when its neighbour does not arrive earlier) and two fronts meet at
+    each interior local maximum; the collision is the earliest (NaN with one front, and every field
+    NaN where no node was reached)."""
+    metrics = segment(arrival_time, length, device=device)
+    return {name: metrics[name] for name in ("front_count", "collision_position", "collision_time")}
 
 
 def speed_errors(metrics: dict, arrival_time, arrival_error, length) -> dict:
@@ -178,8 +163,13 @@ def speed_errors(metrics: dict, arrival_time, arrival_error, length) -> dict:
     length = np.broadcast_to(np.asarray(length, dtype=np.float64), (n_members,))
     dx = length / (n - 1)
     out = {"arrival_time_error": dt}
-    nuc = np.rint((metrics["nucleation_position"] + 0.5 * length) / np.where(dx > 0, dx, 1.0))
-    for seg in POSITION_SEGMENTS:
+
+    def node_of(position):
+        return np.rint((position + 0.5 * length) / np.where(dx > 0, dx, 1.0))
+
+    for seg in POSITION_SEGMENTS + (WHOLE_FRONTS if "v_second" in metrics else ()):
+        # the segment's own front's nucleation node (the second front's for its segment)
+        nuc = node_of(metrics["second_nucleation_position" if seg == "second" else "nucleation_position"])
         error = np.full(n_members, np.nan)
         start, end, v = metrics[f"{seg}_front_start"], metrics[f"{seg}_front_end"], metrics[f"v_{seg}"]
         sel = np.flatnonzero(np.isfinite(v) & np.isfinite(start) & np.isfinite(end))

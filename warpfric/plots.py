@@ -226,20 +226,28 @@ def mu_s_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
 
 
 _SEGMENTS = (("left", "v"), ("middle", "o"), ("right", "^"))
+_SECOND = ("second", "s")
+
+
+def _segment_title(seg: str) -> str:
+    return "second front (whole)" if seg == "second" else f"first front's {seg} segment"
 
 
 def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
-    """v_left, v_middle, v_right against ``pname``: one panel, the segments as markers; with
-    ``colour_by``, one panel per segment, coloured by it; the title names the other swept
-    parameters ``mixed``."""
+    """The first front's v_left, v_middle, v_right, and v_second where some member has a second front,
+    against ``pname``: one panel, the segments as markers; with ``colour_by``, one panel per segment,
+    coloured by it; the title names the other swept parameters ``mixed``."""
     plt = _plt()
     ok = ds.status.values == 0
     x = _per_member(ds, pname)
-    speeds = {seg: np.asarray(ds[f"v_{seg}"].values, dtype=float) for seg, _ in _SEGMENTS}
+    segments = _SEGMENTS
+    if "v_second" in ds and np.isfinite(np.asarray(ds.v_second.values, dtype=float)[ok]).any():
+        segments = _SEGMENTS + (_SECOND,)
+    speeds = {seg: np.asarray(ds[f"v_{seg}"].values, dtype=float) for seg, _ in segments}
     every = np.concatenate([v[ok] for v in speeds.values()])
     if colour_by is None:
         fig, ax = plt.subplots(figsize=(5.6, 3.8))
-        for k, (seg, marker) in enumerate(_SEGMENTS):
+        for k, (seg, marker) in enumerate(segments):
             present = ok & np.isfinite(speeds[seg])
             _plot_by(ax, x, speeds[seg], present, None, ds, marker, label=f"v_{seg} ({present.sum()} members)",
                      colour=f"C{k}")
@@ -249,11 +257,11 @@ def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
         ax.set_title(f"{_front_name(ds)} speeds ({ok.sum()} ok members)", fontsize=10)
     else:
         colours = _Colours(ds, colour_by, ok)
-        fig, axes = plt.subplots(1, 3, figsize=(11.5, 3.6), sharex=True, sharey=True)
-        for ax, (seg, marker) in zip(axes, _SEGMENTS):
+        fig, axes = plt.subplots(1, len(segments), figsize=(3.85 * len(segments), 3.6), sharex=True, sharey=True)
+        for ax, (seg, marker) in zip(axes, segments):
             present = ok & np.isfinite(speeds[seg])
             _plot_by(ax, x, speeds[seg], present, colours, ds, marker)
-            ax.set_title(f"{seg} segment, {present.sum()} members", fontsize=10)
+            ax.set_title(f"{_segment_title(seg)}, {present.sum()} members", fontsize=10)
         axes[0].set_ylabel("front speed (m/s)")
         colours.explain(fig, axes)
         note = _mixed_note(ds, mixed, ok)

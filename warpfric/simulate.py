@@ -270,7 +270,7 @@ def _front_metrics(fronts: Fronts, model: Model, values, result, device: str) ->
     with the event's name (e.g. ``strength_v_main``)."""
     from warpfric.kernels.types import FRONT_EVENTS
 
-    from .fronts import front_collisions, segment_nodes_first, speed_errors
+    from .fronts import segment_nodes_first, speed_errors
 
     out = {}
     for k, event in enumerate(fronts.events):
@@ -287,7 +287,6 @@ def _front_metrics(fronts: Fronts, model: Model, values, result, device: str) ->
         metrics = segment_nodes_first(result.arrival[row], values["length"], fronts, device=device)
         metrics["arrival_time"] = arrival_time
         metrics.update(speed_errors(metrics, arrival_time, result.arrival_error[row].T, values["length"]))
-        metrics.update(front_collisions(arrival_time, values["length"]))
         if event == "velocity":
             metrics["event_max_velocity"] = np.where(result.event, result.member_states["front_max"], np.nan)
         if event == "strength":
@@ -312,20 +311,27 @@ _FRONT_ATTRS = {
     "front_start_time": ("s", "first arrival time of the {front}"),
     "front_end_time": ("s", "last arrival time of the {front} (over the nodes it reached)"),
     "detached_fraction": ("1", "fraction of the nodes the {front} reached"),
-    "front_count": ("1", "separate fronts of the {front}: local minima of t_a(x), each a nucleation (2: a second "
-                    "front, e.g. from the other edge, meets the first; the segments' speeds then span the collision)"),
+    "front_count": ("1", "separate fronts of the {front}: local minima of t_a(x) over the run of nodes it reached, "
+                    "each a nucleation (2: a second front, e.g. from the other edge, meets the first)"),
     "collision_position": ("m", "where the first two fronts of the {front} meet (the earliest interior maximum of "
                            "t_a(x)); NaN: one front"),
     "collision_time": ("s", "when the first two fronts of the {front} meet; NaN: one front"),
+    "second_nucleation_position": ("m", "position of the node where the second front of the {front} starts (the "
+                                   "earliest arrival outside the nodes the first front reaches first); NaN: one front"),
+    "second_front_start_time": ("s", "time the second front of the {front} starts; NaN: one front"),
 }
-_SEGMENT_WORDS = {"left": "left (smaller x)", "middle": "middle", "right": "right (larger x)",
-                  "precursor": "precursor (the slow segment at the nucleation edge)", "main": "main (middle)",
-                  "far": "far (the slow segment at the edge opposite the nucleation edge)"}
+_SEGMENT_WORDS = {"left": "the first front's left (smaller x) segment", "middle": "the first front's middle segment",
+                  "right": "the first front's right (larger x) segment",
+                  "precursor": "the first front's precursor (its slow segment at the nucleation edge)",
+                  "main": "the first front's main (middle) segment",
+                  "far": "the first front's far segment (slow, at its end opposite the nucleation edge)",
+                  "first": "the first front (whole: the nodes it reaches before any other front)",
+                  "second": "the second front (whole: from where it starts to where it meets another front)"}
 for _seg, _words in _SEGMENT_WORDS.items():
-    _FRONT_ATTRS[f"{_seg}_front_start"] = ("m", f"start (smaller x) of the {_words} segment of the {{front}}")
-    _FRONT_ATTRS[f"{_seg}_front_end"] = ("m", f"end (larger x) of the {_words} segment of the {{front}}")
-    _FRONT_ATTRS[f"{_seg}_front_length"] = ("m", f"length of the {_words} segment of the {{front}}")
-    _FRONT_ATTRS[f"v_{_seg}"] = ("m s-1", f"mean speed of the {_words} segment of the {{front}} (1/|slope| of t_a(x))")
+    _FRONT_ATTRS[f"{_seg}_front_start"] = ("m", f"start (smaller x) of {_words} of the {{front}}")
+    _FRONT_ATTRS[f"{_seg}_front_end"] = ("m", f"end (larger x) of {_words} of the {{front}}")
+    _FRONT_ATTRS[f"{_seg}_front_length"] = ("m", f"length of {_words} of the {{front}}")
+    _FRONT_ATTRS[f"v_{_seg}"] = ("m s-1", f"mean speed of {_words} of the {{front}} (1/|slope| of t_a(x))")
     _FRONT_ATTRS[f"v_{_seg}_error"] = ("m s-1", f"interpolation error of v_{_seg}, from the arrival_time_error of "
                                        "its end (and nucleation) nodes: a lower bound, not the speed's error "
                                        "(v_*_grid_error from Fronts(grid_check=True) is usually far larger); inf: "
