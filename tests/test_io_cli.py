@@ -240,7 +240,8 @@ def test_info_and_run_speak_plainly(tmp_path, capsys):
     lines = capsys.readouterr().out.splitlines()
     swept = lines.index("  swept parameters:")
     assert [line.split()[0] for line in lines[swept + 1:swept + 3]] == ["eccentricity", "normal_force"]
-    assert "  middle front present in 0/4 members" in lines and not [line for line in lines if line != line.rstrip()]
+    assert "  first front's middle segment present in 0/4 members" in lines
+    assert "  second front present in 0/4 members" in lines and not [line for line in lines if line != line.rstrip()]
     one = tmp_path / "one.toml"
     one.write_text("fronts = false\n[scene]\n[solver]\nnodes = 11\n")
     assert main(["run", str(one), "-o", str(tmp_path / "one.nc"), "--member-offset", "7", "--device", DEVICE,

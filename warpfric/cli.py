@@ -316,12 +316,15 @@ def summary(ds, name: str) -> str:
         lines.append(f"  mu_s: mean {mu[good].mean():.6f}, std {mu[good].std():.3g}, min {mu[good].min():.6f}, "
                      f"max {mu[good].max():.6f} ({good.sum()} members)")
     if "v_middle" in ds:
-        for seg in ("left", "middle", "right"):
-            v = ds[f"v_{seg}"].values
+        rows = [(f"first front's {seg} segment", f"v_{seg}") for seg in ("left", "middle", "right")]
+        if "v_second" in ds:
+            rows.append(("second front", "v_second"))
+        for what, var in rows:
+            v = ds[var].values
             ok = np.isfinite(v)
             text = (f": median {np.median(v[ok]):.3g} m/s, range [{v[ok].min():.3g}, {v[ok].max():.3g}]"
                     if ok.any() else "")
-            lines.append(f"  {seg} front present in {ok.sum()}/{_plural(v.size, 'member')}{text}")
+            lines.append(f"  {what} present in {ok.sum()}/{_plural(v.size, 'member')}{text}")
     if "sensitivity_design" in ds.attrs:
         import json
 
