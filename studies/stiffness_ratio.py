@@ -13,7 +13,7 @@ else at the paper's values: F = 1e3 .. 1e6 N gives 42 kPa .. 42 MPa (below sigma
 
 For each Lambda, e = -0.3 .. 0.3: mu_s(e), its relative slope (1/mu_s(0)) d mu_s/d e (least
 squares over the members that ended ok), the relative spread, the contact front's nucleation edge
-and precursor length at e = 0. Writes the JSON (every member's numbers) and a PNG beside it.
+and precursor length at e = 0, its number of fronts and the first and second fronts' speeds. Writes the JSON (every member's numbers) and a PNG beside it.
 """
 
 from __future__ import annotations
@@ -74,6 +74,8 @@ def main(argv=None):
             nucleation_edge_e0={-2: "none", -1: "left", 0: "interior", 1: "right"}[edge],
             precursor_length_e0=float(ds.precursor_front_length.values[at]),
             v_main_e0=float(ds.v_main.values[at]),
+            front_count_e0=float(ds.front_count.values[at]), v_first_e0=float(ds.v_first.values[at]),
+            v_second_e0=float(ds.v_second.values[at]),
             lift_off=[int(x) for x in ds.lift_off.values.reshape(shape)[k]],
             status=[int(x) for x in ds.status.values.reshape(shape)[k]],
         ))
@@ -84,10 +86,12 @@ def main(argv=None):
                 members=int(ds.sizes["member"]), lambda_per_newton=unit)
     out.write_text(json.dumps(dict(meta=meta, rows=rows), indent=1, default=float))
     plot(rows, ecc, out.with_suffix(".png"))
-    print(f"{'Lambda':>8} {'F (N)':>10} {'ok':>3} {'dmu/de/mu':>10} {'spread':>8} {'edge e=0':>9} {'precursor mm':>12}")
+    print(f"{'Lambda':>8} {'F (N)':>10} {'ok':>3} {'dmu/de/mu':>10} {'spread':>8} {'edge e=0':>9} {'precursor mm':>12} "
+          f"{'fronts':>6} {'v_first':>8} {'v_second':>8}")
     for r in rows:
         print(f"{r['stiffness_ratio']:8.3g} {r['normal_force']:10.4g} {r['members_ok']:3d} {r['relative_slope']:10.3e} "
-              f"{r['relative_spread']:8.2e} {r['nucleation_edge_e0']:>9} {1e3 * r['precursor_length_e0']:12.1f}")
+              f"{r['relative_spread']:8.2e} {r['nucleation_edge_e0']:>9} {1e3 * r['precursor_length_e0']:12.1f} "
+              f"{r['front_count_e0']:6.0f} {r['v_first_e0']:8.3g} {r['v_second_e0']:8.3g}")
     print(f"{ds.sizes['member']} members, N = {args.nodes}, {device}: {wall:.1f} s -> {out}")
 
 
