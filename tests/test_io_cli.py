@@ -15,7 +15,7 @@ from conftest import DEVICE, run
 
 import warpfric as wf
 from warpfric.cli import main, summary
-from warpfric.io import open_ensemble, write_ensemble
+from warpfric.io import by_parameters, open_ensemble, write_ensemble
 
 TINY = """
 title = "test sweep"
@@ -54,6 +54,29 @@ def test_netcdf_round_trip(tmp_path):
     assert back.attrs["warpfric_complete"] == 1
     with xr.open_dataset(path) as raw:
         assert raw.mu_s.encoding["zlib"] and raw.arrival_time.encoding["zlib"]
+
+
+def test_by_parameters_puts_every_member_at_its_swept_values(tmp_path):
+    """A 2 x 3 grid sweep as a (normal_force, eccentricity) array, from simulate and from its file:
+    each member's mu_s and arrival times sit at its own parameters, its number in member_number;
+    a combination not run is NaN; names that cannot tell members apart are refused, naming them."""
+    ds = run({"eccentricity": [-0.2, 0.0, 0.2], "normal_force": [[500.0], [2000.0]]}, nodes=11, rtol=1e-5,
+             fronts=wf.Fronts())
+    for source in (ds, open_ensemble(write_ensemble(ds, tmp_path / "grid.nc"))):
+        grid = by_parameters(source)
+        assert grid.mu_s.dims == ("normal_force", "eccentricity") and grid.arrival_time.dims[:2] == grid.mu_s.dims
+        for m in range(6):
+            at = dict(normal_force=float(ds.normal_force[m]), eccentricity=float(ds.eccentricity[m]))
+            assert float(grid.mu_s.sel(at)) == float(ds.mu_s[m]) and int(grid.member_number.sel(at)) == m
+            np.testing.assert_array_equal(grid.arrival_time.sel(at).values, ds.arrival_time[m].values)
+    partial = by_parameters(ds.isel(member=[0, 1, 2, 3, 4]))
+    assert np.isnan(float(partial.mu_s.sel(normal_force=2000.0, eccentricity=0.2)))
+    with pytest.raises(ValueError, match="2 combinations of normal_force occur in more than one member"):
+        by_parameters(ds, "normal_force")
+    with pytest.raises(ValueError, match="'density' is 1200 kg m-3 in every member"):
+        by_parameters(ds, ["density", "eccentricity"])
+    with pytest.raises(ValueError, match="no swept parameters"):
+        by_parameters(run(None, nodes=11))
 
 
 @pytest.mark.filterwarnings("ignore:In a future version of xarray the default value for data_vars:FutureWarning")

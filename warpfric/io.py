@@ -430,6 +430,48 @@ def collapse_constants(ds: xr.Dataset, varying) -> xr.Dataset:
     return out
 
 
+def by_parameters(ds: xr.Dataset, names=None) -> xr.Dataset:
+    """The ensemble with its swept parameters as dimensions, to select and plot by them
+    (``by_parameters(ds).mu_s.sel(normal_force=2000.0)``, ``.plot(...)``).
+
+    names: the parameters to make dimensions, each a variable along ``member``; default the
+           ensemble's swept ones (attribute ``varying_parameters``).
+    A grid sweep becomes a full array (dims ``names`` then ``x``, ...); a combination that no member
+    ran is NaN there (integer variables then turn float). The member numbers are kept as the
+    variable ``member_number``. Variables not along ``member`` (the recorded fields) are unchanged.
+    Raises ValueError when two members share a combination of ``names`` (unstacking would have to
+    drop one): pass more names, or select members first.
+    """
+    names = list(ds.attrs.get("varying_parameters", "").split() if names is None else
+                 ([names] if isinstance(names, str) else names))
+    if not names:
+        raise ValueError("by_parameters: no swept parameters (the ensemble's attribute varying_parameters is empty); "
+                         "valid: names of parameters that vary along member")
+    bad = [n for n in names if n not in ds or ds[n].dims != ("member",)]
+    if bad:
+        along = sorted(n for n in PARAMETER_NAMES if n in ds and ds[n].dims == ("member",))
+        raise ValueError(f"by_parameters: {', '.join(map(repr, bad))} not a variable along member; valid: "
+                         f"{', '.join(along) or 'none (every parameter is constant)'}")
+    swept = ds.attrs.get("varying_parameters", "") or "none"
+    for n in names:
+        values = np.asarray(ds[n].values)
+        if ds.sizes["member"] > 1 and np.all(values == values[0]):
+            raise ValueError(f"by_parameters: {n!r} is {values[0]:g} {ds[n].attrs.get('units', '')} in every member, "
+                             f"so it cannot tell members apart; valid: parameters that vary (swept: {swept})")
+    keys = np.stack([np.asarray(ds[n].values) for n in names], axis=1)
+    combos, counts = np.unique(keys, axis=0, return_counts=True)
+    if (counts > 1).any():
+        k = int(np.argmax(counts > 1))
+        example = ", ".join(f"{n} = {v:g}" for n, v in zip(names, combos[k]))
+        shared = int((counts > 1).sum())
+        raise ValueError(f"by_parameters: {shared} combination{'s' if shared > 1 else ''} of {', '.join(names)} "
+                         f"{'occur' if shared > 1 else 'occurs'} in more than one member (e.g. {example}: "
+                         f"{int(counts[k])} members); valid: names that tell every member apart (swept: {swept}; "
+                         "or select members first)")
+    numbered = ds if "member_number" in ds else ds.assign(member_number=ds.member.astype(np.int64))
+    return numbered.set_coords(names).set_index(member=names).unstack("member").transpose(*names, ...)
+
+
 def _in_process_locks():
     """A context in which xarray writes with an in-process lock. Inside a Dask worker xarray would take
     a distributed.Lock (a round trip to the scheduler per variable): that made each chunk's file 6x
