@@ -167,7 +167,14 @@ def test_the_space_time_map_draws_the_contact_fronts_arrival_times(contact_run):
     assert (lo, hi) == pytest.approx((20.05 - 0.0025, 20.3 + 0.0025))
     assert [text.get_text() for text in ax.get_legend().get_texts()] == ["contact front: arrival time t_a"]
     assert not contours(ax)  # the threshold contour belongs to the velocity event
-    assert plots.arrival_times_figure(ds).axes[0].get_title() == "contact front arrival times (1 of 1 members)"
+    # the default scene's contact front is two fronts: the meeting point is marked on the curve
+    ax = plots.arrival_times_figure(ds).axes[0]
+    assert int(ds.front_count.values[0]) == 2
+    assert ax.get_title() == "contact front arrival times (1 of 1 members; \u25bd where two fronts meet: 1)"
+    (mx, my), = [line.get_data() for line in ax.get_lines() if line.get_label() == "_meeting"]
+    assert mx[0] == pytest.approx(float(ds.collision_position.values[0]) * 1e3)
+    assert my[0] == pytest.approx((float(ds.collision_time.values[0]) - ta.min()) * 1e3)
+    assert my[0] == pytest.approx((ta.max() - ta.min()) * 1e3)  # the latest arrival, where the fronts meet
 
 
 def test_the_curve_skips_nodes_the_front_did_not_reach_and_keeps_the_recorded_window(contact_run):

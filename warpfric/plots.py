@@ -295,16 +295,25 @@ def arrival_times_figure(ds, max_curves: int = MAX_CURVES):
     metres = ds.x.attrs.get("units") == "m"
     x = ds.x.values * (1e3 if metres else 1.0)
     fig, ax = plt.subplots(figsize=(7.4, 3.8))
+    meetings = 0
     for k, m in enumerate(candidates):
         ta = ds.arrival_time.values[m]
         label = ", ".join(_value(ds, name, _per_member(ds, name)[m]) for name in swept) or f"member {int(ds.member[m])}"
         colour = colours.colour(colours.values[m]) if colours is not None else f"C{k % 10}"
         style = styles.get(second[m], "-") if styles else "-"
         ax.plot(x, (ta - np.nanmin(ta)) * 1e3, lw=1.4, color=colour, ls=style, label=label)
+        meet = float(ds.collision_position.values[m]) if "collision_position" in ds else np.nan
+        if np.isfinite(meet) and (metres or "length" in ds):
+            # where the first two fronts meet (the first front's segments end there)
+            where = meet * 1e3 if metres else meet / float(_per_member(ds, "length")[m])
+            ax.plot(where, (float(ds.collision_time.values[m]) - np.nanmin(ta)) * 1e3, "v", color=colour, ms=7,
+                    mfc="none", label="_meeting")
+            meetings += 1
     ax.set_xlabel("x (mm)" if metres else "x / L")
     ax.set_ylabel("t_a - first arrival (ms)")
     shown = f"{candidates.size} of {int((ok & arrived).sum())} members" if candidates.size else "no member with a front"
-    ax.set_title(f"{_front_name(ds)} arrival times ({shown})", fontsize=10)
+    met = f"; \u25bd where two fronts meet: {meetings}" if meetings else ""
+    ax.set_title(f"{_front_name(ds)} arrival times ({shown}{met})", fontsize=10)
     ax.grid(alpha=0.3)
     if candidates.size:
         ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, frameon=False)
