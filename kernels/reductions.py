@@ -291,7 +291,8 @@ def front_run(arrival: wp.array2d(dtype=wp.float64), m: int, n: int, i_first: in
 def front_basin(arrival: wp.array2d(dtype=wp.float64), m: int, lo: int, hi: int, i_start: int):
     """The nodes a..b of lo..hi that the front nucleating at i_start reaches before any other: from
     i_start outwards while t_a does not fall. A node whose outer neighbour arrived earlier is a
-    meeting point with another front (a maximum of t_a(x)) and belongs to both."""
+    meeting point with another front (a maximum of t_a(x)) and belongs to both, as does a flat top of
+    equal times there."""
     a = i_start
     while a > lo:
         if arrival[a - 1, m] < arrival[a, m]:
@@ -306,33 +307,61 @@ def front_basin(arrival: wp.array2d(dtype=wp.float64), m: int, lo: int, hi: int,
 
 
 @wp.func
-def count_fronts(
-    arrival: wp.array2d(dtype=wp.float64), m: int, lo: int, hi: int, L: wp.float64, dx: wp.float64,
-    out: wp.array2d(dtype=wp.float64),
-):
-    """Fronts in lo..hi into out: their number (the minima of t_a(x): a node earlier than its left
-    neighbour and not later than its right one; an end node when its one neighbour is not earlier)
-    and where and when the first two meet (the earliest maximum: later than its left neighbour, not
-    earlier than its right one; NaN with one front)."""
+def count_fronts(arrival: wp.array2d(dtype=wp.float64), m: int, lo: int, hi: int):
+    """The number of fronts in lo..hi: the minima of t_a(x), a flat run of equal times counting
+    once: a run whose neighbours on both sides arrive later (an end of lo..hi counts as later)."""
     count = int(0)
-    t_meet = wp.float64(wp.inf)
-    i_meet = int(-1)
-    for i in range(lo, hi + 1):
+    i = lo
+    while i <= hi:
         t = arrival[i, m]
-        starts = True
+        j = i
+        while j < hi:
+            if arrival[j + 1, m] != t:
+                break
+            j += 1
+        left_later = True
         if i > lo:
-            starts = t < arrival[i - 1, m]
-        if i < hi:
-            starts = starts and t <= arrival[i + 1, m]
-        if starts:
+            left_later = arrival[i - 1, m] > t
+        right_later = True
+        if j < hi:
+            right_later = arrival[j + 1, m] > t
+        if left_later and right_later:
             count += 1
-        if i > lo and i < hi:
-            if t > arrival[i - 1, m] and t >= arrival[i + 1, m] and t < t_meet:
-                t_meet = t
-                i_meet = i
-    out[FM_FRONT_COUNT, m] = wp.float64(count)
-    if i_meet >= 0:
-        out[FM_COLLISION_POSITION, m] = -wp.float64(0.5) * L + wp.float64(i_meet) * dx
+        i = j + 1
+    return count
+
+
+@wp.func
+def first_front_meeting(
+    arrival: wp.array2d(dtype=wp.float64), m: int, lo: int, hi: int, a: int, e: int, L: wp.float64,
+    dx: wp.float64, out: wp.array2d(dtype=wp.float64),
+):
+    """Where and when the first front (the nodes a..e of lo..hi, front_basin) meets another front into
+    out: an end of a..e beyond which t_a falls, at the middle of the flat top of equal times there;
+    the earlier of its two ends where both are meetings (the right one where they tie); NaN where
+    neither is."""
+    t_meet = wp.float64(wp.inf)
+    x_meet = wp.float64(wp.nan)
+    if e < hi:
+        if arrival[e + 1, m] < arrival[e, m]:
+            p = e
+            while p > a:
+                if arrival[p - 1, m] != arrival[e, m]:
+                    break
+                p -= 1
+            t_meet = arrival[e, m]
+            x_meet = -wp.float64(0.5) * L + wp.float64(0.5) * wp.float64(p + e) * dx
+    if a > lo:
+        if arrival[a - 1, m] < arrival[a, m] and arrival[a, m] < t_meet:
+            q = a
+            while q < e:
+                if arrival[q + 1, m] != arrival[a, m]:
+                    break
+                q += 1
+            t_meet = arrival[a, m]
+            x_meet = -wp.float64(0.5) * L + wp.float64(0.5) * wp.float64(a + q) * dx
+    if wp.isfinite(t_meet):
+        out[FM_COLLISION_POSITION, m] = x_meet
         out[FM_COLLISION_TIME, m] = t_meet
 
 
@@ -453,10 +482,11 @@ def segment_fronts(
 
     The event is the run of arrived nodes around the nucleation node (the earliest arrival); nodes
     beyond an unreached node are not part of it (detached_fraction still counts every arrived node).
-    A second front may nucleate elsewhere in the run and meet the first at a maximum of t_a(x)
-    (count_fronts): the first front is the nodes it reaches first (front_basin), and the segments
-    are the first front's; the first front is also reported whole (SEGMENT_FIRST). The second front
-    is the one that nucleates next; its extent and mean speed are reported whole (SEGMENT_SECOND).
+    Other fronts may nucleate elsewhere in the run (count_fronts: the minima of t_a(x)) and meet the
+    first at a maximum of t_a(x): the first front is the nodes it reaches first (front_basin), and
+    the segments are the first front's; the first front is also reported whole (SEGMENT_FIRST), with
+    where and when it meets another (first_front_meeting). The second front is the one that
+    nucleates next; its extent and mean speed are reported whole (SEGMENT_SECOND).
     The segmentation works on the intervals between neighbouring nodes of the first front, each
     with its local speed c_j = dx / |t_a(x_{j+1}) - t_a(x_j)|. v_fast is the plateau (mode within
     10 %) of the local speeds among the fastest fast_fraction of the intervals: the sustained speed
@@ -492,10 +522,11 @@ def segment_fronts(
     out[FM_NUCLEATION_EDGE, m] = edge
     out[FM_FIRST_ARRIVAL, m] = t0
     out[FM_LAST_ARRIVAL, m] = t_last
-    count_fronts(arrival, m, lo, hi, L, dx, out)
+    out[FM_FRONT_COUNT, m] = wp.float64(count_fronts(arrival, m, lo, hi))
     # rows of sums: 0, 1 the prefix sums, 2 the log slowness (interval_sums); 3, 4 its running medians
     interval_sums(arrival, sums, m, n, dx)
     a, e = front_basin(arrival, m, lo, hi, i_first)  # the first front: intervals a..e-1
+    first_front_meeting(arrival, m, lo, hi, a, e, L, dx, out)
     if e > a:
         write_segment(out, m, SEGMENT_FIRST, a, e, L, dx, segment_speed(arrival, sums, m, a, e, dx, i_first))
     # the second front: the earliest arrival outside the first front's nodes

@@ -443,6 +443,38 @@ def test_a_second_front_ends_the_first_ones_segments_and_gets_its_own_speed():
     np.testing.assert_allclose(m["second_nucleation_position"], [0.1, -0.1], atol=1e-12)
 
 
+def test_equal_neighbouring_arrivals_and_a_third_front():
+    """A flat step inside a rising curve is one front, not a meeting; a flat top where two fronts
+    meet is one meeting, at its middle, shared by both fronts; both mirror exactly. With three fronts
+    the collision is where the first front meets another (the third here), not where the second and
+    third meet, and the second is the one that starts next."""
+    step = np.array([0.0, 1.0, 1.0, 2.0, 3.0])
+    top = np.array([0.0, 1.0, 2.0, 2.0, 1.5, 1.0])
+    m = segment(np.stack([step, step[::-1]]), 1.0)
+    np.testing.assert_array_equal(m["front_count"], [1, 1])
+    assert np.isnan(m["collision_position"]).all() and np.isnan(m["v_second"]).all()
+    m = segment(np.stack([top, top[::-1]]), 1.0)
+    np.testing.assert_array_equal(m["front_count"], [2, 2])
+    np.testing.assert_allclose(m["collision_position"], [0.0, 0.0], atol=1e-15)  # the middle of nodes 2, 3
+    np.testing.assert_allclose([m["first_front_start"][0], m["first_front_end"][0]], [-0.5, 0.1], atol=1e-15)
+    np.testing.assert_allclose([m["second_front_start"][0], m["second_front_end"][0]], [-0.1, 0.5], atol=1e-15)
+    for name in ("v_first", "v_second", "collision_time", "second_front_start_time"):
+        assert m[name][0] == m[name][1], name
+    np.testing.assert_allclose(m["v_first"][0], 0.6 / 2.0)  # -0.5 .. 0.1 m over 2 s
+    np.testing.assert_allclose(m["v_second"][0], 0.6 / 1.0)  # 0.5 .. -0.1 m over 1 s
+    # A from the left edge at 0 s, B from the right edge at 0.1 s, C at x = +0.15 m at 0.15 s (1 m/s
+    # each; n = 21, L = 1 m): B meets C first, at +0.3 m (0.3 s), A meets C at -0.1 m (0.4 s); A
+    # never meets B, the second front to start
+    xs = np.linspace(-0.5, 0.5, 21)
+    three = np.minimum.reduce([xs + 0.5, 0.1 + (0.5 - xs), 0.15 + np.abs(xs - 0.15)])
+    m = segment(np.stack([three, three[::-1]]), 1.0)
+    np.testing.assert_array_equal(m["front_count"], [3, 3])
+    np.testing.assert_allclose(m["collision_position"], [-0.1, 0.1], atol=1e-12)
+    np.testing.assert_allclose(m["collision_time"], [0.4, 0.4], rtol=1e-12)
+    np.testing.assert_allclose(m["second_nucleation_position"], [0.5, -0.5], atol=1e-12)
+    np.testing.assert_allclose([m["first_front_end"][0], m["first_front_start"][1]], [-0.1, 0.1], atol=1e-12)
+
+
 def test_the_default_scenes_contact_front_is_two_fronts_that_meet():
     """The default scene: the contact front starts at the trailing edge and, ~9 ms later, a second
     one at the leading edge; they meet at about -60 mm (N = 41: -60 mm, N = 100: -61.6 mm), the

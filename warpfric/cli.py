@@ -100,6 +100,15 @@ def _fmt(value, unit="", spec=".4g") -> str:
     return "absent" if not np.isfinite(v) else f"{v:{spec}}{(' ' + unit) if unit else ''}"
 
 
+def _grid_error(m, name: str) -> str:
+    """'+- change' of a front speed from Fronts(grid_check=True), '' without it or where the speed is
+    absent; inf (absent on the coarse grid) as '+- ?'."""
+    if f"{name}_grid_error" not in m or not np.isfinite(float(m[name])):
+        return ""
+    change = float(m[f"{name}_grid_error"])
+    return f"+- {change:.2g}" if np.isfinite(change) else "+- ? (not on the coarse grid)"
+
+
 def _print_member(ds, solver: Solver) -> None:
     m = ds.isel(member=0)
     print(f"scene: F = {float(m.normal_force):g} N, 2e/L = {float(m.eccentricity):g}, "
@@ -121,28 +130,23 @@ def _print_member(ds, solver: Solver) -> None:
         what = f"{event[0]} front " if event else ""
         print(f"front     : {what}nucleates at x = {_fmt(float(m.nucleation_position) * 1e3, 'mm', '.1f')} ({edge}), "
               f"t = {_fmt(m.front_start_time, 's', '.5f')} .. {_fmt(m.front_end_time, 's', '.5f')}")
-        if "front_count" in m and float(m.front_count) > 1:
+        two = "front_count" in m and float(m.front_count) > 1 and np.isfinite(float(m.second_nucleation_position))
+        if two:
             print(f"  first front x = {float(m.first_front_start) * 1e3:.1f} .. {float(m.first_front_end) * 1e3:.1f} mm, "
-                  f"v_first = {_fmt(m.v_first, 'm/s', '.3g')}; its segments:")
+                  f"v_first = {_fmt(m.v_first, 'm/s', '.3g')} {_grid_error(m, 'v_first')}".rstrip() + "; its segments:")
         for seg in ("left", "middle", "right"):
             start, end = float(m[f"{seg}_front_start"]), float(m[f"{seg}_front_end"])
             where = f"x = {start * 1e3:.1f} .. {end * 1e3:.1f} mm" if np.isfinite(start) else "absent"
-            err = ""
-            if f"v_{seg}_grid_error" in m and np.isfinite(float(m[f"v_{seg}"])):
-                change = float(m[f"v_{seg}_grid_error"])  # inf: this segment is absent on the coarse grid
-                err = f"+- {change:.2g}" if np.isfinite(change) else "+- ? (not on the coarse grid)"
-            print(f"  v_{seg:<6} = {_fmt(m[f'v_{seg}'], 'm/s', '.3g'):>10} {err:<10} {where}")
-        if "front_count" in m and float(m.front_count) > 1:
-            err = ""
-            if "v_second_grid_error" in m and np.isfinite(float(m.v_second)):
-                change = float(m.v_second_grid_error)
-                err = f"+- {change:.2g}" if np.isfinite(change) else "+- ? (not on the coarse grid)"
-            print(f"  v_second = {_fmt(m.v_second, 'm/s', '.3g'):>10} {err:<10} x = {float(m.second_front_start) * 1e3:.1f} .. "
-                  f"{float(m.second_front_end) * 1e3:.1f} mm: a second front from x = "
-                  f"{float(m.second_nucleation_position) * 1e3:.1f} mm at t = {float(m.second_front_start_time):.5f} s")
+            print(f"  v_{seg:<6} = {_fmt(m[f'v_{seg}'], 'm/s', '.3g'):>10} {_grid_error(m, f'v_{seg}'):<10} {where}")
+        if two:
+            print(f"  v_second = {_fmt(m.v_second, 'm/s', '.3g'):>10} {_grid_error(m, 'v_second'):<10} "
+                  f"x = {float(m.second_front_start) * 1e3:.1f} .. {float(m.second_front_end) * 1e3:.1f} mm: a second "
+                  f"front from x = {float(m.second_nucleation_position) * 1e3:.1f} mm at t = "
+                  f"{float(m.second_front_start_time):.5f} s")
             more = f" ({int(m.front_count)} fronts in all)" if float(m.front_count) > 2 else ""
-            print(f"  the first two fronts meet at x = {float(m.collision_position) * 1e3:.1f} mm, "
-                  f"t = {float(m.collision_time):.5f} s{more}")
+            if np.isfinite(float(m.collision_position)):
+                print(f"  the first front meets another at x = {float(m.collision_position) * 1e3:.1f} mm, "
+                      f"t = {float(m.collision_time):.5f} s{more}")
         if "v_middle_grid_error" in m:
             print("  (+- : the change on a grid of half the nodes, an estimate of the spatial error)")
         else:

@@ -133,13 +133,15 @@ def arrival_times_from_history(times, velocity, disc_velocity=1.0, fronts: Front
 
 
 def front_collisions(arrival_time, length, device: str | None = "cpu") -> dict:
-    """How many fronts the arrival times (members, nodes) s hold and where the first two meet (nodes
-    evenly spaced over [-L/2, L/2], ``length`` L in m, scalar or (members,)): the ``front_count``,
-    ``collision_position`` (m) and ``collision_time`` (s) of :func:`segment`, (members,) float64
-    each. Within the run of arrived nodes around the nucleation node, a front starts at each local
-    minimum of t_a(x) (an end node when its neighbour does not arrive earlier) and two fronts meet at
-    each interior local maximum; the collision is the earliest (NaN with one front, and every field
-    NaN where no node was reached)."""
+    """How many fronts the arrival times (members, nodes) s hold and where the first front meets
+    another (nodes evenly spaced over [-L/2, L/2], ``length`` L in m, scalar or (members,)): the
+    ``front_count``, ``collision_position`` (m) and ``collision_time`` (s) of :func:`segment`,
+    (members,) float64 each. Within the run of arrived nodes around the nucleation node, a front
+    starts at each local minimum of t_a(x) (a flat run of equal times counts once; an end node when
+    its neighbour does not arrive earlier) and two fronts meet at each interior local maximum; the
+    collision is at an end of the first front (the middle of a flat top; the earlier end where both
+    are meetings). NaN where the first front meets none, and every field NaN where no node was
+    reached."""
     metrics = segment(arrival_time, length, device=device)
     return {name: metrics[name] for name in ("front_count", "collision_position", "collision_time")}
 

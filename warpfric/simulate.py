@@ -311,11 +311,13 @@ _FRONT_ATTRS = {
     "front_start_time": ("s", "first arrival time of the {front}"),
     "front_end_time": ("s", "last arrival time of the {front} (over the nodes it reached)"),
     "detached_fraction": ("1", "fraction of the nodes the {front} reached"),
-    "front_count": ("1", "separate fronts of the {front}: local minima of t_a(x) over the run of nodes it reached, "
-                    "each a nucleation (2: a second front, e.g. from the other edge, meets the first)"),
-    "collision_position": ("m", "where the first two fronts of the {front} meet (the earliest interior maximum of "
-                           "t_a(x)); NaN: one front"),
-    "collision_time": ("s", "when the first two fronts of the {front} meet; NaN: one front"),
+    "front_count": ("1", "separate fronts of the {front}: local minima of t_a(x) over the run of nodes it reached "
+                    "(a flat run of equal times once), each a nucleation (2: a second front, e.g. from the other "
+                    "edge, meets the first)"),
+    "collision_position": ("m", "where the first front of the {front} meets another (the maximum of t_a(x) at an end "
+                           "of the first front, the middle of a flat top; the earlier end where both are meetings); "
+                           "NaN: the first front meets none"),
+    "collision_time": ("s", "when the first front of the {front} meets another; NaN: it meets none"),
     "second_nucleation_position": ("m", "position of the node where the second front of the {front} starts (the "
                                    "earliest arrival outside the nodes the first front reaches first); NaN: one front"),
     "second_front_start_time": ("s", "time the second front of the {front} starts; NaN: one front"),
