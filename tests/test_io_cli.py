@@ -71,12 +71,24 @@ def test_by_parameters_puts_every_member_at_its_swept_values(tmp_path):
             np.testing.assert_array_equal(grid.arrival_time.sel(at).values, ds.arrival_time[m].values)
     partial = by_parameters(ds.isel(member=[0, 1, 2, 3, 4]))
     assert np.isnan(float(partial.mu_s.sel(normal_force=2000.0, eccentricity=0.2)))
+    # one row of the grid: the swept parameter that no longer varies is left out; one name works
+    row = by_parameters(ds.isel(member=[3, 4, 5]))
+    assert row.mu_s.dims == ("eccentricity",) and list(row.member_number.values) == [3, 4, 5]
+    np.testing.assert_array_equal(row.mu_s.values, ds.mu_s.values[3:])
+    assert by_parameters(ds.isel(member=[0, 3]), "normal_force").mu_s.dims == ("normal_force",)
     with pytest.raises(ValueError, match="2 combinations of normal_force occur in more than one member"):
         by_parameters(ds, "normal_force")
     with pytest.raises(ValueError, match="'density' is 1200 kg m-3 in every member"):
         by_parameters(ds, ["density", "eccentricity"])
-    with pytest.raises(ValueError, match="no swept parameters"):
+    with pytest.raises(ValueError, match="no parameter varies among these 1 members"):
         by_parameters(run(None, nodes=11))
+    holed = ds.assign(eccentricity=ds.eccentricity.where(ds.member != 3))
+    with pytest.raises(ValueError, match=r"'eccentricity' is not finite in 1 member\(s\) \(numbers 3\)"):
+        by_parameters(holed)
+    # random samples are no grid: 6 members would fill 6 of 36 combinations
+    sampled = ds.assign(eccentricity=ds.eccentricity + 0.01 * ds.member, normal_force=ds.normal_force + ds.member)
+    with pytest.raises(ValueError, match="not a grid of normal_force, eccentricity: .* fill 6 of 36 combinations"):
+        by_parameters(sampled)
 
 
 @pytest.mark.filterwarnings("ignore:In a future version of xarray the default value for data_vars:FutureWarning")

@@ -430,35 +430,50 @@ def collapse_constants(ds: xr.Dataset, varying) -> xr.Dataset:
     return out
 
 
+MAX_EMPTY_FRACTION = 0.5  # by_parameters: refused where more of the array than this would be empty
+
+
 def by_parameters(ds: xr.Dataset, names=None) -> xr.Dataset:
     """The ensemble with its swept parameters as dimensions, to select and plot by them
     (``by_parameters(ds).mu_s.sel(normal_force=2000.0)``, ``.plot(...)``).
 
-    names: the parameters to make dimensions, each a variable along ``member``; default the
-           ensemble's swept ones (attribute ``varying_parameters``).
+    names: the parameters to make dimensions (a name or a list), each a variable along ``member``;
+           default the ensemble's swept ones (attribute ``varying_parameters``) that vary among its
+           members (a selection may hold one value of some).
     A grid sweep becomes a full array (dims ``names`` then ``x``, ...); a combination that no member
     ran is NaN there (integer variables then turn float). The member numbers are kept as the
     variable ``member_number``. Variables not along ``member`` (the recorded fields) are unchanged.
-    Raises ValueError when two members share a combination of ``names`` (unstacking would have to
-    drop one): pass more names, or select members first.
+    Raises ValueError, naming what to do, when two members share a combination of ``names``
+    (unstacking would drop one), when a value is not finite, and when the members do not form a
+    grid (random samples: more than MAX_EMPTY_FRACTION of the array would be empty; select them
+    along ``member`` instead, e.g. ``ds.where(ds.normal_force > 2000, drop=True)``).
     """
-    names = list(ds.attrs.get("varying_parameters", "").split() if names is None else
-                 ([names] if isinstance(names, str) else names))
+    swept = ds.attrs.get("varying_parameters", "").split()
+    if names is None:
+        names = [n for n in swept if n in ds and ds[n].dims == ("member",) and np.unique(ds[n].values).size > 1]
+    else:
+        names = [names] if isinstance(names, str) else list(names)
     if not names:
-        raise ValueError("by_parameters: no swept parameters (the ensemble's attribute varying_parameters is empty); "
-                         "valid: names of parameters that vary along member")
+        raise ValueError(f"by_parameters: no parameter varies among these {ds.sizes['member']} members (swept: "
+                         f"{' '.join(swept) or 'none'}); valid: names of parameters that vary along member")
     bad = [n for n in names if n not in ds or ds[n].dims != ("member",)]
     if bad:
         along = sorted(n for n in PARAMETER_NAMES if n in ds and ds[n].dims == ("member",))
         raise ValueError(f"by_parameters: {', '.join(map(repr, bad))} not a variable along member; valid: "
                          f"{', '.join(along) or 'none (every parameter is constant)'}")
-    swept = ds.attrs.get("varying_parameters", "") or "none"
+    swept_text = " ".join(swept) or "none"
     for n in names:
-        values = np.asarray(ds[n].values)
+        values = np.asarray(ds[n].values, dtype=np.float64)
+        units = ds[n].attrs.get("units", "")
+        if not np.isfinite(values).all():
+            where = np.flatnonzero(~np.isfinite(values))
+            raise ValueError(f"by_parameters: {n!r} is not finite in {where.size} member(s) (numbers "
+                             f"{', '.join(str(int(k)) for k in ds.member.values[where][:5])}); valid: finite values "
+                             f"({units}); select the other members first")
         if ds.sizes["member"] > 1 and np.all(values == values[0]):
-            raise ValueError(f"by_parameters: {n!r} is {values[0]:g} {ds[n].attrs.get('units', '')} in every member, "
-                             f"so it cannot tell members apart; valid: parameters that vary (swept: {swept})")
-    keys = np.stack([np.asarray(ds[n].values) for n in names], axis=1)
+            raise ValueError(f"by_parameters: {n!r} is {values[0]:g} {units} in every member, so it cannot tell "
+                             f"members apart; valid: parameters that vary (swept: {swept_text})")
+    keys = np.stack([np.asarray(ds[n].values, dtype=np.float64) for n in names], axis=1)
     combos, counts = np.unique(keys, axis=0, return_counts=True)
     if (counts > 1).any():
         k = int(np.argmax(counts > 1))
@@ -466,9 +481,16 @@ def by_parameters(ds: xr.Dataset, names=None) -> xr.Dataset:
         shared = int((counts > 1).sum())
         raise ValueError(f"by_parameters: {shared} combination{'s' if shared > 1 else ''} of {', '.join(names)} "
                          f"{'occur' if shared > 1 else 'occurs'} in more than one member (e.g. {example}: "
-                         f"{int(counts[k])} members); valid: names that tell every member apart (swept: {swept}; "
-                         "or select members first)")
+                         f"{int(counts[k])} members); valid: names that tell every member apart (swept: "
+                         f"{swept_text}; or select members first)")
+    cells = float(np.prod([np.unique(keys[:, k]).size for k in range(len(names))]))
+    if 1.0 - ds.sizes["member"] / cells > MAX_EMPTY_FRACTION:
+        raise ValueError(f"by_parameters: the {ds.sizes['member']} members are not a grid of {', '.join(names)}: "
+                         f"as dimensions they would fill {ds.sizes['member']} of {cells:.3g} combinations; valid: a "
+                         "grid sweep (random samples stay along member: select them with ds.where(...))")
     numbered = ds if "member_number" in ds else ds.assign(member_number=ds.member.astype(np.int64))
+    if len(names) == 1:  # one name: a plain index, which unstack does not take
+        return numbered.set_coords(names).swap_dims(member=names[0]).transpose(*names, ...)
     return numbered.set_coords(names).set_index(member=names).unstack("member").transpose(*names, ...)
 
 
