@@ -304,7 +304,7 @@ def arrival_times_figure(ds, max_curves: int = MAX_CURVES):
         ax.plot(x, (ta - np.nanmin(ta)) * 1e3, lw=1.4, color=colour, ls=style, label=label)
         meet = float(ds.collision_position.values[m]) if "collision_position" in ds else np.nan
         if np.isfinite(meet) and (metres or "length" in ds):
-            # where the first two fronts meet (the first front's segments end there)
+            # where the first front meets another (its segments end there)
             where = meet * 1e3 if metres else meet / float(_per_member(ds, "length")[m])
             ax.plot(where, (float(ds.collision_time.values[m]) - np.nanmin(ta)) * 1e3, "v", color=colour, ms=7,
                     mfc="none", label="_meeting")
