@@ -425,10 +425,15 @@ class Fronts:
                            speeds' spatial error, which ``v_*_error`` (time only) does not see.
                            Costs a run on the coarse grid (about +50 %); off by default.
 
-    Segments: ``left``, ``middle``, ``right`` by position, and the same segments named from where
-    the front starts: ``precursor`` (the slow segment at the nucleation edge), ``main`` (the middle
-    one) and ``far`` (the slow segment at the other edge); precursor and far are NaN when the front
-    nucleates inside the pad. A segment never spans a node that the front did not reach.
+    Fronts and segments: the arrival times may hold several fronts (``front_count``: the minima of
+    t_a(x)) that meet at maxima. The segments are the first front's, over the nodes it reaches
+    before any other: ``left``, ``middle``, ``right`` by position, and the same segments named from
+    where it starts: ``precursor`` (the slow segment at the nucleation edge), ``main`` (the middle
+    one) and ``far`` (the slow segment at its other end); precursor and far are NaN when the front
+    nucleates inside the pad. The first and the second front are also reported whole (``v_first``,
+    ``v_second``, ...), and where the first front meets another (``collision_position``,
+    ``collision_time``). No segment or front spans a node that no front reached
+    (docs/model.md, "Fronts that meet").
     """
 
     event: str | tuple = "contact"
