@@ -184,9 +184,13 @@ def test_the_size_warning_is_one_line(capsys):
     code, _, err = run_cli(capsys, "run", "--nodes", 8000, "--end-time", 20.0001, "--device", "cpu", "--quiet")
     assert code == 1  # no peak in 0.1 ms of sliding: status no_peak
     warned = _warnings(err)
-    assert len(warned) == 1 and warned[0].startswith("warpfric: warning: 1 member x 8000 nodes is far beyond the "
+    assert len(warned) == 2 and warned[0].startswith("warpfric: warning: 1 member x 8000 nodes is far beyond the "
                                                      "usual size"), err
     assert "--grid-check" in warned[0]
+    # and what the status means, with what to change
+    assert warned[1].startswith("warpfric: warning: members that did not end ok have NaN mu_s and fronts: 1 of 1 "
+                                "members: 1 no_peak (mu was still rising at the run's end"), err
+    assert "a later end_time" in warned[1]
 
 
 def test_the_python_api_keeps_python_warnings(capsys):

@@ -55,6 +55,19 @@ def test_split_equals_one_process_bit_for_bit():
     assert_same(one, again)
 
 
+def test_failed_members_of_a_split_run_are_told_once_for_the_ensemble(recwarn):
+    """Members that run out of steps on 2 workers: one warning that counts all of them (not one per
+    worker chunk), with what to change."""
+    members = {"eccentricity": np.linspace(-0.2, 0.2, 9)}
+    ds = wf.simulate(members, solver=wf.Solver(nodes=11, max_steps=30), fronts=None, device="cpu", progress=False,
+                     workers=2)
+    assert ds.attrs["worker_chunks"] > 1 and (ds.status.values == 1).all()
+    said = [str(w.message) for w in recwarn if "did not end ok" in str(w.message)]
+    assert said == ["members that did not end ok have NaN mu_s and fronts: 9 of 9 members: 9 max_steps_reached "
+                    "(Solver(max_steps=...) allows more than 30 attempted steps); their numbers: "
+                    "ds.member[ds.status != 0] (docs/model.md, \"Statuses\")"]
+
+
 def test_workers_default_splits_where_it_pays(monkeypatch):
     monkeypatch.setattr(pool, "cpu_cores", lambda: 4)
     small, big = wf.Solver(nodes=21), wf.Solver(nodes=100)

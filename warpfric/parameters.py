@@ -520,6 +520,8 @@ class Record:
 # how simulate's warning of recording times after a member's end begins (warpfric/pool.py drops the
 # workers' own, and the parent warns once for the whole ensemble)
 RECORD_PAST_END = "Record: recording times after a member's end are NaN"
+# how simulate's warning of members that did not end ok begins (the same: once per ensemble)
+MEMBERS_NOT_OK = "members that did not end ok have NaN mu_s and fronts"
 
 
 def _with_named_keywords(cls):

@@ -47,7 +47,7 @@ import numpy as np
 
 from . import progress as progress_module
 from .device import init_warp
-from .parameters import RECORD_PAST_END
+from .parameters import MEMBERS_NOT_OK, RECORD_PAST_END
 
 # split when one core would take at least this long (s, by progress.cpu_seconds). Measured on this
 # project's 2-core machine (studies/bench_cpu_workers.py, fronts on, N = 100, fresh processes): 100
@@ -171,7 +171,7 @@ def _run_chunk(runner, run_id: int, chunk: int, members: dict, record, member_of
     try:
         with warnings.catch_warnings(record=True) as caught:
             ds = runner(members, record=record, member_offset=member_offset, progress=show, workers=1, **common)
-        return ds, [(m, c) for m, c in warning_pairs(caught) if not m.startswith(RECORD_PAST_END)]
+        return ds, [(m, c) for m, c in warning_pairs(caught) if not m.startswith((RECORD_PAST_END, MEMBERS_NOT_OK))]
     finally:
         progress_module.SINK = None
 

@@ -16,7 +16,7 @@ from . import __version__
 from .device import check_device, init_warp
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
-from .parameters import (RECORD_PAST_END, Fronts, Model, Parameters, Record, Solver, parameter_long_name,
+from .parameters import (MEMBERS_NOT_OK, RECORD_PAST_END, Fronts, Model, Parameters, Record, Solver, parameter_long_name,
                          parameter_units)
 
 
@@ -111,6 +111,7 @@ def simulate(
                       varying_parameters=_varying_parameters(values, varying))
         if record is not None:  # once for the ensemble (the workers' own are dropped)
             _warn_record_past_end(ds, record, member_offset)
+        _warn_members_not_ok(ds, solver)
         return ds
     from warpfric.kernels.types import STATUS_MEANINGS
 
@@ -157,7 +158,34 @@ def simulate(
         _warn_record_past_end(ds, record, member_offset)
     if fronts is not None and fronts.grid_check:
         _add_grid_check(ds, values, scene, model, solver, fronts, device, progress)
+    _warn_members_not_ok(ds, solver)
     return ds
+
+
+_STATUS_ADVICE = {
+    "max_steps_reached": "Solver(max_steps=...) allows more than {max_steps:,} attempted steps",
+    "non_finite_state": "the state became NaN or inf: a tighter rtol, or float64",
+    "step_size_underflow": "the step size fell below its floor: a tighter rtol, or float64",
+    "stalled": ("stopped by the straggler rule after stall_factor = {stall_factor:g} times the attempts of the "
+                "typical member: Solver(stall_factor=float('inf')), in a sweep file [solver] stall_factor = inf, "
+                "runs them to their end"),
+    "no_peak": "mu was still rising at the run's end, or peaked before the disc moved: a later end_time",
+}
+
+
+def _warn_members_not_ok(ds: xr.Dataset, solver: Solver) -> None:
+    """One warning, once per simulate call, that counts the members whose status is not ok, by status,
+    with what each means and what to change (docs/model.md, "Statuses"); their mu_s and front outputs
+    are NaN. The runs inside simulate (worker processes, the float32 fallback, the grid check) leave
+    it to the outer call."""
+    meanings = ds.status.attrs["flag_meanings"].split()
+    codes, counts = np.unique(ds.status.values, return_counts=True)
+    parts = [f"{int(k)} {meanings[c]} ({_STATUS_ADVICE[meanings[c]].format(max_steps=solver.max_steps, stall_factor=solver.stall_factor)})"
+             for c, k in zip(codes, counts) if meanings[c] != "ok"]
+    if parts:
+        bad = int(counts[codes != meanings.index("ok")].sum())
+        warnings.warn(f"{MEMBERS_NOT_OK}: {bad} of {ds.sizes['member']:,} members: {'; '.join(parts)}; their numbers: "
+                      f"ds.member[ds.status != 0] (docs/model.md, \"Statuses\")", stacklevel=3)
 
 
 def _warn_record_past_end(ds: xr.Dataset, record: Record, member_offset: int = 0) -> None:
@@ -199,10 +227,12 @@ def _add_grid_check(ds, values, scene, model, solver, fronts, device, progress) 
     resolved); absent on both, or a failed member: NaN."""
     coarse_nodes = max(3, (solver.nodes + 1) // 2)
     label = (progress if isinstance(progress, str) else "") + " grid check"
-    coarse = simulate({name: values[name] for name in values}, scene=scene, model=model,
-                      solver=dataclasses.replace(solver, nodes=coarse_nodes),
-                      fronts=dataclasses.replace(fronts, grid_check=False), device=device,
-                      progress=label.strip() if progress else progress, workers=1)
+    with warnings.catch_warnings():  # its failed members leave NaN grid errors; the outer call warns of its own
+        warnings.filterwarnings("ignore", message=re.escape(MEMBERS_NOT_OK))
+        coarse = simulate({name: values[name] for name in values}, scene=scene, model=model,
+                          solver=dataclasses.replace(solver, nodes=coarse_nodes),
+                          fronts=dataclasses.replace(fronts, grid_check=False), device=device,
+                          progress=label.strip() if progress else progress, workers=1)
     usable = (ds.status.values == 0) & (coarse.status.values == 0)
     for name, units, what in [("mu_s", "1", "mu_s")] + [(f"v_{seg}", "m s-1", f"v_{seg}") for seg in SEGMENT_NAMES]:
         fine_v, coarse_v = ds[name].values, coarse[name].values
@@ -242,8 +272,9 @@ def _rerun_failed_in_float64(ds, values, scene, model, solver, fronts, record, d
             sub_record = dataclasses.replace(record, members=tuple(position[int(record.members[k])] for k in chosen))
             recorded_pos = chosen
     sub_fronts = dataclasses.replace(fronts, grid_check=False) if fronts is not None else None
-    with warnings.catch_warnings():  # the outer call warns of late recording times, with the members' numbers
+    with warnings.catch_warnings():  # the outer call warns of late recording times and of failed members
         warnings.filterwarnings("ignore", message=re.escape(RECORD_PAST_END))
+        warnings.filterwarnings("ignore", message=re.escape(MEMBERS_NOT_OK))
         sub = simulate(sub_members, scene=scene, model=model, solver=dataclasses.replace(solver, dtype="float64"),
                        fronts=sub_fronts, record=sub_record, device=device, progress=False, workers=1)
     for name, var in sub.data_vars.items():
