@@ -28,6 +28,7 @@ to the joined Dataset, worker start included, the slowest worker's kernel loads 
 
 from __future__ import annotations
 
+import atexit
 import concurrent.futures as cf
 import contextlib
 import dataclasses
@@ -225,6 +226,12 @@ def _get_pool(n_workers: int) -> _Pool:
         executor = cf.ProcessPoolExecutor(n_workers, mp_context=ctx, initializer=_init_worker, initargs=(inbox,))
         _POOL = _Pool(n_workers, executor, inbox, time.perf_counter())
     return _POOL
+
+
+# The kept pool is stopped before the interpreter tears its modules down: left to the teardown, the
+# executor's own clean-up ran with the multiprocessing module already gone and printed "Exception
+# ignored in ... weakref_cb ... 'NoneType' object has no attribute 'util'" at exit
+atexit.register(lambda: shutdown())
 
 
 def shutdown(terminate: bool = False) -> None:
