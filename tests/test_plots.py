@@ -140,9 +140,19 @@ def contact_run(tmp_path_factory):
     return recorded_run(tmp_path_factory.mktemp("contact") / "rec.nc", wf.Fronts())  # the default front
 
 
+MEETS = "where the first front meets another"
+
+
 def arrival_lines(ax):
-    """{legend label: (x, y)} of the curves on a space-time map."""
-    return {line.get_label(): tuple(np.asarray(d, dtype=float) for d in line.get_data()) for line in ax.get_lines()}
+    """{legend label: (x, y)} of the curves on a space-time map (not the meeting-point markers)."""
+    return {line.get_label(): tuple(np.asarray(d, dtype=float) for d in line.get_data()) for line in ax.get_lines()
+            if MEETS not in line.get_label()}
+
+
+def meeting_marks(ax):
+    """{legend label: (x, t)} of the meeting-point markers on a space-time map."""
+    return {line.get_label(): tuple(float(np.asarray(d)[0]) for d in line.get_data()) for line in ax.get_lines()
+            if MEETS in line.get_label()}
 
 
 def contours(ax):
@@ -165,7 +175,13 @@ def test_the_space_time_map_draws_the_contact_fronts_arrival_times(contact_run):
     lo, hi = ax.get_ylim()
     assert lo <= ta.min() and ta.max() <= hi  # inside the recorded window, not stretching it
     assert (lo, hi) == pytest.approx((20.05 - 0.0025, 20.3 + 0.0025))
-    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["contact front: arrival time t_a"]
+    # the default scene's two contact fronts meet: a marker at the meeting point, named in the legend
+    marks = meeting_marks(ax)
+    assert list(marks) == [f"contact front: {MEETS}"]
+    assert marks[f"contact front: {MEETS}"] == pytest.approx(
+        (float(ds.collision_position.values[0]) * 1e3, float(ds.collision_time.values[0])))
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["contact front: arrival time t_a",
+                                                                        f"contact front: {MEETS}"]
     assert not contours(ax)  # the threshold contour belongs to the velocity event
     # the default scene's contact front is two fronts: the meeting point is marked on the curve
     ax = plots.arrival_times_figure(ds).axes[0]
@@ -225,6 +241,7 @@ def test_the_velocity_event_adds_its_threshold_contour(tmp_path):
     np.testing.assert_array_equal(lines["contact front: arrival time t_a"][1], ds.contact_arrival_time.values[0])
     assert len(contours(ax)) == 1 and contours(ax)[0].levels == pytest.approx([0.4 * ds.event_max_velocity.values[0]])
     assert "velocity front: 0.4 x event maximum (recorded)" in [text.get_text() for text in ax.get_legend().get_texts()]
+    assert list(meeting_marks(ax)) == [f"contact front: {MEETS}"]  # the velocity front here is one front
     ax = plots.space_time_figure(ds, 1).axes[0]
     assert not ax.get_lines() and not contours(ax)
     assert [text.get_text() for text in ax.get_legend().get_texts()] == ["no velocity front", "no contact front"]

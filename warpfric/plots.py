@@ -367,8 +367,8 @@ def space_time_figure(ds, recorded_index: int):
     arrival-time curve t_a(x) of each front event the Dataset holds (over the nodes the front
     reached; none where it reached none: 'no contact front' in the legend) and, for the velocity
     event, the contour of threshold x its event maximum on the recorded field (event_max_velocity
-    exists only for that event). The legend names the event of each curve; the axes keep the
-    recorded window."""
+    exists only for that event), and a triangle where the first front meets another. The legend
+    names the event of each curve; the axes keep the recorded window."""
     from matplotlib.lines import Line2D
 
     plt = _plt()
@@ -410,6 +410,12 @@ def space_time_figure(ds, recorded_index: int):
         handles += ax.plot(np.insert(x[reached], gaps, np.nan), np.insert(ta[reached], gaps, np.nan), color=colour,
                            ls=style, lw=1.5, label=f"{front}: arrival time t_a"
                            + ("" if seen.any() else " (outside the recorded times)"))
+        meet = f"{prefix}collision_position"
+        if meet in ds and np.isfinite(float(ds[meet].values[position])) and (metres or "length" in ds):
+            where = float(ds[meet].values[position])
+            where = where * 1e3 if metres else where / float(_per_member(ds, "length")[position])
+            handles += ax.plot(where, float(ds[f"{prefix}collision_time"].values[position]), "v", color=colour,
+                               ms=8, mfc="none", ls="none", label=f"{front}: where the first front meets another")
     ax.set_xlim(window[0])
     ax.set_ylim(window[1])
     if handles:
