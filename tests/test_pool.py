@@ -117,6 +117,33 @@ def test_workers_do_not_run_the_users_script_again(tmp_path):
     assert res.stdout.splitlines() == ["top level", "members 3 2"]
 
 
+def test_the_kept_pool_is_stopped_by_the_exit_handlers(tmp_path):
+    """The worker pool kept between runs is stopped by an exit handler (atexit) before the modules
+    are torn down (its executor's clean-up then printed "Exception ignored ... 'NoneType' object
+    has no attribute 'util'" at the exit of some test sessions): a handler registered before
+    warpfric's, so run after it, finds the pool gone."""
+    script = tmp_path / "exit.py"
+    script.write_text(textwrap.dedent("""
+        import atexit
+        import sys
+
+        def report():
+            print("pool stopped at exit:", sys.modules["warpfric.pool"]._POOL is None, flush=True)
+
+        atexit.register(report)  # handlers run last-registered first: this one after warpfric's
+        import warpfric as wf
+        from warpfric import pool
+        wf.simulate({"eccentricity": [0.0, 0.1, 0.2]}, solver=wf.Solver(nodes=11, rtol=1e-4), fronts=None,
+                    device="cpu", progress=False, workers=2)
+        print("workers alive:", sum(w.is_alive() for w in pool._POOL.executor._processes.values()), flush=True)
+    """))
+    res = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300,
+                         env={**os.environ, "PYTHONWARNINGS": "ignore"})
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.splitlines() == ["workers alive: 2", "pool stopped at exit: True"], res.stdout
+    assert "Exception ignored" not in res.stderr, res.stderr
+
+
 def test_ctrl_c_stops_the_workers_at_once(monkeypatch):
     members = {"eccentricity": np.linspace(-0.2, 0.2, 4)}
     kw = dict(solver=wf.Solver(nodes=11, rtol=1e-4), fronts=None, device="cpu", progress=False)
