@@ -239,13 +239,19 @@ def segment_speed(
 
 
 @wp.func
+def node_position(index: wp.float64, L: wp.float64, dx: wp.float64):
+    """x (m) of node ``index`` (a half-integer: midway between two nodes) on [-L/2, L/2]."""
+    return -wp.float64(0.5) * L + index * dx
+
+
+@wp.func
 def write_segment(
     out: wp.array2d(dtype=wp.float64), m: int, which: int, a: int, b: int,
     L: wp.float64, dx: wp.float64, speed: wp.float64,
 ):
     """Start, end, length (m) and mean speed (m/s) of the segment of intervals a..b-1 into out."""
-    start = -wp.float64(0.5) * L + wp.float64(a) * dx
-    end = -wp.float64(0.5) * L + wp.float64(b) * dx
+    start = node_position(wp.float64(a), L, dx)
+    end = node_position(wp.float64(b), L, dx)
     row = FM_SEGMENTS + 4 * which
     out[row, m] = start
     out[row + 1, m] = end
@@ -350,7 +356,7 @@ def first_front_meeting(
                     break
                 p -= 1
             t_meet = arrival[e, m]
-            x_meet = -wp.float64(0.5) * L + wp.float64(0.5) * wp.float64(p + e) * dx
+            x_meet = node_position(wp.float64(0.5) * wp.float64(p + e), L, dx)
     if a > lo:
         if arrival[a - 1, m] < arrival[a, m] and arrival[a, m] < t_meet:
             q = a
@@ -359,7 +365,7 @@ def first_front_meeting(
                     break
                 q += 1
             t_meet = arrival[a, m]
-            x_meet = -wp.float64(0.5) * L + wp.float64(0.5) * wp.float64(a + q) * dx
+            x_meet = node_position(wp.float64(0.5) * wp.float64(a + q), L, dx)
     if wp.isfinite(t_meet):
         out[FM_COLLISION_POSITION, m] = x_meet
         out[FM_COLLISION_TIME, m] = t_meet
@@ -509,8 +515,7 @@ def segment_fronts(
     t_last = wp.float64(-1.0e300)
     for i in range(lo, hi + 1):
         t_last = wp.max(t_last, arrival[i, m])
-    x_first = -wp.float64(0.5) * L + wp.float64(i_first) * dx
-    out[FM_NUCLEATION_POSITION, m] = x_first
+    out[FM_NUCLEATION_POSITION, m] = node_position(wp.float64(i_first), L, dx)
     # in node spacings from each edge, with a relative slack of 1e-9: a node on the zone's boundary
     # counts as the edge on either side (its position from -L/2 + i*dx rounds either way)
     zone_nodes = settings.edge_zone / dx * (wp.float64(1.0) + wp.float64(1.0e-9))
@@ -538,7 +543,7 @@ def segment_fronts(
             i_second = i
     if i_second >= 0:
         a2, e2 = front_basin(arrival, m, lo, hi, i_second)
-        out[FM_SECOND_NUCLEATION_POSITION, m] = -wp.float64(0.5) * L + wp.float64(i_second) * dx
+        out[FM_SECOND_NUCLEATION_POSITION, m] = node_position(wp.float64(i_second), L, dx)
         out[FM_SECOND_FIRST_ARRIVAL, m] = t_second
         write_segment(out, m, SEGMENT_SECOND, a2, e2, L, dx, segment_speed(arrival, sums, m, a2, e2, dx, i_second))
     if e == a:

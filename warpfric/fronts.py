@@ -166,19 +166,19 @@ def speed_errors(metrics: dict, arrival_time, arrival_error, length) -> dict:
     dx = length / (n - 1)
     out = {"arrival_time_error": dt}
 
-    def node_of(position):
-        return np.rint((position + 0.5 * length) / np.where(dx > 0, dx, 1.0))
+    def node_of(position):  # the node at each member's position (m); NaN where the position is
+        return np.rint((position + 0.5 * length) / dx)
 
     for seg in POSITION_SEGMENTS + (WHOLE_FRONTS if "v_second" in metrics else ()):
-        # the segment's own front's nucleation node (the second front's for its segment)
-        nuc = node_of(metrics["second_nucleation_position" if seg == "second" else "nucleation_position"])
         error = np.full(n_members, np.nan)
         start, end, v = metrics[f"{seg}_front_start"], metrics[f"{seg}_front_end"], metrics[f"v_{seg}"]
         sel = np.flatnonzero(np.isfinite(v) & np.isfinite(start) & np.isfinite(end))
-        # the segment's end nodes a < b and the nucleation node k, member by member (whole arrays)
-        a = np.rint((start[sel] + 0.5 * length[sel]) / dx[sel]).astype(np.int64)
-        b = np.rint((end[sel] + 0.5 * length[sel]) / dx[sel]).astype(np.int64)
-        k = np.where(np.isfinite(nuc[sel]), nuc[sel], -1.0).astype(np.int64)
+        # the segment's end nodes a < b and its own front's nucleation node k (the second front's for
+        # its segment), member by member (whole arrays)
+        nuc = node_of(metrics["second_nucleation_position" if seg == "second" else "nucleation_position"])[sel]
+        a = node_of(start)[sel].astype(np.int64)
+        b = node_of(end)[sel].astype(np.int64)
+        k = np.where(np.isfinite(nuc), nuc, -1.0).astype(np.int64)
         ta_a, ta_b, ta_k = (ta[sel, np.clip(j, 0, n - 1)] for j in (a, b, k))
         dt_a, dt_b, dt_k = (dt[sel, np.clip(j, 0, n - 1)] for j in (a, b, k))
         # an end that never arrived: the speed comes from the interval sums (inf)
