@@ -522,6 +522,9 @@ class Record:
 RECORD_PAST_END = "Record: recording times after a member's end are NaN"
 # how simulate's warning of members that did not end ok begins (the same: once per ensemble)
 MEMBERS_NOT_OK = "members that did not end ok have NaN mu_s and fronts"
+# the warnings simulate raises once for the whole ensemble: the runs inside it (worker processes'
+# chunks, the float32 fallback, the grid check) drop their own
+ENSEMBLE_WARNINGS = (RECORD_PAST_END, MEMBERS_NOT_OK)
 
 
 def _with_named_keywords(cls):

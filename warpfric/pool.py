@@ -48,7 +48,7 @@ import numpy as np
 
 from . import progress as progress_module
 from .device import init_warp
-from .parameters import MEMBERS_NOT_OK, RECORD_PAST_END
+from .parameters import ENSEMBLE_WARNINGS
 
 # split when one core would take at least this long (s, by progress.cpu_seconds). Measured on this
 # project's 2-core machine (studies/bench_cpu_workers.py, fronts on, N = 100, fresh processes): 100
@@ -172,7 +172,7 @@ def _run_chunk(runner, run_id: int, chunk: int, members: dict, record, member_of
     try:
         with warnings.catch_warnings(record=True) as caught:
             ds = runner(members, record=record, member_offset=member_offset, progress=show, workers=1, **common)
-        return ds, [(m, c) for m, c in warning_pairs(caught) if not m.startswith((RECORD_PAST_END, MEMBERS_NOT_OK))]
+        return ds, [(m, c) for m, c in warning_pairs(caught) if not m.startswith(ENSEMBLE_WARNINGS)]
     finally:
         progress_module.SINK = None
 
@@ -228,12 +228,6 @@ def _get_pool(n_workers: int) -> _Pool:
     return _POOL
 
 
-# The kept pool is stopped before the interpreter tears its modules down: left to the teardown, the
-# executor's own clean-up ran with the multiprocessing module already gone and printed "Exception
-# ignored in ... weakref_cb ... 'NoneType' object has no attribute 'util'" at exit
-atexit.register(lambda: shutdown())
-
-
 def shutdown(terminate: bool = False) -> None:
     """Stop the worker processes (they start again with the next ensemble that needs them);
     ``terminate``: at once, dropping what they run."""
@@ -248,6 +242,12 @@ def shutdown(terminate: bool = False) -> None:
     pool.executor.shutdown(wait=not terminate, cancel_futures=True)
     for process in processes:
         process.join(5)
+
+
+# The kept pool is stopped before the interpreter tears its modules down: left to the teardown, the
+# executor's own clean-up ran with the multiprocessing module already gone and printed "Exception
+# ignored in ... weakref_cb ... 'NoneType' object has no attribute 'util'" at exit
+atexit.register(shutdown)
 
 
 def _chunk_record(record, start: int, stop: int):

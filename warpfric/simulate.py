@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import re
 import sys
@@ -16,8 +17,8 @@ from . import __version__
 from .device import check_device, init_warp
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
-from .parameters import (MEMBERS_NOT_OK, RECORD_PAST_END, Fronts, Model, Parameters, Record, Solver, parameter_long_name,
-                         parameter_units)
+from .parameters import (ENSEMBLE_WARNINGS, MEMBERS_NOT_OK, RECORD_PAST_END, Fronts, Model, Parameters, Record, Solver,
+                         parameter_long_name, parameter_units)
 
 
 def simulate(
@@ -180,12 +181,13 @@ def _warn_members_not_ok(ds: xr.Dataset, solver: Solver) -> None:
     it to the outer call."""
     meanings = ds.status.attrs["flag_meanings"].split()
     codes, counts = np.unique(ds.status.values, return_counts=True)
-    parts = [f"{int(k)} {meanings[c]} ({_STATUS_ADVICE[meanings[c]].format(max_steps=solver.max_steps, stall_factor=solver.stall_factor)})"
-             for c, k in zip(codes, counts) if meanings[c] != "ok"]
-    if parts:
-        bad = int(counts[codes != meanings.index("ok")].sum())
-        warnings.warn(f"{MEMBERS_NOT_OK}: {bad} of {ds.sizes['member']:,} members: {'; '.join(parts)}; their numbers: "
-                      f"ds.member[ds.status != 0] (docs/model.md, \"Statuses\")", stacklevel=3)
+    failed = {meanings[c]: int(k) for c, k in zip(codes, counts) if meanings[c] != "ok"}
+    if not failed:
+        return
+    parts = [f"{k} {name} ({_STATUS_ADVICE[name].format(max_steps=solver.max_steps, stall_factor=solver.stall_factor)})"
+             for name, k in failed.items()]
+    warnings.warn(f"{MEMBERS_NOT_OK}: {sum(failed.values())} of {ds.sizes['member']:,} members: {'; '.join(parts)}; "
+                  f"their numbers: ds.member[ds.status != 0] (docs/model.md, \"Statuses\")", stacklevel=3)
 
 
 def _warn_record_past_end(ds: xr.Dataset, record: Record, member_offset: int = 0) -> None:
@@ -221,14 +223,23 @@ def _warn_record_past_end(ds: xr.Dataset, record: Record, member_offset: int = 0
     warnings.warn(f"{RECORD_PAST_END} ({'; '.join(parts)}){advice}", stacklevel=3)
 
 
+@contextlib.contextmanager
+def _ensemble_warnings_dropped():
+    """While a run inside simulate runs: its ENSEMBLE_WARNINGS are dropped (the outer call raises
+    them once, for the whole ensemble)."""
+    with warnings.catch_warnings():
+        for start in ENSEMBLE_WARNINGS:
+            warnings.filterwarnings("ignore", message=re.escape(start))
+        yield
+
+
 def _add_grid_check(ds, values, scene, model, solver, fronts, device, progress) -> None:
     """Fronts.grid_check: the same members on (N+1)//2 nodes; |change| of mu_s and of each front speed
     as ``*_grid_error`` (in place). A segment present on one grid and absent on the other: inf (not
     resolved); absent on both, or a failed member: NaN."""
     coarse_nodes = max(3, (solver.nodes + 1) // 2)
     label = (progress if isinstance(progress, str) else "") + " grid check"
-    with warnings.catch_warnings():  # its failed members leave NaN grid errors; the outer call warns of its own
-        warnings.filterwarnings("ignore", message=re.escape(MEMBERS_NOT_OK))
+    with _ensemble_warnings_dropped():  # its failed members leave NaN grid errors; the outer call warns of its own
         coarse = simulate({name: values[name] for name in values}, scene=scene, model=model,
                           solver=dataclasses.replace(solver, nodes=coarse_nodes),
                           fronts=dataclasses.replace(fronts, grid_check=False), device=device,
@@ -272,9 +283,7 @@ def _rerun_failed_in_float64(ds, values, scene, model, solver, fronts, record, d
             sub_record = dataclasses.replace(record, members=tuple(position[int(record.members[k])] for k in chosen))
             recorded_pos = chosen
     sub_fronts = dataclasses.replace(fronts, grid_check=False) if fronts is not None else None
-    with warnings.catch_warnings():  # the outer call warns of late recording times and of failed members
-        warnings.filterwarnings("ignore", message=re.escape(RECORD_PAST_END))
-        warnings.filterwarnings("ignore", message=re.escape(MEMBERS_NOT_OK))
+    with _ensemble_warnings_dropped():  # the outer call warns of late recording times and of failed members
         sub = simulate(sub_members, scene=scene, model=model, solver=dataclasses.replace(solver, dtype="float64"),
                        fronts=sub_fronts, record=sub_record, device=device, progress=False, workers=1)
     for name, var in sub.data_vars.items():
