@@ -462,8 +462,8 @@ def by_parameters(ds: xr.Dataset, names=None) -> xr.Dataset:
         raise ValueError(f"by_parameters: {', '.join(map(repr, bad))} not a variable along member; valid: "
                          f"{', '.join(along) or 'none (every parameter is constant)'}")
     swept_text = " ".join(swept) or "none"
-    for n in names:
-        values = np.asarray(ds[n].values, dtype=np.float64)
+    keys = np.stack([np.asarray(ds[n].values, dtype=np.float64) for n in names], axis=1)
+    for n, values in zip(names, keys.T):
         units = ds[n].attrs.get("units", "")
         if not np.isfinite(values).all():
             where = np.flatnonzero(~np.isfinite(values))
@@ -473,7 +473,6 @@ def by_parameters(ds: xr.Dataset, names=None) -> xr.Dataset:
         if ds.sizes["member"] > 1 and np.all(values == values[0]):
             raise ValueError(f"by_parameters: {n!r} is {values[0]:g} {units} in every member, so it cannot tell "
                              f"members apart; valid: parameters that vary (swept: {swept_text})")
-    keys = np.stack([np.asarray(ds[n].values, dtype=np.float64) for n in names], axis=1)
     combos, counts = np.unique(keys, axis=0, return_counts=True)
     if (counts > 1).any():
         k = int(np.argmax(counts > 1))

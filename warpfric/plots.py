@@ -93,6 +93,17 @@ def _value(ds, name: str, value: float) -> str:
     return f"{_SYMBOLS.get(name, name)} = {_number(value)}{' ' + units if units else ''}"
 
 
+def _meeting_point(ds, prefix: str, m: int, metres: bool):
+    """(x, t) where member m's first front of the event ``prefix`` meets another, x in mm (metres) or
+    in units of L, t in s; None where it meets none (or x / L cannot be had without ``length``)."""
+    name = f"{prefix}collision_position"
+    meet = float(ds[name].values[m]) if name in ds else np.nan
+    if not np.isfinite(meet) or not (metres or "length" in ds):
+        return None
+    where = meet * 1e3 if metres else meet / float(_per_member(ds, "length")[m])
+    return where, float(ds[f"{prefix}collision_time"].values[m])
+
+
 def front_events(ds) -> list:
     """(event, prefix) of each front event whose arrival times ``ds`` holds, the primary event (its
     outputs unprefixed: ``arrival_time``) first, each other one's outputs prefixed ``event_``
@@ -302,12 +313,9 @@ def arrival_times_figure(ds, max_curves: int = MAX_CURVES):
         colour = colours.colour(colours.values[m]) if colours is not None else f"C{k % 10}"
         style = styles.get(second[m], "-") if styles else "-"
         ax.plot(x, (ta - np.nanmin(ta)) * 1e3, lw=1.4, color=colour, ls=style, label=label)
-        meet = float(ds.collision_position.values[m]) if "collision_position" in ds else np.nan
-        if np.isfinite(meet) and (metres or "length" in ds):
-            # where the first front meets another (its segments end there)
-            where = meet * 1e3 if metres else meet / float(_per_member(ds, "length")[m])
-            ax.plot(where, (float(ds.collision_time.values[m]) - np.nanmin(ta)) * 1e3, "v", color=colour, ms=7,
-                    mfc="none", label="_meeting")
+        meet = _meeting_point(ds, "", m, metres)  # where the first front meets another (its segments end there)
+        if meet is not None:
+            ax.plot(meet[0], (meet[1] - np.nanmin(ta)) * 1e3, "v", color=colour, ms=7, mfc="none", label="_meeting")
             meetings += 1
     ax.set_xlabel("x (mm)" if metres else "x / L")
     ax.set_ylabel("t_a - first arrival (ms)")
@@ -410,12 +418,10 @@ def space_time_figure(ds, recorded_index: int):
         handles += ax.plot(np.insert(x[reached], gaps, np.nan), np.insert(ta[reached], gaps, np.nan), color=colour,
                            ls=style, lw=1.5, label=f"{front}: arrival time t_a"
                            + ("" if seen.any() else " (outside the recorded times)"))
-        meet = f"{prefix}collision_position"
-        if meet in ds and np.isfinite(float(ds[meet].values[position])) and (metres or "length" in ds):
-            where = float(ds[meet].values[position])
-            where = where * 1e3 if metres else where / float(_per_member(ds, "length")[position])
-            handles += ax.plot(where, float(ds[f"{prefix}collision_time"].values[position]), "v", color=colour,
-                               ms=8, mfc="none", ls="none", label=f"{front}: where the first front meets another")
+        meet = _meeting_point(ds, prefix, position, metres)
+        if meet is not None:
+            handles += ax.plot(*meet, "v", color=colour, ms=8, mfc="none", ls="none",
+                               label=f"{front}: where the first front meets another")
     ax.set_xlim(window[0])
     ax.set_ylim(window[1])
     if handles:
