@@ -117,10 +117,9 @@ def left_edge_front_speed(ds) -> np.ndarray:
     edge zone of 0.1 L), whether it is the first front (v_first) or the second (v_second); NaN where
     no front starts there. The paper's left precursor is a slow front from the left edge; with two
     fronts, ours is often the second one (studies/README.md, "Summary")."""
-    zone = ds.attrs.get("fronts_edge_zone_fraction", 0.1) * ds.length.values
-    left = -0.5 * ds.length.values
-    first = ds.nucleation_position.values <= left + zone * (1 + 1e-9)
-    second = ds.second_nucleation_position.values <= left + zone * (1 + 1e-9)
+    first = ds.nucleation_edge.values == -1  # the segmentation's own edge decision
+    zone = ds.attrs.get("fronts_edge_zone_fraction", 0.1) * ds.length.values  # none is stored for the second
+    second = ds.second_nucleation_position.values <= -0.5 * ds.length.values + zone * (1 + 1e-9)
     return np.where(first, ds.v_first.values, np.where(second, ds.v_second.values, np.nan))
 
 
