@@ -414,6 +414,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     array3 = wp.array3d(dtype=ft)
     array4 = wp.array4d(dtype=ft)
     block_barrier = stages["team"].get("block_barrier", None)
+    team_barrier = stages["team"]["barrier"]
     shared_on = shared_work is not None
     shared_nodes, shared_stride = shared_work if shared_on else (1, 1)
     shared_len = N_WORK * shared_nodes * shared_stride
@@ -524,6 +525,13 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
             s2 = (s1 + 1) % n_slots
             s3 = (s1 + n_slots - 1) % n_slots  # the last stage's slot (TR-BDF2: s1 + 2; ESDIRK4: s1 + 5)
             restart = st.restart
+            curvature_in = ft(st.newton_curvature)
+            # The member state waits in global memory while the stage code runs, so that its fields
+            # take no registers or stack there (a 1,128-byte stack per thread became 904 B: sm_90,
+            # studies/sass_sites.py). Every lane stores the same values; the barrier first lets every
+            # lane of the team read the last attempt's state back before it is overwritten.
+            team_barrier()
+            member_states[m] = st
             # ---- stepper ----
             if wp.static(esdirk4):
                 if restart != 0:
@@ -534,7 +542,9 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
                                        delta0, tilt)
             else:  # TR-BDF2, or backward Euler at a (re)start: one call, so the stage code is compiled once
                 res = implicit_step(c, p, settings, m, n, state, K, work_view, gates, step_end, s1, s2, s3, t, step.h,
-                                    step.t_new, delta0, tilt, restart, ft(st.newton_curvature))
+                                    step.t_new, delta0, tilt, restart, curvature_in)
+            st = member_states[m]  # this lane's own store, or another lane's of the same values
+            if wp.static(not esdirk4):
                 # the next step's first Newton iteration is judged with this step's curvature
                 # (kernels/newton.py newton_solve); a failed solve or a restart forgets it
                 st.newton_curvature = wp.float64(0.0)
