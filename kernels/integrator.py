@@ -458,8 +458,9 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     ):
         """Advance each member by at most ``launch_steps`` attempted steps (or to its end, or until its
         attempts exceed stall_limit[0]).
-        Shapes and units: kernels/types.py. A team: every lane keeps the same IntegratorState; lane
-        0 stores it."""
+        Shapes and units: kernels/types.py. A team: every lane keeps the same IntegratorState; every
+        lane stores it before the stage code of an attempt and reads it back after, and lane 0
+        stores it at the end."""
         if wp.static(shared_on):  # the first tile: reserves the block's dynamic shared memory for the work view below
             wp.tile_empty(shape=(shared_len,), dtype=ft, storage="shared")
         if wp.static(poison_on):  # the check WARPFRIC_TEAM_POISON_SHARED_WORK: all of it NaN, by every thread
