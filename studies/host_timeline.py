@@ -1,14 +1,15 @@
 """Where one member's wall time goes on the host: a timeline of warpfric.simulate (ms from its
 call) and the median wall time of repeated runs (docs/performance.md, "One member's host time").
 
-    python studies/host_timeline.py [--device cuda:0] [--nodes 40] [--relaxation-gate none]
-                                    [--runs 15]
+    python studies/host_timeline.py [--device cuda:0] [--nodes N] [--relaxation-gate none]
+                                    [--runs 15] [--fronts] [--default-scene]
 
-The member is that of studies/baseline_diffrax.py (the peers' comparison), fronts off, rtol 1e-5,
-t = 0..20.6 s. The timeline marks the engine's stages by wrapping them (kernel lookup, module
-load, allocation, the state read-back buffer, initial states, each launch, each read-back wait,
-the Dataset); the time between the first launch and the last wait is the kernel's, the rest is
-host time on the critical path. A warm-up run compiles first.
+The member is that of studies/baseline_diffrax.py (the peers' comparison), rtol 1e-5, t = 0..20.6 s;
+with --default-scene the default scene of `warpfric run` (the automatic end, the default rtol). Fronts
+off, or with --fronts the default front event (contact). The timeline marks the engine's stages by
+wrapping them (kernel lookup, module load, allocation, the state read-back buffer, initial states,
+each launch, each read-back wait, the Dataset); the time between the first launch and the last wait
+is the kernel's, the rest is host time on the critical path. A warm-up run compiles first.
 """
 
 import argparse
@@ -64,16 +65,25 @@ def instrument() -> None:
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--device", default="cuda:0" if wp.get_cuda_device_count() else "cpu")
-    ap.add_argument("--nodes", type=int, default=40)
+    ap.add_argument("--nodes", type=int, default=None, help="default: 40, or the Solver's with --default-scene")
     ap.add_argument("--relaxation-gate", default="none", choices=["none", "stress", "velocity"])
     ap.add_argument("--runs", type=int, default=15)
+    ap.add_argument("--fronts", action="store_true", help="the front outputs (simulate's default, the contact front)")
+    ap.add_argument("--default-scene", action="store_true", help="the default scene of `warpfric run` (e = 0)")
     args = ap.parse_args(argv)
+    fronts = wf.Fronts() if args.fronts else None
     model = wf.Model(relaxation_gate=args.relaxation_gate)
-    solver = wf.Solver(nodes=args.nodes, rtol=1e-5, max_steps=10**6)
-    scene = wf.Parameters(end_time=20.6)
+    if args.default_scene:
+        solver = wf.Solver() if args.nodes is None else wf.Solver(nodes=args.nodes)
+        scene = wf.Parameters()
+        member = {"eccentricity": [0.0]}
+    else:
+        solver = wf.Solver(nodes=args.nodes or 40, rtol=1e-5, max_steps=10**6)
+        scene = wf.Parameters(end_time=20.6)
+        member = members(1)
 
     def one():
-        return wf.simulate(members(1), scene=scene, model=model, solver=solver, fronts=None, device=args.device,
+        return wf.simulate(member, scene=scene, model=model, solver=solver, fronts=fronts, device=args.device,
                            progress=False)
 
     one()  # compile
@@ -89,7 +99,8 @@ def main(argv=None):
     mark("simulate<")
     t0 = marks[0][1]
     print("timeline (ms):", " ".join(f"{name} {(t - t0) * 1e3:.2f}" for name, t in marks))
-    print(f"{args.device} N = {args.nodes} {args.relaxation_gate}: wall median {np.median(walls) * 1e3:.2f} ms "
+    label = f"{args.relaxation_gate}{' default scene' if args.default_scene else ''}{' fronts' if args.fronts else ''}"
+    print(f"{args.device} N = {solver.nodes} {label}: wall median {np.median(walls) * 1e3:.2f} ms "
           f"(min {min(walls) * 1e3:.2f}, max {max(walls) * 1e3:.2f}, {args.runs} runs), "
           f"{int(ds.steps_accepted.values[0] + ds.steps_rejected.values[0])} attempts, mu_s {ds.mu_s.values[0]:.9f}")
 
