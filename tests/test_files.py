@@ -101,6 +101,19 @@ def _two_runs(tmp_path, capsys, second_offset_in_file: bool):
     return a, b
 
 
+def test_chunk_lines_name_the_member_numbers_of_an_offset_run(tmp_path, capsys):
+    """Each chunk's line and the summary give the members' numbers (offset included), not their
+    positions in the sweep."""
+    sweep = tmp_path / "s.toml"
+    sweep.write_text(SWEEP)
+    code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "b.nc", "--chunk", 2, "--member-offset", 3,
+                           "--device", DEVICE)
+    assert code == 0, err
+    chunk_lines = [line for line in err if line.startswith("warpfric chunk")]
+    assert [line.split(":")[0] for line in chunk_lines] == ["warpfric chunk 1/2 (members 3..4)",
+                                                            "warpfric chunk 2/2 (member 5)"], err
+
+
 @pytest.mark.parametrize("new_defaults", [False, True])
 @pytest.mark.parametrize("offset_in_file", [False, True])
 def test_runs_with_member_offsets_combine_with_open_mfdataset(tmp_path, capsys, offset_in_file, new_defaults):

@@ -64,6 +64,12 @@ def _members(start: int, stop: int) -> str:
     return f"members {start}..{stop - 1}" if stop - start != 1 else f"member {start}"
 
 
+def _chunk_label(job: ChunkJob) -> str:
+    """'chunk 2/5 (members 1200..2399)': the chunk's member numbers, the run's member offset included."""
+    first = job.member_offset + job.start
+    return f"chunk {job.index + 1}/{job.n_chunks} ({_members(first, first + job.stop - job.start)})"
+
+
 def worker_device(worker=None) -> str:
     """The Warp device of this process: cuda:0 where CUDA_VISIBLE_DEVICES lists this worker's GPU first
     (dask-cuda's LocalCUDACluster, a SLURM GPU job); on a plain LocalCluster of a multi-GPU host, where
@@ -105,11 +111,11 @@ def run_chunk(job: ChunkJob) -> dict:
 
         wp.init()
         if wp.get_cuda_device_count() == 0:
-            raise RunError(f"chunk {job.index + 1} (members {job.start}..{job.stop - 1}): device {device} asked for, "
+            raise RunError(f"{_chunk_label(job)}: device {device} asked for, "
                            f"but this worker (pid {os.getpid()}) has no CUDA device")
     sl = slice(job.start, job.stop)
     record = chunk_record(sweep.record, sl)
-    label = f"chunk {job.index + 1}/{job.n_chunks} ({_members(job.start, job.stop)})" if job.progress else False
+    label = _chunk_label(job) if job.progress else False
     collect = job.parent_pid is not None and job.parent_pid != os.getpid()  # not a thread of the parent
     with warnings.catch_warnings(record=True) if collect else contextlib.nullcontext() as caught:
         ds = simulate(sweep.member_slice(sl) or None, scene=sweep.scene, model=sweep.model, solver=sweep.solver,
@@ -218,7 +224,7 @@ def run_on_client(jobs: list, client, quiet: bool = False) -> tuple[list, list]:
             report = future.result()
         except Exception as err:  # noqa: BLE001 - reported by member range, the rest goes on
             errors.append(dict(index=job.index, start=job.start, stop=job.stop, error=f"{type(err).__name__}: {err}"))
-            _say(f"chunk {job.index + 1}/{job.n_chunks} ({_members(job.start, job.stop)}) FAILED: "
+            _say(f"{_chunk_label(job)} FAILED: "
                  f"{type(err).__name__}: {err}", False)
             if isinstance(err, OutputWriteError):
                 # raised below, once every chunk has ended: not cancelled, since a chunk still being
@@ -431,7 +437,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
                                             cpu_workers)
         missing = [i for i in range(store.n_chunks) if not store.is_done(i)]
         if errors or missing:
-            ranges = ", ".join(_members(store.members(i).start, store.members(i).stop) for i in missing)
+            ranges = ", ".join(_members(offset + store.members(i).start, offset + store.members(i).stop) for i in missing)
             _say(f"{plural(len(missing), 'chunk')} missing ({ranges}; {len(errors)} raised, see above); the "
                  f"finished chunks are kept in {parts}: `{resume_command}` runs the rest", False)
             return RunReport(chunks=reports, errors=errors, output=None, wall_s=wall)
