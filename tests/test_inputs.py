@@ -108,3 +108,20 @@ def test_a_sweep_files_non_number_names_the_parameters_range_and_units(tmp_path,
         load_sweep(path)
     for w in words:
         assert w in str(err.value), (w, str(err.value))
+
+
+@pytest.mark.parametrize("sweep, where", [
+    ("[grid]\neccentricity = [0.0, 0.2]\n", "[grid] eccentricity"),
+    ("[zip]\neccentricity = [0.0, 0.2]\nnormal_force = [500.0, 1000.0]\n", "[zip] eccentricity"),
+])
+def test_a_parameter_set_in_scene_and_swept_is_refused(tmp_path, sweep, where):
+    """[scene] eccentricity = 0.1 beside a sweep of eccentricity would be ignored without a word (each
+    member takes the swept value): the file is refused, naming both places."""
+    from warpfric.sweep_file import SweepError, load_sweep
+
+    path = tmp_path / "s.toml"
+    path.write_text("[scene]\neccentricity = 0.1\n" + sweep)
+    with pytest.raises(SweepError) as err:
+        load_sweep(path)
+    for w in ("'eccentricity'", "[scene]", where, "remove one"):
+        assert w in str(err.value), (w, str(err.value))

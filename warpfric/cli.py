@@ -243,7 +243,8 @@ def _run(args) -> int:
         keys = ", ".join("fronts = false (top level)" if (flag, value) == ("--front-event", "off") else
                          f"{key} = {_toml_value(value)}" for flag, key, value in given)
         raise UsageError(f"{flags}: for the default scene only; a sweep file sets its own (write {keys} in "
-                         f"{args.sweep}), so that the file it writes can be run again from its sweep_toml")
+                         f"{args.sweep}, or change the values where the file sweeps a parameter), so that the file "
+                         "it writes can be run again from its sweep_toml")
     if args.cpu_workers is not None and (args.scheduler or args.local_cluster):
         raise UsageError("--cpu-workers splits a run in this process; on a Dask cluster (--scheduler, "
                          "--local-cluster) each worker runs its chunk in one process: leave it out")

@@ -257,6 +257,11 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
                              "design's rows exactly (put fixed values in [scene])")
         design = parse_design(doc["design"])
         members = generate(design)
+    for pname in doc.get("scene", {}):
+        if pname in seen or pname in members:  # [grid], [zip], [sample]; or [design]'s generated members
+            where = seen.get(pname) or f"[design] {pname}"
+            raise SweepError(f"parameter {pname!r} is set in [scene] and swept in {where}: each member takes the "
+                             "swept value, so [scene]'s would be ignored; remove one of them")
     if blocks:
         sizes = [len(next(iter(b.values()))) for b in blocks]
         index = np.array(list(itertools.product(*(range(s) for s in sizes))), dtype=np.int64).reshape(-1, len(blocks))
