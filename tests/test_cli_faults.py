@@ -309,6 +309,15 @@ def test_a_second_run_on_the_same_output_is_refused_with_exit_4(tmp_path, sweep,
     assert _files(tmp_path) == ["s.nc", "s.toml"]  # the lock is removed at the end
 
 
+def test_write_ensemble_into_a_missing_folder_says_so(tmp_path):
+    """The folder is named as missing (HDF5 would report 'Permission denied', and no partial file
+    existed), and nothing is created."""
+    ds = run({"eccentricity": [0.0]}, nodes=11, fronts=None)
+    with pytest.raises(IO_MODULE.OutputWriteError, match="folder '.*newdir.*' does not exist"):
+        IO_MODULE.write_ensemble(ds, tmp_path / "newdir" / "sub" / "py.nc")
+    assert _files(tmp_path) == []
+
+
 def test_write_ensemble_from_python_respects_a_running_output(tmp_path):
     """write_ensemble beside a living run on the same output raises OutputBusy and writes nothing;
     this process's own lock and a dead run's lock do not stop it."""

@@ -524,6 +524,8 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
     OutputBusy when another run holds the output's lock (``OUT.nc.lock``, :func:`lock_output`).
     """
     path = Path(path)
+    if not path.parent.is_dir():  # else HDF5 reports it as "Permission denied"
+        raise OutputWriteError(f"could not write {str(path)!r}: folder {str(path.parent)!r} does not exist")
     refuse_if_locked(path)
     if varying is None:
         varying = ds.attrs.get("varying_parameters", "").split()
@@ -595,6 +597,9 @@ def open_ensemble(path) -> xr.Dataset:
     if path.is_dir():
         raise ValueError(f"{path}: a folder, not a netCDF file")
     ds = _read(path)
+    if "warpfric_version" not in ds.attrs:
+        raise ValueError(f"{path}: a netCDF file, but not a warpfric ensemble (no attribute warpfric_version: "
+                         "another program wrote it)")
     if int(ds.attrs.get(COMPLETE_ATTR, 0)) != 1:
         raise ValueError(f"{path}: not a complete warpfric ensemble (attribute {COMPLETE_ATTR} missing)")
     return ds
