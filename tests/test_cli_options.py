@@ -10,7 +10,7 @@ import warnings
 import pytest
 from conftest import DEVICE, one_line_error, run_cli, TINY_SWEEP
 
-from warpfric.cli import build_parser, join_negative_values, main
+from warpfric.cli import _parser_actions, build_parser, join_negative_values, main
 from warpfric.io import open_ensemble
 from warpfric.parameters import Model, Solver
 
@@ -107,18 +107,9 @@ def test_cpu_workers_reach_simulate(tmp_path, capsys):
     assert code == 0, err
 
 
-def _actions(parser):
-    for action in parser._actions:  # noqa: SLF001 - argparse lists its arguments only here
-        if action.choices and isinstance(action.choices, dict):  # the subcommands
-            for sub in action.choices.values():
-                yield from _actions(sub)
-        else:
-            yield parser.prog, action
-
-
 def test_every_option_and_argument_has_help():
     parser, _ = build_parser()
-    seen = [(prog, action.dest, action.help) for prog, action in _actions(parser)]
+    seen = [(prog, action.dest, action.help) for prog, action in _parser_actions(parser)]
     assert len(seen) > 30
     missing = [(prog, dest) for prog, dest, text in seen if not text or not text.strip()]
     assert missing == []
@@ -189,7 +180,7 @@ def test_the_size_warning_is_one_line(capsys):
     assert "--grid-check" in warned[0]
     # and what the status means, with what to change
     assert warned[1].startswith("warpfric: warning: members that did not end ok have NaN mu_s and fronts: 1 of 1 "
-                                "members: 1 no_peak (mu was still rising at the run's end"), err
+                                "member: 1 no_peak (mu was still rising at the run's end"), err
     assert "a later end_time" in warned[1]
 
 
@@ -210,3 +201,19 @@ def test_the_relaxation_gate_help_says_what_each_law_is(capsys):
     assert "SPEC" not in text
     assert "none: the friction law without the yield gate, relaxation and rejuvenation at every stress" in text
     assert "--front-event {contact,strength,velocity,off}" in text
+
+
+@pytest.mark.parametrize("argv, words", [
+    (["run", "--eccentricty", "0.1"], ["unrecognized arguments: --eccentricty", "did you mean --eccentricity?"]),
+    (["run", "--nodes", "10.5"], ["argument --nodes: invalid int value: '10.5'", "`warpfric run --help`"]),
+    (["run", "--front-event", "contct"], ["argument --front-event: invalid choice: 'contct'"]),
+    (["rn"], ["invalid choice: 'rn'", "`warpfric COMMAND --help`"]),
+])
+def test_a_command_line_mistake_is_one_line(capsys, argv, words):
+    """argparse's faults end like every other fault: one line 'warpfric: error: ...', exit code 2, an
+    unknown option answered with the closest known one (not a usage block)."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    one_line_error(err, *words)

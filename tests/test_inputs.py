@@ -125,3 +125,12 @@ def test_a_parameter_set_in_scene_and_swept_is_refused(tmp_path, sweep, where):
         load_sweep(path)
     for w in ("'eccentricity'", "[scene]", where, "remove one"):
         assert w in str(err.value), (w, str(err.value))
+
+
+def test_ragged_members_window_and_event_off_name_what_is_wrong():
+    with pytest.raises(ValueError, match="parameter 'eccentricity': value .* is not a rectangular array"):
+        simulate({"eccentricity": [[0.1], [0.1, 0.2]]})
+    with pytest.raises(ValueError, match="record window: start 20.25 s is after stop 20.05 s"):
+        wf.Record.window(20.25, 20.05, 10)
+    with pytest.raises(ValueError, match="no fronts: simulate\\(\\.\\.\\., fronts=None\\)"):
+        wf.Fronts(event="off")

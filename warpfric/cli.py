@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import difflib
 import re
 import shlex
 import sys
@@ -97,7 +98,12 @@ def _status_name(ds, code: int) -> str:
 
 def _fmt(value, unit="", spec=".4g") -> str:
     v = float(value)
-    return "absent" if not np.isfinite(v) else f"{v:{spec}}{(' ' + unit) if unit else ''}"
+    if not np.isfinite(v):
+        return "absent"
+    text = f"{v:{spec}}"
+    if text.startswith("-") and float(text) == 0.0:  # -0.000000: a round-off below the shown digits
+        text = text[1:]
+    return text + (f" {unit}" if unit else "")
 
 
 def _grid_error(m, name: str) -> str:
@@ -106,7 +112,7 @@ def _grid_error(m, name: str) -> str:
     if f"{name}_grid_error" not in m or not np.isfinite(float(m[name])):
         return ""
     change = float(m[f"{name}_grid_error"])
-    return f"+- {change:.2g}" if np.isfinite(change) else "+- ? (not on the coarse grid)"
+    return f"+- {change:.2g} m/s" if np.isfinite(change) else "+- ? (not on the coarse grid)"
 
 
 def _print_member(ds, solver: Solver) -> None:
@@ -125,6 +131,8 @@ def _print_member(ds, solver: Solver) -> None:
     elif event == ["contact"] and gate != "stress" and not np.isfinite(float(m.front_start_time)):
         print(f"front     : absent: the contact front needs the yield gate (--relaxation-gate stress); under "
               f"relaxation gate {gate} --front-event strength reads a front")
+    elif not np.isfinite(float(m.nucleation_position)):
+        print(f"front     : absent: no node reached the {event[0] + ' ' if event else ''}front's event in the run")
     else:
         edge = {-1: "left edge", 0: "interior", 1: "right edge", -2: "none"}[int(m.nucleation_edge)]
         what = f"{event[0]} front " if event else ""
@@ -134,12 +142,13 @@ def _print_member(ds, solver: Solver) -> None:
         if two:
             print(f"  first front x = {float(m.first_front_start) * 1e3:.1f} .. {float(m.first_front_end) * 1e3:.1f} mm, "
                   f"v_first = {_fmt(m.v_first, 'm/s', '.3g')} {_grid_error(m, 'v_first')}".rstrip() + "; its segments:")
+        width = 14 if "v_middle_grid_error" in m else 10  # the '+- 0.69 m/s' column
         for seg in ("left", "middle", "right"):
             start, end = float(m[f"{seg}_front_start"]), float(m[f"{seg}_front_end"])
             where = f"x = {start * 1e3:.1f} .. {end * 1e3:.1f} mm" if np.isfinite(start) else "absent"
-            print(f"  v_{seg:<6} = {_fmt(m[f'v_{seg}'], 'm/s', '.3g'):>10} {_grid_error(m, f'v_{seg}'):<10} {where}")
+            print(f"  v_{seg:<6} = {_fmt(m[f'v_{seg}'], 'm/s', '.3g'):>10} {_grid_error(m, f'v_{seg}'):<{width}} {where}")
         if two:
-            print(f"  v_second = {_fmt(m.v_second, 'm/s', '.3g'):>10} {_grid_error(m, 'v_second'):<10} "
+            print(f"  v_second = {_fmt(m.v_second, 'm/s', '.3g'):>10} {_grid_error(m, 'v_second'):<{width}} "
                   f"x = {float(m.second_front_start) * 1e3:.1f} .. {float(m.second_front_end) * 1e3:.1f} mm: a second "
                   f"front from x = {float(m.second_nucleation_position) * 1e3:.1f} mm at t = "
                   f"{float(m.second_front_start_time):.5f} s")
@@ -319,7 +328,7 @@ def summary(ds, name: str) -> str:
     good = np.isfinite(mu)
     if good.any():
         lines.append(f"  mu_s: mean {mu[good].mean():.6f}, std {mu[good].std():.3g}, min {mu[good].min():.6f}, "
-                     f"max {mu[good].max():.6f} ({good.sum()} members)")
+                     f"max {mu[good].max():.6f} ({_plural(int(good.sum()), 'member')})")
     if "v_middle" in ds:
         rows = [(f"first front's {seg} segment", f"v_{seg}") for seg in ("left", "middle", "right")]
         if "v_second" in ds:
@@ -380,6 +389,32 @@ def _sensitivity(args) -> int:
     return 0
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse's parser with one-line errors (``warpfric: error: ...``, exit code 2, as every other
+    fault), an unknown option answered with the closest known ones."""
+
+    def error(self, message):
+        if message.startswith("unrecognized arguments:"):
+            known = sorted({o for _, a in _parser_actions(self) for o in a.option_strings if o.startswith("--")})
+            unknown = [w for w in message.split(":", 1)[1].split() if w.startswith("-")]
+            close = {w: difflib.get_close_matches(w.split("=")[0], known, n=1) for w in unknown}
+            hints = [f"did you mean {c[0]}?" for c in close.values() if c]
+            if hints:
+                message += " (" + "; ".join(hints) + ")"
+        command = self.prog if self.prog != "warpfric" else "warpfric COMMAND"
+        self.exit(2, f"warpfric: error: {message} (`{command} --help` lists the options)\n")
+
+
+def _parser_actions(parser: argparse.ArgumentParser):
+    """(prog, action) of every argument of ``parser`` and its subcommands."""
+    for action in parser._actions:  # noqa: SLF001 - argparse lists its arguments only here
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001 - the subcommands
+            for sub in action.choices.values():
+                yield from _parser_actions(sub)
+        else:
+            yield parser.prog, action
+
+
 def build_parser() -> tuple[argparse.ArgumentParser, set]:
     """The argument parser, and the option strings that take a value (for negative numbers)."""
     value_options: set = set()
@@ -390,7 +425,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, set]:
             value_options.update(action.option_strings)
         return action
 
-    parser = argparse.ArgumentParser(prog="warpfric", description=__doc__,
+    parser = _Parser(prog="warpfric", description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
                                 help="run, info, plot or sensitivity (warpfric COMMAND --help)")

@@ -41,5 +41,8 @@ def check_device(device: str | None, n_members: int | None = None) -> str:
     if str(device) == "cuda" and wp.get_cuda_device_count() > 0:
         return "cuda:0"
     if str(device) not in names:
-        raise ValueError(f"device {device!r} is not available; valid: {', '.join(names)} (or None)")
+        gpus = "" if wp.get_cuda_device_count() > 0 else " (no CUDA GPU or driver found on this machine)"
+        raise ValueError(f"device {device!r} is not available{gpus}; valid: {', '.join(names)}, or None (Python; on "
+                         "the command line, leave --device out): a GPU where there is one and the ensemble is large "
+                         "enough, else the CPU")
     return str(device)

@@ -162,7 +162,11 @@ def resolve_value(name: str, value: Any, scene: Parameters | None = None):
         if meta["none_means"] is None:
             raise ValueError(f"parameter {name!r}: value None is not allowed; valid range {_range_text(meta)}")
         return np.asarray(meta["none_means"], dtype=np.float64)
-    arr = np.asarray(value)
+    try:
+        arr = np.asarray(value)
+    except ValueError:  # nested lists of different lengths
+        raise ValueError(f"parameter {name!r}: value {value!r} is not a rectangular array (nested lists of different "
+                         "lengths); give a number, or a list or array of numbers per member") from None
     if arr.dtype.kind not in "iuf" or _holds_bool(value):  # booleans: True would pass as 1.0, False as 0.0
         raise ValueError(
             f"parameter {name!r}: value {value!r} is not a real number; valid range {_range_text(_FIELDS[name].metadata)}"
@@ -459,7 +463,8 @@ class Fronts:
         events = (self.event,) if isinstance(self.event, str) else self.event
         need(isinstance(events, tuple) and len(events) >= 1 and all(isinstance(e, str) and e in FRONT_EVENTS for e in events)
              and len(set(events)) == len(events), "event", self.event,
-             f"one of {', '.join(map(repr, FRONT_EVENTS))}, or a tuple of distinct ones")
+             f"one of {', '.join(map(repr, FRONT_EVENTS))}, or a tuple of distinct ones (no fronts: "
+             "simulate(..., fronts=None))")
         need(real(self.threshold) and 0 < self.threshold < 1, "threshold", self.threshold, "a number in (0, 1)")
         need(self.direction in _FRONT_DIRECTIONS, "direction", self.direction, " or ".join(_FRONT_DIRECTIONS))
         need(isinstance(self.grid_check, (bool, np.bool_)), "grid_check", self.grid_check, "True or False")
@@ -501,6 +506,8 @@ class Record:
         """``count`` evenly spaced times from ``start`` to ``stop`` (s), both included."""
         if not (isinstance(count, (int, np.integer)) and count >= 2):
             raise ValueError(f"record setting 'count' = {count!r} is invalid; valid: an integer >= 2")
+        if not float(start) <= float(stop):
+            raise ValueError(f"record window: start {start!r} s is after stop {stop!r} s; valid: start <= stop")
         return Record(members=tuple(members), times=tuple(np.linspace(float(start), float(stop), int(count))))
 
     def __post_init__(self):

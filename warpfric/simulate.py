@@ -168,6 +168,7 @@ _STATUS_ADVICE = {
                 "runs them to their end"),
     "no_peak": "mu was still rising at the run's end, or peaked before the disc moved: a later end_time",
 }
+_STILL_DISC_ADVICE = "disc_velocity = 0: the disc never moves, so there is no friction peak to find"
 
 
 def _warn_members_not_ok(ds: xr.Dataset, solver: Solver) -> None:
@@ -180,9 +181,16 @@ def _warn_members_not_ok(ds: xr.Dataset, solver: Solver) -> None:
     failed = {meanings[c]: int(k) for c, k in zip(codes, counts) if meanings[c] != "ok"}
     if not failed:
         return
-    parts = [f"{k} {name} ({_STATUS_ADVICE[name].format(max_steps=solver.max_steps, stall_factor=solver.stall_factor)})"
-             for name, k in failed.items()]
-    warnings.warn(f"{MEMBERS_NOT_OK}: {sum(failed.values())} of {ds.sizes['member']:,} members: {'; '.join(parts)}; "
+    advice = {name: text.format(max_steps=solver.max_steps, stall_factor=solver.stall_factor)
+              for name, text in _STATUS_ADVICE.items()}
+    if "no_peak" in failed:
+        still = int(np.sum((ds.status.values == meanings.index("no_peak")) & (np.asarray(ds.disc_velocity) == 0.0)))
+        if still == failed["no_peak"]:
+            advice["no_peak"] = _STILL_DISC_ADVICE
+        elif still:
+            advice["no_peak"] += f"; {still} of them: {_STILL_DISC_ADVICE}"
+    parts = [f"{k} {name} ({advice[name]})" for name, k in failed.items()]
+    warnings.warn(f"{MEMBERS_NOT_OK}: {sum(failed.values())} of {ds.sizes['member']:,} member{'' if ds.sizes['member'] == 1 else 's'}: {'; '.join(parts)}; "
                   f"their numbers: ds.member[ds.status != 0] (docs/model.md, \"Statuses\")", stacklevel=3)
 
 
