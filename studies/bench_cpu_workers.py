@@ -8,8 +8,8 @@ first), and a second call in the same process shows the warm pool.
                                         [--out studies/results/bench_cpu_workers.jsonl]
 
 Members as in studies/bench_engine.py (eccentricity uniform in [-0.2, 0.2], normal force
-log-uniform in [500, 5000] N, seed 0), the default friction law and solver, fronts on (two passes)
-unless --no-fronts. Prints the times and the speed-ups, checks that both give the same outputs
+log-uniform in [500, 5000] N, seed 0), the default friction law and solver, the default fronts (the
+contact front) unless --no-fronts. Prints the times and the speed-ups, checks that both give the same outputs
 (a SHA-256 over every variable's bytes) and appends one JSON line to --out.
 """
 
