@@ -597,9 +597,9 @@ def open_ensemble(path) -> xr.Dataset:
     if path.is_dir():
         raise ValueError(f"{path}: a folder, not a netCDF file")
     ds = _read(path)
-    if "warpfric_version" not in ds.attrs:
-        raise ValueError(f"{path}: a netCDF file, but not a warpfric ensemble (no attribute warpfric_version: "
-                         "another program wrote it)")
+    if "warpfric_version" not in ds.attrs and COMPLETE_ATTR not in ds.attrs:
+        raise ValueError(f"{path}: a netCDF file, but not a warpfric ensemble (no attribute warpfric_version or "
+                         f"{COMPLETE_ATTR}: another program wrote it)")
     if int(ds.attrs.get(COMPLETE_ATTR, 0)) != 1:
         raise ValueError(f"{path}: not a complete warpfric ensemble (attribute {COMPLETE_ATTR} missing)")
     return ds
