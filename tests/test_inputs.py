@@ -134,3 +134,18 @@ def test_ragged_members_window_and_event_off_name_what_is_wrong():
         wf.Record.window(20.25, 20.05, 10)
     with pytest.raises(ValueError, match="no fronts: simulate\\(\\.\\.\\., fronts=None\\)"):
         wf.Fronts(event="off")
+
+
+@pytest.mark.parametrize("kw, words", [
+    ({"normal_force": 0.0}, ["'normal_force' = 0.0 N", "(0, inf) N"]),
+    ({"eccentricity": 1.0}, ["'eccentricity' = 1.0", "[-0.6, 0.6]"]),
+    ({"length": float("nan")}, ["'length' = nan m", "(0, inf) m"]),
+])
+def test_a_scene_is_checked_where_it_is_written(kw, words):
+    """Parameters refuses a value out of range when it is made, not only when simulate runs it; None
+    and stop_time = inf keep their meanings."""
+    with pytest.raises(ValueError) as err:
+        wf.Parameters(**kw)
+    for w in words:
+        assert w in str(err.value), (w, str(err.value))
+    wf.Parameters(end_time=None, stop_time=float("inf"), torque_arm=None)

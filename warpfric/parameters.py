@@ -104,6 +104,14 @@ class Parameters:
     )
     initial_age: float = _p(3.33e-4, "s", "initial contact age phi_init", 0.0, INF, high_open=True)
 
+    def __post_init__(self):
+        # each value against its range now, where the user wrote it (simulate checks them again per
+        # member, with the protocol's cross-parameter rules)
+        for f in dataclasses.fields(self):
+            value = resolve_value(f.name, getattr(self, f.name))
+            if value is not None:
+                validate_value(f.name, value)
+
 
 PARAMETER_NAMES: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(Parameters))
 _FIELDS = {f.name: f for f in dataclasses.fields(Parameters)}
