@@ -528,7 +528,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
             restart = st.restart
             curvature_in = ft(st.newton_curvature)
             # The member state waits in global memory while the stage code runs, so that its fields
-            # take no registers or stack there (a 1,128-byte stack per thread became 904 B: sm_90,
+            # take no registers or stack there (a 1,128-byte stack per thread became 912 B: sm_90,
             # studies/sass_sites.py). Every lane stores the same values; the barrier first lets every
             # lane of the team read the last attempt's state back before it is overwritten.
             team_barrier()
@@ -578,6 +578,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
             tilt = res.tilt
         st.delta0 = wp.float64(delta0)
         st.tilt = wp.float64(tilt)
+        team_barrier()  # every lane has read the state back (an attempt's read) before lane 0 stores the last
         if lane == 0:
             member_states[m] = st
 

@@ -208,6 +208,7 @@ def test_the_relaxation_gate_help_says_what_each_law_is(capsys):
     (["run", "--nodes", "10.5"], ["argument --nodes: invalid int value: '10.5'", "`warpfric run --help`"]),
     (["run", "--front-event", "contct"], ["argument --front-event: invalid choice: 'contct'"]),
     (["rn"], ["invalid choice: 'rn'", "`warpfric COMMAND --help`"]),
+    (["info", "x.nc", "--nodes", "20"], ["unrecognized arguments: --nodes 20", "`warpfric info --help`"]),
 ])
 def test_a_command_line_mistake_is_one_line(capsys, argv, words):
     """argparse's faults end like every other fault: one line 'warpfric: error: ...', exit code 2, an
@@ -217,3 +218,20 @@ def test_a_command_line_mistake_is_one_line(capsys, argv, words):
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     one_line_error(err, *words)
+
+
+def test_unknown_options_are_matched_within_their_subcommand(capsys):
+    """info has no --eccentricity: no suggestion from run's options."""
+    with pytest.raises(SystemExit):
+        main(["info", "x.nc", "--eccentricty", "0.1"])
+    err = capsys.readouterr().err
+    assert "did you mean" not in err and "`warpfric info --help`" in err, err
+
+
+def test_a_failed_member_says_its_front_outputs_are_nan(capsys):
+    """The run ends before mu peaks (no_peak), after the front: its front outputs are NaN, and the
+    CLI says why instead of 'absent'."""
+    code, out, _ = run_cli(capsys, "run", "--nodes", 20, "--end-time", 20.2, "--device", DEVICE, "--quiet")
+    assert code == 1
+    front = [line for line in out if line.startswith("front")]
+    assert front == ["front     : not given: the member did not end ok (no_peak), so its front outputs are NaN"], out

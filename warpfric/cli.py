@@ -131,6 +131,9 @@ def _print_member(ds, solver: Solver) -> None:
     elif event == ["contact"] and gate != "stress" and not np.isfinite(float(m.front_start_time)):
         print(f"front     : absent: the contact front needs the yield gate (--relaxation-gate stress); under "
               f"relaxation gate {gate} --front-event strength reads a front")
+    elif int(m.status) != 0:
+        print(f"front     : not given: the member did not end ok ({_status_name(ds, m.status)}), so its front outputs "
+              "are NaN")
     elif not np.isfinite(float(m.nucleation_position)):
         print(f"front     : absent: no node reached the {event[0] + ' ' if event else ''}front's event in the run")
     else:
@@ -251,9 +254,10 @@ def _run(args) -> int:
             given = [g for g in given if g[0] != "--grid-check"]  # no fronts: nothing to check on a grid
         keys = ", ".join("fronts = false (top level)" if (flag, value) == ("--front-event", "off") else
                          f"{key} = {_toml_value(value)}" for flag, key, value in given)
+        swept = any(key.startswith("[scene]") for _, key, _ in given)
+        where = ", or change the values where the file sweeps the parameter" if swept else ""
         raise UsageError(f"{flags}: for the default scene only; a sweep file sets its own (write {keys} in "
-                         f"{args.sweep}, or change the values where the file sweeps a parameter), so that the file "
-                         "it writes can be run again from its sweep_toml")
+                         f"{args.sweep}{where}), so that the file it writes can be run again from its sweep_toml")
     if args.cpu_workers is not None and (args.scheduler or args.local_cluster):
         raise UsageError("--cpu-workers splits a run in this process; on a Dask cluster (--scheduler, "
                          "--local-cluster) each worker runs its chunk in one process: leave it out")
@@ -395,7 +399,7 @@ class _Parser(argparse.ArgumentParser):
 
     def error(self, message):
         if message.startswith("unrecognized arguments:"):
-            known = sorted({o for _, a in _parser_actions(self) for o in a.option_strings if o.startswith("--")})
+            known = sorted({o for a in self._actions for o in a.option_strings if o.startswith("--")})  # noqa: SLF001
             unknown = [w for w in message.split(":", 1)[1].split() if w.startswith("-")]
             close = {w: difflib.get_close_matches(w.split("=")[0], known, n=1) for w in unknown}
             hints = [f"did you mean {c[0]}?" for c in close.values() if c]
@@ -413,6 +417,12 @@ def _parser_actions(parser: argparse.ArgumentParser):
                 yield from _parser_actions(sub)
         else:
             yield parser.prog, action
+
+
+def _subcommand_parser(parser: argparse.ArgumentParser, command: str) -> argparse.ArgumentParser:
+    """The parser of subcommand ``command`` of ``parser``."""
+    subcommands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))  # noqa: SLF001
+    return subcommands.choices[command]
 
 
 def build_parser() -> tuple[argparse.ArgumentParser, set]:
@@ -515,7 +525,9 @@ def main(argv=None) -> int:
 
     parser, value_options = build_parser()
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
-    args = parser.parse_args(join_negative_values(argv, value_options))
+    args, extra = parser.parse_known_args(join_negative_values(argv, value_options))
+    if extra:  # answered by the subcommand's parser: its options, its --help
+        _subcommand_parser(parser, args.command).error(f"unrecognized arguments: {' '.join(extra)}")
     args.command_line = shlex.join(["warpfric", *argv])  # the files' history attribute
     handlers = {"run": _run, "info": _info, "plot": _plot, "sensitivity": _sensitivity}
     try:

@@ -514,7 +514,7 @@ class Record:
         """``count`` evenly spaced times from ``start`` to ``stop`` (s), both included."""
         if not (isinstance(count, (int, np.integer)) and count >= 2):
             raise ValueError(f"record setting 'count' = {count!r} is invalid; valid: an integer >= 2")
-        if not float(start) <= float(stop):
+        if float(start) > float(stop):  # NaN: Record's own check names the times
             raise ValueError(f"record window: start {start!r} s is after stop {stop!r} s; valid: start <= stop")
         return Record(members=tuple(members), times=tuple(np.linspace(float(start), float(stop), int(count))))
 
@@ -526,7 +526,8 @@ class Record:
             raise ValueError(f"record setting 'members' = {self.members!r} has repeated indices")
         times = np.asarray(self.times, dtype=np.float64).reshape(-1)
         if times.size == 0 or not np.isfinite(times).all() or (times < 0).any() or (np.diff(times) < 0).any():
-            raise ValueError(f"record setting 'times' = {self.times!r} is invalid; valid: non-empty, finite, "
+            shown = ", ".join(f"{t:g}" for t in times[:6]) + (f", ... ({times.size} times)" if times.size > 6 else "")
+            raise ValueError(f"record setting 'times' = [{shown}] s is invalid; valid: non-empty, finite, "
                              "non-decreasing times >= 0 (s)")
         object.__setattr__(self, "members", tuple(int(i) for i in members))
         object.__setattr__(self, "times", tuple(float(t) for t in times))
