@@ -45,8 +45,8 @@ class EngineResult:
     strength_peak: np.ndarray | None
     event: np.ndarray | None
     record: np.ndarray | None
-    # compiling (or loading from Warp's cache) the integrator's modules, and the first import of the
-    # kernels' Python modules in a process, s
+    # compiling (or loading from Warp's cache) the integrator's modules and the fronts' segmentation
+    # kernel, and the first import of the kernels' Python modules in a process, s
     kernel_build_s: float
     device_bytes_per_member: float  # device memory of the integration arrays per member, bytes (recorded
     # fields, the front segmentation and the read-back copies not included)
@@ -604,6 +604,10 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
         wp.load_module(kern["evaluate_fields"].module, device=device)
         for layout_kernel in kern["layout"].values():
             wp.load_module(layout_kernel.module, device=device)
+        if fronts is not None:  # the fronts' segmentation kernel (warpfric/fronts.py), launched after the run
+            from warpfric.kernels.reductions import segment_fronts
+
+            wp.load_module(segment_fronts.module, device=device)
     kernel_build_s = time.perf_counter() - t_build + import_s
     block_members = layout.block_members
     blocks = -(-n_members // block_members)  # of a team kernel's launch
