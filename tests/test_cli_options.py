@@ -10,7 +10,7 @@ import warnings
 import pytest
 from conftest import DEVICE, one_line_error, run_cli, TINY_SWEEP
 
-from warpfric.cli import _parser_actions, build_parser, join_negative_values, main
+from warpfric.cli import build_parser, join_negative_values, main
 from warpfric.io import open_ensemble
 from warpfric.parameters import Model, Solver
 
@@ -107,9 +107,18 @@ def test_cpu_workers_reach_simulate(tmp_path, capsys):
     assert code == 0, err
 
 
+def _actions(parser):
+    for action in parser._actions:  # noqa: SLF001 - argparse lists its arguments only here
+        if action.choices and isinstance(action.choices, dict):  # the subcommands
+            for sub in action.choices.values():
+                yield from _actions(sub)
+        else:
+            yield parser.prog, action
+
+
 def test_every_option_and_argument_has_help():
     parser, _ = build_parser()
-    seen = [(prog, action.dest, action.help) for prog, action in _parser_actions(parser)]
+    seen = [(prog, action.dest, action.help) for prog, action in _actions(parser)]
     assert len(seen) > 30
     missing = [(prog, dest) for prog, dest, text in seen if not text or not text.strip()]
     assert missing == []

@@ -409,16 +409,6 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"warpfric: error: {message} (`{command} --help` lists the options)\n")
 
 
-def _parser_actions(parser: argparse.ArgumentParser):
-    """(prog, action) of every argument of ``parser`` and its subcommands."""
-    for action in parser._actions:  # noqa: SLF001 - argparse lists its arguments only here
-        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001 - the subcommands
-            for sub in action.choices.values():
-                yield from _parser_actions(sub)
-        else:
-            yield parser.prog, action
-
-
 def _subcommand_parser(parser: argparse.ArgumentParser, command: str) -> argparse.ArgumentParser:
     """The parser of subcommand ``command`` of ``parser``."""
     subcommands = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))  # noqa: SLF001

@@ -190,7 +190,8 @@ def _warn_members_not_ok(ds: xr.Dataset, solver: Solver) -> None:
         elif still:
             advice["no_peak"] += f"; {still} of them: {_STILL_DISC_ADVICE}"
     parts = [f"{k} {name} ({advice[name]})" for name, k in failed.items()]
-    warnings.warn(f"{MEMBERS_NOT_OK}: {sum(failed.values())} of {ds.sizes['member']:,} member{'' if ds.sizes['member'] == 1 else 's'}: {'; '.join(parts)}; "
+    n = ds.sizes["member"]
+    warnings.warn(f"{MEMBERS_NOT_OK}: {sum(failed.values())} of {n:,} member{'' if n == 1 else 's'}: {'; '.join(parts)}; "
                   f"their numbers: ds.member[ds.status != 0] (docs/model.md, \"Statuses\")", stacklevel=3)
 
 
