@@ -42,6 +42,7 @@ class TeamCompileOptions(NamedTuple):
     block_members: int | None = None  # members per thread block (None: per run, block_members_for; 1: a block each)
     shared_work: bool = True  # the work array in shared memory where it fits (team_layout: blocked kernel, wide teams)
     poison_shared_work: bool = False  # a check: the shared work array filled with NaN at each launch's start
+    shared_pad: int = 0  # bytes of shared memory reserved beyond the work array (a probe of the L1 it leaves)
 
 
 def team_compile_options() -> TeamCompileOptions:
@@ -52,7 +53,9 @@ def team_compile_options() -> TeamCompileOptions:
     blocked_layout; at most shared_work_members where the work is in shared memory),
     WARPFRIC_TEAM_SHARED_WORK (0: the team kernel's work array in global memory; team_layout) and
     WARPFRIC_TEAM_POISON_SHARED_WORK (1: that shared array filled with NaN at the start of every
-    launch, so that a value read before the attempt wrote it shows; a check, not for runs)."""
+    launch, so that a value read before the attempt wrote it shows; a check, not for runs) and
+    WARPFRIC_TEAM_SHARED_PAD (bytes, a multiple of 8: that much more shared memory reserved beside
+    the shared work array, unused; a probe of how the L1 left to the SM matters)."""
     registers = int(os.environ.get("WARPFRIC_TEAM_MAX_REGISTERS", "0"))
     inline = os.environ.get("WARPFRIC_INLINE", "") or None
     if inline not in (None, "force", "never"):
@@ -73,10 +76,14 @@ def team_compile_options() -> TeamCompileOptions:
     poison = os.environ.get("WARPFRIC_TEAM_POISON_SHARED_WORK", "") or "0"
     if poison not in ("0", "1"):
         raise ValueError(f"WARPFRIC_TEAM_POISON_SHARED_WORK={poison!r} is invalid; valid: 0, 1 or unset")
+    pad = os.environ.get("WARPFRIC_TEAM_SHARED_PAD", "") or "0"
+    if not pad.isdigit() or int(pad) % 8:
+        raise ValueError(f"WARPFRIC_TEAM_SHARED_PAD={pad!r} is invalid; valid: a multiple of 8 bytes >= 0, or unset")
     return TeamCompileOptions(max_registers=registers if registers > 0 else None, inline=inline,
                               smem_spilling=os.environ.get("WARPFRIC_TEAM_SMEM_SPILLING", "0") == "1",
                               out_of_line=out_of_line, exchange=exchange, block_members=block_members,
-                              shared_work=shared_work == "1", poison_shared_work=poison == "1")
+                              shared_work=shared_work == "1", poison_shared_work=poison == "1",
+                              shared_pad=int(pad))
 
 
 # Where a team's lanes exchange by warp shuffles (a team of at most 32 lanes: one warp), a thread
@@ -418,6 +425,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     shared_on = shared_work is not None
     shared_nodes, shared_stride = shared_work if shared_on else (1, 1)
     shared_len = N_WORK * shared_nodes * shared_stride
+    reserved_len = shared_len + options.shared_pad // 8
     poison_on = shared_on and options.poison_shared_work
     threads = block_threads(lanes, blocked)
 
@@ -462,7 +470,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
         lane stores it before the stage code of an attempt and reads it back after, and lane 0
         stores it at the end."""
         if wp.static(shared_on):  # the first tile: reserves the block's dynamic shared memory for the work view below
-            wp.tile_empty(shape=(shared_len,), dtype=ft, storage="shared")
+            wp.tile_empty(shape=(reserved_len,), dtype=ft, storage="shared")
         if wp.static(poison_on):  # the check WARPFRIC_TEAM_POISON_SHARED_WORK: all of it NaN, by every thread
             _poison_block, poison_thread = wp.tid()
             reserved = wp.array(ptr=dynamic_shared_base(), shape=(shared_len,), dtype=ft)

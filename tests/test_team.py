@@ -374,6 +374,18 @@ def test_work_array_memory_choice(monkeypatch):
             team_layout(32, 200, 10_000, True, 132, h100)
         assert team_layout(1, 200, 10_000, True, 132, h100) == (False, 1, None)  # no team, no switch read
         monkeypatch.delenv(name)
+    # the probe WARPFRIC_TEAM_SHARED_PAD: bytes reserved beside the work (a multiple of 8), no layout change
+    from warpfric.kernels.integrator import team_compile_options
+
+    monkeypatch.setenv("WARPFRIC_TEAM_SHARED_PAD", "41600")
+    assert team_compile_options().shared_pad == 41_600
+    assert team_layout(32, 200, 10_000, True, 132, h100) == (True, 8, (200, 9))
+    for bad in ("7", "-8", "x"):
+        monkeypatch.setenv("WARPFRIC_TEAM_SHARED_PAD", bad)
+        with pytest.raises(ValueError, match=f"WARPFRIC_TEAM_SHARED_PAD='{bad}' is invalid; valid: a multiple of 8"):
+            team_compile_options()
+    monkeypatch.delenv("WARPFRIC_TEAM_SHARED_PAD")
+    assert team_compile_options().shared_pad == 0
 
 
 def test_similar_members_are_neighbours():
