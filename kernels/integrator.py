@@ -624,8 +624,40 @@ def make_layout_kernels(ft):
         k, m, i = wp.tid()
         rows[k, m, i] = source[k, i, kernel_member[m]]
 
-    _LAYOUT_KERNELS[ft] = dict(initial_state=initial_state, member_rows=member_rows, member_columns=member_columns)
+    _LAYOUT_KERNELS[ft] = dict(initial_state=initial_state, member_rows=member_rows, member_columns=member_columns,
+                               member_states=start_member_states, member_params=fill_member_params)
     return _LAYOUT_KERNELS[ft]
+
+
+@wp.kernel(module="unique", enable_backward=False)
+def start_member_states(start: wp.array(dtype=IntegratorState), record_slot: wp.array(dtype=wp.int32),
+                        front_level: wp.array(dtype=wp.float64), front_until: wp.array(dtype=wp.float64),
+                        states: wp.array(dtype=IntegratorState)):
+    """states[m] = start[0] (a member's state at t = 0, warpfric/engine.py initial_states) with member
+    m's record_slot[m] and, where given ((member,) arrays; empty: none), its front_level[m] (m/s)
+    and front_until[m] (s): the velocity front's arrival pass. The host builds one state, not
+    (member,) of them (25 MB at 100,000 members)."""
+    m = wp.tid()
+    st = start[0]
+    st.record_slot = record_slot[m]
+    if front_level.shape[0] > 0:
+        st.front_level = front_level[m]
+        st.front_until = front_until[m]
+    states[m] = st
+
+
+@wp.kernel(module="unique", enable_backward=False)
+def fill_member_params(first: wp.array(dtype=wp.float64), columns: wp.array2d(dtype=wp.float64),
+                       fields: wp.array(dtype=wp.int32), rows: wp.array2d(dtype=wp.float64)):
+    """The members' MemberParams, whose fields are all float64, viewed as rows (member, field):
+    rows[m, f] = first[f] (a member's parameters), but columns[j, m] in the fields f = fields[j]
+    that differ among the members (SI units, kernels/types.py). The host uploads only those columns."""
+    m, f = wp.tid()
+    value = first[f]
+    for j in range(fields.shape[0]):
+        if fields[j] == f:
+            value = columns[j, m]
+    rows[m, f] = value
 
 
 @wp.kernel(module="unique", enable_backward=False)

@@ -430,6 +430,64 @@ def test_similar_members_are_neighbours():
     assert not alike_blocks(TeamLayout(False, 1, None), 10_000, 1)  # the thread kernel, the CPU
 
 
+def test_members_taken_as_raw_records_match_fancy_indexing():
+    """engine.take_members gathers structured member states as rows of bytes: the same records as
+    numpy's fancy indexing (field by field) for every field, NaN and -inf included; a plain
+    array is indexed as usual. engine.alike: one value in every member (inf too), not with NaN."""
+    from warpfric.engine import alike, initial_states, take_members
+    from warpfric.parameters import Solver
+
+    rng = np.random.default_rng(5)
+    st = initial_states(37, Solver(), np.arange(37, dtype=np.int32))
+    for name in st.dtype.names:
+        st[name] = rng.integers(-3, 1000, 37).astype(st.dtype[name])
+    st["mu_s"][3] = np.nan
+    st["front_max"][4] = -np.inf
+    index = rng.permutation(37)[:30]
+    taken = take_members(st, index)
+    assert taken.dtype == st.dtype and taken.shape == (30,)
+    for name in st.dtype.names:
+        np.testing.assert_array_equal(taken[name], st[index][name], err_msg=name)
+    np.testing.assert_array_equal(take_members(st["t"], index), st["t"][index])
+    assert alike(np.full(5, 2.0)) and alike(np.full(3, np.inf)) and alike(np.array([]))
+    assert not alike(np.array([1.0, 2.0])) and not alike(np.array([np.nan, np.nan]))
+
+
+def test_member_params_and_states_built_on_the_device_match_the_host_ones():
+    """engine.device_member_params and device_member_states build on the device what member_params
+    and initial_states build on the host: the same bytes, for members that differ in some
+    parameters (an infinite end_time among them: the automatic end), in none, and one alone; the
+    states with record slots, and with the velocity front's front_level and front_until."""
+    import warp as wp
+
+    from warpfric.engine import device_member_params, device_member_states, initial_states, member_params
+    from warpfric.kernels.integrator import make_layout_kernels
+    from warpfric.members import resolve_members
+    from warpfric.parameters import Parameters, Solver
+
+    layout = make_layout_kernels(wp.float64)
+    solver = Solver(initial_step=3e-7)
+    rng = np.random.default_rng(11)
+    cases = [dict(eccentricity=rng.uniform(-0.2, 0.2, 9), normal_force=rng.uniform(500, 5000, 9),
+                  end_time=np.where(rng.random(9) < 0.5, np.inf, 30.0)), dict(eccentricity=np.zeros(4)), {}]
+    for members in cases:
+        values, _ = resolve_members(members, Parameters())
+        n = values["normal_force"].shape[0]
+        with wp.ScopedDevice("cpu"):
+            params = device_member_params(values, layout).numpy()
+            assert params.tobytes() == member_params(values).tobytes(), members.keys()
+            slots = rng.integers(-1, 3, n).astype(np.int32)
+            expected = initial_states(n, solver, slots)
+            states = device_member_states(n, solver, slots, layout).numpy()
+            for name in expected.dtype.names:  # field by field: a struct's padding bytes are not set
+                np.testing.assert_array_equal(states[name], expected[name], err_msg=name)
+            level, until = rng.uniform(0, 1, n), np.where(rng.random(n) < 0.5, -np.inf, 20.0)
+            expected["front_level"], expected["front_until"] = level, until
+            states = device_member_states(n, solver, slots, layout, front_level=level, front_until=until).numpy()
+            for name in expected.dtype.names:
+                np.testing.assert_array_equal(states[name], expected[name], err_msg=name)
+
+
 def test_host_copy_lands_in_the_array_it_is_given():
     """engine.host_copy fills the host array it is given (the engine reads its final fields back
     into arrays allocated and touched while a GPU integrates: landing_arrays, used on every device)

@@ -84,7 +84,7 @@ WIDE_WARPS_PER_SM = 8  # the warps an SM's registers hold at 255 registers a thr
 # (H100, studies/results/h100/member_order_8114533.jsonl).
 MEMBER_ORDERS = ("similar", "given")
 SIMILAR_ORDER_MIN_WAVES = 2
-MORTON_BITS = 63  # bits of a member's key, shared among the parameters that vary
+KEY_BITS = 64  # bits of a member's sort key: its Z-order cell, then its own number
 
 
 def morton_key(coords: np.ndarray, bits: int) -> np.ndarray:
@@ -107,6 +107,12 @@ def alike_blocks(layout, n_members: int, sm_count: int) -> bool:
     return layout.blocked and layout.block_members > 1 and blocks >= SIMILAR_ORDER_MIN_WAVES * sm_count
 
 
+def alike(column) -> bool:
+    """Whether a (member,) parameter column takes one value in every member (NaN: not alike)."""
+    column = np.asarray(column)
+    return column.size == 0 or bool(column.min() == column.max())
+
+
 def member_order(values: dict, blocked: bool, requested: str | None = None) -> np.ndarray | None:
     """The order in which run() hands its members to the kernel (an index array), or None for the
     caller's order: ``requested`` (WARPFRIC_MEMBER_ORDER) or, unset, "similar" where ``blocked``
@@ -123,16 +129,24 @@ def member_order(values: dict, blocked: bool, requested: str | None = None) -> n
     varied = []
     for name in sorted(values):
         column = np.asarray(values[name], dtype=np.float64)
-        if column.size and column.min() == column.max():
+        if column.size and alike(column):
             continue  # alike in every member (found without np.unique's sort: most columns of a run)
         distinct, rank = np.unique(column, return_inverse=True)
         if distinct.size > 1:
             varied.append(rank / (distinct.size - 1))
     if not varied:  # one member, or members alike in every parameter
         return None
-    varied = varied[:MORTON_BITS]
-    key = morton_key(np.stack(varied, axis=1), MORTON_BITS // len(varied))
-    return np.argsort(key, kind="stable")
+    # the key: the Z-order cell in the high bits, the member's number in the low ones, so that every
+    # key differs and numpy's fast unstable sort keeps ties in the caller's order (a stable sort of
+    # 100,000 keys took 6 ms, this one 1 ms); bits enough for every distinct rank while the varied
+    # parameters number at most 64 // index_bits - 1 (3 at 10,000 members, 2 at 100,000), fewer beyond
+    n_members = varied[0].size
+    index_bits = max(1, (n_members - 1).bit_length())
+    varied = varied[:KEY_BITS - index_bits]
+    bits = min((KEY_BITS - index_bits) // len(varied), index_bits)  # index_bits: every rank its own cell
+    cell = morton_key(np.stack(varied, axis=1), bits)
+    key = (cell << np.uint64(index_bits)) | np.arange(n_members, dtype=np.uint64)
+    return np.argsort(key)
 
 
 def choose_lanes(solver: Solver, device: str, members: int | None = None, sm_count: int = 0) -> int:
@@ -304,6 +318,53 @@ def member_params(values: dict) -> np.ndarray:
     return params
 
 
+def device_member_params(values: dict, layout: dict):
+    """The members' MemberParams as a Warp array on the current device, as member_params(values)
+    gives them, built there: the host uploads one member's parameters and the columns that differ
+    among the members (layout: the layout kernels, kernels/integrator.py; at 100,000 members the
+    host's structured array was 22 MB of fresh memory on the critical path)."""
+    import warp as wp
+
+    from warpfric.kernels.types import MemberParams
+
+    dtype = np.dtype(MemberParams.numpy_dtype())
+    if any(dtype[name] != np.float64 for name in dtype.names) or dtype.itemsize != 8 * len(dtype.names):
+        raise AssertionError("device_member_params: MemberParams must be float64 fields without padding")
+    n_members = values["normal_force"].shape[0]
+    first = member_params({name: np.asarray(column)[:1] for name, column in values.items()})
+    columns = {name: values[name] for name in dtype.names if name in values}
+    columns["end_time"] = np.minimum(values["end_time"], values["max_end_time"])
+    columns["auto_end"] = np.isinf(values["end_time"]).astype(np.float64)
+    varying = [name for name in dtype.names if name in columns and not alike(columns[name])]
+    params = wp.empty(n_members, dtype=MemberParams)
+    rows = wp.array(ptr=params.ptr, shape=(n_members, len(dtype.names)), dtype=wp.float64, device=params.device)
+    stacked = np.stack([np.asarray(columns[name], dtype=np.float64) for name in varying]) if varying \
+        else np.zeros((0, n_members))
+    wp.launch(layout["member_params"], dim=rows.shape,
+              inputs=[wp.array(first.view(np.float64), dtype=wp.float64), wp.array(stacked, dtype=wp.float64),
+                      wp.array([dtype.names.index(name) for name in varying], dtype=wp.int32)], outputs=[rows])
+    return params
+
+
+def device_member_states(n_members: int, solver: Solver, record_slots: np.ndarray, layout: dict,
+                         front_level: np.ndarray | None = None, front_until: np.ndarray | None = None):
+    """The members' IntegratorStates at t = 0 as initial_states gives them, a Warp array built on
+    the current device from one member's state: record_slots (member,), and front_level (m/s) and
+    front_until (s) (member,) where given (the velocity front's arrival pass)."""
+    import warp as wp
+
+    from warpfric.kernels.types import IntegratorState
+
+    start = wp.array(initial_states(1, solver, np.full(1, -1, np.int32)), dtype=IntegratorState)
+    states = wp.empty(n_members, dtype=IntegratorState)
+    given = front_level is not None
+    wp.launch(layout["member_states"], dim=n_members,
+              inputs=[start, wp.array(record_slots, dtype=wp.int32),
+                      wp.array(front_level if given else np.zeros(0), dtype=wp.float64),
+                      wp.array(front_until if given else np.zeros(0), dtype=wp.float64)], outputs=[states])
+    return states
+
+
 def initial_states(n_members: int, solver: Solver, record_slots: np.ndarray) -> np.ndarray:
     """IntegratorState of every member at t = 0 (a backward-Euler start, no maximum yet)."""
     from warpfric.kernels.types import IntegratorState
@@ -411,6 +472,16 @@ PINNED_POOL_MAX_BYTES = 1 << 20  # per buffer kept
 PINNED_POOL_MAX_TOTAL = 16 << 20  # all buffers kept
 
 
+def take_members(a: np.ndarray, index: np.ndarray) -> np.ndarray:
+    """a[index] along the first axis of a 1-D array; a structured array (the member states) is
+    gathered as rows of raw bytes: numpy's fancy indexing copies a structured record field by
+    field (100,000 IntegratorStates: 20 ms against 0.8 ms, on this project's CPU)."""
+    if a.dtype.names is None:
+        return a[index]
+    records = np.ascontiguousarray(a).view(np.uint8).reshape(a.shape[0], a.dtype.itemsize)
+    return np.take(records, index, axis=0).view(a.dtype).reshape(len(index))
+
+
 def touched_empty(shape, dtype) -> np.ndarray:
     """np.empty(shape, dtype) with every page written once (one value per 4 KiB): the OS's
     first-touch page faults are taken now, so that a later copy into it runs at the copy's own
@@ -486,8 +557,9 @@ def member_columns(layout: dict, source, kernel_member) -> np.ndarray:
 class StateSnapshots:
     """Read-back of the member states that does not stall the launch queue: ``take`` queues a copy
     into a host buffer (pinned on a CUDA device) behind the launches queued so far and returns a
-    ticket; ``wait`` blocks until that copy has landed and returns the states (a numpy copy, so that
-    the next ``take`` may reuse the buffer: takes and waits alternate). ``close`` gives a small
+    ticket; ``wait`` blocks until that copy has landed and returns the states in a host array of its
+    own, which the next ``wait`` overwrites (takes and waits alternate; one array a run, so that its
+    pages are written for the first time once: 25 MB at 100,000 members). ``close`` gives a small
     pinned buffer back to a pool that the next run of as many members on the device takes (the
     buffer is only ever used by one run at a time)."""
 
@@ -499,6 +571,7 @@ class StateSnapshots:
         self.cuda = wp.get_device(device).is_cuda
         self.key = (str(wp.get_device(device)), n_members)
         self.buffer = None
+        self.states = None  # the host array that wait() copies into
         if self.cuda:
             with _PINNED_LOCK:
                 free = _PINNED_POOL.get(self.key)
@@ -522,13 +595,24 @@ class StateSnapshots:
         wp.copy(self.buffer, member_states)
         return self.buffer, (wp.record_event() if self.cuda else None)
 
+    def final(self, ticket) -> np.ndarray:
+        """``wait`` for the last snapshot of a pass: its host array is the caller's from now on (a
+        later ``wait`` fills another)."""
+        states = self.wait(ticket)
+        self.states = None
+        return states
+
     def wait(self, ticket) -> np.ndarray:
         import warp as wp
 
         buffer, event = ticket
         if event is not None:
             wp.synchronize_event(event)
-        return buffer.numpy().copy()
+        landed = buffer.numpy()
+        if self.states is None:
+            self.states = np.empty_like(landed)
+        np.copyto(self.states, landed)
+        return self.states
 
 
 def log_launches(log: list, pass_index: int, member_states, launch, device, stall_limit, solver: Solver):
@@ -594,7 +678,9 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     # before the kernels are built, so that a bad WARPFRIC_MEMBER_ORDER is refused first
     order = member_order(values, alike_blocks(layout, n_members, sm_count), os.environ.get("WARPFRIC_MEMBER_ORDER"))
     if order is not None:  # the kernel's order; the outputs go back into the caller's on their way to the host
-        values = {name: np.asarray(column)[order] for name, column in values.items()}
+        # a column alike in every member is its own reordering (most columns of a run: 6 of 28 ms
+        # of host time before a 100,000-member launch went into copying them)
+        values = {name: column if alike(column) else np.asarray(column)[order] for name, column in values.items()}
     t_build = time.perf_counter()
     kern = get_integrator(solver.dtype, model, lanes, solver.method, cuda=cuda, observed=observer_set(fronts),
                           shared_work=layout.shared_work)
@@ -612,7 +698,6 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     block_members = layout.block_members
     blocks = -(-n_members // block_members)  # of a team kernel's launch
     ft = kern["ft"]
-    params_np = member_params(values)
     settings = solver_settings(solver)
     stress_gate = model.relaxation_gate == "stress"
     outputs = output_settings(fronts, stress_gate)
@@ -622,7 +707,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     strength = outputs.strength_front == 1
     n_passes = 2 if outputs.velocity_front == 1 else 1
     with wp.ScopedDevice(device):
-        arrays = allocate(ft, params_np, n, stress_gate, fronts is not None,
+        arrays = allocate(ft, device_member_params(values, kern["layout"]), n, stress_gate, fronts is not None,
                           record.times if record is not None else None, len(record.members) if record is not None else 0,
                           member_major=team, method=solver.method, strength=strength,
                           global_work=layout.shared_work is None)
@@ -652,12 +737,14 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
 
         bar = Progress(show_progress, n_members, label, n_passes, solver)  # warpfric/progress.py
         for pass_index in range(n_passes):
-            states_np = initial_states(n_members, solver, slots if pass_index == 0 else np.full(n_members, -1, np.int32))
-            if pass_index == 1:
+            if pass_index == 0:
+                member_states = device_member_states(n_members, solver, slots, kern["layout"])
+            else:
                 # the velocity front's arrival pass: the contact and strength fronts (pass 1's) are kept
-                states_np["front_level"] = np.where(event, fronts.threshold * front_max, np.inf)
-                states_np["front_until"] = np.where(event, front_last, -np.inf)  # no event: nothing to redo
-            member_states = wp.array(states_np, dtype=IntegratorState)
+                member_states = device_member_states(
+                    n_members, solver, np.full(n_members, -1, np.int32), kern["layout"],
+                    front_level=np.where(event, fronts.threshold * front_max, np.inf),
+                    front_until=np.where(event, front_last, -np.inf))  # no event: nothing to redo
             wp.launch(kern["layout"]["initial_state"], dim=arrays.state.shape, inputs=[initial_age, arrays.state])
             arrays.stages.zero_()  # K[fsal] holds f(y) of the state: zero for the state at rest
             arrays.gates.zero_()  # every gate closed: no friction stress at the start
@@ -695,8 +782,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                 bar.update(st_now)
                 if n_done == n_members:
                     break
-            snapshot.wait(pending)
-            st_now = member_states.numpy()
+            st_now = snapshot.final(pending)  # every member was done before the launch it follows
             bar.end_pass(st_now)
             if pass_index == 0:
                 st = st_now
@@ -720,7 +806,7 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
                                           landing["gates"])[G_GATE]
         snapshot.close()
         if order is not None:  # the member states and events back into the caller's order (the rest: above, below)
-            st = st[back]
+            st = take_members(st, back)
             event = None if event is None else event[back]
         arrival = arrival_error = strength_peak = None
         if fronts is not None:
