@@ -191,6 +191,7 @@ def test_the_size_warning_is_one_line(capsys):
     assert warned[1].startswith("warpfric: warning: members that did not end ok have NaN mu_s and fronts: 1 of 1 "
                                 "member: 1 no_peak (mu was still rising at the run's end"), err
     assert "a later end_time" in warned[1]
+    assert "their numbers: warpfric info on the output file" in warned[1] and "ds.member" not in warned[1]
 
 
 def test_the_python_api_keeps_python_warnings(capsys):

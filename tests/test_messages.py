@@ -64,3 +64,20 @@ def test_info_prints_dimensionless_ranges_without_unit_1():
     ecc = next(line for line in lines if line.strip().startswith("eccentricity"))
     force = next(line for line in lines if line.strip().startswith("normal_force"))
     assert ecc.endswith("in [0, 0.1] (dimensionless)") and force.endswith("in [500, 600] N")
+
+
+def test_info_names_the_members_not_ok():
+    """`warpfric info` lists the members of each status other than ok by their numbers, the first
+    ten, then how many more (the CLI's warning of members not ok points there)."""
+    ds = wf.simulate({"eccentricity": np.zeros(14), "normal_force": np.full(14, 500.0)}, solver=wf.Solver(nodes=11),
+                     fronts=None, device=DEVICE, progress=False, member_offset=100)
+    ds.attrs.update(warpfric_version="x", wall_time_s=0.0)
+    meanings = ds.status.attrs["flag_meanings"].split()
+    status = np.zeros(14, dtype=np.int32)
+    status[[1, 4]] = meanings.index("stalled")
+    status[2:] = np.where(np.arange(2, 14) >= 3, meanings.index("no_peak"), status[2:])
+    ds["status"].values[:] = status
+    lines = summary(ds, "x.nc").splitlines()
+    assert "  status: ok 2, no_peak 11, stalled 1" in lines or "  status: ok 2, stalled 1, no_peak 11" in lines
+    assert f"    stalled: member 101" in lines
+    assert "    no_peak: members 103, 104, 105, 106, 107, 108, 109, 110, 111, 112 and 1 more" in lines

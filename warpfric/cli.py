@@ -33,11 +33,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .parameters import RELAXATION_GATES, Fronts, Model, Parameters, Solver, units_text
+from .parameters import (MEMBERS_NOT_OK_CLI_HINT, MEMBERS_NOT_OK_HINT, RELAXATION_GATES, Fronts, Model, Parameters,
+                         Solver, units_text)
 from .progress import member_range, plural as _plural, seconds_text as _seconds
 
 
 EXIT_FAILED_MEMBERS = 1
+NOT_OK_SHOWN = 10  # members not ok that `info` names, per status
 EXIT_BAD_INPUT = 2
 EXIT_WRITE_FAILED = 3
 EXIT_OUTPUT_BUSY = 4
@@ -78,7 +80,7 @@ def one_line_warnings():
     seen = set()
 
     def show(message, category, filename, lineno, file=None, line=None):
-        text = " ".join(str(message).split())
+        text = " ".join(str(message).split()).replace(MEMBERS_NOT_OK_HINT, MEMBERS_NOT_OK_CLI_HINT)
         if text in seen:
             return
         seen.add(text)
@@ -328,6 +330,12 @@ def summary(ds, name: str) -> str:
     meanings = ds.status.attrs["flag_meanings"].split()
     counts = {meanings[int(k)]: int((ds.status.values == k).sum()) for k in np.unique(ds.status.values)}
     lines.append("  status: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+    for code in np.unique(ds.status.values):
+        if int(code) != 0:  # the members not ok, by number (the first NOT_OK_SHOWN of each status)
+            which = numbers[ds.status.values == code]
+            more = f" and {which.size - NOT_OK_SHOWN:,} more" if which.size > NOT_OK_SHOWN else ""
+            lines.append(f"    {meanings[int(code)]}: member{'s' if which.size > 1 else ''} "
+                         f"{', '.join(str(k) for k in which[:NOT_OK_SHOWN])}{more}")
     mu = ds.mu_s.values
     good = np.isfinite(mu)
     if good.any():

@@ -17,7 +17,7 @@ from . import __version__
 from .device import check_device, init_warp
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
-from .parameters import (ENSEMBLE_WARNINGS, MEMBERS_NOT_OK, RECORD_PAST_END, Fronts, Model, Parameters, Record, Solver,
+from .parameters import (ENSEMBLE_WARNINGS, MEMBERS_NOT_OK, MEMBERS_NOT_OK_HINT, RECORD_PAST_END, Fronts, Model, Parameters, Record, Solver,
                          parameter_long_name, parameter_units)
 
 
@@ -192,7 +192,7 @@ def _warn_members_not_ok(ds: xr.Dataset, solver: Solver) -> None:
     parts = [f"{k} {name} ({advice[name]})" for name, k in failed.items()]
     n = ds.sizes["member"]
     warnings.warn(f"{MEMBERS_NOT_OK}: {sum(failed.values())} of {n:,} member{'' if n == 1 else 's'}: {'; '.join(parts)}; "
-                  f"their numbers: ds.member[ds.status != 0] (docs/model.md, \"Statuses\")", stacklevel=3)
+                  f"{MEMBERS_NOT_OK_HINT}", stacklevel=3)
 
 
 def _warn_record_past_end(ds: xr.Dataset, record: Record, member_offset: int = 0) -> None:
