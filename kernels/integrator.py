@@ -180,7 +180,7 @@ def team_layout(lanes: int, n_nodes: int, n_members: int, cuda: bool, sm_count: 
     if not blocked_layout(lanes, exchange, options.block_members):
         if (shared_allowed and warps_team(lanes, exchange)
                 and shared_work_stride(n_nodes, 1, max_shared - TEAM_BUFFER_BYTES)):  # one member beside the team buffer
-            return TeamLayout(False, 1, (n_nodes, 1))
+            return _padded(TeamLayout(False, 1, (n_nodes, 1)), options.shared_pad, max_shared - TEAM_BUFFER_BYTES)
         return TeamLayout(False, 1, None)
     most = 0
     if shared_allowed:
@@ -188,7 +188,19 @@ def team_layout(lanes: int, n_nodes: int, n_members: int, cuda: bool, sm_count: 
     block_members = block_members_for(n_members, sm_count, options.block_members, most or MAX_BLOCK_MEMBERS)
     if not most:
         return TeamLayout(True, block_members, None)
-    return TeamLayout(True, block_members, (n_nodes, shared_work_stride(n_nodes, block_members, max_shared)))
+    return _padded(TeamLayout(True, block_members, (n_nodes, shared_work_stride(n_nodes, block_members, max_shared))),
+                   options.shared_pad, max_shared)
+
+
+def _padded(layout: TeamLayout, pad: int, max_shared: int) -> TeamLayout:
+    """layout, where the probe WARPFRIC_TEAM_SHARED_PAD (``pad`` bytes) fits beside its shared work
+    array in max_shared bytes less SHARED_WORK_RESERVE; a ValueError naming the room otherwise."""
+    nodes, stride = layout.shared_work
+    room = max_shared - SHARED_WORK_RESERVE - N_WORK * nodes * stride * 8
+    if pad > room:
+        raise ValueError(f"WARPFRIC_TEAM_SHARED_PAD={pad} does not fit beside the shared work array of this run: "
+                         f"at most {room} bytes here")
+    return layout
 
 
 @wp.func_native(r"""

@@ -250,13 +250,13 @@ def member_zeros(shape, ft, member_major: bool):
 def allocate(ft, params, n_nodes: int, stress_gate: bool, fronts: bool,
              record_times, n_recorded: int, member_major: bool = False, method: str = "tr_bdf2",
              strength: bool = False, global_work: bool = True) -> DeviceArrays:
-    """Allocate the arrays of a launch on the current Warp device. ``params``: the members'
-    MemberParams (member,), a Warp array there (warpfric/engine.py device_member_params); arrays a scene does not need get a (.., 1, 1) placeholder;
-    member_major: the state, stages, work and gates arrays hold each member contiguously
-    (:func:`member_zeros`); method: the integrator, which sets the stage slots of K (:func:`stage_slots`);
-    strength: the strength front's per-node reductions; global_work: the work array in global memory
-    (False: a (N_WORK, 1, 1) placeholder, the kernel keeps it in shared memory: kernels/integrator.py
-    team_layout)."""
+    """Allocate the arrays of a launch on the current Warp device. ``params``: the members' MemberParams
+    (member,), a Warp array there (warpfric/engine.py device_member_params); arrays a scene does not
+    need get a (.., 1, 1) placeholder; member_major: the state, stages, work and gates arrays hold
+    each member contiguously (:func:`member_zeros`); method: the integrator, which sets the stage
+    slots of K (:func:`stage_slots`); strength: the strength front's per-node reductions;
+    global_work: the work array in global memory (False: a (N_WORK, 1, 1) placeholder, the kernel
+    keeps it in shared memory: kernels/integrator.py team_layout)."""
     n_members = params.shape[0]
     times = np.asarray(record_times if n_recorded else [0.0], dtype=np.float64)
     per_node = (n_nodes, n_members)

@@ -191,7 +191,18 @@ def test_the_size_warning_is_one_line(capsys):
     assert warned[1].startswith("warpfric: warning: members that did not end ok have NaN mu_s and fronts: 1 of 1 "
                                 "member: 1 no_peak (mu was still rising at the run's end"), err
     assert "a later end_time" in warned[1]
-    assert "their numbers: warpfric info on the output file" in warned[1] and "ds.member" not in warned[1]
+    assert "their numbers" not in warned[1] and warned[1].endswith("a later end_time)"), err  # no file: no hint
+
+
+def test_the_warning_of_members_not_ok_points_to_info_on_the_file(capsys, tmp_path):
+    out = tmp_path / "one scene.nc"
+    code, _, err = run_cli(capsys, "run", "--nodes", 11, "--end-time", 20.0001, "--device", "cpu", "--quiet",
+                           "-o", out)
+    warned = _warnings(err)
+    assert code == 1 and len(warned) == 1, err
+    assert warned[0].endswith(f"their numbers: warpfric info '{out}' (docs/model.md, \"Statuses\")"), err
+    code, stdout, _ = run_cli(capsys, "info", out)
+    assert code == 0 and "    no_peak: member 0" in stdout, stdout
 
 
 def test_the_python_api_keeps_python_warnings(capsys):

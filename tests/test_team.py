@@ -377,8 +377,14 @@ def test_work_array_memory_choice(monkeypatch):
     # the probe WARPFRIC_TEAM_SHARED_PAD: bytes reserved beside the work (a multiple of 8), no layout change
     from warpfric.kernels.integrator import team_compile_options
 
-    monkeypatch.setenv("WARPFRIC_TEAM_SHARED_PAD", "41600")
-    assert team_compile_options().shared_pad == 41_600
+    monkeypatch.setenv("WARPFRIC_TEAM_SHARED_PAD", "40000")
+    assert team_compile_options().shared_pad == 40_000
+    assert team_layout(32, 200, 10_000, True, 132, h100) == (True, 8, (200, 9))
+    room = h100 - 4096 - 13 * 200 * 9 * 8  # 41,152 bytes beside 8 members' work
+    monkeypatch.setenv("WARPFRIC_TEAM_SHARED_PAD", str(room + 8))
+    with pytest.raises(ValueError, match=f"WARPFRIC_TEAM_SHARED_PAD={room + 8} does not fit .* at most {room} bytes"):
+        team_layout(32, 200, 10_000, True, 132, h100)
+    monkeypatch.setenv("WARPFRIC_TEAM_SHARED_PAD", str(room))
     assert team_layout(32, 200, 10_000, True, 132, h100) == (True, 8, (200, 9))
     for bad in ("7", "-8", "x"):
         monkeypatch.setenv("WARPFRIC_TEAM_SHARED_PAD", bad)
@@ -415,7 +421,7 @@ def test_similar_members_are_neighbours():
     twice = {name: np.concatenate([column[:50], column[:50]]) for name, column in values.items()}
     pairs = member_order(twice, blocked=True)
     position = np.argsort(pairs)
-    np.testing.assert_array_equal(np.abs(position[:50] - position[50:]), 1)
+    np.testing.assert_array_equal(position[50:] - position[:50], 1)  # ties: the caller's order
     assert member_order(values, blocked=False) is None and member_order(values, True, "given") is None
     np.testing.assert_array_equal(member_order(values, False, "similar"), order)
     with pytest.raises(ValueError, match="WARPFRIC_MEMBER_ORDER='random'"):
@@ -473,7 +479,7 @@ def test_member_params_and_states_built_on_the_device_match_the_host_ones():
     for members in cases:
         values, _ = resolve_members(members, Parameters())
         n = values["normal_force"].shape[0]
-        with wp.ScopedDevice("cpu"):
+        with wp.ScopedDevice(DEVICE):
             params = device_member_params(values, layout).numpy()
             assert params.tobytes() == member_params(values).tobytes(), members.keys()
             slots = rng.integers(-1, 3, n).astype(np.int32)
@@ -486,6 +492,32 @@ def test_member_params_and_states_built_on_the_device_match_the_host_ones():
             states = device_member_states(n, solver, slots, layout, front_level=level, front_until=until).numpy()
             for name in expected.dtype.names:
                 np.testing.assert_array_equal(states[name], expected[name], err_msg=name)
+
+
+def test_state_snapshots_reuse_one_host_array_and_hand_the_last_over():
+    """engine.StateSnapshots: each wait fills the same host array with the states taken; final()
+    hands it over, so that a later take and wait (the velocity front's second pass) fill another."""
+    import warp as wp
+
+    from warpfric.engine import StateSnapshots, initial_states
+    from warpfric.kernels.types import IntegratorState
+    from warpfric.parameters import Solver
+
+    states = initial_states(5, Solver(), np.arange(5, dtype=np.int32))
+    device_states = wp.array(states, dtype=IntegratorState, device=DEVICE)
+    snapshot = StateSnapshots(5, DEVICE)
+    first = snapshot.wait(snapshot.take(device_states))
+    np.testing.assert_array_equal(first["record_slot"], np.arange(5))
+    states["t"] = 7.0
+    device_states.assign(wp.array(states, dtype=IntegratorState, device=DEVICE))
+    again = snapshot.wait(snapshot.take(device_states))
+    assert again is first and (first["t"] == 7.0).all()
+    kept = snapshot.final(snapshot.take(device_states))
+    states["t"] = 9.0
+    device_states.assign(wp.array(states, dtype=IntegratorState, device=DEVICE))
+    later = snapshot.wait(snapshot.take(device_states))
+    assert later is not kept and (kept["t"] == 7.0).all() and (later["t"] == 9.0).all()
+    snapshot.close()
 
 
 def test_host_copy_lands_in_the_array_it_is_given():

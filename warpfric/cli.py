@@ -33,8 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .parameters import (MEMBERS_NOT_OK_CLI_HINT, MEMBERS_NOT_OK_HINT, RELAXATION_GATES, Fronts, Model, Parameters,
-                         Solver, units_text)
+from .parameters import MEMBERS_NOT_OK_HINT, RELAXATION_GATES, Fronts, Model, Parameters, Solver, units_text
 from .progress import member_range, plural as _plural, seconds_text as _seconds
 
 
@@ -73,14 +72,19 @@ def _fail(message: str, code: int = EXIT_BAD_INPUT) -> int:
 
 
 @contextlib.contextmanager
-def one_line_warnings():
+def one_line_warnings(output: str | None = None):
     """While a command runs: each Python warning as one line on stderr, ``warpfric: warning: <message>``
-    (no file, line number or source line), each distinct message once. The filters are left as they
-    are (-W, PYTHONWARNINGS); the Python API keeps Python's usual warnings."""
+    (no file, line number or source line), each distinct message once. The warning of members not
+    ok points to ``warpfric info OUTPUT`` for their numbers where the command writes ``output``, and
+    drops the Python API's hint otherwise (a single scene prints its status). The filters are left
+    as they are (-W, PYTHONWARNINGS); the Python API keeps Python's usual warnings."""
     seen = set()
+    hint = (f"their numbers: warpfric info {shlex.quote(str(output))} (docs/model.md, \"Statuses\")"
+            if output else None)
 
     def show(message, category, filename, lineno, file=None, line=None):
-        text = " ".join(str(message).split()).replace(MEMBERS_NOT_OK_HINT, MEMBERS_NOT_OK_CLI_HINT)
+        text = " ".join(str(message).split())
+        text = text.replace(MEMBERS_NOT_OK_HINT, hint) if hint else text.replace("; " + MEMBERS_NOT_OK_HINT, "")
         if text in seen:
             return
         seen.add(text)
@@ -529,7 +533,7 @@ def main(argv=None) -> int:
     args.command_line = shlex.join(["warpfric", *argv])  # the files' history attribute
     handlers = {"run": _run, "info": _info, "plot": _plot, "sensitivity": _sensitivity}
     try:
-        with one_line_warnings():
+        with one_line_warnings(args.output if args.command == "run" else None):
             return handlers[args.command](args)
     except ValueError as err:  # bad input, or an output folder that cannot be written: one line, exit 2
         return _fail(str(err))

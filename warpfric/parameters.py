@@ -540,7 +540,6 @@ RECORD_PAST_END = "Record: recording times after a member's end are NaN"
 MEMBERS_NOT_OK = "members that did not end ok have NaN mu_s and fronts"
 # how that warning ends: where to find their numbers, in the Python API (the command line shows its own)
 MEMBERS_NOT_OK_HINT = 'their numbers: ds.member[ds.status != 0] (docs/model.md, "Statuses")'
-MEMBERS_NOT_OK_CLI_HINT = "their numbers: warpfric info on the output file (docs/model.md, \"Statuses\")"
 # the warnings simulate raises once for the whole ensemble: the runs inside it (worker processes'
 # chunks, the float32 fallback, the grid check) drop their own
 ENSEMBLE_WARNINGS = (RECORD_PAST_END, MEMBERS_NOT_OK)

@@ -17,8 +17,8 @@ from . import __version__
 from .device import check_device, init_warp
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
-from .parameters import (ENSEMBLE_WARNINGS, MEMBERS_NOT_OK, MEMBERS_NOT_OK_HINT, RECORD_PAST_END, Fronts, Model, Parameters, Record, Solver,
-                         parameter_long_name, parameter_units)
+from .parameters import (ENSEMBLE_WARNINGS, MEMBERS_NOT_OK, MEMBERS_NOT_OK_HINT, RECORD_PAST_END, Fronts, Model,
+                         Parameters, Record, Solver, parameter_long_name, parameter_units)
 
 
 def simulate(
