@@ -459,14 +459,20 @@ def test_members_taken_as_raw_records_match_fancy_indexing():
     assert not alike(np.array([1.0, 2.0])) and not alike(np.array([np.nan, np.nan]))
 
 
-def test_member_params_and_states_built_on_the_device_match_the_host_ones():
-    """engine.device_member_params and device_member_states build on the device what member_params
-    and initial_states build on the host: the same bytes, for members that differ in some
-    parameters (an infinite end_time among them: the automatic end), in none, and one alone; the
-    states with record slots, and with the velocity front's front_level and front_until."""
+@pytest.mark.parametrize("built_from", [0, 4096])
+def test_member_params_and_states_built_on_the_device_match_the_host_ones(built_from, monkeypatch):
+    """engine.device_member_params and device_member_states build on the device (from
+    DEVICE_BUILT_MIN_MEMBERS members on; 0 here: always) what member_params and initial_states
+    build on the host: the same bytes, for members that differ in some parameters (an infinite
+    end_time among them: the automatic end), in none, and one alone; the states with record slots,
+    and with the velocity front's front_level and front_until. Below the threshold they are the
+    host's, uploaded."""
     import warp as wp
 
+    import warpfric.engine as engine
     from warpfric.engine import device_member_params, device_member_states, initial_states, member_params
+
+    monkeypatch.setattr(engine, "DEVICE_BUILT_MIN_MEMBERS", built_from)
     from warpfric.kernels.integrator import make_layout_kernels
     from warpfric.members import resolve_members
     from warpfric.parameters import Parameters, Solver

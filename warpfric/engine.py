@@ -318,15 +318,23 @@ def member_params(values: dict) -> np.ndarray:
     return params
 
 
+# members from which the MemberParams and start states are built on the device (below, the host's
+# arrays are small and one upload is quicker than the device's few: ~0.2 ms a run, CPU, one member)
+DEVICE_BUILT_MIN_MEMBERS = 4096
+
+
 def device_member_params(values: dict, layout: dict):
     """The members' MemberParams as a Warp array on the current device, as member_params(values)
-    gives them, built there: the host uploads one member's parameters and the columns that differ
-    among the members (layout: the layout kernels, kernels/integrator.py; at 100,000 members the
-    host's structured array was 22 MB of fresh memory on the critical path)."""
+    gives them; from DEVICE_BUILT_MIN_MEMBERS members on built there: the host uploads one
+    member's parameters and the columns that differ among the members (layout: the layout
+    kernels, kernels/integrator.py; at 100,000 members the host's structured array was 22 MB of
+    fresh memory on the critical path)."""
     import warp as wp
 
     from warpfric.kernels.types import MemberParams
 
+    if values["normal_force"].shape[0] < DEVICE_BUILT_MIN_MEMBERS:
+        return wp.array(member_params(values), dtype=MemberParams)
     dtype = np.dtype(MemberParams.numpy_dtype())
     if any(dtype[name] != np.float64 for name in dtype.names) or dtype.itemsize != 8 * len(dtype.names):
         raise AssertionError("device_member_params: MemberParams must be float64 fields without padding")
@@ -348,13 +356,19 @@ def device_member_params(values: dict, layout: dict):
 
 def device_member_states(n_members: int, solver: Solver, record_slots: np.ndarray, layout: dict,
                          front_level: np.ndarray | None = None, front_until: np.ndarray | None = None):
-    """The members' IntegratorStates at t = 0 as initial_states gives them, a Warp array built on
-    the current device from one member's state: record_slots (member,), and front_level (m/s) and
-    front_until (s) (member,) where given (the velocity front's arrival pass)."""
+    """The members' IntegratorStates at t = 0 as initial_states gives them, a Warp array on the
+    current device (from DEVICE_BUILT_MIN_MEMBERS members on built there from one member's state):
+    record_slots (member,), and front_level (m/s) and front_until (s) (member,) where given (the
+    velocity front's arrival pass)."""
     import warp as wp
 
     from warpfric.kernels.types import IntegratorState
 
+    if n_members < DEVICE_BUILT_MIN_MEMBERS:
+        states = initial_states(n_members, solver, record_slots)
+        if front_level is not None:
+            states["front_level"], states["front_until"] = front_level, front_until
+        return wp.array(states, dtype=IntegratorState)
     start = wp.array(initial_states(1, solver, np.full(1, -1, np.int32)), dtype=IntegratorState)
     states = wp.empty(n_members, dtype=IntegratorState)
     given = front_level is not None
