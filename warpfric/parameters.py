@@ -262,7 +262,7 @@ class Solver:
     method:           the time integrator (docs/model.md, "Time integration"): 'tr_bdf2' (default; order 2,
                       3 stages) or 'esdirk4' (ESDIRK4(3)6L[2]SA of Kennedy & Carpenter 2016: order 4,
                       6 stages, fewer Newton iterations at tight tolerances). 'esdirk4' runs
-                      without fronts (Fronts: use 'tr_bdf2').
+                      the contact and strength fronts, not the velocity front (use 'tr_bdf2').
     rtol:             relative local error tolerance of the adaptive step (1e-12 .. 1e-1).
                       The absolute tolerance of each variable kind is rtol times its natural scale
                       (docs/model.md, "Time integration").
