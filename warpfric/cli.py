@@ -332,9 +332,10 @@ def summary(ds, name: str) -> str:
         lines.append(f"    {pname:<22} {np.unique(v).size:>6} values in [{v.min():.6g}, {v.max():.6g}]"
                      + (f" {units}" if units else " (dimensionless)"))
     meanings = ds.status.attrs["flag_meanings"].split()
-    counts = {meanings[int(k)]: int((ds.status.values == k).sum()) for k in np.unique(ds.status.values)}
+    codes = np.unique(ds.status.values)
+    counts = {meanings[int(k)]: int((ds.status.values == k).sum()) for k in codes}
     lines.append("  status: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
-    for code in np.unique(ds.status.values):
+    for code in codes:
         if int(code) != 0:  # the members not ok, by number (the first NOT_OK_SHOWN of each status)
             which = numbers[ds.status.values == code]
             more = f" and {which.size - NOT_OK_SHOWN:,} more" if which.size > NOT_OK_SHOWN else ""

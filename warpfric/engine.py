@@ -304,17 +304,26 @@ def confirmed_strength_peaks(strength, arrival, arrival_error, final_time: np.nd
     return np.where(confirmed, peak, np.nan)
 
 
+def param_columns(values: dict) -> dict:
+    """The MemberParams fields of resolved parameters (name -> (member,) float64), as columns: the
+    parameters' own, end_time capped at max_end_time and auto_end (1 where end_time is None (inf):
+    the automatic end). Fields not given stay 0 in member_params."""
+    from warpfric.kernels.types import MemberParams
+
+    columns = {name: values[name] for name in MemberParams.numpy_dtype()["names"] if name in values}
+    columns["end_time"] = np.minimum(values["end_time"], values["max_end_time"])
+    columns["auto_end"] = np.isinf(values["end_time"]).astype(np.float64)
+    return columns
+
+
 def member_params(values: dict) -> np.ndarray:
-    """Resolved parameters (name -> (member,) float64) -> MemberParams as a structured array.
-    end_time None (inf) becomes the automatic end, capped at max_end_time."""
+    """Resolved parameters (name -> (member,) float64) -> MemberParams as a structured array
+    (param_columns)."""
     from warpfric.kernels.types import MemberParams
 
     params = np.zeros(values["normal_force"].shape[0], dtype=MemberParams.numpy_dtype())
-    for name in params.dtype.names:
-        if name in values:
-            params[name] = values[name]
-    params["end_time"] = np.minimum(values["end_time"], values["max_end_time"])
-    params["auto_end"] = np.isinf(values["end_time"]).astype(np.float64)
+    for name, column in param_columns(values).items():
+        params[name] = column
     return params
 
 
@@ -333,16 +342,14 @@ def device_member_params(values: dict, layout: dict):
 
     from warpfric.kernels.types import MemberParams
 
-    if values["normal_force"].shape[0] < DEVICE_BUILT_MIN_MEMBERS:
+    n_members = values["normal_force"].shape[0]
+    if n_members < DEVICE_BUILT_MIN_MEMBERS:
         return wp.array(member_params(values), dtype=MemberParams)
     dtype = np.dtype(MemberParams.numpy_dtype())
     if any(dtype[name] != np.float64 for name in dtype.names) or dtype.itemsize != 8 * len(dtype.names):
         raise AssertionError("device_member_params: MemberParams must be float64 fields without padding")
-    n_members = values["normal_force"].shape[0]
     first = member_params({name: np.asarray(column)[:1] for name, column in values.items()})
-    columns = {name: values[name] for name in dtype.names if name in values}
-    columns["end_time"] = np.minimum(values["end_time"], values["max_end_time"])
-    columns["auto_end"] = np.isinf(values["end_time"]).astype(np.float64)
+    columns = param_columns(values)
     varying = [name for name in dtype.names if name in columns and not alike(columns[name])]
     params = wp.empty(n_members, dtype=MemberParams)
     rows = wp.array(ptr=params.ptr, shape=(n_members, len(dtype.names)), dtype=wp.float64, device=params.device)

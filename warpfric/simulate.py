@@ -391,11 +391,10 @@ def _yield_variables(status: np.ndarray, yield_time: np.ndarray, yield_gate: np.
     NaN in the rows of failed members (a new array would cost ~50 ms of fresh pages at 100,000
     members)."""
     broken = (status != 0) & (status != meanings.index("no_peak"))
-    yt = yield_time
     if broken.any():  # a run cut short still has real opening times
-        yt[broken] = np.nan
+        yield_time[broken] = np.nan
     return {
-        "yield_time": (("member", "x"), yt, {
+        "yield_time": (("member", "x"), yield_time, {
             "units": "s", "long_name": "time at which the asperity-level stress |tau_f|/A first reached tau_c "
             "(the yield gate opened; NaN: never)"}),
         "yield_gate": (("member", "x"), yield_gate, {
