@@ -27,6 +27,7 @@ gate, which refuses it (docs/model.md, "Precision").
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import platform
@@ -35,8 +36,11 @@ import time
 from pathlib import Path
 
 import numpy as np
+import warp as wp
 
 import warpfric as wf
+from warpfric.engine import choose_lanes
+
 
 def reference_path(gate: str, nodes: int = 200) -> str:
     """The gate-less reference keeps its original name (made before the gate existed); N other than
@@ -70,8 +74,6 @@ def profiler(on: bool, what: str):
     if on:
         import ctypes
 
-        import warp as wp
-
         wp.synchronize()
         getattr(ctypes.CDLL("libcuda.so.1"), "cuProfilerStart" if what == "start" else "cuProfilerStop")()
 
@@ -94,8 +96,6 @@ def write_launch_log(path: str, row: dict, values: dict, model, solver, fronts, 
         engine.LAUNCH_LOG = None
     resident = None
     if str(device).startswith("cuda"):
-        import warp as wp
-
         # one-warp blocks, register-limited to 8 per SM (255 registers per thread; ncu)
         resident = wp.get_device(device).sm_count * 8
     keys = ("members", "nodes", "lanes", "relaxation_gate", "fronts", "steps_per_launch", "device", "commit")
@@ -148,8 +148,6 @@ def main(argv=None):
                          "view, studies/stall_sites.py); a kernel of its own, same code")
     args = ap.parse_args(argv)
     if args.lineinfo:
-        import warp as wp
-
         wp.config.lineinfo = True
     device = args.device or wf.default_device()
     n_check = 16
@@ -185,11 +183,19 @@ def main(argv=None):
             continue  # the cooperative kernel is float64 only
         solver = wf.Solver(nodes=args.nodes, dtype=dtype, rtol=args.rtol, lanes=lanes, predict_switches=predict == "on",
                            method=method, **({} if spl is None else dict(steps_per_launch=spl)))
-        warm = wf.simulate(members(1), scene=wf.Parameters(end_time=20.01), model=model, solver=solver, fronts=fronts,
-                           device=device)  # compile
-        build_s = float(warm.attrs.get("kernel_build_time_s", float("nan")))
-        print(f"kernel build (compile, or load from Warp's cache): {build_s:.1f} s", flush=True)
+        build_s_of = {}  # lanes -> the warm-up's kernel build time (s)
         for m in args.members:
+            # compile (or load) the kernel this member count runs: the automatic team size depends on
+            # the members (one member takes a wider team than 10,000), so a warm-up of one member
+            # alone would leave the timed run of another size to compile its kernel
+            lanes_m = choose_lanes(solver, device, m, wp.get_device(device).sm_count if device.startswith("cuda") else 0)
+            if lanes_m not in build_s_of:
+                warm = wf.simulate(members(1), scene=wf.Parameters(end_time=20.01), model=model,
+                                   solver=dataclasses.replace(solver, lanes=lanes_m), fronts=fronts, device=device)
+                build_s_of[lanes_m] = float(warm.attrs.get("kernel_build_time_s", float("nan")))
+                print(f"kernel build, {lanes_m} lanes (compile, or load from Warp's cache): {build_s_of[lanes_m]:.1f} s",
+                      flush=True)
+            build_s = build_s_of[lanes_m]
             best = None
             for _ in range(args.repeat):
                 profiler(args.cuda_profile_range, "start")
