@@ -17,7 +17,6 @@ the free edges, so the elastic force sums to zero over the pad exactly.
 
 
 import functools
-import os
 from typing import Any
 
 import warp as wp
@@ -27,9 +26,6 @@ from .types import MemberParams
 FLOAT32_VELOCITY_FLOOR = 1.0e-4  # m/s, smallest velocity reference of the error weights in float32
 SLIDING_NEWTON_ITERATIONS = 12  # Newton iterations on the gate of a node sliding on the yield surface
 SLIDING_GATE_TOL = 1.0e-10  # converged gate update
-# benchmark probe (docs/performance.md, "Tried and not kept"): the friction law's two logarithms in
-# float32, a bound on what a faster float64 logarithm could save (not accurate: timing only)
-FLOAT32_LOG_PROBE = os.environ.get("WARPFRIC_PROBE_FLOAT32_LOG", "") == "1"
 
 # ------------------------------------------------------------------------------------------------
 # Arithmetic
@@ -475,13 +471,6 @@ def make_friction_at_gate(ft, model, Coeffs):
     over_den = make_over_den(ft)
 
     @wp.func
-    def law_log(x: ft):
-        """log(x), or with the benchmark probe FLOAT32_LOG_PROBE log(x) in float32."""
-        if wp.static(FLOAT32_LOG_PROBE):
-            return ft(wp.log(wp.float32(x)))
-        return wp.log(x)
-
-    @wp.func
     def friction_at_gate(c: Coeffs, sigma: ft, s: ft, z_tau: ft, z_phi: ft, g: ft, gate: ft):
         """The closed-form stage solution of the friction law at one node for a given slip rate s and
         gate (see interface_friction), as a Friction (d_slip through phi and tau_el, gate fixed)."""
@@ -501,7 +490,7 @@ def make_friction_at_gate(ft, model, Coeffs):
         if sigma >= ft(0.0):
             contact = ft(1.0)
         sigma_c = sigma * contact
-        aging = ft(1.0) + c.b * law_log(ft(1.0) + over_den(phi, c.phi0, c.inv_phi0))
+        aging = ft(1.0) + c.b * wp.log(ft(1.0) + over_den(phi, c.phi0, c.inv_phi0))
         age_den = c.phi0 + phi  # s
         slip_den = c.vstar + a_s  # m/s
         inv_dens = ft(1.0)  # float64 with the viscous term: 1/(age_den*slip_den), one division for both
@@ -523,7 +512,7 @@ def make_friction_at_gate(ft, model, Coeffs):
         dtf_darea = dtel_darea
         dtf_ds = dtel_ds
         if wp.static(viscous):
-            lg = law_log(ft(1.0) + over_den(a_s, c.vstar, c.inv_vstar))
+            lg = wp.log(ft(1.0) + over_den(a_s, c.vstar, c.inv_vstar))
             tau_f += c.eta_vstar * area * sg * lg
             dtf_darea += c.eta_vstar * sg * lg
             if wp.static(ft == wp.float64):
