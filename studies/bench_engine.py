@@ -20,8 +20,11 @@ kernel, float64 only; default: the automatic choice). --predict-switches: Solver
 values to time (stress gate; default: on). --methods: Solver.method values to time. --steps-per-launch: Solver.steps_per_launch values.
 --launch-log: where the kernel time goes, launch by launch (one more, synchronised run per timing).
 --cuda-profile-range: only the timed runs are profiled by `ncu --profile-from-start off`.
---lineinfo: the kernels carry line information (for Nsight Compute's source view). Compilation is excluded (a warm-up run compiles each kernel first). float32 is skipped with the stress
-gate, which refuses it (docs/model.md, "Precision").
+--lineinfo: the kernels carry line information (for Nsight Compute's source view). Compilation is
+excluded: before the first timed run of each kernel, a warm-up run of the same members to
+t = 20.01 s compiles it (or loads it from Warp's cache); the kernel depends on the member count
+through the team size and the block's layout. float32 is skipped with the stress gate, which
+refuses it (docs/model.md, "Precision").
 """
 
 from __future__ import annotations
@@ -57,6 +60,19 @@ def members(m: int, seed: int = 0) -> dict:
     }
 
 
+def kernel_key(solver, device: str, m: int) -> tuple:
+    """What of the integrate kernel a run of m members decides: its lanes and its shared work
+    array's (nodes, member stride), as warpfric.engine.run chooses them."""
+    from warpfric.kernels.integrator import team_layout
+
+    cuda = device.startswith("cuda")
+    gpu = wp.get_device(device) if cuda else None
+    lanes = choose_lanes(solver, device, m, gpu.sm_count if cuda else 0)
+    layout = team_layout(lanes, solver.nodes, m, cuda, gpu.sm_count if cuda else 1,
+                         gpu.max_shared_memory_per_block if cuda else 0)
+    return lanes, layout.shared_work
+
+
 def tree_commit() -> str:
     """The commit of the timed tree for a result row: WARPFRIC_COMMIT, which names the tree where
     there is no git (a GPU host that got a copy of it), else git's short HEAD, else "unknown"."""
@@ -84,8 +100,6 @@ def write_launch_log(path: str, row: dict, values: dict, model, solver, fronts, 
     JSON lines (the timed row's settings, then per launch: kernel_s, running_members, attempts,
     max_member_attempts, newton_iterations), and a one-line summary: the kernel time, and the share
     of it spent in launches where fewer members ran than the GPU holds at once (tail)."""
-    import dataclasses
-
     from warpfric import engine
 
     engine.LAUNCH_LOG = []
@@ -183,19 +197,19 @@ def main(argv=None):
             continue  # the cooperative kernel is float64 only
         solver = wf.Solver(nodes=args.nodes, dtype=dtype, rtol=args.rtol, lanes=lanes, predict_switches=predict == "on",
                            method=method, **({} if spl is None else dict(steps_per_launch=spl)))
-        build_s_of = {}  # lanes -> the warm-up's kernel build time (s)
+        build_s_of = {}  # the kernel's (lanes, shared work array) -> the warm-up's kernel build time (s)
         for m in args.members:
-            # compile (or load) the kernel this member count runs: the automatic team size depends on
-            # the members (one member takes a wider team than 10,000), so a warm-up of one member
-            # alone would leave the timed run of another size to compile its kernel
-            lanes_m = choose_lanes(solver, device, m, wp.get_device(device).sm_count if device.startswith("cuda") else 0)
-            if lanes_m not in build_s_of:
-                warm = wf.simulate(members(1), scene=wf.Parameters(end_time=20.01), model=model,
-                                   solver=dataclasses.replace(solver, lanes=lanes_m), fronts=fronts, device=device)
-                build_s_of[lanes_m] = float(warm.attrs.get("kernel_build_time_s", float("nan")))
-                print(f"kernel build, {lanes_m} lanes (compile, or load from Warp's cache): {build_s_of[lanes_m]:.1f} s",
-                      flush=True)
-            build_s = build_s_of[lanes_m]
+            # compile (or load) the kernel this member count runs: the automatic team size and the
+            # block's shared work array (its member stride) depend on the members, so a warm-up of
+            # one member would leave a timed run of another size to compile its own kernel
+            key = kernel_key(solver, device, m)
+            if key not in build_s_of:
+                warm = wf.simulate(members(m), scene=wf.Parameters(end_time=20.01), model=model, solver=solver,
+                                   fronts=fronts, device=device, progress=False)
+                build_s_of[key] = float(warm.attrs.get("kernel_build_time_s", float("nan")))
+                print(f"kernel build, {key[0]} lanes, shared work {key[1]} (compile, or load from Warp's cache): "
+                      f"{build_s_of[key]:.1f} s", flush=True)
+            build_s = build_s_of[key]
             best = None
             for _ in range(args.repeat):
                 profiler(args.cuda_profile_range, "start")
