@@ -42,7 +42,7 @@ import numpy as np
 import warp as wp
 
 import warpfric as wf
-from warpfric.engine import choose_lanes
+from warpfric.engine import run_layout
 
 
 def reference_path(gate: str, nodes: int = 200) -> str:
@@ -62,14 +62,8 @@ def members(m: int, seed: int = 0) -> dict:
 
 def kernel_key(solver, device: str, m: int) -> tuple:
     """What of the integrate kernel a run of m members decides: its lanes and its shared work
-    array's (nodes, member stride), as warpfric.engine.run chooses them."""
-    from warpfric.kernels.integrator import team_layout
-
-    cuda = device.startswith("cuda")
-    gpu = wp.get_device(device) if cuda else None
-    lanes = choose_lanes(solver, device, m, gpu.sm_count if cuda else 0)
-    layout = team_layout(lanes, solver.nodes, m, cuda, gpu.sm_count if cuda else 1,
-                         gpu.max_shared_memory_per_block if cuda else 0)
+    array's (nodes, member stride), as warpfric.engine.run chooses them (run_layout)."""
+    lanes, layout = run_layout(solver, device, m)
     return lanes, layout.shared_work
 
 

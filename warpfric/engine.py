@@ -179,6 +179,22 @@ def choose_lanes(solver: Solver, device: str, members: int | None = None, sm_cou
     return 1
 
 
+def run_layout(solver: Solver, device: str, n_members: int):
+    """(lanes, TeamLayout) of a run of n_members on ``device``: choose_lanes, then the members per
+    block and the work array's memory (kernels/integrator.py team_layout). The integrate kernel a
+    run builds depends on both (its lanes and its shared work array)."""
+    import warp as wp
+
+    from warpfric.kernels.integrator import team_layout
+
+    cuda = str(device).startswith("cuda")
+    gpu = wp.get_device(device) if cuda else None
+    sm_count = gpu.sm_count if cuda else 1
+    lanes = choose_lanes(solver, device, n_members, sm_count)
+    return lanes, team_layout(lanes, solver.nodes, n_members, cuda, sm_count,
+                              gpu.max_shared_memory_per_block if cuda else 0)
+
+
 def slower_float32(solver: Solver, device: str) -> str | None:
     """Why float32 is the slower precision for this run, or None: on a CUDA device float32 runs the
     thread-per-member kernel (the cooperative kernel is compiled for float64 only), where float64
@@ -676,16 +692,16 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     t_import = time.perf_counter()
     import warp as wp
 
-    from warpfric.kernels.integrator import block_threads, get_integrator, team_layout
+    from warpfric.kernels.integrator import block_threads, get_integrator
     from warpfric.kernels.types import FRONT_EVENTS, G_GATE, N_COMPONENTS, S_MAX, S_RATIO1, IntegratorState, allocate
 
     import_s = time.perf_counter() - t_import  # the kernels' Python modules (their first import: ~70 ms)
     n_members = values["normal_force"].shape[0]
     n = solver.nodes
     cuda = str(device).startswith("cuda")
-    gpu = wp.get_device(device) if cuda else None
-    sm_count = gpu.sm_count if cuda else 1
-    lanes = choose_lanes(solver, device, n_members, sm_count)
+    sm_count = wp.get_device(device).sm_count if cuda else 1
+    # threads per member, members per block and the work array's memory
+    lanes, layout = run_layout(solver, device, n_members)
     team = lanes > 1
     if team and not cuda:
         warnings.warn(f"Solver(lanes={lanes}) on {device}: the cooperative kernel runs there on Warp's experimental "
@@ -694,8 +710,6 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     note = slower_float32(solver, device)
     if note is not None:
         warnings.warn(note, stacklevel=3)
-    # members per block and the work array's memory (kernels/integrator.py team_layout)
-    layout = team_layout(lanes, n, n_members, cuda, sm_count, gpu.max_shared_memory_per_block if cuda else 0)
     # before the kernels are built, so that a bad WARPFRIC_MEMBER_ORDER is refused first
     order = member_order(values, alike_blocks(layout, n_members, sm_count), os.environ.get("WARPFRIC_MEMBER_ORDER"))
     if order is not None:  # the kernel's order; the outputs go back into the caller's on their way to the host
