@@ -1,4 +1,5 @@
-"""The profile readers of studies/ (sass_sites.py, stall_sites.py) on small hand-written inputs:
+"""The profile readers of studies/ (sass_sites.py, stall_sites.py, stage_registers.py) on small
+hand-written inputs:
 nvdisasm's line-info comments give each instruction its call sites and its own source line, and
 Nsight Compute's per-instruction warp samples are summed over them. The real inputs need a GPU
 host (docs/performance.md, "Where the warps wait")."""
@@ -11,6 +12,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "studies"))
 import sass_sites  # noqa: E402
+import stage_registers  # noqa: E402
 import stall_sites  # noqa: E402
 
 # three instructions, with nvdisasm -g -gi's comments (innermost frame first, the kernel's own line
@@ -235,3 +237,23 @@ SASS_STACK = """\
 
 def test_stack_bytes_by_the_line_of_the_stored_value():
     assert sass_sites.stack_bytes(SASS_STACK) == {("newton.py", 8): 8, ("esdirk.py", 4): 5, ("integrator.py", 2): 16}
+
+
+# cuobjdump -res-usage of a cubin with the kernel and one function kept out of line (the format of
+# CUDA 13.4's cuobjdump)
+RES_USAGE = """\
+
+Resource usage:
+ Common:
+  GLOBAL:154 CONSTANT[3]:5720 CONSTANT[4]:336
+ Function friction_at_gate_0:
+  REG:96 STACK:48 SHARED:0 LOCAL:0 CONSTANT[0]:0 TEXTURE:0 SURFACE:0 SAMPLER:0
+ Function piece_kernel__locals__stage_piece_4bf00729_cuda_kernel_forward:
+  REG:128 STACK:1256 SHARED:25856 LOCAL:0 CONSTANT[0]:1520 TEXTURE:0 SURFACE:0 SAMPLER:0
+"""
+
+
+def test_stage_registers_reads_the_kernels_registers_and_stack():
+    assert stage_registers.parse_res_usage(RES_USAGE) == (128, 1256)
+    with pytest.raises(RuntimeError, match="no REG/STACK line"):
+        stage_registers.parse_res_usage("Resource usage:\n Common:\n  GLOBAL:0\n")
