@@ -16,8 +16,10 @@ derivatives) takes, all SMs together, and what the 10,000-member benchmark's row
 that rate: 1,094.8 Newton iterations a member (studies/results/h100/targets_88e8bd2.jsonl, mean
 over members) x 200 nodes x 10,000 members = 2.19e9 node rows, and ~2 converged stages an
 attempt, 389.5 attempts a member: 1.56e9 nodes' stage derivatives, half of them a step's last stage
-(derivatives: with the stress gate's switch test) and half the stage inside it (derivatives_mid).
-A timing, not a test.
+(derivatives: with the stress gate's switch test) and half the stage inside it (derivatives_mid);
+NaN below 1,000 members, whose launches time their latency, not the GPU's throughput (one member's
+pieces are timed by Nsight Compute's kernel durations instead: docs/performance.md). A timing, not
+a test.
 """
 
 import argparse
@@ -37,6 +39,7 @@ from stage_registers import piece_kernel  # noqa: E402
 
 BENCH_ROWS = 1094.8 * 200 * 10_000  # node rows of the 10,000-member benchmark (module docstring)
 BENCH_DERIVATIVES = 2 * 389.5 * 200 * 10_000  # its nodes' stage derivatives (about)
+BULK_MEMBERS = 1_000  # fewer members: no benchmark time (NaN), the launch is not a throughput
 
 
 def synthetic_state(ft, arrays, n_members: int, n: int):
@@ -69,7 +72,7 @@ def main(argv=None):
     ap.add_argument("--nodes", type=int, default=200)
     ap.add_argument("--lanes", type=int, nargs="+", default=[32, 64])
     ap.add_argument("--caps", type=int, nargs="+", default=[255, 200, 168, 128])
-    ap.add_argument("--pieces", nargs="+", default=["rows", "derivatives"], choices=["rows", "derivatives", "derivatives_mid"])
+    ap.add_argument("--pieces", nargs="+", default=["rows", "derivatives"], choices=["rows", "derivatives", "derivatives_mid", "start"])
     ap.add_argument("--launches", type=int, default=20)
     ap.add_argument("--jsonl", default=None, help="append a JSON line per row")
     args = ap.parse_args(argv)
@@ -99,7 +102,9 @@ def main(argv=None):
           f"{args.launches} launches a row")
     print(f"{'piece':>12s} {'lanes':>5s} {'cap':>4s} {'launch ms':>10s} {'ps a node':>10s} {'bench s':>8s}")
     for piece in args.pieces:
-        total = BENCH_ROWS if piece == "rows" else BENCH_DERIVATIVES / 2  # a step's last stage, or the other
+        # the benchmark's evaluations of the piece: the rows; the derivatives of a step's last
+        # stage, or of the other; none of the start (every launch's fixed cost: NaN)
+        total = {"rows": BENCH_ROWS, "start": float("nan")}.get(piece, BENCH_DERIVATIVES / 2)
         for lanes in args.lanes:
             for cap in args.caps:
                 kernel = piece_kernel(piece, lanes, cap, model)
@@ -121,9 +126,12 @@ def main(argv=None):
                 per_launch = (time.perf_counter() - start) / args.launches
                 nodes = args.members * args.nodes
                 checksum = float(np.abs(result.numpy()).sum())
+                # the benchmark's time at this rate: a rate of the bulk only (a launch of fewer
+                # members waits on its own latency and its launch, not on the GPU's throughput)
+                bench_s = per_launch / nodes * total if args.members >= BULK_MEMBERS else float("nan")
                 row = dict(piece=piece, device=wp.get_device(args.device).name, members=args.members,
                            nodes=args.nodes, lanes=lanes, max_registers=cap, launch_s=per_launch,
-                           ps_per_node=per_launch / nodes * 1e12, bench_s=per_launch / nodes * total,
+                           ps_per_node=per_launch / nodes * 1e12, bench_s=bench_s,
                            checksum_finite=bool(np.isfinite(checksum)))
                 print(f"{piece:>12s} {lanes:>5d} {cap:>4d} {per_launch * 1e3:10.3f} {row['ps_per_node']:10.2f} "
                       f"{row['bench_s']:8.3f}" + ("" if row["checksum_finite"] else "  (non-finite result)"),

@@ -26,6 +26,9 @@ once, from a member's state as the kernel holds it:
                  built as the pieces are: a block a member, the work array in global memory
                  (WARPFRIC_TEAM_BLOCK_MEMBERS=1, WARPFRIC_TEAM_SHARED_WORK=0; a run's default
                  kernel, eight members a block with the work in shared memory, keeps less stack)
+    start        what every piece does before its own code (the member's state and parameters
+                 loaded, its coefficients derived): a launch's fixed cost, to subtract from a
+                 piece's kernel time where one member's pieces are timed
 
 Every piece is compiled ahead of time for sm_<arch> (Warp's NVRTC, no GPU or driver needed) with
 the register cap given (cuda_max_registers; 255 is the H100's own limit), and its registers and
@@ -48,7 +51,7 @@ import warpfric as wf  # noqa: E402
 from sass_sites import tool  # noqa: E402
 
 RES_USAGE = re.compile(r"REG:(\d+)\s+STACK:(\d+)")
-PIECES = ("rows", "rows_table", "newton", "derivatives", "derivatives_mid", "step", "accept", "kernel")
+PIECES = ("rows", "rows_table", "newton", "derivatives", "derivatives_mid", "step", "accept", "kernel", "start")
 
 
 def piece_kernel(piece: str, lanes: int, cap: int, model):
@@ -121,6 +124,12 @@ def piece_kernel(piece: str, lanes: int, cap: int, model):
                                      + row.col_tilt + row.e1 + row.e2 + row.d11 + row.d12 + row.d21 + row.d22
                                      + row.c1_left + row.c1_center + row.c1_right + row.c2_left + row.c2_center
                                      + row.c2_right + row.kink)
+        elif wp.static(code == 8):  # start
+            out = wp.float64(c.MH + c.M_over_H + c.lam + c.G + c.two_G_over_H + c.rhoH + c.damping + c.kif + c.Kh
+                             + c.inv_hardness + c.eta_vstar + c.vstar + c.inv_vstar + c.b + c.phi0 + c.inv_phi0
+                             + c.inv_D + c.tau_c + c.v0 + c.dx + c.inv_dx + c.L + c.h_arm + c.tau_scale + c.u_scale
+                             + c.v_scale + c.phi_scale + c.delta_scale + c.tilt_scale + g + delta0 + tilt)
+            out += wp.float64(s1 + s2 + s3)
         elif wp.static(code == 0):  # rows
             total = ft(0.0)
             for i in range(first_node, end_node):
