@@ -127,6 +127,16 @@ def test_a_parameter_set_in_scene_and_swept_is_refused(tmp_path, sweep, where):
         assert w in str(err.value), (w, str(err.value))
 
 
+def test_a_scene_holds_one_value_a_parameter():
+    """A list in Parameters was accepted and failed later inside simulate without the parameter's name."""
+    with pytest.raises(ValueError, match="parameter 'normal_force': value \\[1000.0, 2000.0\\] is not a single number.*"
+                                         "simulate\\(\\{'normal_force'"):
+        wf.Parameters(normal_force=[1000.0, 2000.0])
+    with pytest.raises(ValueError, match="parameter 'eccentricity': value .* is not a single number"):
+        wf.Parameters(eccentricity=np.array([0.1]))
+    assert wf.Parameters(normal_force=np.float64(1500.0), eccentricity=0).normal_force == 1500.0
+
+
 def test_ragged_members_window_and_event_off_name_what_is_wrong():
     with pytest.raises(ValueError, match="parameter 'eccentricity': value .* is not a rectangular array"):
         simulate({"eccentricity": [[0.1], [0.1, 0.2]]})

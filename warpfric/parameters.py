@@ -110,6 +110,11 @@ class Parameters:
         for f in dataclasses.fields(self):
             value = resolve_value(f.name, getattr(self, f.name))
             if value is not None:
+                if value.ndim != 0:  # a scene is one pad: values per member go in simulate's members
+                    raise ValueError(
+                        f"parameter {f.name!r}: value {getattr(self, f.name)!r} is not a single number; a scene "
+                        f"(Parameters) holds one value a parameter: give values per member in simulate's members, "
+                        f"e.g. simulate({{{f.name!r}: [...]}}, scene=...)")
                 validate_value(f.name, value)
 
 
