@@ -140,3 +140,39 @@ def test_output_not_in_the_file(tmp_path, capsys):
     code = main(["sensitivity", str(path), "--output", "v_sideways"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and "v_sideways" in err[0] and "available: " in err[0] and "y" in err[0]
+
+
+def test_results_are_not_replaced_without_overwrite_and_the_ensemble_never(tmp_path, capsys):
+    """`warpfric sensitivity` replaced its result, its figure and even the ensemble it read (-o on
+    the input) without a word, and a missing folder ended in a traceback."""
+    ds = ishigami_dataset(n=64)
+    ds.attrs["warpfric_complete"] = 1
+    path = tmp_path / "ish.nc"
+    ds.to_netcdf(path)
+    result, figure = tmp_path / "ish_sensitivity.nc", tmp_path / "ish_sensitivity.png"
+
+    def run(*extra):
+        code = main(["sensitivity", str(path), "--output", "y", *extra])
+        return code, capsys.readouterr().err.strip().splitlines()
+
+    assert run()[0] == 0 and result.exists() and figure.exists()
+    first = result.stat().st_mtime_ns, figure.read_bytes()
+    code, err = run()
+    assert code == 2 and len(err) == 1 and "ish_sensitivity.nc' exists; pass --overwrite" in err[0], err
+    assert (result.stat().st_mtime_ns, figure.read_bytes()) == first
+    figure.unlink()  # the figure alone, left from an earlier run, is refused the same
+    result.rename(tmp_path / "kept.nc")
+    figure.write_bytes(b"an older figure")
+    code, err = run()
+    assert code == 2 and "ish_sensitivity.png' exists" in err[0] and not result.exists(), err
+    code, err = run("-o", str(path), "--overwrite")
+    assert code == 2 and len(err) == 1 and "is the ensemble being analysed" in err[0], err
+    with xr.open_dataset(path) as kept:
+        assert kept.y.size == ds.y.size and DESIGN_ATTR in kept.attrs
+    code, err = run("-o", str(tmp_path / "no_folder" / "x.nc"))
+    assert code == 2 and len(err) == 1 and "does not exist" in err[0], err
+    code, err = run("--overwrite")
+    assert code == 0 and result.exists() and figure.read_bytes() != b"an older figure"
+    assert not list(tmp_path.glob("*.tmp*"))
+    with xr.open_dataset(result) as res:
+        assert "S1" in res and list(res.output.values) == ["y"]

@@ -4,6 +4,7 @@
   warpfric info OUT.nc [MORE.nc ...]
   warpfric plot OUT.nc [--outdir DIR]
   warpfric sensitivity OUT.nc [--output mu_s --output v_middle ...] [--on-failure refuse|fill-mean]
+                       [-o RESULT.nc] [--overwrite]
 
 Without a sweep file, ``run`` simulates the paper's default scene (one member, F = 1000 N, e = 0,
 changeable with --normal-force, --eccentricity, --disc-velocity, ...) and prints mu_s and the front
@@ -372,8 +373,10 @@ def _plot(args) -> int:
     from .io import open_ensemble
     from .plots import quick_look
 
-    ds = open_ensemble(args.file)
     outdir = Path(args.outdir) if args.outdir else Path(args.file).with_suffix("")
+    if outdir.exists() and not outdir.is_dir():
+        raise UsageError(f"figure folder {str(outdir)!r} is a file; give another with --outdir DIR")
+    ds = open_ensemble(args.file)
     outdir.mkdir(parents=True, exist_ok=True)
     for path in quick_look(ds, outdir):
         print(f"wrote {path}")
@@ -384,11 +387,22 @@ def _sensitivity(args) -> int:
     from .io import open_ensemble
     from .sensitivity import analyse, bar_plot
 
-    ds = open_ensemble(args.file)
+    from .io import replace_atomically
+    from .runner import check_output_name
+
+    source = Path(args.file)
+    out = Path(args.out) if args.out else source.with_name(source.stem + "_sensitivity.nc")
+    figure = out.with_suffix(".png")
+    check_output_name(out)
+    if out.exists() and source.exists() and out.samefile(source):
+        raise UsageError(f"output {str(out)!r} is the ensemble being analysed; give another -o OUT.nc")
+    for path in (out, figure):
+        if path.exists() and not args.overwrite:
+            raise UsageError(f"output {str(path)!r} exists; pass --overwrite to replace it")
+    ds = open_ensemble(source)
     res = analyse(ds, outputs=tuple(args.output or ["mu_s"]), on_failure=args.on_failure, log=args.log)
-    out = Path(args.out) if args.out else Path(args.file).with_name(Path(args.file).stem + "_sensitivity.nc")
-    res.to_netcdf(out)
-    bar_plot(res, out.with_suffix(".png"))
+    replace_atomically(out, res.to_netcdf)
+    replace_atomically(figure, lambda tmp: bar_plot(res, tmp), suffix=".png")
     for o in res.output.values:
         r = res.sel(output=o)
         print(f"{'log ' if args.log else ''}{o}: ({int(r.filled_members)} members filled with the mean)")
@@ -508,6 +522,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, set]:
         help="members that failed or lack an output: refuse (default) or replace by the mean")
     add(sens, "--log", action="store_true", help="analyse the log of each output (heavy-tailed outputs: front speeds)")
     add(sens, "-o", "--out", default=None, help="result file (default OUT_sensitivity.nc, and .png)")
+    add(sens, "--overwrite", action="store_true", help="replace an existing result file and figure")
     return parser, value_options
 
 

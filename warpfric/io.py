@@ -538,15 +538,31 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
     earlier = out.attrs.get("history", "")
     out.attrs["history"] = _history_line(command) + ("\n" + earlier if earlier else "")
     root, recorded = _to_file_layout(out, run_id)
-    # a name of its own per writer: two writers of one chunk (a task run twice) never share a file
-    tmp = path.with_name(f"{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
-    try:
+
+    def write(tmp):
         with _in_process_locks():
             root.to_netcdf(tmp, format="NETCDF4", engine="netcdf4", encoding=_encoding(root, complevel))
             if recorded is not None:
                 recorded.to_netcdf(tmp, mode="a", group=RECORDED_GROUP, format="NETCDF4", engine="netcdf4",
                                    encoding=_encoding(recorded, complevel))
         refuse_if_locked(path)  # again: a run may have started on this output during the write
+
+    return replace_atomically(path, write)
+
+
+def replace_atomically(path, write, suffix: str = "") -> Path:
+    """Write ``path`` through ``write(tmp)`` into a temporary file beside it, then move that over
+    ``path``: a write that fails or is interrupted leaves ``path`` as it was and no temporary file.
+    The temporary's name is ``PATH.<pid>.<hex>.tmp`` (a name of its own per writer: two writers of
+    one chunk, a task run twice, never share a file; remove_stale_temporaries finds those of
+    killed writers), with ``suffix`` after it where the writer needs one (a figure's ``.png``).
+    Raises OutputWriteError for an I/O error (a full disk, a folder that does not exist)."""
+    path = Path(path)
+    if not path.parent.is_dir():  # else HDF5 reports it as "Permission denied"
+        raise OutputWriteError(f"could not write {str(path)!r}: folder {str(path.parent)!r} does not exist")
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp{suffix}")
+    try:
+        write(tmp)
         os.replace(tmp, path)
     except BaseException as err:  # a full disk, an I/O error, Ctrl-C: no temporary file stays behind
         free = free_bytes(path.parent)
