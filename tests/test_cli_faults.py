@@ -357,6 +357,22 @@ def test_two_runs_started_at_once_one_is_refused(tmp_path, sweep):
     assert open_ensemble(out).sizes["member"] == 6 and not lock.exists()
 
 
+@pytest.mark.parametrize("extra, run_table, words", [
+    (["--workers", "2"], "", ["--workers = 2", "new local Dask cluster", "--cpu-workers"]),
+    (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "", ["--workers = 2", "does not start"]),
+    ([], "[run]\nworkers = 2\n", ["[run] workers = 2", "new local Dask cluster"]),
+])
+def test_workers_without_a_new_local_cluster_are_refused(tmp_path, capsys, no_simulation, extra, run_table, words):
+    """--workers (or [run] workers) sizes a new local Dask cluster only: without one it was ignored
+    without a word, and looks like --cpu-workers."""
+    path = tmp_path / "w.toml"
+    path.write_text(TINY_SWEEP + run_table)
+    code, _out, err = run_cli(capsys, "run", path, "-o", tmp_path / "w.nc", "--device", "cpu", *extra)
+    assert code == 2
+    _error_line(err, *words)
+    assert _files(tmp_path) == ["w.toml"]
+
+
 def test_an_unreachable_scheduler_leaves_no_parts_folder(tmp_path, sweep, capsys, monkeypatch):
     distributed = pytest.importorskip("distributed")
 
@@ -455,3 +471,19 @@ def test_a_write_error_keeps_its_disk_full_flag_across_processes():
     err = pickle.loads(pickle.dumps(IO_MODULE.OutputWriteError("disk full while writing 'x.nc'", True)))
     assert isinstance(err, IO_MODULE.OutputWriteError) and err.disk_full is True
     assert str(err) == "disk full while writing 'x.nc'"
+
+
+def test_a_figure_folder_that_is_a_file_is_refused(tmp_path, capsys):
+    """`warpfric plot OUT.nc --outdir FILE` (or an ensemble file without a suffix, whose default
+    folder is its own name) ended in mkdir's traceback."""
+    taken = tmp_path / "taken.png"
+    taken.write_bytes(b"not a folder")
+    code, _out, err = run_cli(capsys, "plot", tmp_path / "any.nc", "--outdir", taken)
+    assert code == 2
+    _error_line(err, "taken.png' is a file", "--outdir")
+    bare = tmp_path / "ensemble"
+    bare.write_bytes(b"an ensemble without a suffix")
+    code, _out, err = run_cli(capsys, "plot", bare)
+    assert code == 2
+    _error_line(err, "ensemble' is a file")
+    assert taken.read_bytes() == b"not a folder"

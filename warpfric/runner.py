@@ -396,8 +396,14 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         raise RunError(f"[record] members: index {max(sweep.record.members)} but the sweep has "
                        f"{sweep.n_members} members (valid 0..{sweep.n_members - 1})")
     where = scheduler or sweep.run.get("scheduler")
+    given_workers = "--workers" if workers is not None else "[run] workers"
     workers = workers or sweep.run.get("workers")
     use_cluster = client is not None or bool(local) or (where is not None and local is not False)
+    new_local_cluster = use_cluster and client is None and bool(local or where == "local")
+    if workers is not None and not new_local_cluster:  # it sizes a new local cluster, nothing else
+        raise RunError(f"{given_workers} = {workers}: the number of workers of a new local Dask cluster "
+                       "(--local-cluster, or [run] scheduler = \"local\"), which this run does not start; "
+                       "--cpu-workers splits a run in this process")
     if device is None and previous is not None:
         device = previous.manifest.get("device")  # a resumed run keeps its device: one file, one device
     if device is None and sweep.run.get("device"):
@@ -420,7 +426,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
                 "combined file)")
     own_client = None
     if use_cluster and client is None:  # before any file: an unreachable scheduler leaves nothing behind
-        own_client = local_cluster(workers) if (local or where == "local") else connect(where)
+        own_client = local_cluster(workers) if new_local_cluster else connect(where)
         client = own_client
     resume_command = f"warpfric run {sweep_file} -o {out} --resume" + (f" --device {device}" if device else "")
     store = previous
