@@ -59,6 +59,25 @@ def test_a_decade_spanning_parameter_gets_a_log_axis_and_the_second_a_legend(gri
     assert texts == ["F = 100 N", "F = 300 N", "F = 1000 N", "F = 3000 N", "F = 10000 N"]
 
 
+def test_small_linear_values_share_a_power_of_ten_instead_of_long_tick_labels():
+    """A disc velocity swept over [-1e-4, 1e-4] m/s: its ticks were written out (-0.000100,
+    -0.000075, ...) and overlapped; now short numbers and a x 10^-4 beside the axis."""
+    velocity = np.array([-1e-4, -5e-5, 0.0, 5e-5, 1e-4])
+    ds = ensemble(np.full(5, 1000.0), np.zeros(5)).assign(
+        disc_velocity=("member", velocity, {"units": "m s-1"}))
+    ds.attrs["varying_parameters"] = "disc_velocity"
+    fig = plots.mu_s_figure(ds, "disc_velocity")
+    ax = fig.axes[0]
+    fig.canvas.draw()
+    labels = [t.get_text().replace("$\\mathdefault{", "").replace("}$", "") for t in ax.get_xticklabels()]
+    assert ax.get_xscale() == "linear" and labels, labels
+    assert max(len(t) for t in labels) <= 5, labels  # e.g. -1.00 (a minus sign and three digits)
+    assert "10^{" in ax.xaxis.get_offset_text().get_text() and "4" in ax.xaxis.get_offset_text().get_text()
+    fig = plots.mu_s_figure(ds.assign(disc_velocity=("member", velocity * 1e3 + 0.5)), "disc_velocity")
+    fig.canvas.draw()  # values near 0.5 m/s: written out, no power of ten
+    assert fig.axes[0].xaxis.get_offset_text().get_text() == ""
+
+
 def test_a_third_swept_parameter_is_named_in_the_titles(grid):
     """Three swept parameters: x and colour show two, the third's members share the axes; the titles
     say so, with its number of values (a constant one is not named)."""

@@ -79,11 +79,20 @@ def _log_ticks(axis, values) -> None:
 
 def _scale(ax, which: str, values) -> str:
     """Axis ``which`` ('x' or 'y') of ``ax``: log where ``values`` span a decade or more (with
-    _log_ticks), else linear. Returns the scale."""
+    _log_ticks), else linear, its small or large numbers as a common power of ten beside the axis
+    (a disc velocity of +-1e-4 m/s as -1, 0, 1 and x 10^-4: written out, its ticks overlapped).
+    Returns the scale."""
+    from matplotlib import ticker
+
     scale = _axis_scale(values)
     getattr(ax, f"set_{which}scale")(scale)
+    axis = getattr(ax, f"{which}axis")
     if scale == "log":
-        _log_ticks(getattr(ax, f"{which}axis"), values)
+        _log_ticks(axis, values)
+    else:
+        formatter = ticker.ScalarFormatter(useMathText=True)
+        formatter.set_powerlimits((-3, 4))
+        axis.set_major_formatter(formatter)
     return scale
 
 
