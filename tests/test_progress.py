@@ -172,7 +172,8 @@ class UnsizedTerminal(FakeTerminal):
 
 
 def test_a_terminal_of_zero_size_draws_80_columns(clock, monkeypatch):
-    """tqdm read 0 x 0 as -1 rows and drew nothing: every line came out empty."""
+    """tqdm read 0 x 0 as -1 rows and drew nothing: every line came out empty. A line fits its
+    width with its counts whole."""
     terminal = UnsizedTerminal()
     monkeypatch.setattr(sys, "stderr", terminal)  # where tqdm measures the terminal itself
     monkeypatch.setattr(os, "get_terminal_size", lambda fd=None: os.terminal_size((0, 0)))
@@ -184,9 +185,20 @@ def test_a_terminal_of_zero_size_draws_80_columns(clock, monkeypatch):
     line.close()
     frames = drawn(terminal)
     assert len(frames) >= 3 and all(len(text.rstrip("\n")) == 80 for _, text in frames), frames
-    assert frames[-1][0] == 100 and frames[-1][1].startswith("warpfric chunk 1/4 (members 0..1199): 100.0%|")
+    # the counts are whole (tqdm cut a long line's end: "..., 100/1"); the label gives way instead
+    assert all(text.rstrip("\n").endswith(" done]") for _, text in frames), frames
+    assert frames[-1][0] == 100 and frames[-1][1].startswith("chunk 1/4 (memb…: 100.0%|")
+    assert frames[-1][1].rstrip("\n").endswith("1200/1200 done]")
     monkeypatch.setenv("COLUMNS", "60")  # a size the environment gives
     assert progress._terminal_size(terminal) == (60, 24)
+    monkeypatch.setenv("COLUMNS", "120")  # room for all of it
+    wide = UnsizedTerminal()
+    monkeypatch.setattr(sys, "stderr", wide)
+    line = progress.Line(1200, "chunk 1/4 (members 0..1199)", clock=clock)
+    clock.now += 1.0
+    line.close()
+    text = drawn(wide)[-1][1].rstrip("\n")
+    assert len(text) == 120 and text.startswith("warpfric chunk 1/4 (members 0..1199): 100.0%|"), text
 
 
 def test_durations_and_counts_read_as_words():

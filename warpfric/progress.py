@@ -172,6 +172,9 @@ def _terminal_size(stream) -> tuple[int, int]:
     return min(columns, 120), rows
 
 
+LINE_MIN_BAR = 5  # characters of the bar itself that a line keeps (Line._fitted_label)
+
+
 class Line:
     """One progress line for n members on ``stream`` (default stderr). In a terminal: a tqdm bar
     (percentage, members done, members/s, time left), redrawn by ``show`` at most every
@@ -201,10 +204,33 @@ class Line:
             # both given: tqdm does not read the size itself (a terminal of 0 x 0 gave it -1 rows, and then
             # it drew nothing)
             columns, rows = _terminal_size(self.stream)
-            self.bar = _Bar(total=self.n, desc=self.label, unit=" members", file=self.stream, mininterval=0,
-                            miniters=0, smoothing=0.1, ncols=columns, nrows=rows, leave=True,
-                            bar_format="{desc}: {percentage:5.1f}%|{bar}| [{elapsed}<{remaining}{postfix}]")
-            self.bar.set_postfix_str(self._postfix(), refresh=True)
+            self.columns = columns
+            postfix = self._postfix()
+            self.bar = _Bar(total=self.n, desc=self._fitted_label(postfix), postfix=postfix, unit=" members",
+                            file=self.stream, mininterval=0, miniters=0, smoothing=0.1, ncols=columns, nrows=rows,
+                            leave=True, bar_format="{desc}: {percentage:5.1f}%|{bar}| [{elapsed}<{remaining}{postfix}]")
+
+    def _set_postfix(self) -> None:
+        """The bar's counts and its label, fitted to the terminal (drawn at the next update)."""
+        postfix = self._postfix()
+        self.bar.set_description_str(self._fitted_label(postfix), refresh=False)
+        self.bar.set_postfix_str(postfix, refresh=False)
+
+    def _fitted_label(self, postfix: str) -> str:
+        """The label, cut where the line would not fit the terminal's width beside ``postfix``
+        (tqdm cuts a line that is too long at its end, which holds the counts): first the tool's
+        name, then the label's end (an ellipsis)."""
+        elapsed = self.clock() - self.t0
+        remaining = elapsed * (1.0 - self.fraction) / self.fraction if self.fraction > 0 else 0.0
+        # the rest of the line: ": 100.0%|", a bar of LINE_MIN_BAR, "| [", elapsed "<" remaining as
+        # tqdm writes them (MM:SS, or H:MM:SS from an hour on), ", " and "]"
+        clock_width = sum(5 if t < 3600 else len(f"{int(t // 3600)}:00:00") for t in (elapsed, remaining))
+        room = self.columns - len(postfix) - (9 + LINE_MIN_BAR + 3 + clock_width + 1 + 2 + 1)
+        label = self.label
+        if len(label) > room:
+            label = label.removeprefix("warpfric ")
+            label = label if len(label) <= room else label[:max(room - 1, 0)] + "…"
+        return label
 
     def _postfix(self) -> str:
         rate = self.fraction * self.n / max(self.clock() - self.t0, 1e-9)  # members (or their fractions) per second
@@ -223,7 +249,7 @@ class Line:
         if self.bar is None or self.closed or (not force and now - self.last < self.interval):
             return False
         self.last = now
-        self.bar.set_postfix_str(self._postfix(), refresh=False)
+        self._set_postfix()
         self.bar.update(self.fraction * self.n - self.bar.n)
         return True
 
@@ -242,7 +268,7 @@ class Line:
         self.fraction, self.done = 1.0, self.n
         if self.bar is not None:
             self.note = summary or self.note
-            self.bar.set_postfix_str(self._postfix(), refresh=False)
+            self._set_postfix()
             self.bar.update(self.n - self.bar.n)
             self.bar.close()
             return
