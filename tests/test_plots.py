@@ -78,6 +78,17 @@ def test_small_linear_values_share_a_power_of_ten_instead_of_long_tick_labels():
     assert fig.axes[0].xaxis.get_offset_text().get_text() == ""
 
 
+def test_one_member_is_one_member_in_legends_and_titles():
+    ds = ensemble(np.array([1000.0, 2000.0]), np.zeros(2))
+    ds["status"] = ("member", np.array([0, 1], np.int32))
+    ds.attrs["varying_parameters"] = "normal_force"
+    ax = plots.mu_s_figure(ds, "normal_force").axes[0]
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["1 ok member"]
+    speeds = plots.front_speeds_figure(ds, "normal_force").axes[0]
+    assert speeds.get_title().endswith("(1 ok member)") and "v_middle (1 member)" in [
+        t.get_text() for t in speeds.get_legend().get_texts()]
+
+
 def test_a_third_swept_parameter_is_named_in_the_titles(grid):
     """Three swept parameters: x and colour show two, the third's members share the axes; the titles
     say so, with its number of values (a constant one is not named)."""

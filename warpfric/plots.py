@@ -15,6 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
+from .progress import plural
+
 MAX_LEGEND = 8  # values of a colour parameter shown in a legend; more: a colour bar
 MAX_CURVES = 8  # arrival-time curves in one figure
 # symbols of the parameters most often swept (legend entries "F = 1000 N"; axis labels)
@@ -230,7 +232,7 @@ def mu_s_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     x, mu = _per_member(ds, pname), np.asarray(ds.mu_s.values, dtype=float)
     colours = _Colours(ds, colour_by, ok) if colour_by else None
     fig, ax = plt.subplots(figsize=(5.6, 3.8))
-    _plot_by(ax, x, mu, ok, colours, ds, label=f"{ok.sum()} ok members", colour="C0")
+    _plot_by(ax, x, mu, ok, colours, ds, label=plural(int(ok.sum()), "ok member"), colour="C0")
     _scale(ax, "x", x[ok])
     _scale(ax, "y", mu[ok])
     ax.set_xlabel(_label(ds, pname))
@@ -269,19 +271,19 @@ def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
         fig, ax = plt.subplots(figsize=(5.6, 3.8))
         for k, (seg, marker) in enumerate(segments):
             present = ok & np.isfinite(speeds[seg])
-            _plot_by(ax, x, speeds[seg], present, None, ds, marker, label=f"v_{seg} ({present.sum()} members)",
+            _plot_by(ax, x, speeds[seg], present, None, ds, marker, label=f"v_{seg} ({plural(int(present.sum()), 'member')})",
                      colour=f"C{k}")
         axes = [ax]
         ax.legend(fontsize=8)
         ax.set_ylabel("front speed (m/s)")
-        ax.set_title(f"{_front_name(ds)} speeds ({ok.sum()} ok members)", fontsize=10)
+        ax.set_title(f"{_front_name(ds)} speeds ({plural(int(ok.sum()), 'ok member')})", fontsize=10)
     else:
         colours = _Colours(ds, colour_by, ok)
         fig, axes = plt.subplots(1, len(segments), figsize=(3.85 * len(segments), 3.6), sharex=True, sharey=True)
         for ax, (seg, marker) in zip(axes, segments):
             present = ok & np.isfinite(speeds[seg])
             _plot_by(ax, x, speeds[seg], present, colours, ds, marker)
-            ax.set_title(f"{_segment_title(seg)}, {present.sum()} members", fontsize=10)
+            ax.set_title(f"{_segment_title(seg)}, {plural(int(present.sum()), 'member')}", fontsize=10)
         axes[0].set_ylabel("front speed (m/s)")
         colours.explain(fig, axes)
         note = _mixed_note(ds, mixed, ok)
@@ -358,7 +360,7 @@ def quick_look(ds, outdir, max_curves: int = MAX_CURVES) -> list:
         fig, ax = plt.subplots(figsize=(5.6, 3.8))
         mu = ds.mu_s.values[ok & np.isfinite(ds.mu_s.values)]
         edges = np.histogram_bin_edges(mu, bins="auto") if mu.size > 1 else 10
-        ax.hist(mu, bins=edges if np.size(edges) <= 41 else 40, label=f"{mu.size} ok members")
+        ax.hist(mu, bins=edges if np.size(edges) <= 41 else 40, label=plural(mu.size, "ok member"))
         ax.set_xlabel("static friction coefficient mu_s")
         ax.set_ylabel("members")
         ax.legend(fontsize=8)
