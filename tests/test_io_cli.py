@@ -169,7 +169,10 @@ def test_resume_after_kill_gives_the_uninterrupted_result(tmp_path):
 
 BAD = [
     ("[grid]\neccentricity = [0.0]\nfoo = [1.0]\n", ["foo", "accepted", "normal_force"]),  # unknown parameter
-    ("[solver]\nnodez = 30\n", ["nodez", "accepted", "nodes"]),  # unknown key
+    ("[solver]\nnodez = 30\n", ["nodez", "(did you mean 'nodes'?); accepted"]),  # unknown key
+    ("[grid]\neccentricty = [0.0]\n", ["eccentricty", "(did you mean 'eccentricity'?); accepted"]),
+    ("[record]\nmember = [0]\n", ["member", "(did you mean 'members'?)"]),
+    ("[grid]\neccentricity = [0.0]\n[run]\nchunks = 2\n", ["chunks", "(did you mean 'chunk'?)"]),
     ("colour = 'red'\n", ["colour", "accepted"]),  # unknown top-level key
     ("[solver]\nnodes = 'many'\n", ["nodes", "integer"]),  # wrong type
     ("[grid]\nnormal_force = ['a']\n", ["normal_force", "number"]),  # wrong type in a list
@@ -177,6 +180,8 @@ BAD = [
     ("[sample]\nn = 0\nnormal_force = {distribution = 'uniform', low = 1, high = 2}\n", ["n", "integer >= 1"]),
     ("[grid]\neccentricity = [0.0, 1.5]\n", ["eccentricity", "1.5", "valid range"]),  # out of range
     ("[sample]\nn = 4\nnormal_force = {distribution = 'gamma', low = 1, high = 2}\n", ["gamma", "uniform"]),
+    ("[sample]\nn = 4\neccentricity = {distribution = 'uniform', low = 0.0, high = 0.9}\n",
+     ["[sample] eccentricity.high = 0.9 is outside eccentricity's valid range"]),  # named, not a drawn value
     ("[zip]\neccentricity = [0.0, 0.1]\nnormal_force = [500.0]\n", ["zip", "length"]),
     ("[grid]\neccentricity = [0.0]\n[zip]\neccentricity = [0.1]\n", ["eccentricity", "twice"]),
     ("[scene]\nnormal_force = -5.0\n", ["normal_force", "-5.0", "valid range"]),

@@ -36,7 +36,7 @@ import numpy as np
 
 from .members import resolve_members
 from .parameters import (PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solver, parameter_range_text, parameter_units,
-                         units_text)
+                         units_text, validate_value)
 
 TOP_KEYS = ("title", "description", "scene", "model", "solver", "fronts", "record", "grid", "zip", "sample", "design",
             "run")
@@ -79,6 +79,14 @@ def _where(table: str, key: str | None = None) -> str:
     return f"[{table}] {key}" if key else f"[{table}]"
 
 
+def _accepted(key: str, names) -> str:
+    """'(did you mean 'x'?); accepted: a, b, ...' for a key that is not one of ``names``."""
+    import difflib
+
+    close = difflib.get_close_matches(str(key), list(names), n=1)
+    return (f" (did you mean {close[0]!r}?)" if close else "") + f"; accepted: {', '.join(names)}"
+
+
 def _number(value, where: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         key, _, part = where.split("] ")[-1].partition(".")  # '[grid] normal_force.start' -> normal_force, start
@@ -94,7 +102,7 @@ def _dataclass_kwargs(table: dict, cls, where: str, parameters: bool = False) ->
     out = {}
     for key, value in table.items():
         if key not in names:
-            raise SweepError(f"unknown key {_where(where, key)}; accepted: {', '.join(names)}")
+            raise SweepError(f"unknown key {_where(where, key)}{_accepted(key, names)}")
         default = names[key].default
         if parameters:
             out[key] = _number(value, _where(where, key)) if value is not None else None
@@ -124,7 +132,7 @@ def _values(spec, where: str) -> np.ndarray:
     if isinstance(spec, dict):
         unknown = set(spec) - set(RANGE_KEYS)
         if unknown:
-            raise SweepError(f"unknown key {where}.{sorted(unknown)[0]}; accepted: {', '.join(RANGE_KEYS)}")
+            raise SweepError(f"unknown key {where}.{sorted(unknown)[0]}{_accepted(sorted(unknown)[0], RANGE_KEYS)}")
         for key in ("start", "stop", "num"):
             if key not in spec:
                 raise SweepError(f"{where}: missing key {key!r} (a range needs start, stop, num)")
@@ -157,6 +165,14 @@ def _draw(name: str, spec, n: int, seed: int, where: str) -> np.ndarray:
         if key not in spec:
             raise SweepError(f"{where}: missing key {key!r} for the {dist} distribution")
     a, b = (_number(spec[k], f"{where}.{k}") for k in keys)
+    for key, value in zip(keys, (a, b)):  # a bound or mean outside the parameter's range draws values outside it
+        if key in ("low", "high", "mean"):
+            try:
+                validate_value(name, np.float64(value))
+            except ValueError:
+                units = units_text(parameter_units(name))
+                raise SweepError(f"{where}.{key} = {value!r} is outside {name}'s valid range "
+                                 f"{parameter_range_text(name)}{' ' + units if units else ''}") from None
     rng = np.random.default_rng([seed, zlib.crc32(name.encode())])
     if dist == "uniform":
         if not a < b:
@@ -188,7 +204,7 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
         raise SweepError(f"{name}: not valid TOML ({err})") from None
     for key in doc:
         if key not in TOP_KEYS:
-            raise SweepError(f"unknown key {key!r} in {name}; accepted: {', '.join(TOP_KEYS)}")
+            raise SweepError(f"unknown key {key!r} in {name}{_accepted(key, TOP_KEYS)}")
     for key in ("scene", "model", "solver", "record", "grid", "zip", "sample", "design", "run"):
         if key in doc and not isinstance(doc[key], dict):
             raise SweepError(f"{key} = {doc[key]!r}: expected a table [{key}]")
@@ -214,7 +230,7 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
 
     def claim(pname: str, where: str):
         if pname not in PARAMETER_NAMES:
-            raise SweepError(f"unknown parameter {where}; accepted: {', '.join(PARAMETER_NAMES)}")
+            raise SweepError(f"unknown parameter {where}{_accepted(pname, PARAMETER_NAMES)}")
         if pname in seen:
             raise SweepError(f"parameter {pname!r} is swept twice ({seen[pname]} and {where})")
         seen[pname] = where
@@ -297,7 +313,7 @@ def _record(spec: dict) -> Record:
     keys = ("members", "times", "start", "stop", "count")
     for key in spec:
         if key not in keys:
-            raise SweepError(f"unknown key [record] {key}; accepted: {', '.join(keys)}")
+            raise SweepError(f"unknown key [record] {key}{_accepted(key, keys)}")
     members = spec.get("members", [0])
     if not isinstance(members, list) or not all(isinstance(i, int) and not isinstance(i, bool) for i in members):
         raise SweepError(f"[record] members = {members!r}: expected a list of member indices")
@@ -320,7 +336,7 @@ def _dataclass_like(table: dict, kinds: dict, where: str) -> dict:
     out = {}
     for key, value in table.items():
         if key not in kinds:
-            raise SweepError(f"unknown key {_where(where, key)}; accepted: {', '.join(kinds)}")
+            raise SweepError(f"unknown key {_where(where, key)}{_accepted(key, kinds)}")
         kind = kinds[key]
         if (isinstance(value, bool) and kind is not bool) or not isinstance(value, kind):
             expected = {int: "an integer", str: "a string", bool: "true or false"}[kind]
