@@ -127,6 +127,11 @@ def test_a_parameter_set_in_scene_and_swept_is_refused(tmp_path, sweep, where):
         assert w in str(err.value), (w, str(err.value))
 
 
+def test_fronts_given_as_an_event_name_points_to_fronts_of_that_event():
+    with pytest.raises(ValueError, match="got str \\(for that event: fronts=warpfric.Fronts\\(event='strength'\\)\\)"):
+        simulate({"eccentricity": [0.0]}, fronts="strength")
+
+
 def test_a_scene_holds_one_value_a_parameter():
     """A list in Parameters was accepted and failed later inside simulate without the parameter's name."""
     with pytest.raises(ValueError, match="parameter 'normal_force': value \\[1000.0, 2000.0\\] is not a single number.*"

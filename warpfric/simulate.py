@@ -17,8 +17,8 @@ from . import __version__
 from .device import check_device, init_warp
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
-from .parameters import (ENSEMBLE_WARNINGS, MEMBERS_NOT_OK, MEMBERS_NOT_OK_HINT, RECORD_PAST_END, Fronts, Model,
-                         Parameters, Record, Solver, parameter_long_name, parameter_units)
+from .parameters import (ENSEMBLE_WARNINGS, FRONT_EVENTS, MEMBERS_NOT_OK, MEMBERS_NOT_OK_HINT, RECORD_PAST_END, Fronts,
+                         Model, Parameters, Record, Solver, parameter_long_name, parameter_units)
 
 
 def simulate(
@@ -86,7 +86,9 @@ def simulate(
             "(float32 stalls at the gate switches), or float32 with relaxation_gate='none' or 'velocity'"
         )
     if fronts is not None and not isinstance(fronts, Fronts):
-        raise ValueError(f"fronts: expected a warpfric.Fronts or None, got {type(fronts).__name__}")
+        hint = (f" (for that event: fronts=warpfric.Fronts(event={fronts!r}))"
+                if isinstance(fronts, str) and fronts in FRONT_EVENTS else "")
+        raise ValueError(f"fronts: expected a warpfric.Fronts or None, got {type(fronts).__name__}{hint}")
     if record is not None and not isinstance(record, Record):
         raise ValueError(f"record: expected a warpfric.Record or None, got {type(record).__name__}")
     if isinstance(member_offset, bool) or not isinstance(member_offset, (int, np.integer)) or not (
