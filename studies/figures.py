@@ -55,6 +55,11 @@ def _plt():
     return plt
 
 
+# members that end no_peak by design: fig11's stopped disc stops before its mu_s peak (docs/model.md,
+# "Statuses"), so the largest mu it sees, at the stop, is no mu_s
+EXPECTED_NO_PEAK = {"fig11": 1}
+
+
 def peak_check(ds) -> dict:
     """Members per status, and the ok members whose mu_s peak is not inside the run (mu_s_time >=
     final_time; the engine gives those status no_peak, so 0 is expected)."""
@@ -495,7 +500,9 @@ def run_study(name, quick, device, outdir, relaxation_gate="stress", front_event
                     max_final_time=max(p["max_final_time"] for p in peaks))
     else:
         peak = peak_check(ds)
-    if peak["members_without_peak"] or peak["failed_members"]:
+    expected = EXPECTED_NO_PEAK.get(name, 0)
+    if (peak["members_without_peak"], peak["failed_members"]) != (expected, expected) or (
+            expected and peak["status_counts"].get("no_peak", 0) != expected):
         print(f"WARNING {stem}: {peak['members_without_peak']} member(s) end before their mu_s peak, "
               f"{peak['failed_members']} failed (status != 0): {peak['status_counts']}", file=sys.stderr)
     claims = dict(claims) if isinstance(claims, dict) else claims

@@ -39,6 +39,8 @@ attempted steps with only 60 gate switches: an expensive rupture, not chatter).
 
 The claims and their pass rules are in CLAIMS below (paper figure numbers). A claim whose members
 did not all end with status 0 (ok) is "not scored", never "pass"; failed_members names their status.
+Member 14 (the stopped disc) ends no_peak, as it should: its disc stops before the mu_s peak, and
+its claim (Fig. 11) reads its velocities only.
 """
 
 from __future__ import annotations
@@ -214,13 +216,16 @@ def score(ds, i: int, k: int, event: str = "contact", naming: str = "spec") -> d
     g = reader(ds, i, event, naming)
     status = g("status")
     mu, vl, vm, vr = g("mu_s"), g("v_left"), g("v_middle"), g("v_right")
-    ok = lambda *idx: all(status[j] == 0 for j in idx)  # noqa: E731
+    # the stopped member's disc stops before its mu_s peak (20.15 s against ~20.23 s): no_peak is
+    # its expected status (docs/model.md, "Statuses"), and its claim reads its velocities only
+    expected = lambda j: status[j] == 0 or (j == STOPPED and STATUS[int(status[j])] == "no_peak")  # noqa: E731
+    ok = lambda *idx: all(expected(j) for j in idx)  # noqa: E731
     out = {}
 
     def put(name, needed, passed, value):
         if not ok(*needed):
             out[name] = {"result": "not scored", "value": value,
-                         "failed_members": {int(j): STATUS[int(status[j])] for j in needed if status[j]}}
+                         "failed_members": {int(j): STATUS[int(status[j])] for j in needed if not expected(j)}}
         else:
             out[name] = {"result": "pass" if passed else "fail", "value": value}
 
@@ -310,7 +315,7 @@ def score(ds, i: int, k: int, event: str = "contact", naming: str = "spec") -> d
     no_peak = [int(j) for j in range(M) if j != STOPPED and status[j] == 0
                and not g("mu_s_time")[j] < g("final_time")[j] - 1e-9]
     return dict(claims=out, members_without_peak=no_peak,
-                failed_members={int(j): STATUS[int(status[j])] for j in range(M) if status[j]},
+                failed_members={int(j): STATUS[int(status[j])] for j in range(M) if not expected(j)},
                 mu_s_e0=_f(mu[E0]))
 
 

@@ -191,7 +191,7 @@ def test_the_size_warning_is_one_line(capsys):
     assert warned[1].startswith("warpfric: warning: members that did not end ok have NaN mu_s and fronts: 1 of 1 "
                                 "member: 1 no_peak (mu was still rising at the run's end"), err
     assert "a later end_time" in warned[1]
-    assert "their numbers" not in warned[1] and warned[1].endswith("a later end_time)"), err  # no file: no hint
+    assert "their numbers" not in warned[1] and warned[1].endswith("a later end_time or stop_time)"), err  # no file
 
 
 def test_the_warning_of_members_not_ok_points_to_info_on_the_file(capsys, tmp_path):

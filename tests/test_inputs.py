@@ -132,6 +132,36 @@ def test_fronts_given_as_an_event_name_points_to_fronts_of_that_event():
         simulate({"eccentricity": [0.0]}, fronts="strength")
 
 
+def test_a_stop_before_the_disc_moves_is_refused():
+    """stop_time <= rest_until ran, ended no_peak and advised a later end_time, the wrong fix."""
+    with pytest.raises(ValueError, match="parameter 'stop_time' = 5.0 \\(s\\) stops the disc before it starts to move; "
+                                         "valid range \\(rest_until, inf\\] = \\(20.0, inf\\] s.*member 1"):
+        simulate({"stop_time": [np.inf, 5.0]})
+
+
+def test_record_times_that_are_no_numbers_are_named():
+    with pytest.raises(ValueError, match="record setting 'times' = \\('a',\\) is invalid; valid: non-empty"):
+        wf.Record(times=("a",))
+    with pytest.raises(ValueError, match="record window: start 'a' and stop 20 are invalid; valid: numbers"):
+        wf.Record.window("a", 20, 3)
+
+
+def test_torque_arm_none_is_the_pad_height_and_nan_no_value():
+    """A NaN in a per-member torque_arm ran silently as the pad height; None (the scene's, or given
+    for every member) means the pad height, as documented."""
+    with pytest.raises(ValueError, match="parameter torque_arm\\[0\\] = nan m is out of range"):
+        simulate({"torque_arm": [np.nan, 0.01]})
+    from warpfric.members import resolve_members
+
+    height = wf.Parameters().height
+    for members, scene in (({"torque_arm": None, "eccentricity": [0.0, 0.1]}, wf.Parameters(torque_arm=0.02)),
+                           ({"eccentricity": [0.0, 0.1]}, wf.Parameters())):
+        values, _ = resolve_members(members, scene)
+        np.testing.assert_array_equal(values["torque_arm"], [height, height])
+    values, _ = resolve_members({"torque_arm": [0.01, -0.02]}, wf.Parameters())
+    np.testing.assert_array_equal(values["torque_arm"], [0.01, -0.02])
+
+
 def test_a_scene_holds_one_value_a_parameter():
     """A list in Parameters was accepted and failed later inside simulate without the parameter's name."""
     with pytest.raises(ValueError, match="parameter 'normal_force': value \\[1000.0, 2000.0\\] is not a single number.*"

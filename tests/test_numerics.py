@@ -60,13 +60,16 @@ def test_hard_cases_end_ok_and_finite():
     }
     # eta = 0 is a dynamic rupture under the stress gate (~30x the steps): not a straggler here
     ds = run(hard, rtol=1e-5, scene=wf.Parameters(end_time=22.0), stall_factor=float("inf"))
-    assert list(ds.status.values) == [0] * 5
-    for name in ("mu_s", "mu_s_time", "displacement", "velocity", "friction_stress", "normal_stress"):
+    meanings = ds.status.attrs["flag_meanings"].split()
+    # the stop (20.15 s) comes before the peak of the uninterrupted run (20.23 s): mu was still
+    # rising, so its largest value, at the stop, is no mu_s (it was reported as one, status ok)
+    assert [meanings[k] for k in ds.status.values] == ["ok"] * 4 + ["no_peak"]
+    assert np.isfinite(ds.mu_s.values[:4]).all() and np.isfinite(ds.mu_s_time.values[:4]).all()
+    assert np.isnan(ds.mu_s.values[4]) and np.isnan(ds.mu_s_time.values[4])
+    for name in ("displacement", "velocity", "friction_stress", "normal_stress", "mu_final"):
         assert np.isfinite(ds[name].values).all(), name
     # 1.85 s after the sudden stop the pad is at rest (it moves at ~1e-7 m/s while driven)
     assert abs(ds.velocity.values[4]).max() < 1e-9
-    # the stop happens before the peak of the uninterrupted run: mu_s is reached at the stop
-    assert abs(ds.mu_s_time.values[4] - 20.15) < 1e-9
 
 
 def test_newton_converges_quadratically():

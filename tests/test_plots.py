@@ -158,8 +158,9 @@ def test_quick_look_writes_every_figure(grid, tmp_path):
 
 def recorded_run(path, fronts):
     """Two recorded members through a file: member 0 detaches at t ~ 20.13 s; member 1's disc stops
-    at 5 s, long before, so it has no front (status no_peak, every arrival time NaN)."""
-    ds = run({"stop_time": [np.inf, 5.0]}, scene=wf.Parameters(end_time=20.3), nodes=21, fronts=fronts,
+    at 20.03 s, 30 ms after it started and long before a node yields, so it has no front (status
+    no_peak, every arrival time NaN)."""
+    ds = run({"stop_time": [np.inf, 20.03]}, scene=wf.Parameters(end_time=20.3), nodes=21, fronts=fronts,
              record=wf.Record.window(20.05, 20.3, 51, members=(0, 1)))
     write_ensemble(ds, path)
     return open_ensemble(path)

@@ -69,11 +69,10 @@ def resolve_members(members: Any, scene: Parameters) -> tuple[dict[str, np.ndarr
             scalar = resolve_value(name, getattr(scene, name))
             v = np.full(n_members, np.nan if scalar is None else float(scalar))
         values[name] = v
-    # torque_arm None (or NaN from a None in members) means "the pad height"
-    arm = values["torque_arm"]
-    values["torque_arm"] = np.where(np.isnan(arm), values["height"], arm) if (
-        scene.torque_arm is None or "torque_arm" in arrays
-    ) else arm
+    # torque_arm None (the scene's, or given for every member) means "the pad height"; a NaN in a
+    # per-member array is no value (validate_value refuses it, as in Parameters)
+    if given.get("torque_arm", 0.0) is None or ("torque_arm" not in arrays and scene.torque_arm is None):
+        values["torque_arm"] = values["height"].copy()
     for name in PARAMETER_NAMES:
         validate_value(name, values[name])
     _check_protocol(values)
@@ -92,3 +91,11 @@ def _check_protocol(values: dict[str, np.ndarray]) -> None:
                 f"parameter {name!r} = {float(end[i])!r} (s) ends before the disc starts to move; "
                 f"valid range (rest_until, inf) = ({float(rest[i])!r}, inf) s (member {i})"
             )
+    stop = values["stop_time"]
+    bad = ~(stop > rest)
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(
+            f"parameter 'stop_time' = {float(stop[i])!r} (s) stops the disc before it starts to move; valid "
+            f"range (rest_until, inf] = ({float(rest[i])!r}, inf] s, inf: no stop (member {i})"
+        )

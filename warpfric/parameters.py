@@ -85,7 +85,7 @@ class Parameters:
     rest_until: float = _p(20.0, "s", "time at which the disc starts to move", 0.0, INF)
     velocity_ramp_time: float = _p(2.0, "s", "duration of the disc-velocity ramp", 0.0, INF)
     stop_time: float | None = _p(
-        None, "s", "time of a sudden disc stop (None or inf: no stop)", 0.0, INF, True, False, none_means=INF
+        None, "s", "time of a sudden disc stop, after rest_until (None or inf: no stop)", 0.0, INF, True, False, none_means=INF
     )
     end_time: float | None = _p(
         None, "s", "end of the simulated time (None or inf: when the detachment is over, at most max_end_time)",
@@ -519,7 +519,12 @@ class Record:
         """``count`` evenly spaced times from ``start`` to ``stop`` (s), both included."""
         if not (isinstance(count, (int, np.integer)) and count >= 2):
             raise ValueError(f"record setting 'count' = {count!r} is invalid; valid: an integer >= 2")
-        if float(start) > float(stop):  # NaN: Record's own check names the times
+        try:
+            start, stop = float(start), float(stop)
+        except (TypeError, ValueError):
+            raise ValueError(f"record window: start {start!r} and stop {stop!r} are invalid; valid: numbers of "
+                             "seconds, start <= stop") from None
+        if start > stop:  # NaN: Record's own check names the times
             raise ValueError(f"record window: start {start!r} s is after stop {stop!r} s; valid: start <= stop")
         return Record(members=tuple(members), times=tuple(np.linspace(float(start), float(stop), int(count))))
 
@@ -529,7 +534,11 @@ class Record:
             raise ValueError(f"record setting 'members' = {self.members!r} is invalid; valid: non-empty list of member indices >= 0")
         if len(set(members.tolist())) != members.size:
             raise ValueError(f"record setting 'members' = {self.members!r} has repeated indices")
-        times = np.asarray(self.times, dtype=np.float64).reshape(-1)
+        try:
+            times = np.asarray(self.times, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            raise ValueError(f"record setting 'times' = {self.times!r} is invalid; valid: non-empty, finite, "
+                             "non-decreasing times >= 0 (s)") from None
         if times.size == 0 or not np.isfinite(times).all() or (times < 0).any() or (np.diff(times) < 0).any():
             shown = ", ".join(f"{t:g}" for t in times[:6]) + (f", ... ({times.size} times)" if times.size > 6 else "")
             raise ValueError(f"record setting 'times' = [{shown}] s is invalid; valid: non-empty, finite, "

@@ -168,7 +168,8 @@ _STATUS_ADVICE = {
     "stalled": ("stopped by the straggler rule after stall_factor = {stall_factor:g} times the attempts of the "
                 "typical member: Solver(stall_factor=float('inf')), in a sweep file [solver] stall_factor = inf, "
                 "runs them to their end"),
-    "no_peak": "mu was still rising at the run's end, or peaked before the disc moved: a later end_time",
+    "no_peak": ("mu was still rising at the run's end or at the disc's stop, or peaked before the disc moved: "
+                "a later end_time or stop_time"),
 }
 _STILL_DISC_ADVICE = "disc_velocity = 0: the disc never moves, so there is no friction peak to find"
 
@@ -505,10 +506,12 @@ def _varying_parameters(values, varying) -> str:
 def _member_status(st: np.ndarray, values, meanings) -> np.ndarray:
     """Each member's status code (member,) int32: the kernel's, or no_peak where an ok member's mu(t)
     was still rising at its last accepted step (its maximum lies beyond end_time, and the running
-    maximum, the value at the end, is not mu_s) or peaked before the disc moved (load noise, not a
-    friction peak)."""
+    maximum, the value at the end, is not mu_s), peaked before the disc moved (load noise, not a
+    friction peak), or had its largest value when the disc stopped (stop_time before the peak: mu
+    was still rising and fell after the stop, so the value at the stop is not mu_s)."""
     status = st["status"].astype(np.int32)
-    no_peak = (st["mu_s_time"] >= st["t"]) | (st["mu_s_time"] <= values["rest_until"])
+    no_peak = ((st["mu_s_time"] >= st["t"]) | (st["mu_s_time"] <= values["rest_until"])
+               | (st["mu_s_time"] >= values["stop_time"]))
     return np.where((status == 0) & no_peak, meanings.index("no_peak"), status).astype(np.int32)
 
 
