@@ -1,8 +1,12 @@
 """warpfric.io: ensembles as netCDF files for xarray (CF attributes, compression, chunked runs).
 
 A file holds dims ``member`` and ``x`` (and ``recorded``, ``time`` for recorded fields). Every
-input parameter is a variable: along ``member`` where it varies in the run (or in the sweep the
-file is a chunk of), a scalar where it does not. Outputs carry CF ``units`` and ``long_name``;
+input parameter is a variable along ``member``, a constant one too (:func:`parameters_along_member`:
+files of different constants then combine under any xarray settings); :func:`open_ensemble` gives
+the parameters that do not vary in the file (global attribute ``varying_parameters``) back as
+scalars, where :func:`warpfric.simulate` keeps every parameter along ``member``
+(``parameters_along_member(open_ensemble(path))`` has simulate()'s layout). Outputs carry CF
+``units`` and ``long_name``;
 the model switches, solver and front settings, package and Warp versions and the device are
 global attributes.
 
@@ -18,7 +22,7 @@ however a user opens them:
   their members alike, but their labels differ, so xarray's default ``xr.open_mfdataset(files)``
   (combine="by_coords") concatenates them along ``member``, every member once, runs in the order
   they started (before the labels it kept 2 of 5 members, or padded mu_s to recorded_member x
-  member with NaN). :func:`open_ensemble` gives back simulate()'s layout: ``member`` the numbers,
+  member with NaN). :func:`open_ensemble` gives back simulate()'s member identity: ``member`` the numbers,
   ``member_id`` the labels (which :func:`write_ensemble` keeps).
 - Recorded fields live in the netCDF4 group ``recorded`` (``xr.open_dataset(path,
   group="recorded")``): dims (``recorded_member``, ``record_time``, ``x``), ``recorded_member``
@@ -598,8 +602,10 @@ def _read(path) -> xr.Dataset:
 
 
 def open_ensemble(path) -> xr.Dataset:
-    """Open a warpfric netCDF file (loaded into memory). Raises ValueError for a missing or
-    incomplete file, naming what to do."""
+    """Open a warpfric netCDF file (loaded into memory): simulate()'s layout, but for the parameters
+    that do not vary in the file (not in its ``varying_parameters``), which come back as scalars
+    (``parameters_along_member`` puts them along ``member`` again). Raises ValueError for a missing
+    or incomplete file, naming what to do."""
     path = Path(path)
     parts = parts_dir(path)
     if not path.exists():
