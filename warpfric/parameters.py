@@ -274,7 +274,7 @@ class Solver:
     initial_step:     s, the first step and the backward-Euler restart step after a discontinuity.
     min_step:         s, a member whose step falls below this stops with status step_size_underflow.
     max_step:         s, largest step.
-    max_steps:        attempted steps (accepted + rejected) per member before status max_steps.
+    max_steps:        attempted steps (accepted + rejected) per member before status max_steps_reached.
     newton_max_iter:  Newton iterations per stage before the step is rejected.
     newton_tol:       Newton convergence threshold in the error-weighted norm (units of rtol).
     switch_tol:       stress gate: tolerance of the located gate switches, in units of rtol (docs/model.md,

@@ -61,16 +61,24 @@ def simulate(
     parameter along ``member``; ``mu_s``, ``mu_s_time`` (s), ``status`` (flag values, see its
     attrs), ``lift_off``, ``steps_accepted``, ``steps_rejected`` (by cause: ``rejected_error_test``,
     ``rejected_newton``, ``rejected_switch``; and ``missed_predictions``), ``newton_iterations``,
-    ``final_time`` (s), ``plate_compression`` (m), ``plate_tilt`` (rad), ``mu_final``, and the final
+    ``final_time`` (s), ``plate_compression`` (m), ``plate_tilt`` (rad), ``mu_final``,
+    ``working_precision`` (bits), ``gate_switches`` and ``unlocated_switches``, and the final
     state along (member, x): ``displacement`` (m), ``velocity`` (m/s), ``elastic_stress`` (Pa),
-    ``contact_age`` (s), ``normal_stress`` (Pa), ``friction_stress`` (Pa). With fronts, for the
-    first event (others prefixed with the event's name, e.g. ``strength_v_main``):
-    ``arrival_time`` and ``arrival_time_error`` (member, x; s), ``nucleation_position`` (m),
-    ``nucleation_edge``, ``front_start_time``, ``front_end_time`` (s), ``detached_fraction`` and per
-    segment (left, middle, right by position; precursor, main, far from where the front starts)
+    ``contact_age`` (s), ``normal_stress`` (Pa), ``friction_stress`` (Pa); the stress gate adds
+    ``yield_time`` (s) and ``yield_gate`` (member, x). With fronts, for the first event (others
+    prefixed with the event's name, e.g. ``strength_v_main``): ``arrival_time`` and
+    ``arrival_time_error`` (member, x; s), ``nucleation_position`` (m), ``nucleation_edge``,
+    ``front_start_time``, ``front_end_time`` (s), ``detached_fraction``; per segment of the first
+    front (left, middle, right by position; precursor, main, far from where it starts)
     ``*_front_start``, ``*_front_end``, ``*_front_length`` (m), ``v_*`` and ``v_*_error`` (m/s; NaN
-    where a segment is absent); the velocity event adds ``event_max_velocity`` (m/s), the strength
-    event ``strength_peak`` (member, x). With record:
+    where a segment is absent); the fronts as wholes (``first``, ``second``: ``first_front_start``
+    ... ``v_second_error``), ``front_count``, where and when the first meets another
+    (``collision_position`` (m), ``collision_time`` (s)) and where and when a second starts
+    (``second_nucleation_position`` (m), ``second_front_start_time`` (s)); each output's
+    ``long_name`` says what it is and when it is NaN. The velocity event adds
+    ``event_max_velocity`` (m/s), the strength event ``strength_peak`` (member, x) (``strength_``
+    prefixed again where it is not the first event: ``strength_strength_peak``); ``grid_check``
+    adds ``mu_s_grid_error`` and ``v_*_grid_error``. With record:
     ``velocity_history``, ``slip_rate_history``, ``normal_stress_history``,
     ``friction_stress_history`` along (recorded, time, x), coordinates ``recorded_member`` and
     ``time``. Raises ValueError on invalid input before any kernel runs.
