@@ -72,7 +72,8 @@ def main(argv=None):
     ap.add_argument("--nodes", type=int, default=200)
     ap.add_argument("--lanes", type=int, nargs="+", default=[32, 64])
     ap.add_argument("--caps", type=int, nargs="+", default=[255, 200, 168, 128])
-    ap.add_argument("--pieces", nargs="+", default=["rows", "derivatives"], choices=["rows", "derivatives", "derivatives_mid", "start"])
+    ap.add_argument("--pieces", nargs="+", default=["rows", "derivatives"],
+                    choices=["rows", "derivatives", "derivatives_mid", "start"])
     ap.add_argument("--launches", type=int, default=20)
     ap.add_argument("--jsonl", default=None, help="append a JSON line per row")
     args = ap.parse_args(argv)

@@ -85,7 +85,8 @@ class Parameters:
     rest_until: float = _p(20.0, "s", "time at which the disc starts to move", 0.0, INF)
     velocity_ramp_time: float = _p(2.0, "s", "duration of the disc-velocity ramp", 0.0, INF)
     stop_time: float | None = _p(
-        None, "s", "time of a sudden disc stop, after rest_until (None or inf: no stop)", 0.0, INF, True, False, none_means=INF
+        None, "s", "time of a sudden disc stop, after rest_until (None or inf: no stop)", 0.0, INF, True, False,
+        none_means=INF
     )
     end_time: float | None = _p(
         None, "s", "end of the simulated time (None or inf: when the detachment is over, at most max_end_time)",

@@ -271,7 +271,8 @@ def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
         fig, ax = plt.subplots(figsize=(5.6, 3.8))
         for k, (seg, marker) in enumerate(segments):
             present = ok & np.isfinite(speeds[seg])
-            _plot_by(ax, x, speeds[seg], present, None, ds, marker, label=f"v_{seg} ({plural(int(present.sum()), 'member')})",
+            _plot_by(ax, x, speeds[seg], present, None, ds, marker,
+                     label=f"v_{seg} ({plural(int(present.sum()), 'member')})",
                      colour=f"C{k}")
         axes = [ax]
         ax.legend(fontsize=8)
