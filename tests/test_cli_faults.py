@@ -360,7 +360,7 @@ def test_two_runs_started_at_once_one_is_refused(tmp_path, sweep):
 @pytest.mark.parametrize("extra, run_table, words", [
     (["--workers", "2"], "", ["--workers = 2", "new local Dask cluster", "--cpu-workers"]),
     (["--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "", ["--workers = 2", "does not start"]),
-    ([], "[run]\nworkers = 2\n", ["[run] workers = 2", "new local Dask cluster"]),
+    ([], "[run]\nworkers = 2\n", ["[run] workers = 2", "new local Dask cluster", "scheduler = \"local\""]),
 ])
 def test_workers_without_a_new_local_cluster_are_refused(tmp_path, capsys, no_simulation, extra, run_table, words):
     """--workers (or [run] workers) sizes a new local Dask cluster only: without one it was ignored
@@ -371,6 +371,24 @@ def test_workers_without_a_new_local_cluster_are_refused(tmp_path, capsys, no_si
     assert code == 2
     _error_line(err, *words)
     assert _files(tmp_path) == ["w.toml"]
+
+
+def test_a_files_local_cluster_workers_stay_unused_on_another_scheduler(tmp_path, capsys, monkeypatch, no_simulation):
+    """[run] scheduler = "local" with workers = 2, run on another scheduler (--scheduler): the
+    file's workers belong to its own local cluster and are not refused; the run gets as far as
+    connecting (nothing listens at the address here)."""
+    distributed = pytest.importorskip("distributed")
+
+    def unreachable(address, timeout=None, **kwargs):
+        raise OSError(f"Timed out trying to connect to {address} after {timeout}")
+
+    monkeypatch.setattr(distributed, "Client", unreachable)
+    path = tmp_path / "w.toml"
+    path.write_text(TINY_SWEEP + '[run]\nscheduler = "local"\nworkers = 2\n')
+    code, _out, err = run_cli(capsys, "run", path, "-o", tmp_path / "w.nc", "--device", "cpu",
+                              "--scheduler", "tcp://127.0.0.1:1")
+    assert code == 2
+    _error_line(err, "scheduler 'tcp://127.0.0.1:1': cannot connect")
 
 
 def test_an_unreachable_scheduler_leaves_no_parts_folder(tmp_path, sweep, capsys, monkeypatch):

@@ -396,14 +396,20 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         raise RunError(f"[record] members: index {max(sweep.record.members)} but the sweep has "
                        f"{sweep.n_members} members (valid 0..{sweep.n_members - 1})")
     where = scheduler or sweep.run.get("scheduler")
-    given_workers = "--workers" if workers is not None else "[run] workers"
-    workers = workers or sweep.run.get("workers")
     use_cluster = client is not None or bool(local) or (where is not None and local is not False)
     new_local_cluster = use_cluster and client is None and bool(local or where == "local")
-    if workers is not None and not new_local_cluster:  # it sizes a new local cluster, nothing else
-        raise RunError(f"{given_workers} = {workers}: the number of workers of a new local Dask cluster "
-                       "(--local-cluster, or [run] scheduler = \"local\"), which this run does not start; "
-                       "--cpu-workers splits a run in this process")
+    # workers size a new local cluster, nothing else: given for a run that starts none, they were
+    # ignored without a word. The file's own stay unused where the caller runs it on another
+    # cluster (client, --scheduler): refused only where the run uses no cluster at all
+    if workers is not None and not new_local_cluster:
+        raise RunError(f"--workers = {workers}: the number of workers of a new local Dask cluster (--local-cluster, "
+                       "or [run] scheduler = \"local\"), which this run does not start; --cpu-workers splits a run "
+                       "in this process")
+    if sweep.run.get("workers") is not None and not use_cluster:
+        raise RunError(f"[run] workers = {sweep.run['workers']}: the number of workers of a new local Dask cluster, "
+                       "which this run does not start (it runs in this process); add [run] scheduler = \"local\" "
+                       "or run with --local-cluster, or leave workers out")
+    workers = workers or sweep.run.get("workers")
     if device is None and previous is not None:
         device = previous.manifest.get("device")  # a resumed run keeps its device: one file, one device
     if device is None and sweep.run.get("device"):
