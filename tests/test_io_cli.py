@@ -182,11 +182,40 @@ BAD = [
     ("[sample]\nn = 4\nnormal_force = {distribution = 'gamma', low = 1, high = 2}\n", ["gamma", "uniform"]),
     ("[sample]\nn = 4\neccentricity = {distribution = 'uniform', low = 0.0, high = 0.9}\n",
      ["[sample] eccentricity.high = 0.9 is outside eccentricity's valid range"]),  # named, not a drawn value
+    ("[sample]\nn = 4\neccentricity = {distribution = 'unifrom', low = 0.0, high = 0.1}\n",
+     ["'unifrom' (did you mean 'uniform'?)"]),
+    ("[sample]\nn = 4\neccentricity = {distribution = 'uniform', lo = 0.0, high = 0.1}\n",
+     ["eccentricity.lo for uniform (did you mean 'low'?)"]),
     ("[zip]\neccentricity = [0.0, 0.1]\nnormal_force = [500.0]\n", ["zip", "length"]),
     ("[grid]\neccentricity = [0.0]\n[zip]\neccentricity = [0.1]\n", ["eccentricity", "twice"]),
     ("[scene]\nnormal_force = -5.0\n", ["normal_force", "-5.0", "valid range"]),
     ("[fronts]\nthreshold = 2.0\n", ["threshold", "(0, 1)"]),
 ]
+
+
+def test_a_sample_may_reach_an_open_upper_limit():
+    """Uniform draws lie below high, so high may be the open upper limit of a parameter's range
+    (poisson_ratio < 0.5); low may not, nor a high beyond it."""
+    from warpfric.sweep_file import SweepError
+
+    draws = load_sweep_text("[sample]\nn = 64\npoisson_ratio = {distribution = 'uniform', low = 0.3, high = 0.5}\n")
+    assert ((draws >= 0.3) & (draws < 0.5)).all() and draws.size == 64
+    with pytest.raises(SweepError, match="poisson_ratio.low = 0.5 is outside"):
+        load_sweep_text("[sample]\nn = 4\npoisson_ratio = {distribution = 'uniform', low = 0.5, high = 0.6}\n")
+
+
+def load_sweep_text(text):
+    """The poisson_ratio values a sweep file's text draws."""
+    import tempfile
+
+    from warpfric.members import resolve_members
+    from warpfric.sweep_file import load_sweep
+
+    path = Path(tempfile.mkdtemp()) / "s.toml"
+    path.write_text(text)
+    sweep = load_sweep(path)
+    values, _ = resolve_members(sweep.members, sweep.scene)
+    return values["poisson_ratio"]
 
 
 @pytest.mark.parametrize("text, words", BAD)

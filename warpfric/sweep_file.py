@@ -156,19 +156,22 @@ def _draw(name: str, spec, n: int, seed: int, where: str) -> np.ndarray:
         raise SweepError(f"{where} = {spec!r}: expected {{distribution = 'uniform' | 'normal' | 'loguniform', ...}}")
     dist = spec["distribution"]
     if dist not in DISTRIBUTIONS:
-        raise SweepError(f"{where}.distribution = {dist!r}; accepted: {', '.join(DISTRIBUTIONS)}")
+        raise SweepError(f"{where}.distribution = {dist!r}{_accepted(dist, DISTRIBUTIONS)}")
     keys = DISTRIBUTIONS[dist]
     unknown = set(spec) - set(keys) - {"distribution"}
     if unknown:
-        raise SweepError(f"unknown key {where}.{sorted(unknown)[0]}; accepted for {dist}: {', '.join(keys)}")
+        key = sorted(unknown)[0]
+        raise SweepError(f"unknown key {where}.{key} for {dist}{_accepted(key, keys)}")
     for key in keys:
         if key not in spec:
             raise SweepError(f"{where}: missing key {key!r} for the {dist} distribution")
     a, b = (_number(spec[k], f"{where}.{k}") for k in keys)
     for key, value in zip(keys, (a, b)):  # a bound or mean outside the parameter's range draws values outside it
         if key in ("low", "high", "mean"):
+            # the draws lie below high: high may be an open upper limit of the range (poisson_ratio's 0.5)
+            inside = np.nextafter(value, -np.inf) if key == "high" else value
             try:
-                validate_value(name, np.float64(value))
+                validate_value(name, np.float64(inside))
             except ValueError:
                 units = units_text(parameter_units(name))
                 raise SweepError(f"{where}.{key} = {value!r} is outside {name}'s valid range "
