@@ -85,7 +85,7 @@ def stage_slots(method: str) -> int:
 STATUS_MAX_STEPS = 1
 STATUS_NON_FINITE = 2
 STATUS_STEP_UNDERFLOW = 3
-STATUS_NO_PEAK = 4  # set on the host: the friction coefficient was still rising at the end of the run
+STATUS_NO_PEAK = 4  # set on the host (warpfric/simulate.py _member_status): no peak of mu inside the run
 STATUS_STALLED = 5  # far more steps than its peers (Solver.stall_factor; the limit comes from the host)
 STATUS_MEANINGS = ("ok", "max_steps_reached", "non_finite_state", "step_size_underflow", "no_peak", "stalled")
 

@@ -138,11 +138,13 @@ def test_predicted_switches_save_rejected_steps_at_the_same_accuracy():
     assert (predicted.rejected_switch.values < located.rejected_switch.values / 2).all()
 
 
-def test_a_sudden_stop_after_a_predicted_switch_ends_ok():
+def test_a_sudden_stop_after_a_predicted_switch_ends_without_failure():
     """A predicted switch can lie past the sudden stop; the step to the stop restarts the member,
     and the limit must not survive the load jump (found in review: the restart step ended on the
     stale limit and the next step had zero length: non_finite_state with NaN outputs, 11 of these
-    120 members). A long initial_step makes the restart steps reach the stale limits."""
+    120 members). A long initial_step makes the restart steps reach the stale limits. Every member
+    ends ok or no_peak (a stop before the peak, or within the step after it, which leaves the peak
+    unresolved: allowed either way within 2 ms after the peak)."""
     stops = np.append(np.linspace(20.10, 20.30, 120), np.inf)  # the last: the uninterrupted run
     ds = run({"stop_time": stops}, scene=wf.Parameters(end_time=20.4), nodes=30, rtol=1e-5, initial_step=1e-2)
     meanings = ds.status.attrs["flag_meanings"].split()

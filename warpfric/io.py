@@ -558,8 +558,9 @@ def replace_atomically(path, write, suffix: str = "") -> Path:
     """Write ``path`` through ``write(tmp)`` into a temporary file beside it, then move that over
     ``path``: a write that fails or is interrupted leaves ``path`` as it was and no temporary file.
     The temporary's name is ``PATH.<pid>.<hex>.tmp`` (a name of its own per writer: two writers of
-    one chunk, a task run twice, never share a file; remove_stale_temporaries finds those of
-    killed writers), with ``suffix`` after it where the writer needs one (a figure's ``.png``).
+    one chunk, a task run twice, never share a file; for an ensemble, remove_stale_temporaries
+    finds those that killed writers left), with ``suffix`` after it where the writer needs one (a
+    figure's ``.png``).
     Raises OutputWriteError for an I/O error (a full disk, a folder that does not exist)."""
     path = Path(path)
     if not path.parent.is_dir():  # else HDF5 reports it as "Permission denied"

@@ -75,7 +75,8 @@ def simulate(
     ... ``v_second_error``), ``front_count``, where and when the first meets another
     (``collision_position`` (m), ``collision_time`` (s)) and where and when a second starts
     (``second_nucleation_position`` (m), ``second_front_start_time`` (s)); each output's
-    ``long_name`` says what it is and when it is NaN. The velocity event adds
+    ``long_name`` says what it is, and every output of a member whose status is not ok is NaN (a
+    front output also where the member has no such front or segment). The velocity event adds
     ``event_max_velocity`` (m/s), the strength event ``strength_peak`` (member, x) (``strength_``
     prefixed again where it is not the first event: ``strength_strength_peak``); ``grid_check``
     adds ``mu_s_grid_error`` and ``v_*_grid_error``. With record:
@@ -176,8 +177,8 @@ _STATUS_ADVICE = {
     "stalled": ("stopped by the straggler rule after stall_factor = {stall_factor:g} times the attempts of the "
                 "typical member: Solver(stall_factor=float('inf')), in a sweep file [solver] stall_factor = inf, "
                 "runs them to their end"),
-    "no_peak": ("mu was still rising at the run's end or at the disc's stop, or peaked before the disc moved: "
-                "a later end_time or stop_time"),
+    "no_peak": ("mu was still rising at the run's end or had its largest value at the disc's stop, or peaked "
+                "before the disc moved: a later end_time or stop_time"),
 }
 _STILL_DISC_ADVICE = "disc_velocity = 0: the disc never moves, so there is no friction peak to find"
 
@@ -515,8 +516,11 @@ def _member_status(st: np.ndarray, values, meanings) -> np.ndarray:
     """Each member's status code (member,) int32: the kernel's, or no_peak where an ok member's mu(t)
     was still rising at its last accepted step (its maximum lies beyond end_time, and the running
     maximum, the value at the end, is not mu_s), peaked before the disc moved (load noise, not a
-    friction peak), or had its largest value when the disc stopped (stop_time before the peak: mu
-    was still rising and fell after the stop, so the value at the stop is not mu_s)."""
+    friction peak), or had its largest value when the disc stopped (a stop_time before the peak,
+    where mu was still rising and fell after the stop, so the value at the stop is not mu_s; or a
+    stop so soon after the peak, before the next accepted step, that no step resolved the peak:
+    the value at the stop is then within the step's change of mu_s, but cannot be told from a
+    still rising mu, so it is not given either)."""
     status = st["status"].astype(np.int32)
     no_peak = ((st["mu_s_time"] >= st["t"]) | (st["mu_s_time"] <= values["rest_until"])
                | (st["mu_s_time"] >= values["stop_time"]))
