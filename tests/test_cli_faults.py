@@ -444,6 +444,32 @@ def test_ctrl_c_in_a_sweep_says_what_was_kept(tmp_path, sweep, capsys, monkeypat
     assert not list(tmp_path.rglob("*.tmp")) and not (tmp_path / "s.nc.lock").exists()
 
 
+def test_a_ctrl_c_during_a_write_waits_for_the_write_and_then_stops_it(tmp_path):
+    """A SIGINT inside xarray's netCDF write left its file lock half taken and `warpfric run` hung
+    while it wrote the combined file; now the write runs to its end, then KeyboardInterrupt is
+    raised, the old file kept and no temporary file left."""
+    import signal
+
+    from warpfric.io import replace_atomically
+
+    out = tmp_path / "out.nc"
+    out.write_text("the old result")
+    finished = []
+
+    def write(tmp):
+        Path(tmp).write_text("half")
+        os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C in the middle of the write
+        Path(tmp).write_text("the new result")
+        finished.append(True)
+
+    with pytest.raises(KeyboardInterrupt):
+        replace_atomically(out, write)
+    assert finished and out.read_text() == "the old result" and _files(tmp_path) == ["out.nc"]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # Python's own handler again
+    replace_atomically(out, lambda tmp: Path(tmp).write_text("written"))  # and a write without one
+    assert out.read_text() == "written" and _files(tmp_path) == ["out.nc"]
+
+
 def test_write_ensemble_removes_its_temporary_file_on_ctrl_c(tmp_path, monkeypatch):
     from warpfric.io import write_ensemble
 

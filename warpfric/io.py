@@ -62,7 +62,9 @@ import hashlib
 import json
 import os
 import shutil
+import signal
 import socket
+import threading
 import time
 import uuid
 from pathlib import Path
@@ -554,20 +556,43 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
     return replace_atomically(path, write)
 
 
+@contextlib.contextmanager
+def _sigint_held():
+    """Ctrl-C (SIGINT) held back while the block runs; yields a list that holds True once one came.
+    A netCDF write cannot be interrupted halfway: a KeyboardInterrupt inside xarray's file locks left
+    one half taken, and the writer's own close then waited on it for ever (a Ctrl-C while a sweep
+    wrote its combined file hung `warpfric run`). Only where Python's own handler is in place, in the
+    main thread; elsewhere the block runs as it is."""
+    interrupted = []
+    if (threading.current_thread() is not threading.main_thread()
+            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+        yield interrupted
+        return
+    previous = signal.signal(signal.SIGINT, lambda signum, frame: interrupted.append(True))
+    try:
+        yield interrupted
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def replace_atomically(path, write, suffix: str = "") -> Path:
     """Write ``path`` through ``write(tmp)`` into a temporary file beside it, then move that over
     ``path``: a write that fails or is interrupted leaves ``path`` as it was and no temporary file.
     The temporary's name is ``PATH.<pid>.<hex>.tmp`` (a name of its own per writer: two writers of
     one chunk, a task run twice, never share a file; for an ensemble, remove_stale_temporaries
     finds those that killed writers left), with ``suffix`` after it where the writer needs one (a
-    figure's ``.png``).
-    Raises OutputWriteError for an I/O error (a full disk, a folder that does not exist)."""
+    figure's ``.png``). A Ctrl-C during the write is held until the write ends (a netCDF write
+    interrupted halfway could hang: _sigint_held), then raised as KeyboardInterrupt, ``path`` as
+    it was. Raises OutputWriteError for an I/O error (a full disk, a folder that does not exist)."""
     path = Path(path)
     if not path.parent.is_dir():  # else HDF5 reports it as "Permission denied"
         raise OutputWriteError(f"could not write {str(path)!r}: folder {str(path.parent)!r} does not exist")
     tmp = path.with_name(f"{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp{suffix}")
     try:
-        write(tmp)
+        with _sigint_held() as interrupted:
+            write(tmp)
+        if interrupted:  # Ctrl-C during the write: raised now, the file not moved into place
+            raise KeyboardInterrupt
         os.replace(tmp, path)
     except BaseException as err:  # a full disk, an I/O error, Ctrl-C: no temporary file stays behind
         free = free_bytes(path.parent)
