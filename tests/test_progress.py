@@ -143,10 +143,10 @@ def test_cpu_launches_last_about_a_tenth_of_a_second():
 
 
 def test_a_run_far_beyond_the_usual_size_warns_with_time_and_memory():
-    with pytest.warns(progress.SizeWarning, match=r"1 member x 100000 nodes .* roughly 2\.\d h on 1 CPU core .* "
+    with pytest.warns(progress.SizeWarning, match=r"1 member x 100000 nodes .* roughly 8\d min on 1 CPU core .* "
                                                   r"MB of memory"):
         progress.size_warning(1, wf.Solver(nodes=100_000), 2, "cpu")
-    with pytest.warns(progress.SizeWarning, match=r"roughly 7\d min on 2 CPU cores"):  # 1e7 node-members
+    with pytest.warns(progress.SizeWarning, match=r"roughly 4\d min on 2 CPU cores"):  # 1e7 node-members
         progress.size_warning(20_000, wf.Solver(nodes=1000), 1, "cpu", workers=2)
     with pytest.warns(progress.SizeWarning, match=r"200000 members x 100 nodes .* GB of device memory"):
         progress.size_warning(200_000, wf.Solver(nodes=100), 1, "cuda:0")
@@ -187,7 +187,9 @@ def test_a_terminal_of_zero_size_draws_80_columns(clock, monkeypatch):
     assert len(frames) >= 3 and all(len(text.rstrip("\n")) == 80 for _, text in frames), frames
     # the counts are whole (tqdm cut a long line's end: "..., 100/1"); the label gives way instead
     assert all(text.rstrip("\n").endswith(" done]") for _, text in frames), frames
-    assert frames[-1][0] == 100 and frames[-1][1].startswith("chunk 1/4 (memb…: 100.0%|")
+    # the label keeps one length over the run (reckoned for the widest counts), so it does not jump
+    assert len({text.split(": ")[0] for _, text in frames}) == 1, frames
+    assert frames[-1][0] == 100 and frames[-1][1].startswith("chunk 1/4 (mem…: 100.0%|")
     assert frames[-1][1].rstrip("\n").endswith("1200/1200 done]")
     monkeypatch.setenv("COLUMNS", "60")  # a size the environment gives
     assert progress._terminal_size(terminal) == (60, 24)
@@ -199,6 +201,19 @@ def test_a_terminal_of_zero_size_draws_80_columns(clock, monkeypatch):
     line.close()
     text = drawn(wide)[-1][1].rstrip("\n")
     assert len(text) == 120 and text.startswith("warpfric chunk 1/4 (members 0..1199): 100.0%|"), text
+
+
+def test_a_label_too_long_for_the_line_is_left_out_not_cut_to_a_stub(clock, monkeypatch):
+    """The plain label, beside counts and a note at 80 columns, came out as 'warpfr…'."""
+    terminal = UnsizedTerminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    monkeypatch.setenv("COLUMNS", "80")
+    line = progress.Line(300, "", clock=clock)
+    clock.now += 1.0
+    line.close("2 workers")
+    text = drawn(terminal)[-1][1].rstrip("\n")
+    assert len(text) == 80 and text.startswith("100.0%|") and text.endswith("300/300 done, 2 workers]"), text
+    assert "…" not in text
 
 
 def test_durations_and_counts_read_as_words():

@@ -93,7 +93,7 @@ def plan(workers, device, n_members: int, solver, fronts, record) -> int:
         raise ValueError(f"workers = {workers} is invalid with device {device!r}; valid there: None or 1 (worker "
                          "processes serve the CPU, where Warp runs a launch on one core)")
     record_slots(record, n_members)  # a recorded member beyond the ensemble: the same error as in one process
-    passes = 1.0 if fronts is None else progress_module.FRONTS_PASSES * (1.5 if fronts.grid_check else 1.0)
+    passes = progress_module.front_passes(fronts)
     if workers is None:
         pays = progress_module.cpu_seconds(n_members, solver, passes) >= MIN_CPU_SECONDS
         n = min(cpu_cores(), n_members) if cpu and n_members > 1 and pays and _top_level() else 1
@@ -122,6 +122,7 @@ def _init_worker(inbox) -> None:
     (its "no CUDA driver" notice, which the parent has printed, not repeated)."""
     global _IN_WORKER, _INBOX
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    threading.Thread(target=_exit_with_parent, args=(os.getppid(),), daemon=True).start()
     os.environ["CUDA_VISIBLE_DEVICES"] = ""
     _IN_WORKER, _INBOX = True, inbox
     saved = os.dup(2)
@@ -133,6 +134,18 @@ def _init_worker(inbox) -> None:
         os.dup2(saved, 2)
         os.close(saved)
     inbox.put(("ready", os.getpid()))
+
+
+PARENT_POLL_S = 0.5  # how often a worker looks whether the process that started it still lives
+
+
+def _exit_with_parent(parent: int) -> None:
+    """In a worker, on a thread of its own: end the worker once the process that started it is gone.
+    A parent that is killed (SIGTERM, SIGKILL, out of time) cannot stop its workers, which then went
+    on computing and held their memory, re-parented, until someone killed them."""
+    while os.getppid() == parent:
+        time.sleep(PARENT_POLL_S)
+    os._exit(1)
 
 
 class _Sink:

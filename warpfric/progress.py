@@ -26,15 +26,24 @@ import warnings
 import numpy as np
 
 # --- cost model: one member of the default scene through one pass, on one core of this project's
-# CPU (fronts off, rtol 1e-5, the stress gate: median 315 attempts at N = 100 over 200 members of
-# eccentricity in [-0.2, 0.2] and F in [500, 5000] N; 337 at N = 41; 540, 880, 1550 and 2990 at
-# N = 400, 800, 1600 and 3200; 11x more attempts at rtol 1e-7; 0.29 .. 0.36 us per node and attempt
-# for 1 or 2 members from N = 100 to 3200, 0.42 us for 100 members at N = 100: 1.45 s). The front
-# metrics cost FRONTS_PASSES passes (3.6 s for those 100 members: pass 1 takes ~30 % more steps,
-# then pass 2) ---
-CPU_SECONDS_PER_NODE_ATTEMPT = 0.42e-6
+# CPU (rtol 1e-5, the stress gate: median 315 attempts at N = 100 over 200 members of eccentricity
+# in [-0.2, 0.2] and F in [500, 5000] N; 337 at N = 41; 540, 880, 1550 and 2990 at N = 400, 800,
+# 1600 and 3200; 11x more attempts at rtol 1e-7). Per node and attempt, with the contact front
+# (one pass): 0.27 us for 200 members at N = 40 (0.72 s), 0.26 us for 64 at N = 100 (0.54 s), 0.24 us
+# for 16 at N = 200 (0.30 s), one process, best of two. The front events cost FRONT_PASSES passes
+# of that (200 members at N = 40: none 0.716 s, contact 0.713, strength 0.765, velocity 1.831: its
+# first pass takes ~30 % more steps, then a second) ---
+CPU_SECONDS_PER_NODE_ATTEMPT = 0.26e-6
 FEW_NODES_ATTEMPTS = 330.0
-FRONTS_PASSES = 2.5
+FRONT_PASSES = {"contact": 1.0, "strength": 1.1, "velocity": 2.6}
+
+
+def front_passes(fronts) -> float:
+    """Passes' worth of work of a run with ``fronts`` (None: 1): its costliest event's, 1.5x with
+    the grid check (the same members on a coarser grid)."""
+    if fronts is None:
+        return 1.0
+    return max(FRONT_PASSES[event] for event in fronts.events) * (1.5 if fronts.grid_check else 1.0)
 
 
 def expected_attempts(nodes: int, rtol: float = 1e-5, method: str = "tr_bdf2") -> float:
@@ -46,7 +55,7 @@ def expected_attempts(nodes: int, rtol: float = 1e-5, method: str = "tr_bdf2") -
 
 def cpu_seconds(n_members: int, solver, passes: float = 1.0) -> float:
     """Rough time of an ensemble on one CPU core (s): members x passes x expected attempts x nodes x
-    CPU_SECONDS_PER_NODE_ATTEMPT (passes: 1 without fronts, FRONTS_PASSES with)."""
+    CPU_SECONDS_PER_NODE_ATTEMPT (passes: front_passes)."""
     attempts = expected_attempts(solver.nodes, solver.rtol, solver.method)
     return n_members * passes * attempts * solver.nodes * CPU_SECONDS_PER_NODE_ATTEMPT
 
@@ -173,6 +182,7 @@ def _terminal_size(stream) -> tuple[int, int]:
 
 
 LINE_MIN_BAR = 5  # characters of the bar itself that a line keeps (Line._fitted_label)
+LINE_MIN_LABEL = 8  # a label cut shorter than this (with its ellipsis) is left out instead
 
 
 class Line:
@@ -208,7 +218,7 @@ class Line:
             postfix = self._postfix()
             self.bar = _Bar(total=self.n, desc=self._fitted_label(postfix), postfix=postfix, unit=" members",
                             file=self.stream, mininterval=0, miniters=0, smoothing=0.1, ncols=columns, nrows=rows,
-                            leave=True, bar_format="{desc}: {percentage:5.1f}%|{bar}| [{elapsed}<{remaining}{postfix}]")
+                            leave=True, bar_format="{desc}{percentage:5.1f}%|{bar}| [{elapsed}<{remaining}{postfix}]")
 
     def _set_postfix(self) -> None:
         """The bar's counts and its label, fitted to the terminal (drawn at the next update)."""
@@ -217,20 +227,23 @@ class Line:
         self.bar.set_postfix_str(postfix, refresh=False)
 
     def _fitted_label(self, postfix: str) -> str:
-        """The label, cut where the line would not fit the terminal's width beside ``postfix``
-        (tqdm cuts a line that is too long at its end, which holds the counts): first the tool's
-        name, then the label's end (an ellipsis)."""
+        """The line's start, ``label: ``, fitted to the terminal's width beside the counts (tqdm cuts
+        a line that is too long at its end, which holds them): the label whole, else without the
+        tool's name, else cut (an ellipsis) where at least LINE_MIN_LABEL characters stay, else none.
+        The room is reckoned for the widest counts of the run (a rate of up to 8 characters, all
+        members done), so that the label keeps its length from one redraw to the next."""
         elapsed = self.clock() - self.t0
         remaining = elapsed * (1.0 - self.fraction) / self.fraction if self.fraction > 0 else 0.0
-        # the rest of the line: ": 100.0%|", a bar of LINE_MIN_BAR, "| [", elapsed "<" remaining as
+        # the rest of the line: "100.0%|", a bar of LINE_MIN_BAR, "| [", elapsed "<" remaining as
         # tqdm writes them (MM:SS, or H:MM:SS from an hour on), ", " and "]"
         clock_width = sum(5 if t < 3600 else len(f"{int(t // 3600)}:00:00") for t in (elapsed, remaining))
-        room = self.columns - len(postfix) - (9 + LINE_MIN_BAR + 3 + clock_width + 1 + 2 + 1)
-        label = self.label
-        if len(label) > room:
-            label = label.removeprefix("warpfric ")
-            label = label if len(label) <= room else label[:max(room - 1, 0)] + "…"
-        return label
+        widest = len(f"1.23e+03 members/s, {self.n}/{self.n} done") + (len(f", {self.note}") if self.note else 0)
+        room = self.columns - max(len(postfix), widest) - (7 + LINE_MIN_BAR + 3 + clock_width + 1 + 2 + 1) - 2
+        for label in (self.label, self.label.removeprefix("warpfric ")):
+            if len(label) <= room:
+                return f"{label}: "
+        short = self.label.removeprefix("warpfric ")
+        return f"{short[:room - 1]}…: " if room >= LINE_MIN_LABEL else ""
 
     def _postfix(self) -> str:
         rate = self.fraction * self.n / max(self.clock() - self.t0, 1e-9)  # members (or their fractions) per second
