@@ -391,6 +391,20 @@ def test_a_files_local_cluster_workers_stay_unused_on_another_scheduler(tmp_path
     _error_line(err, "scheduler 'tcp://127.0.0.1:1': cannot connect")
 
 
+def test_the_size_warning_of_a_chunked_sweep_is_the_whole_runs_and_said_once(tmp_path, sweep, capsys, monkeypatch):
+    """Each chunk warned of its own size (a sweep too large as a whole but cut into usual chunks was
+    not warned of at all); now the run warns once, with its own numbers. The usual size is made
+    small here so that the tiny sweep (3 members x 11 nodes, chunks of 1) is beyond it."""
+    from warpfric import progress
+
+    monkeypatch.setattr(progress, "USUAL_NODES", 5)
+    code, _out, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--chunk", 1, "--device", DEVICE,
+                              "--quiet")
+    assert code == 0, err
+    warned = [line for line in err if "far beyond the usual size" in line]
+    assert len(warned) == 1 and "3 members x 11 nodes" in warned[0], err
+
+
 def test_an_unreachable_scheduler_leaves_no_parts_folder(tmp_path, sweep, capsys, monkeypatch):
     distributed = pytest.importorskip("distributed")
 

@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .pool import warn_once, warning_pairs
-from .progress import member_range, plural, seconds_text
+from .pool import cpu_cores, warn_once, warning_pairs
+from .progress import SizeWarning, front_passes, member_range, plural, seconds_text, size_warning
 
 FINAL_FIELDS = ("displacement", "velocity", "elastic_stress", "contact_age", "normal_stress", "friction_stress")
 
@@ -118,9 +118,11 @@ def run_chunk(job: ChunkJob) -> dict:
     label = _chunk_label(job) if job.progress else False
     collect = job.parent_pid is not None and job.parent_pid != os.getpid()  # not a thread of the parent
     with warnings.catch_warnings(record=True) if collect else contextlib.nullcontext() as caught:
-        ds = simulate(sweep.member_slice(sl) or None, scene=sweep.scene, model=sweep.model, solver=sweep.solver,
-                      fronts=sweep.fronts, record=record, device=device, progress=label,
-                      member_offset=job.member_offset + job.start, workers=job.cpu_workers)
+        with warnings.catch_warnings():  # the size warning is the whole sweep's, said once by run_sweep
+            warnings.filterwarnings("ignore", category=SizeWarning)
+            ds = simulate(sweep.member_slice(sl) or None, scene=sweep.scene, model=sweep.model, solver=sweep.solver,
+                          fronts=sweep.fronts, record=record, device=device, progress=label,
+                          member_offset=job.member_offset + job.start, workers=job.cpu_workers)
     if record is not None:  # member numbers, as the member coordinate
         ds = ds.assign_coords(recorded_member=ds.recorded_member.copy(data=ds.member.values[list(record.members)]))
     ds.attrs["title"] = sweep.title or ds.attrs["title"]
@@ -430,6 +432,10 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
     check_space(out, sweep_bytes(sweep, sweep.n_members - done) + sweep_bytes(sweep, sweep.n_members),
                 f"this run ({sweep.n_members - done} members of {sweep.solver.nodes} nodes to run, chunks and "
                 "combined file)")
+    # for the members still to run, once (each chunk's own is dropped: run_chunk), on this process's
+    # cores where it runs here
+    size_warning(sweep.n_members - done, sweep.solver, front_passes(sweep.fronts), device or "cuda",
+                 1 if use_cluster else (cpu_workers or cpu_cores()))
     own_client = None
     if use_cluster and client is None:  # before any file: an unreachable scheduler leaves nothing behind
         own_client = local_cluster(workers) if new_local_cluster else connect(where)
