@@ -68,6 +68,25 @@ def test_failed_members_of_a_split_run_are_told_once_for_the_ensemble(recwarn):
                     "ds.member[ds.status != 0] (docs/model.md, \"Statuses\")"]
 
 
+def test_velocity_settings_without_the_velocity_event_are_told_once(recwarn):
+    """Fronts(threshold=...) with the contact event (the default) changed nothing without a word; now
+    one warning for the ensemble, also on 2 workers and with the grid check's second run; none
+    where the velocity event is asked for."""
+    members = {"eccentricity": np.linspace(-0.2, 0.2, 4)}
+    solver = wf.Solver(nodes=11, rtol=1e-4)
+    ds = wf.simulate(members, solver=solver, fronts=wf.Fronts(threshold=0.5, direction="absolute", grid_check=True),
+                     device="cpu", progress=False, workers=2)
+    assert ds.attrs["worker_chunks"] > 1
+    said = [str(w.message) for w in recwarn if "velocity event only" in str(w.message)]
+    assert said == ["fronts settings of the velocity event only, unused without it: threshold = 0.5, direction = "
+                    "'absolute' (event='contact'); they set the velocity front's arrival level and sign: "
+                    "Fronts(event=('contact', 'velocity')) reads both fronts"], said
+    recwarn.clear()
+    wf.simulate(members, solver=solver, fronts=wf.Fronts(event=("contact", "velocity"), threshold=0.5),
+                device="cpu", progress=False, workers=1)
+    assert not [w for w in recwarn if "velocity event only" in str(w.message)]
+
+
 def test_workers_default_splits_where_it_pays(monkeypatch):
     monkeypatch.setattr(pool, "cpu_cores", lambda: 4)
     small, big = wf.Solver(nodes=21), wf.Solver(nodes=100)

@@ -437,7 +437,8 @@ class Fronts:
     min_event_fraction:    velocity event: a detachment event needs a maximum detachment velocity of
                            at least this fraction of |disc_velocity|; below it there is no front (all
                            front outputs NaN). Measured events: 1e-4 .. 3e-3 of |v_max| for 1e-6 ..
-                           1e-2 m/s.
+                           1e-2 m/s. (threshold, direction and min_event_fraction changed without the
+                           velocity event asked for change nothing; simulate warns once.)
     grid_check:            also run the ensemble on a grid of about half the nodes ((N+1)//2) and
                            report the change as ``v_*_grid_error`` and ``mu_s_grid_error``, the
                            speeds' spatial error, which ``v_*_error`` (time only) does not see.
@@ -491,6 +492,15 @@ class Fronts:
              self.edge_zone_fraction, "a number in [0, 0.5]")
         need(real(self.min_event_fraction) and 0 <= self.min_event_fraction < 1, "min_event_fraction",
              self.min_event_fraction, "a number in [0, 1)")
+
+    def unused_settings(self) -> list:
+        """The velocity event's settings (threshold, direction, min_event_fraction) changed from
+        their defaults where no requested event reads them, as 'name = value' texts."""
+        if "velocity" in self.events:
+            return []
+        defaults = {f.name: f.default for f in dataclasses.fields(self)}
+        return [f"{name} = {getattr(self, name)!r}" for name in ("threshold", "direction", "min_event_fraction")
+                if getattr(self, name) != defaults[name]]
 
     @property
     def events(self) -> tuple:
@@ -555,9 +565,11 @@ RECORD_PAST_END = "Record: recording times after a member's end are NaN"
 MEMBERS_NOT_OK = "members that did not end ok have NaN mu_s and fronts"
 # how that warning ends: where to find their numbers, in the Python API (the command line shows its own)
 MEMBERS_NOT_OK_HINT = 'their numbers: ds.member[ds.status != 0] (docs/model.md, "Statuses")'
+# how simulate's warning of velocity-front settings that no requested event reads begins
+FRONTS_SETTINGS_UNUSED = "fronts settings of the velocity event only, unused without it"
 # the warnings simulate raises once for the whole ensemble: the runs inside it (worker processes'
 # chunks, the float32 fallback, the grid check) drop their own
-ENSEMBLE_WARNINGS = (RECORD_PAST_END, MEMBERS_NOT_OK)
+ENSEMBLE_WARNINGS = (RECORD_PAST_END, MEMBERS_NOT_OK, FRONTS_SETTINGS_UNUSED)
 
 
 def _with_named_keywords(cls):

@@ -17,8 +17,9 @@ from . import __version__
 from .device import check_device, init_warp
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
-from .parameters import (ENSEMBLE_WARNINGS, FRONT_EVENTS, MEMBERS_NOT_OK, MEMBERS_NOT_OK_HINT, RECORD_PAST_END, Fronts,
-                         Model, Parameters, Record, Solver, parameter_long_name, parameter_units)
+from .parameters import (ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, MEMBERS_NOT_OK, MEMBERS_NOT_OK_HINT,
+                         RECORD_PAST_END, Fronts, Model, Parameters, Record, Solver, parameter_long_name,
+                         parameter_units)
 
 
 def simulate(
@@ -108,6 +109,10 @@ def simulate(
         raise NotImplementedError(f"the velocity front with solver setting 'method' = {solver.method!r} is not implemented "
                                   "(its arrival times read TR-BDF2's second stage); use the contact or strength front, "
                                   "or method='tr_bdf2'")
+    if fronts is not None and fronts.unused_settings():  # asked for, and silently without effect
+        warnings.warn(f"{FRONTS_SETTINGS_UNUSED}: {', '.join(fronts.unused_settings())} (event={fronts.event!r}); "
+                      "they set the velocity front's arrival level and sign: Fronts(event=('contact', 'velocity')) "
+                      "reads both fronts", stacklevel=2)
     if fronts is not None and fronts.grid_check and solver.nodes < 5:
         raise ValueError(f"fronts setting 'grid_check' needs solver setting 'nodes' >= 5 (got {solver.nodes}): the "
                          "check compares with (nodes + 1)//2 nodes")
