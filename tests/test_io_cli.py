@@ -136,6 +136,19 @@ def test_cli_run_info_plot_end_to_end(tmp_path):
     assert all((tmp_path / "png" / p).stat().st_size > 10_000 for p in pngs)
 
 
+def test_combined_parts_report_their_worker_processes():
+    """A combined file kept the first part's workers, worker_chunks and worker_start_time_s."""
+    from warpfric.io import concat_members
+
+    kw = dict(solver=wf.Solver(nodes=11, rtol=1e-4), fronts=None, device="cpu", progress=False, workers=1)
+    split = wf.simulate({"eccentricity": [0.0]}, **kw).assign_attrs(workers=2, worker_chunks=4, worker_start_time_s=0.5)
+    alone = wf.simulate({"eccentricity": [0.1]}, member_offset=1, **kw)
+    alone.attrs.pop("workers", None)
+    for parts in ((split, alone), (alone, split)):
+        both = concat_members(list(parts))
+        assert (both.attrs["workers"], both.attrs["worker_chunks"], both.attrs["worker_start_time_s"]) == (2, 5, 0.5)
+
+
 def test_resume_after_kill_gives_the_uninterrupted_result(tmp_path):
     sweep = tmp_path / "s.toml"
     sweep.write_text(TINY.replace("[-0.2, 0.0, 0.2]", "[-0.3, -0.2, -0.1, 0.0, 0.1, 0.2]"))  # 12 members
@@ -160,6 +173,10 @@ def test_resume_after_kill_gives_the_uninterrupted_result(tmp_path):
     assert res.returncode == 0, res.stderr
     assert f"{12 - len(finished)} to run" in res.stderr or f"{13 - len(finished)} to run" in res.stderr
     resumed = open_ensemble(out)
+    # its history names the interrupted command and the --resume (it named the --resume alone)
+    history = resumed.attrs["history"].splitlines()
+    assert any(line.endswith(f"--chunk 1 --device {DEVICE} --quiet (warpfric {wf.__version__})") for line in history)
+    assert sum("--resume" in line for line in history) == 2, history  # the resumed chunks' and the combined file's
     whole = tmp_path / "whole.nc"
     assert _cli("run", str(sweep), "-o", str(whole), "--chunk", "5", "--device", DEVICE).returncode == 0
     reference = open_ensemble(whole)

@@ -740,7 +740,16 @@ class ChunkStore:
         datasets = [_read(self.chunk_path(i)) for i in range(self.n_chunks)]
         combined = concat_members(datasets, names=[self.chunk_path(i).name for i in range(self.n_chunks)])
         combined.attrs.pop("chunk_index", None)
-        combined.attrs.pop("history", None)
+        # the commands that wrote the chunks (an interrupted run's and its --resume), latest first,
+        # under the line of the command that combines them (write_ensemble)
+        latest = {}  # command -> its latest "<time>: <command>" line (chunks written at other seconds)
+        for line in sorted(line for ds in datasets for line in str(ds.attrs.get("history", "")).splitlines() if line):
+            latest[line.partition(": ")[2]] = line
+        history = "\n".join(sorted(latest.values(), reverse=True))
+        if history:
+            combined.attrs["history"] = history
+        else:
+            combined.attrs.pop("history", None)
         combined.attrs["chunks"] = self.n_chunks
         write_ensemble(combined, path, command=command, run_id=self.manifest.get("run_id"))
         shutil.rmtree(self.directory)
@@ -823,4 +832,8 @@ def concat_members(datasets, names=None) -> xr.Dataset:
     out.attrs["varying_parameters"] = " ".join(p for p in PARAMETER_NAMES if p in varying)
     for key in ("wall_time_s", "kernel_build_time_s"):
         out.attrs[key] = float(sum(float(ds.attrs.get(key, 0.0)) for ds in datasets))
+    if any("workers" in ds.attrs for ds in datasets):  # worker processes of the parts (pool.py): theirs, not the first's
+        out.attrs["workers"] = max(int(ds.attrs.get("workers", 1)) for ds in datasets)
+        out.attrs["worker_chunks"] = sum(int(ds.attrs.get("worker_chunks", 1)) for ds in datasets)
+        out.attrs["worker_start_time_s"] = float(sum(float(ds.attrs.get("worker_start_time_s", 0.0)) for ds in datasets))
     return out
