@@ -82,20 +82,16 @@ def resolve_members(members: Any, scene: Parameters) -> tuple[dict[str, np.ndarr
 def _check_protocol(values: dict[str, np.ndarray]) -> None:
     """Cross-parameter rules of the load protocol."""
     rest = values["rest_until"]
-    for name in ("end_time", "max_end_time"):
-        end = values[name]
-        bad = ~(end > rest)
+    # each a time after the disc starts to move: what one before it does, the range's closing
+    # bracket (inf: none for an end, no stop for stop_time), a note
+    ends = ("ends before the disc starts to move", ")", "")
+    rules = {"end_time": ends, "max_end_time": ends,
+             "stop_time": ("stops the disc before it starts to move", "]", ", inf: no stop")}
+    for name, (what, bracket, note) in rules.items():
+        bad = ~(values[name] > rest)
         if np.any(bad):
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(
-                f"parameter {name!r} = {float(end[i])!r} (s) ends before the disc starts to move; "
-                f"valid range (rest_until, inf) = ({float(rest[i])!r}, inf) s (member {i})"
+                f"parameter {name!r} = {float(values[name][i])!r} (s) {what}; "
+                f"valid range (rest_until, inf{bracket} = ({float(rest[i])!r}, inf{bracket} s{note} (member {i})"
             )
-    stop = values["stop_time"]
-    bad = ~(stop > rest)
-    if np.any(bad):
-        i = int(np.flatnonzero(bad)[0])
-        raise ValueError(
-            f"parameter 'stop_time' = {float(stop[i])!r} (s) stops the disc before it starts to move; valid "
-            f"range (rest_until, inf] = ({float(rest[i])!r}, inf] s, inf: no stop (member {i})"
-        )
