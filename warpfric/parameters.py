@@ -151,13 +151,17 @@ def parameter_range_text(name: str) -> str:
     return _range_text(_FIELDS[name].metadata)
 
 
-def unknown_parameter(name: str) -> str:
-    """The message for a parameter name that is not one: the valid names and the closest match."""
+def did_you_mean(name, names) -> str:
+    """" (did you mean 'x'?)" with the closest of ``names`` to ``name``, or "" where none is close."""
     import difflib
 
-    close = difflib.get_close_matches(name, PARAMETER_NAMES, n=1)
-    hint = f" (did you mean {close[0]!r}?)" if close else ""
-    return f"unknown parameter {name!r}{hint}; valid names: {', '.join(PARAMETER_NAMES)}"
+    close = difflib.get_close_matches(str(name), list(names), n=1)
+    return f" (did you mean {close[0]!r}?)" if close else ""
+
+
+def unknown_parameter(name: str) -> str:
+    """The message for a parameter name that is not one: the valid names and the closest match."""
+    return f"unknown parameter {name!r}{did_you_mean(name, PARAMETER_NAMES)}; valid names: {', '.join(PARAMETER_NAMES)}"
 
 
 def _holds_bool(value) -> bool:
@@ -575,17 +579,14 @@ ENSEMBLE_WARNINGS = (RECORD_PAST_END, MEMBERS_NOT_OK, FRONTS_SETTINGS_UNUSED)
 def _with_named_keywords(cls):
     """Wrap a dataclass's __init__ so that an unknown keyword raises a TypeError that names the
     valid ones and the closest match (the default message names neither)."""
-    import difflib
-
     init = cls.__init__
     names = [f.name for f in dataclasses.fields(cls)]
 
     def __init__(self, *args, **kwargs):
         unknown = [k for k in kwargs if k not in names]
         if unknown:
-            close = difflib.get_close_matches(unknown[0], names, n=1)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
-            raise TypeError(f"{cls.__name__}: unknown parameter {unknown[0]!r}{hint}; valid names: {', '.join(names)}")
+            raise TypeError(f"{cls.__name__}: unknown parameter {unknown[0]!r}{did_you_mean(unknown[0], names)}; "
+                            f"valid names: {', '.join(names)}")
         init(self, *args, **kwargs)
 
     __init__.__doc__ = init.__doc__

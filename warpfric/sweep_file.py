@@ -35,8 +35,8 @@ from pathlib import Path
 import numpy as np
 
 from .members import resolve_members
-from .parameters import (PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solver, parameter_range_text, parameter_units,
-                         units_text, validate_value)
+from .parameters import (PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solver, did_you_mean, parameter_range_text,
+                         parameter_units, units_text, validate_value)
 
 TOP_KEYS = ("title", "description", "scene", "model", "solver", "fronts", "record", "grid", "zip", "sample", "design",
             "run")
@@ -81,10 +81,7 @@ def _where(table: str, key: str | None = None) -> str:
 
 def _accepted(key: str, names) -> str:
     """'(did you mean 'x'?); accepted: a, b, ...' for a key that is not one of ``names``."""
-    import difflib
-
-    close = difflib.get_close_matches(str(key), list(names), n=1)
-    return (f" (did you mean {close[0]!r}?)" if close else "") + f"; accepted: {', '.join(names)}"
+    return f"{did_you_mean(key, names)}; accepted: {', '.join(names)}"
 
 
 def _number(value, where: str) -> float:
