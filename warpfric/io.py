@@ -530,8 +530,7 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
     OutputBusy when another run holds the output's lock (``OUT.nc.lock``, :func:`lock_output`).
     """
     path = Path(path)
-    if not path.parent.is_dir():  # else HDF5 reports it as "Permission denied"
-        raise OutputWriteError(f"could not write {str(path)!r}: folder {str(path.parent)!r} does not exist")
+    _require_folder(path)
     refuse_if_locked(path)
     if varying is None:
         varying = ds.attrs.get("varying_parameters", "").split()
@@ -554,6 +553,13 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
         refuse_if_locked(path)  # again: a run may have started on this output during the write
 
     return replace_atomically(path, write)
+
+
+def _require_folder(path: Path) -> None:
+    """OutputWriteError where ``path``'s folder does not exist (HDF5 reports that as "Permission
+    denied")."""
+    if not path.parent.is_dir():
+        raise OutputWriteError(f"could not write {str(path)!r}: folder {str(path.parent)!r} does not exist")
 
 
 @contextlib.contextmanager
@@ -585,8 +591,7 @@ def replace_atomically(path, write, suffix: str = "") -> Path:
     interrupted halfway could hang: _sigint_held), then raised as KeyboardInterrupt, ``path`` as
     it was. Raises OutputWriteError for an I/O error (a full disk, a folder that does not exist)."""
     path = Path(path)
-    if not path.parent.is_dir():  # else HDF5 reports it as "Permission denied"
-        raise OutputWriteError(f"could not write {str(path)!r}: folder {str(path.parent)!r} does not exist")
+    _require_folder(path)
     tmp = path.with_name(f"{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp{suffix}")
     try:
         with _sigint_held() as interrupted:

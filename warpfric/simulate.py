@@ -109,8 +109,9 @@ def simulate(
         raise NotImplementedError(f"the velocity front with solver setting 'method' = {solver.method!r} is not implemented "
                                   "(its arrival times read TR-BDF2's second stage); use the contact or strength front, "
                                   "or method='tr_bdf2'")
-    if fronts is not None and fronts.unused_settings():  # asked for, and silently without effect
-        warnings.warn(f"{FRONTS_SETTINGS_UNUSED}: {', '.join(fronts.unused_settings())} (event={fronts.event!r}); "
+    unused = fronts.unused_settings() if fronts is not None else []
+    if unused:  # asked for, and silently without effect
+        warnings.warn(f"{FRONTS_SETTINGS_UNUSED}: {', '.join(unused)} (event={fronts.event!r}); "
                       "they set the velocity front's arrival level and sign: Fronts(event=('contact', 'velocity')) "
                       "reads both fronts", stacklevel=2)
     if fronts is not None and fronts.grid_check and solver.nodes < 5:
