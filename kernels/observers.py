@@ -81,10 +81,14 @@ def detachment_over(p: MemberParams, st: IntegratorState, outputs: OutputSetting
     """The automatic end: mu has passed a maximum reached after the disc slid AUTO_END_MIN_TRAVEL*D
     and fallen AUTO_END_PEAK_DROP below it, (velocity front) no node is above AUTO_END_FRONT_FRACTION
     of the arrival level, and (strength front) every node in contact has passed its peak of
-    tau_f/sigma_n by STRENGTH_PEAK_DROP."""
+    tau_f/sigma_n by STRENGTH_PEAK_DROP. A disc that stopped before it slid AUTO_END_MIN_TRAVEL*D
+    can give no such maximum (its travel stays where it stopped): the run ends at the stop."""
+    min_travel = wp.float64(AUTO_END_MIN_TRAVEL) * p.memory_length
+    if st.t >= p.stop_time and disc_travel_at(p, p.stop_time) < min_travel:
+        return True
     if st.t <= p.rest_until or st.npts < 3 or st.mu_s <= wp.float64(0.0):
         return False
-    if disc_travel_at(p, st.mu_s_time) < wp.float64(AUTO_END_MIN_TRAVEL) * p.memory_length:
+    if disc_travel_at(p, st.mu_s_time) < min_travel:
         return False  # the maximum must come from the sliding disc
     if st.mu_final > (wp.float64(1.0) - wp.float64(AUTO_END_PEAK_DROP)) * st.mu_s:
         return False

@@ -160,6 +160,31 @@ def test_a_sudden_stop_after_a_predicted_switch_ends_without_failure():
     np.testing.assert_allclose(ds.mu_s.values[after], peak, rtol=1e-5)
 
 
+def test_a_disc_stopped_before_it_slid_the_peak_travel_ends_at_the_stop():
+    """The automatic end needs a maximum of mu reached after the disc slid AUTO_END_MIN_TRAVEL memory
+    lengths; a disc stopped before that (here 0.25 D: 1e-4 m/s ramped over 2 s, stopped 0.05 s after
+    the rest) can give none, and ran at rest to max_end_time (80 s). It ends at the stop, no_peak,
+    with the state of a run that ends there by end_time; a stop after that travel (20.12 s: 1.44 D)
+    still runs on past the stop until mu has fallen."""
+    from warpfric.kernels.observers import AUTO_END_MIN_TRAVEL
+
+    ramp, v = P.velocity_ramp_time, P.disc_velocity
+    travel = [v * (t - P.rest_until) ** 2 / (2 * ramp) / P.memory_length for t in (20.05, 20.12)]
+    assert travel[0] < AUTO_END_MIN_TRAVEL < travel[1]
+    auto = run({"stop_time": [20.05, 20.12]}, rtol=1e-6)
+    fixed = run({"end_time": [20.05]}, rtol=1e-6)
+    meanings = auto.status.attrs["flag_meanings"].split()
+    assert [meanings[k] for k in auto.status.values] == ["no_peak", "no_peak"]
+    assert auto.final_time.values[0] == 20.05 and 20.12 < auto.final_time.values[1] < 20.2
+    # the same steps as the run to end_time (to 80 s it took 407 instead of 236)
+    assert auto.steps_accepted.values[0] == fixed.steps_accepted.values[0]
+    for name in ("mu_final", "plate_compression", "plate_tilt"):
+        np.testing.assert_allclose(auto[name].values[0], fixed[name].values[0], rtol=1e-12, err_msg=name)
+    # (friction_stress is not compared: at the final time the one disc has stopped, the other not)
+    for name in ("displacement", "velocity", "elastic_stress", "contact_age"):
+        np.testing.assert_allclose(auto[name].values[0], fixed[name].values[0], rtol=1e-12, atol=0, err_msg=name)
+
+
 def test_gateless_law_rejects_no_step_for_a_switch():
     """Without the stress gate there are no gate switches: every rejection is the error test's or
     Newton's, and nothing is predicted."""
