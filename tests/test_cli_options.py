@@ -229,6 +229,9 @@ def test_the_relaxation_gate_help_says_what_each_law_is(capsys):
     (["run", "--nodes", "10.5"], ["argument --nodes: invalid int value: '10.5'", "`warpfric run --help`"]),
     (["run", "--front-event", "contct"], ["argument --front-event: invalid choice: 'contct'"]),
     (["rn"], ["invalid choice: 'rn'", "`warpfric COMMAND --help`"]),
+    # no abbreviations: a prefix of one option is no option (it would break when another starts alike)
+    (["run", "--overw"], ["unrecognized arguments: --overw", "did you mean --overwrite?"]),
+    (["sensitivity", "x.nc", "--overwr"], ["unrecognized arguments: --overwr", "did you mean --overwrite?"]),
     (["info", "x.nc", "--nodes", "20"], ["unrecognized arguments: --nodes 20", "`warpfric info --help`"]),
 ])
 def test_a_command_line_mistake_is_one_line(capsys, argv, words):

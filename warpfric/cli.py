@@ -422,7 +422,13 @@ def _sensitivity(args) -> int:
 
 class _Parser(argparse.ArgumentParser):
     """argparse's parser with one-line errors (``warpfric: error: ...``, exit code 2, as every other
-    fault), an unknown option answered with the closest known ones."""
+    fault), an unknown option answered with the closest known ones, and no abbreviated options (a
+    script that writes ``--over`` for ``--overwrite`` would break, or change meaning, the day another
+    option starts alike: it gets the "did you mean" hint instead)."""
+
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message):
         if message.startswith("unrecognized arguments:"):
