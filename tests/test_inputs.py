@@ -3,7 +3,7 @@ before any kernel runs."""
 
 import numpy as np
 import pytest
-from conftest import DEVICE
+from conftest import DEVICE, run
 
 import warpfric as wf
 
@@ -49,11 +49,14 @@ def test_bad_parameters(members, words):
 @pytest.mark.parametrize(
     "kw, words",
     [
-        (dict(nodes=2), ["nodes", "2", ">= 3"]),
+        (dict(nodes=2), ["nodes", "2", "[3, 2147483647]"]),
         (dict(dtype="float16"), ["dtype", "float16", "float32 or float64"]),
         (dict(rtol=0.0), ["rtol", "0.0"]),
         (dict(dtype="float32", rtol=1e-7), ["rtol", "1e-07", "float32"]),
         (dict(max_steps=0), ["max_steps"]),
+        # the kernels count steps in int32: 2**32 + 5 ran 5 steps, 10**12 none
+        (dict(max_steps=2**32 + 5), ["max_steps", "4294967301", "[1, 2147483647]"]),
+        (dict(stall_min_steps=2**31), ["stall_min_steps", "[1, 2147483647]"]),
         (dict(min_step=1.0, initial_step=1e-6), ["initial_step"]),
         (dict(step_safety=1.5), ["step_safety", "1.5", "(0, 1)"]),
         (dict(failure_factor=0.0), ["failure_factor", "0.0"]),
@@ -194,3 +197,32 @@ def test_a_scene_is_checked_where_it_is_written(kw, words):
     for w in words:
         assert w in str(err.value), (w, str(err.value))
     wf.Parameters(end_time=None, stop_time=float("inf"), torque_arm=None)
+
+
+def test_the_ends_that_take_inf_say_so_and_a_per_member_none_points_to_inf():
+    """stop_time and end_time take inf (no stop, the automatic end): their range is written (0, inf],
+    not (0, inf); a None inside a per-member list (None stands only for the whole) is answered with inf."""
+    with pytest.raises(ValueError, match=r"'stop_time' = -1.0 s is out of range; valid range \(0, inf\] s"):
+        simulate({"stop_time": [-1.0]})
+    with pytest.raises(ValueError, match=r"valid range \(0, inf\] \(per member, write inf where you mean None\)"):
+        simulate({"end_time": [None, 21.0]})
+    with pytest.raises(ValueError, match=r"'normal_force': value \[None, 2.0\] is not a real number; valid range \(0, inf\)$"):
+        simulate({"normal_force": [None, 2.0]})
+
+
+def test_parameters_that_the_model_switches_ignore_are_named():
+    """Model(tilt=False) spreads the load evenly and has no moment balance: an eccentricity swept
+    there changed nothing (the same mu_s and steps) without a word; likewise shear_strength without
+    the stress gate. One warning names each with the switch; defaults or used values give none."""
+    with pytest.warns(UserWarning, match=r"parameters without effect under these model switches: eccentricity "
+                                         r"\(tilt=False.*shear_strength \(relaxation_gate='none'\)") as caught:
+        ds = run({"eccentricity": [0.0, 0.3], "shear_strength": [1.3e8, 1e8]}, nodes=20, rtol=1e-5,
+                 model=wf.Model(tilt=False, relaxation_gate="none"))
+    assert len([w for w in caught if "without effect" in str(w.message)]) == 1
+    assert ds.mu_s.values[0] == ds.mu_s.values[1] and ds.steps_accepted.values[0] == ds.steps_accepted.values[1]
+    from warpfric.members import resolve_members
+
+    model = wf.Model(relaxation_gate="none", tilt=False, inertia=False, viscous_friction=False)
+    assert model.unused_parameters(resolve_members(None, wf.Parameters())[0]) == []
+    values = resolve_members({"eccentricity": [0.1], "shear_strength": [1e8]}, wf.Parameters())[0]
+    assert wf.Model().unused_parameters(values) == []  # both used by the default model

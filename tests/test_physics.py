@@ -65,6 +65,24 @@ def test_steady_sliding_matches_closed_form(members):
     assert abs(ds.mu_final.values[0] / expected - 1) < 1e-3
 
 
+def test_without_aging_there_is_no_static_peak():
+    """b = 0: the contact area does not grow with age, so mu(t) rises to steady sliding's level and
+    stays there. The run found no fall of mu, ran to max_end_time (80 s) and gave its round-off
+    maximum (5e-9 above steady sliding) as mu_s with status ok; it is no_peak now, mu_s NaN, mu_final
+    the closed form of steady sliding. b = 0.01 has a static peak above steady sliding: ok. An
+    explicit end_time beyond max_end_time is the run's end (it was cut to max_end_time)."""
+    scene = wf.Parameters()
+    ds = run({"aging_coefficient": [0.0, 0.01]}, scene=scene, rtol=1e-5)
+    meanings = ds.status.attrs["flag_meanings"].split()
+    assert [meanings[k] for k in ds.status.values] == ["no_peak", "ok"]
+    assert np.isnan(ds.mu_s.values[0]) and ds.final_time.values[0] == scene.max_end_time
+    np.testing.assert_allclose(ds.mu_final.values[0], steady_mu(wf.Parameters(aging_coefficient=0.0), scene.disc_velocity),
+                               rtol=1e-6)
+    assert ds.mu_s.values[1] > 1.005 * steady_mu(wf.Parameters(aging_coefficient=0.01), scene.disc_velocity)
+    later = run({"aging_coefficient": [0.0]}, scene=wf.Parameters(end_time=scene.max_end_time + 10.0), rtol=1e-5)
+    assert later.final_time.values[0] == scene.max_end_time + 10.0 and later.status.values[0] == ds.status.values[0]
+
+
 def test_plate_is_in_force_and_moment_equilibrium():
     """p*int sigma dx = F and p*int x sigma dx = F*e - h_arm*p*int tau_f dx at the final state."""
     ecc = np.array([-0.2, 0.0, 0.25])

@@ -81,6 +81,23 @@ def test_every_accepted_eccentricity_runs_up_to_heavy_lift_off():
     assert (ds.contact_arrival_time.values[opened] > 20.0).all()
 
 
+def test_a_sudden_stop_of_a_lifted_off_pad_is_advised_damping():
+    """Stopped at 21 s with part of the pad lifted off, 2e/L = -0.35 vibrates undamped where nothing
+    touches and reaches max_steps at ~21.002 s (2e/L = -0.25 ends ok); "a larger max_steps" alone
+    was the advice, and reaching 22 s would need ~1e7 steps. The warning names the lift-off and
+    damping, and a damping of 1e6 Pa s/m makes both members end ok with mu at 22 s within 1e-6."""
+    import warpfric as wf
+
+    members = {"eccentricity": [-0.35, -0.25]}
+    with pytest.warns(UserWarning, match="1 max_steps_reached .*; 1 of them: part of the pad lifted off.*1e6 Pa s/m"):
+        ds = run(members, scene=wf.Parameters(stop_time=21.0, end_time=22.0), rtol=1e-5, max_steps=4000,
+                 stall_factor=float("inf"))
+    assert list(ds.status.values) == [1, 0] and (ds.lift_off.values == 1).all()
+    damped = run(members, scene=wf.Parameters(stop_time=21.0, end_time=22.0, damping=1e6), rtol=1e-5, max_steps=4000)
+    assert (damped.status.values == 0).all() and (damped.final_time.values == 22.0).all()
+    np.testing.assert_allclose(damped.mu_final.values[1], ds.mu_final.values[1], rtol=1e-6)
+
+
 def test_a_disc_that_never_moves_has_no_peak_and_no_front():
     """disc_velocity = 0: the pad only feels the load ramp; its largest mu(t) is round-off before the
     disc would start, and its 'event' of ~1e-22 m/s is no event: status no_peak, NaN mu_s, no front."""

@@ -322,13 +322,14 @@ def confirmed_strength_peaks(strength, arrival, arrival_error, final_time: np.nd
 
 def param_columns(values: dict) -> dict:
     """The MemberParams fields of resolved parameters (name -> (member,) float64), as columns: the
-    parameters' own, end_time capped at max_end_time and auto_end (1 where end_time is None (inf):
-    the automatic end). Fields not given stay 0 in member_params."""
+    parameters' own, end_time max_end_time where it is None (inf: the automatic end; an explicit
+    end_time is not capped) and auto_end (1 there). Fields not given stay 0 in member_params."""
     from warpfric.kernels.types import MemberParams
 
     columns = {name: values[name] for name in MemberParams.numpy_dtype()["names"] if name in values}
-    columns["end_time"] = np.minimum(values["end_time"], values["max_end_time"])
-    columns["auto_end"] = np.isinf(values["end_time"]).astype(np.float64)
+    auto_end = np.isinf(values["end_time"])
+    columns["end_time"] = np.where(auto_end, values["max_end_time"], values["end_time"])
+    columns["auto_end"] = auto_end.astype(np.float64)
     return columns
 
 

@@ -139,10 +139,11 @@ def units_text(units: str) -> str:
 
 
 def _range_text(meta) -> str:
-    """Valid range, e.g. '(0, inf)': an infinite end is always open (inf itself is never a value,
-    except stop_time = inf, which means "no stop")."""
+    """Valid range, e.g. '(0, inf)': an infinite end is open (inf itself is never a value), except
+    where inf is what None means (stop_time = inf: no stop; end_time = inf: the automatic end)."""
     lo = "(" if meta["low_open"] or math.isinf(meta["low"]) else "["
-    hi = ")" if meta["high_open"] or math.isinf(meta["high"]) else "]"
+    inf_allowed = meta["none_means"] is not None and math.isinf(meta["none_means"])
+    hi = ")" if (meta["high_open"] or math.isinf(meta["high"])) and not inf_allowed else "]"
     return f"{lo}{meta['low']:g}, {meta['high']:g}{hi}"
 
 
@@ -186,9 +187,12 @@ def resolve_value(name: str, value: Any, scene: Parameters | None = None):
         raise ValueError(f"parameter {name!r}: value {value!r} is not a rectangular array (nested lists of different "
                          "lengths); give a number, or a list or array of numbers per member") from None
     if arr.dtype.kind not in "iuf" or _holds_bool(value):  # booleans: True would pass as 1.0, False as 0.0
-        raise ValueError(
-            f"parameter {name!r}: value {value!r} is not a real number; valid range {_range_text(_FIELDS[name].metadata)}"
-        )
+        meta = _FIELDS[name].metadata
+        hint = ""
+        if meta["none_means"] is not None and arr.ndim > 0:  # [None, 21.0]: None only stands for the whole
+            hint = f" (per member, write {meta['none_means']:g} where you mean None)"
+        raise ValueError(f"parameter {name!r}: value {value!r} is not a real number; valid range "
+                         f"{_range_text(meta)}{hint}")
     return arr.astype(np.float64)
 
 
@@ -237,6 +241,11 @@ class Model:
                         'none': no gate, |s| always (the SPEC v1 law of earlier results);
                         'velocity': |s| -> sqrt(s^2 + v0^2), v0 = ``gate_velocity`` (Bar-Sinai et
                         al., PRE 88, 060403, 2013).
+
+    A parameter that the switches leave without effect (eccentricity and torque_arm without tilt,
+    viscous_coefficient without viscous friction, shear_strength without the stress gate,
+    gate_velocity without the velocity gate, density without inertia) is named in one warning by
+    ``simulate`` where a member sets it away from the default scene (``unused_parameters``).
     """
 
     inertia: bool = True
@@ -254,10 +263,30 @@ class Model:
             elif not isinstance(v, (bool, np.bool_)):
                 raise ValueError(f"model switch {f.name!r} = {v!r}: must be True or False")
 
+    def unused_parameters(self, values: dict) -> list:
+        """The parameters that these switches leave without effect and that some member sets away from
+        the default scene's value (``values``: resolved parameters, name -> (member,) float64; the
+        torque arm's default is the member's height), as 'name (why)' texts."""
+        unused = {
+            "eccentricity": (not self.tilt, "tilt=False: no moment balance, the load is spread evenly"),
+            "torque_arm": (not self.tilt, "tilt=False: no moment balance"),
+            "viscous_coefficient": (not self.viscous_friction, "viscous_friction=False"),
+            "shear_strength": (self.relaxation_gate != "stress", f"relaxation_gate={self.relaxation_gate!r}"),
+            "gate_velocity": (self.relaxation_gate != "velocity", f"relaxation_gate={self.relaxation_gate!r}"),
+            "density": (not self.inertia, "inertia=False: a quasi-static pad"),
+        }
+        texts = []
+        for name, (without_effect, why) in unused.items():
+            default = values["height"] if name == "torque_arm" else getattr(Parameters(), name)
+            if without_effect and np.any(np.asarray(values[name]) != default):
+                texts.append(f"{name} ({why})")
+        return texts
+
 
 _DTYPES = ("float32", "float64")
 _METHODS = ("tr_bdf2", "esdirk4")
 FLOAT32_MIN_RTOL = 1e-5  # docs/performance.md: float32 stalls below this
+INT32_MAX = 2**31 - 1  # the kernels' step counters and node indices are int32
 MAX_LANES = 256  # threads per block: the cooperative kernel takes 255 registers per thread on the H100, and a block has 65,536
 
 
@@ -352,7 +381,7 @@ class Solver:
         def is_real(v):
             return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) and math.isfinite(v)
 
-        need(is_int(self.nodes) and self.nodes >= 3, "nodes", self.nodes, "an integer >= 3")
+        need(is_int(self.nodes) and 3 <= self.nodes <= INT32_MAX, "nodes", self.nodes, f"an integer in [3, {INT32_MAX}]")
         need(self.dtype in _DTYPES, "dtype", self.dtype, " or ".join(_DTYPES))
         need(isinstance(self.method, str) and self.method in _METHODS, "method", self.method,
              " or ".join(repr(m) for m in _METHODS))
@@ -365,7 +394,8 @@ class Solver:
             need(is_real(v) and v > 0, name, v, "a number > 0 (s)")
         need(self.min_step <= self.initial_step <= self.max_step, "initial_step", self.initial_step,
              f"min_step ({self.min_step:g}) <= initial_step <= max_step ({self.max_step:g})")
-        need(is_int(self.max_steps) and self.max_steps >= 1, "max_steps", self.max_steps, "an integer >= 1")
+        need(is_int(self.max_steps) and 1 <= self.max_steps <= INT32_MAX, "max_steps", self.max_steps,
+             f"an integer in [1, {INT32_MAX}] (the kernels count in int32)")
         need(is_int(self.newton_max_iter) and 1 <= self.newton_max_iter <= 100, "newton_max_iter",
              self.newton_max_iter, "an integer in [1, 100]")
         need(is_real(self.newton_tol) and 0 < self.newton_tol <= 1, "newton_tol", self.newton_tol, "a number in (0, 1]")
@@ -376,8 +406,8 @@ class Solver:
              "True or False")
         need(is_real(self.sliding_width) and 0 < self.sliding_width <= 0.1, "sliding_width", self.sliding_width,
              "a number in (0, 0.1]")
-        need(is_int(self.steps_per_launch) and self.steps_per_launch >= 1, "steps_per_launch",
-             self.steps_per_launch, "an integer >= 1")
+        need(is_int(self.steps_per_launch) and 1 <= self.steps_per_launch <= INT32_MAX, "steps_per_launch",
+             self.steps_per_launch, f"an integer in [1, {INT32_MAX}]")
         need(is_real(self.step_safety) and 0 < self.step_safety < 1, "step_safety", self.step_safety, "a number in (0, 1)")
         need(is_real(self.step_min_factor) and 0 < self.step_min_factor < 1, "step_min_factor", self.step_min_factor,
              "a number in (0, 1)")
@@ -387,8 +417,8 @@ class Solver:
              "a number in (0, 1)")
         need((is_real(self.stall_factor) or self.stall_factor == math.inf) and self.stall_factor >= 1, "stall_factor",
              self.stall_factor, "a number >= 1 (inf: never)")
-        need(is_int(self.stall_min_steps) and self.stall_min_steps >= 1, "stall_min_steps", self.stall_min_steps,
-             "an integer >= 1")
+        need(is_int(self.stall_min_steps) and 1 <= self.stall_min_steps <= INT32_MAX, "stall_min_steps",
+             self.stall_min_steps, f"an integer in [1, {INT32_MAX}]")
         need(isinstance(self.float32_fallback, (bool, np.bool_)), "float32_fallback", self.float32_fallback,
              "True or False")
         max_lanes = min(MAX_LANES, self.nodes // 2)
@@ -573,7 +603,9 @@ MEMBERS_NOT_OK_HINT = 'their numbers: ds.member[ds.status != 0] (docs/model.md, 
 FRONTS_SETTINGS_UNUSED = "fronts settings of the velocity event only, unused without it"
 # the warnings simulate raises once for the whole ensemble: the runs inside it (worker processes'
 # chunks, the float32 fallback, the grid check) drop their own
-ENSEMBLE_WARNINGS = (RECORD_PAST_END, MEMBERS_NOT_OK, FRONTS_SETTINGS_UNUSED)
+# how simulate's warning of parameters that the model switches leave without effect begins
+PARAMETERS_UNUSED = "parameters without effect under these model switches"
+ENSEMBLE_WARNINGS = (RECORD_PAST_END, MEMBERS_NOT_OK, FRONTS_SETTINGS_UNUSED, PARAMETERS_UNUSED)
 
 
 def _with_named_keywords(cls):

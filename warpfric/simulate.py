@@ -18,7 +18,7 @@ from .device import check_device, init_warp
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
 from .parameters import (ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, MEMBERS_NOT_OK, MEMBERS_NOT_OK_HINT,
-                         RECORD_PAST_END, Fronts, Model, Parameters, Record, Solver, parameter_long_name,
+                         PARAMETERS_UNUSED, RECORD_PAST_END, Fronts, Model, Parameters, Record, Solver, parameter_long_name,
                          parameter_units)
 
 
@@ -118,6 +118,10 @@ def simulate(
         raise ValueError(f"fronts setting 'grid_check' needs solver setting 'nodes' >= 5 (got {solver.nodes}): the "
                          "check compares with (nodes + 1)//2 nodes")
     values, varying = resolve_members(members, scene)
+    unused = model.unused_parameters(values)
+    if unused:  # set, and silently without effect
+        warnings.warn(f"{PARAMETERS_UNUSED}: {', '.join(unused)}; they differ from the default scene but change "
+                      "nothing in this model", stacklevel=2)
     device = check_device(device, values["normal_force"].shape[0])
     from . import pool  # a CPU ensemble large enough to pay: its members split over worker processes
 
@@ -144,7 +148,7 @@ def simulate(
         front = _front_metrics(fronts, model, values, result, device)
     wall = time.perf_counter() - t_start - result.kernel_build_s
     st = result.member_states
-    status = _member_status(st, values, STATUS_MEANINGS)
+    status = _member_status(st, values, STATUS_MEANINGS, solver.rtol)
     # the Dataset is built once, with every variable: each later addition is a merge over all of them
     # (~5 ms for the front outputs of one member)
     extra = {}
@@ -183,10 +187,13 @@ _STATUS_ADVICE = {
     "stalled": ("stopped by the straggler rule after stall_factor = {stall_factor:g} times the attempts of the "
                 "typical member: Solver(stall_factor=float('inf')), in a sweep file [solver] stall_factor = inf, "
                 "runs them to their end"),
-    "no_peak": ("mu was still rising at the run's end or had its largest value at the disc's stop, or peaked "
-                "before the disc moved: a later end_time or stop_time"),
+    "no_peak": ("mu was still rising at the run's end or had its largest value at the disc's stop, peaked "
+                "before the disc moved, or never fell below its largest value by more than rtol (steady "
+                "sliding without a static peak, e.g. aging_coefficient = 0): a later end_time or stop_time"),
 }
 _STILL_DISC_ADVICE = "disc_velocity = 0: the disc never moves, so there is no friction peak to find"
+_LIFTED_OFF_ADVICE = ("part of the pad lifted off, where nothing damps its shear vibration (a sudden stop excites "
+                      "it): a small damping, e.g. 1e6 Pa s/m, lets the steps grow again (docs/model.md, \"Open choices\": lift-off)")
 
 
 def _warn_members_not_ok(ds: xr.Dataset, solver: Solver) -> None:
@@ -207,6 +214,11 @@ def _warn_members_not_ok(ds: xr.Dataset, solver: Solver) -> None:
             advice["no_peak"] = _STILL_DISC_ADVICE
         elif still:
             advice["no_peak"] += f"; {still} of them: {_STILL_DISC_ADVICE}"
+    for name in ("max_steps_reached", "stalled"):
+        if name in failed and "lift_off" in ds:
+            lifted = int(np.sum((ds.status.values == meanings.index(name)) & (ds.lift_off.values == 1)))
+            if lifted:
+                advice[name] += f"; {lifted} of them: {_LIFTED_OFF_ADVICE}"
     parts = [f"{k} {name} ({advice[name]})" for name, k in failed.items()]
     n = ds.sizes["member"]
     warnings.warn(f"{MEMBERS_NOT_OK}: {sum(failed.values())} of {n:,} member{'' if n == 1 else 's'}: {'; '.join(parts)}; "
@@ -518,7 +530,7 @@ def _varying_parameters(values, varying) -> str:
     return " ".join(v for v in varying if np.unique(values[v]).size > 1)
 
 
-def _member_status(st: np.ndarray, values, meanings) -> np.ndarray:
+def _member_status(st: np.ndarray, values, meanings, rtol: float) -> np.ndarray:
     """Each member's status code (member,) int32: the kernel's, or no_peak where an ok member's mu(t)
     was still rising at its last accepted step (its maximum lies beyond end_time, and the running
     maximum, the value at the end, is not mu_s), peaked before the disc moved (load noise, not a
@@ -526,10 +538,14 @@ def _member_status(st: np.ndarray, values, meanings) -> np.ndarray:
     where mu was still rising and fell after the stop, so the value at the stop is not mu_s; or a
     stop so soon after the peak, before the next accepted step, that no step resolved the peak:
     the value at the stop is then within the step's change of mu_s, but cannot be told from a
-    still rising mu, so it is not given either)."""
+    still rising mu, so it is not given either), or never fell below its maximum by more than the
+    solver's relative tolerance ``rtol`` by the end of the run (a plateau: steady sliding without a
+    static peak, whose maximum is round-off or the error control's ripple, not mu_s)."""
     status = st["status"].astype(np.int32)
+    with np.errstate(invalid="ignore"):
+        plateau = ~(st["mu_final"] < (1.0 - rtol) * st["mu_s"])
     no_peak = ((st["mu_s_time"] >= st["t"]) | (st["mu_s_time"] <= values["rest_until"])
-               | (st["mu_s_time"] >= values["stop_time"]))
+               | (st["mu_s_time"] >= values["stop_time"]) | plateau)
     return np.where((status == 0) & no_peak, meanings.index("no_peak"), status).astype(np.int32)
 
 
