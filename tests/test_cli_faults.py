@@ -145,8 +145,9 @@ def test_a_folder_without_write_permission_as_a_normal_user():
         shutil.rmtree(home, ignore_errors=True)
 
 
-def _interrupted_run(tmp_path, sweep, capsys, monkeypatch, out, interrupt_at=2):
-    """Run the sweep in chunks of one member, Ctrl-C in chunk ``interrupt_at`` (1-based)."""
+def _interrupted_run(tmp_path, sweep, capsys, monkeypatch, out, interrupt_at=2, *options):
+    """Run the sweep in chunks of one member, Ctrl-C in chunk ``interrupt_at`` (1-based); ``options``
+    are further command-line options."""
     real = SIMULATE_MODULE.simulate
     calls = []
 
@@ -158,7 +159,7 @@ def _interrupted_run(tmp_path, sweep, capsys, monkeypatch, out, interrupt_at=2):
         return real(*args, **kwargs)
 
     monkeypatch.setattr(SIMULATE_MODULE, "simulate", interrupted)
-    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--chunk", 1, "--device", DEVICE, "--quiet")
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--chunk", 1, "--device", DEVICE, "--quiet", *options)
     monkeypatch.setattr(SIMULATE_MODULE, "simulate", real)
     return code, err
 
@@ -254,6 +255,38 @@ def test_too_little_free_space_is_refused_before_the_run(tmp_path, sweep, capsys
     assert code == 3
     _error_line(err, "disk full: 1000 bytes free", "this run (3 members of 11 nodes", "needs about")
     assert _files(tmp_path) == ["s.toml"]
+
+
+@pytest.mark.parametrize("body, words", [
+    # the product was built as a Python list before any check: minutes of silence, then MemoryError
+    ("[grid]\neccentricity = {start = -0.5, stop = 0.5, num = 100000}\n"
+     "normal_force = {start = 500, stop = 5000, num = 100000}\n",
+     ["the sweep has 10,000,000,000 members (100,000 (eccentricity) x 100,000 (normal_force))", "at most 2,130,706,432"]),
+    ("[grid]\neccentricity = {start = -0.5, stop = 0.5, num = 40000}\n"
+     "normal_force = {start = 500, stop = 5000, num = 40000}\n",
+     ["the sweep's 1,600,000,000 members need about 38.4 GB for their parameter values alone", "more than this machine's"]),
+    ("[sample]\nn = 3000000000\neccentricity = {low = -0.2, high = 0.2}\n",
+     ["[sample] n = 3000000000: expected an integer in [1, 2130706432]"]),
+    ("[grid]\neccentricity = [0.0]\n[record]\nstart = 20\nstop = 21\ncount = 100000000\n",
+     ["record setting 'count' = 100000000 is invalid; valid: an integer in [2, 1,000,000]"]),
+    # 53 GB for one member: the system killed the run and left its lock and parts folder
+    ("[solver]\nnodes = 100000000\n[grid]\neccentricity = [0.0]\n",
+     ["a chunk (1 member x 100000000 nodes at once) needs about 53.0 GB of memory", "more than this machine's"]),
+])
+def test_a_sweep_too_large_for_the_machine_is_refused_before_anything(tmp_path, capsys, monkeypatch, no_simulation,
+                                                                      body, words):
+    """Sizes beyond the member numbers or this machine's memory are one line, exit 2, nothing
+    written (the machine's memory held at 25 GB so that the test does not depend on the host)."""
+    from warpfric import progress
+
+    monkeypatch.setattr(progress, "machine_memory_bytes", lambda: 25 * 10**9)
+    monkeypatch.setattr("warpfric.sweep_file.machine_memory_bytes", lambda: 25 * 10**9)
+    sweep = tmp_path / "big.toml"
+    sweep.write_text(body)
+    code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "big.nc", "--device", "cpu")
+    assert code == 2
+    _error_line(err, *words)
+    assert _files(tmp_path) == ["big.toml"]
 
 
 @pytest.mark.parametrize("size, words", [
@@ -458,6 +491,27 @@ def test_ctrl_c_in_a_sweep_says_what_was_kept(tmp_path, sweep, capsys, monkeypat
     assert not list(tmp_path.rglob("*.tmp")) and not (tmp_path / "s.nc.lock").exists()
 
 
+def test_an_interrupted_overwrite_is_resumed_with_the_command_it_printed(tmp_path, sweep, capsys, monkeypatch):
+    """A run with --overwrite over a complete file, interrupted after a chunk, printed `... --resume`;
+    that command answered 'exists; pass --overwrite (it is complete: nothing to resume)' and the
+    finished chunk could only be thrown away. It finishes the replacement now."""
+    out = tmp_path / "s.nc"
+    code, _, _ = run_cli(capsys, "run", sweep, "-o", out, "--device", DEVICE, "--quiet")
+    assert code == 0
+    with xr.open_dataset(out) as ds:
+        first = ds.attrs["history"]
+    code, err = _interrupted_run(tmp_path, sweep, capsys, monkeypatch, out, 2, "--overwrite")
+    assert code == 130 and err[-1].endswith(f"`warpfric run {sweep} -o {out} --resume --device {DEVICE}` goes on from them")
+    code, stdout, _ = run_cli(capsys, "info", out)  # the old file, complete, and what is replacing it
+    assert code == 0 and stdout[-1].startswith(f"  an interrupted run that replaces it: 1/3 chunks finished in {out}.parts")
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
+    assert code == 0, err
+    assert any(f"'{out}' is replaced when the interrupted run it belongs to ends" in line for line in err), err
+    assert _files(tmp_path) == ["s.nc", "s.toml"]
+    with xr.open_dataset(out) as ds:
+        assert ds.attrs["history"] != first and "--overwrite" in ds.attrs["history"] and ds.sizes["member"] == 3
+
+
 def test_a_ctrl_c_during_a_write_waits_for_the_write_and_then_stops_it(tmp_path):
     """A SIGINT inside xarray's netCDF write left its file lock half taken and `warpfric run` hung
     while it wrote the combined file; now the write runs to its end, then KeyboardInterrupt is
@@ -529,6 +583,22 @@ def test_a_write_error_keeps_its_disk_full_flag_across_processes():
     err = pickle.loads(pickle.dumps(IO_MODULE.OutputWriteError("disk full while writing 'x.nc'", True)))
     assert isinstance(err, IO_MODULE.OutputWriteError) and err.disk_full is True
     assert str(err) == "disk full while writing 'x.nc'"
+
+
+def test_a_figure_folder_that_cannot_be_written_is_one_line(tmp_path, capsys, monkeypatch):
+    """`warpfric plot` into a read-only or forbidden folder ended in matplotlib's or mkdir's
+    traceback (exit 1): one line, exit 2, with the reason and --outdir."""
+    import warpfric.plots
+
+    monkeypatch.setattr(IO_MODULE, "open_ensemble", lambda path: None)
+    for error, reason in ((errno.EROFS, "read-only file system"), (errno.EACCES, "permission denied")):
+        def refused(ds, outdir, error=error):
+            raise OSError(error, os.strerror(error), str(outdir / "mu_s.png"))
+
+        monkeypatch.setattr(warpfric.plots, "quick_look", refused)
+        code, _out, err = run_cli(capsys, "plot", tmp_path / "e.nc", "--outdir", tmp_path / "figures")
+        assert code == 2
+        _error_line(err, f"figure folder '{tmp_path / 'figures'}': cannot write in it ({reason})", "--outdir DIR")
 
 
 def test_a_figure_folder_that_is_a_file_is_refused(tmp_path, capsys):

@@ -226,3 +226,14 @@ def test_parameters_that_the_model_switches_ignore_are_named():
     assert model.unused_parameters(resolve_members(None, wf.Parameters())[0]) == []
     values = resolve_members({"eccentricity": [0.1], "shear_strength": [1e8]}, wf.Parameters())[0]
     assert wf.Model().unused_parameters(values) == []  # both used by the default model
+
+
+def test_a_run_beyond_the_machines_memory_is_refused(monkeypatch):
+    """One member of 1e8 nodes needs ~53 GB; with less memory the system killed it after the size
+    warning. Refused before anything runs, naming the estimate and the machine's memory."""
+    from warpfric import progress
+
+    monkeypatch.setattr(progress, "machine_memory_bytes", lambda: 25 * 10**9)
+    with pytest.raises(ValueError, match=r"this run \(1 member x 100000000 nodes at once\) needs about 53.0 GB of "
+                                         r"memory, more than this machine's 25.0 GB"):
+        simulate(None, device="cpu", solver=wf.Solver(nodes=10**8))

@@ -194,7 +194,7 @@ BAD = [
     ("[solver]\nnodes = 'many'\n", ["nodes", "integer"]),  # wrong type
     ("[grid]\nnormal_force = ['a']\n", ["normal_force", "number"]),  # wrong type in a list
     ("[grid]\neccentricity = []\n", ["eccentricity", "empty"]),  # empty sweep
-    ("[sample]\nn = 0\nnormal_force = {distribution = 'uniform', low = 1, high = 2}\n", ["n", "integer >= 1"]),
+    ("[sample]\nn = 0\nnormal_force = {distribution = 'uniform', low = 1, high = 2}\n", ["n = 0", "an integer in [1, 2130706432]"]),
     ("[grid]\neccentricity = [0.0, 1.5]\n", ["eccentricity", "1.5", "valid range"]),  # out of range
     ("[sample]\nn = 4\nnormal_force = {distribution = 'gamma', low = 1, high = 2}\n", ["gamma", "uniform"]),
     ("[sample]\nn = 4\neccentricity = {distribution = 'uniform', low = 0.0, high = 0.9}\n",

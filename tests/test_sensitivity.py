@@ -176,3 +176,29 @@ def test_results_are_not_replaced_without_overwrite_and_the_ensemble_never(tmp_p
     assert not list(tmp_path.glob("*.tmp*"))
     with xr.open_dataset(result) as res:
         assert "S1" in res and list(res.output.values) == ["y"]
+
+
+@pytest.mark.parametrize("outputs, words", [
+    # the result file was written with ['y', 'y'] and the figure then failed in matplotlib
+    (("y", "y"), ["output 'y' is given more than once"]),
+    (("x1",), ["output 'x1' is an input parameter; available: y"]),
+    (("status",), ["output 'status' is a flag variable; available: y"]),
+    (("constant",), ["output 'constant' is the same in every member: its variance is 0"]),
+])
+def test_outputs_without_indices_are_refused(outputs, words):
+    """Indices of a repeated output, of an input, of a flag or of a constant (0/0: '0.000 +- 0.000'
+    with numpy's divide warning) are refused with the output's name."""
+    ds = ishigami_dataset(n=16)
+    ds["constant"] = ("member", np.ones(ds.sizes["member"]))
+    with pytest.raises(ValueError) as err:
+        analyse(ds, outputs)
+    for w in words:
+        assert w in str(err.value), (w, str(err.value))
+
+
+def test_an_output_filled_into_a_constant_is_refused():
+    """All members but one failed: filling them with the one left's value leaves no variance."""
+    ds = ishigami_dataset(n=16)
+    ds["status"].values[1:] = 1
+    with pytest.raises(ValueError, match=r"'y' is the same in every member once the 159 of 160 that failed are filled"):
+        analyse(ds, ("y",), on_failure="fill-mean")

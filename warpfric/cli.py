@@ -297,6 +297,10 @@ def _info(args) -> int:
         return 1
     ds = open_ensemble(path)
     print(summary(ds, str(path)))
+    if parts_dir(path).exists():  # an interrupted --overwrite run is replacing it
+        store = ChunkStore.load(parts_dir(path))
+        print(f"  an interrupted run that replaces it: {store.done_count()}/{_plural(store.n_chunks, 'chunk')} "
+              f"finished in {parts_dir(path)}; `{resume_command(store, path)}` finishes it and replaces this file")
     return 0
 
 
@@ -370,16 +374,20 @@ def summary(ds, name: str) -> str:
 
 
 def _plot(args) -> int:
-    from .io import open_ensemble
+    from .io import open_ensemble, os_error_reason
     from .plots import quick_look
 
     outdir = Path(args.outdir) if args.outdir else Path(args.file).with_suffix("")
     if outdir.exists() and not outdir.is_dir():
         raise UsageError(f"figure folder {str(outdir)!r} is a file; give another with --outdir DIR")
     ds = open_ensemble(args.file)
-    outdir.mkdir(parents=True, exist_ok=True)
-    for path in quick_look(ds, outdir):
-        print(f"wrote {path}")
+    try:
+        outdir.mkdir(parents=True, exist_ok=True)
+        for path in quick_look(ds, outdir):
+            print(f"wrote {path}")
+    except OSError as err:
+        raise UsageError(f"figure folder {str(outdir)!r}: cannot write in it ({os_error_reason(err)}); give another "
+                         "with --outdir DIR") from None
     return 0
 
 

@@ -164,8 +164,13 @@ def _create_exclusive(path: Path) -> int:
     return os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o644)
 
 
+def os_error_reason(err: OSError) -> str:
+    """An OSError's reason as a message writes it: 'permission denied', 'read-only file system'."""
+    return "read-only file system" if err.errno == errno.EROFS else (err.strerror or str(err)).lower()
+
+
 def _unwritable(path: Path, folder: Path, err: OSError) -> OutputUnwritable:
-    reason = "read-only file system" if err.errno == errno.EROFS else (err.strerror or str(err)).lower()
+    reason = os_error_reason(err)
     return OutputUnwritable(f"output {str(path)!r}: cannot write in folder {str(folder)!r} ({reason}); choose "
                             "another -o or make the folder writable")
 

@@ -542,6 +542,10 @@ class Fronts:
         return (self.event,) if isinstance(self.event, str) else tuple(self.event)
 
 
+MAX_RECORD_TIMES = 1_000_000
+_RECORD_TIMES_WHY = "(each time holds 4 fields at every node of each recorded member: 3.2 GB at 100 nodes)"
+
+
 @dataclass(frozen=True)
 class Record:
     """Field recording for chosen members (off unless given): pad velocity (m/s), slip rate (m/s),
@@ -562,8 +566,9 @@ class Record:
     @staticmethod
     def window(start: float, stop: float, count: int, members=(0,)) -> "Record":
         """``count`` evenly spaced times from ``start`` to ``stop`` (s), both included."""
-        if not (isinstance(count, (int, np.integer)) and count >= 2):
-            raise ValueError(f"record setting 'count' = {count!r} is invalid; valid: an integer >= 2")
+        if not (isinstance(count, (int, np.integer)) and 2 <= count <= MAX_RECORD_TIMES):
+            raise ValueError(f"record setting 'count' = {count!r} is invalid; valid: an integer in [2, "
+                             f"{MAX_RECORD_TIMES:,}] {_RECORD_TIMES_WHY}")
         try:
             start, stop = float(start), float(stop)
         except (TypeError, ValueError):
@@ -584,6 +589,9 @@ class Record:
         except (TypeError, ValueError):
             raise ValueError(f"record setting 'times' = {self.times!r} is invalid; valid: non-empty, finite, "
                              "non-decreasing times >= 0 (s)") from None
+        if times.size > MAX_RECORD_TIMES:
+            raise ValueError(f"record setting 'times' has {times.size:,} times; valid: at most {MAX_RECORD_TIMES:,} "
+                             f"{_RECORD_TIMES_WHY}")
         if times.size == 0 or not np.isfinite(times).all() or (times < 0).any() or (np.diff(times) < 0).any():
             shown = ", ".join(f"{t:g}" for t in times[:6]) + (f", ... ({times.size} times)" if times.size > 6 else "")
             raise ValueError(f"record setting 'times' = [{shown}] s is invalid; valid: non-empty, finite, "

@@ -100,6 +100,7 @@ def plan(workers, device, n_members: int, solver, fronts, record) -> int:
     else:
         n = min(int(workers), n_members)
     if not _IN_WORKER:
+        progress_module.check_memory(n_members, solver, device)
         progress_module.size_warning(n_members, solver, passes, device, n)
     return n
 

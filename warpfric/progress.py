@@ -22,6 +22,7 @@ import os
 import sys
 import time
 import warnings
+from pathlib import Path
 
 import numpy as np
 
@@ -121,6 +122,36 @@ def _size(n_bytes: float) -> str:
         if n_bytes >= scale:
             return f"{n_bytes / scale:.1f} {unit}"
     return f"{n_bytes / 1e3:.0f} kB"
+
+
+def machine_memory_bytes() -> int | None:
+    """This machine's physical memory in bytes (a cgroup limit where one is lower), or None where
+    it cannot be read."""
+    try:
+        total = os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, ValueError, OSError):
+        return None
+    try:
+        limit = Path("/sys/fs/cgroup/memory.max").read_text().strip()
+        if limit.isdigit():
+            total = min(total, int(limit))
+    except OSError:
+        pass
+    return total
+
+
+def check_memory(n_members: int, solver, device, what: str = "this run") -> None:
+    """ValueError where the members held at once need more memory than this machine has (the
+    estimate of size_warning: host and, on the CPU, the kernels' arrays): such a run would only be
+    killed by the system, leaving its files behind."""
+    scale = 1.0 if solver.dtype == "float64" else 0.5
+    per_node = HOST_BYTES_PER_NODE + (DEVICE_BYTES_PER_NODE if str(device).startswith("cpu") else 0.0)
+    need = n_members * solver.nodes * per_node * scale
+    have = machine_memory_bytes()
+    if have is not None and need > have:
+        raise ValueError(f"{what} ({plural(n_members, 'member')} x {solver.nodes} nodes at once) needs about "
+                         f"{_size(need)} of memory, more than this machine's {_size(have)}; fewer nodes, or fewer "
+                         "members at once (a sweep's chunk, --chunk)")
 
 
 def size_warning(n_members: int, solver, passes: float, device, workers: int = 1) -> str | None:

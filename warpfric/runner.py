@@ -28,7 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from .pool import cpu_cores, warn_once, warning_pairs
-from .progress import SizeWarning, front_passes, member_range, plural, seconds_text, size_warning
+from .progress import (SizeWarning, check_memory, front_passes, member_range, plural, seconds_text,
+                       size_warning)
 
 FINAL_FIELDS = ("displacement", "velocity", "elastic_stress", "contact_age", "normal_stress", "friction_stress")
 
@@ -310,7 +311,8 @@ def check_output(path: Path, resume: bool, overwrite: bool) -> None:
     if resume and overwrite:
         raise RunError("--resume and --overwrite exclude each other")
     check_output_name(path)
-    if path.exists() and not overwrite:
+    # a file beside parts is one that an interrupted --overwrite run is replacing: --resume goes on
+    if path.exists() and not overwrite and not (resume and parts_dir(path).exists()):
         raise RunError(f"output {str(path)!r} exists; pass --overwrite to replace it"
                        + (" (it is complete: nothing to resume)" if resume else ""))
     if parts_dir(path).exists() and not (resume or overwrite):
@@ -371,6 +373,9 @@ def run_sweep(sweep_file, output=None, *, chunk: int | None = None, member_offse
         check_output(out, resume, overwrite)
         if resume and parts_dir(out).exists():
             probe_writable(parts_dir(out), out)
+            if out.exists():
+                _say(f"{str(out)!r} is replaced when the interrupted run it belongs to ends (that run was started "
+                     "with --overwrite)", quiet)
         stale = remove_stale_temporaries(out)
         if stale:
             _say(f"removed {len(stale)} temporary files that an interrupted run left ({stale[0].name}, ...)", quiet)
@@ -432,6 +437,10 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
     check_space(out, sweep_bytes(sweep, sweep.n_members - done) + sweep_bytes(sweep, sweep.n_members),
                 f"this run ({sweep.n_members - done} members of {sweep.solver.nodes} nodes to run, chunks and "
                 "combined file)")
+    try:  # a chunk's members are held at once: more than the machine has is refused before any file
+        check_memory(min(chunk, sweep.n_members - done), sweep.solver, device or "cuda", "a chunk")
+    except ValueError as err:
+        raise RunError(str(err)) from None
     # for the members still to run, once (each chunk's own is dropped: run_chunk), on this process's
     # cores where it runs here
     size_warning(sweep.n_members - done, sweep.solver, front_passes(sweep.fronts), device or "cuda",

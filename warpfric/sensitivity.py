@@ -167,10 +167,22 @@ def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: in
     d = len(names)
     result = {}
     filled = {}
+    repeated = sorted({o for o in outputs if list(outputs).count(o) > 1})
+    if repeated:
+        raise ValueError(f"output {repeated[0]!r} is given more than once; give each output once")
+
+    inputs = set(PARAMETER_NAMES) | set(names)
+
+    def is_output(v):  # a per-member result: not an input parameter, not a flag (status, edge codes)
+        return (ds[v].dims == ("member",) and v not in inputs and v != "status"
+                and "flag_meanings" not in ds[v].attrs)
+
     for out in outputs:
-        if out not in ds or ds[out].dims != ("member",):
-            candidates = [v for v in ds.data_vars if ds[v].dims == ("member",) and v not in PARAMETER_NAMES]
-            raise ValueError(f"output {out!r} is not a per-member variable of the file; available: {', '.join(candidates)}")
+        if out not in ds or not is_output(out):
+            candidates = [v for v in ds.data_vars if is_output(v)]
+            what = ("an input parameter" if out in inputs else "a flag variable" if out in ds
+                    and (out == "status" or "flag_meanings" in ds[out].attrs) else "not a per-member variable of the file")
+            raise ValueError(f"output {out!r} is {what}; available: {', '.join(candidates)}")
         Y = ds[out].values.astype(np.float64)
         if log:
             with np.errstate(divide="ignore", invalid="ignore"):
@@ -183,6 +195,10 @@ def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: in
                                  f"{', '.join(map(str, idx[:10]))}{' ...' if idx.size > 10 else ''}); the design needs "
                                  "every row: pass --on-failure fill-mean to replace them by the mean")
             Y = np.where(bad, Y[~bad].mean(), Y)
+        if np.all(Y == Y[0]):  # no variance: every index would be 0/0
+            filled_text = f" once the {bad.sum()} of {rows} that failed are filled with the mean" if bad.any() else ""
+            raise ValueError(f"output {out!r} is the same in every member{filled_text}: its variance is 0 and its "
+                             "indices are undefined")
         filled[out] = int(bad.sum())
         if design["method"] == "saltelli":
             r = sobol_analyze.analyze(problem, Y, calc_second_order=design["second_order"],
@@ -205,8 +221,8 @@ def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: in
             data[k] = (("output", "parameter", "parameter_2"),
                        np.array([np.asarray(result[o][k], dtype=float).reshape(d, d) for o in outputs]),
                        {"long_name": ("second-order Sobol index" if k == "S2" else "confidence half-width of S2")})
-    data["filled_members"] = (("output",), np.array([filled[o] for o in outputs]),
-                              {"long_name": f"members replaced by the mean ({on_failure})"})
+    data["filled_members"] = (("output",), np.array([filled[o] for o in outputs], dtype=np.int32),
+                              {"long_name": f"members replaced by the mean ({on_failure})", "units": "1"})
     res = xr.Dataset(data, coords={"output": list(outputs), "parameter": names, "parameter_2": names})
     if design["method"] == "saltelli":
         _warn_unresolved(res, design["n"])

@@ -25,7 +25,6 @@ adding a parameter does not change the others' draws.
 from __future__ import annotations
 
 import dataclasses
-import itertools
 import math
 import tomllib
 import zlib
@@ -37,6 +36,7 @@ import numpy as np
 from .members import resolve_members
 from .parameters import (PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solver, did_you_mean, parameter_range_text,
                          parameter_units, units_text, validate_value)
+from .progress import machine_memory_bytes
 
 TOP_KEYS = ("title", "description", "scene", "model", "solver", "fronts", "record", "grid", "zip", "sample", "design",
             "run")
@@ -252,8 +252,9 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
     if sample:
         n = sample.pop("n", None)
         seed = sample.pop("seed", 0)
-        if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-            raise SweepError(f"[sample] n = {n!r}: expected an integer >= 1 (the number of samples)")
+        if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MEMBER_NUMBER_LIMIT:
+            raise SweepError(f"[sample] n = {n!r}: expected an integer in [1, {MEMBER_NUMBER_LIMIT}] (the number of "
+                             "samples; member numbers are int32)")
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
             raise SweepError(f"[sample] seed = {seed!r}: expected an integer >= 0")
         if not sample:
@@ -280,10 +281,23 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
                              "swept value, so [scene]'s would be ignored; remove one of them")
     if blocks:
         sizes = [len(next(iter(b.values()))) for b in blocks]
-        index = np.array(list(itertools.product(*(range(s) for s in sizes))), dtype=np.int64).reshape(-1, len(blocks))
-        for j, block in enumerate(blocks):
+        total = math.prod(sizes)  # checked before any table of that length is built
+        if total > MEMBER_NUMBER_LIMIT:
+            factors = " x ".join(f"{size:,} ({', '.join(b)})" for size, b in zip(sizes, blocks))
+            raise SweepError(f"the sweep has {total:,} members ({factors}); at most {MEMBER_NUMBER_LIMIT:,} (member "
+                             "numbers are int32): fewer values, or several sweep files with [run] member_offset")
+        table = total * 8 * (sum(len(b) for b in blocks) + 1)  # the members' values and one index column
+        have = machine_memory_bytes()
+        if have is not None and table > have:
+            raise SweepError(f"the sweep's {total:,} members need about {table / 1e9:.1f} GB for their parameter "
+                             f"values alone, more than this machine's {have / 1e9:.1f} GB; fewer values, or "
+                             "several sweep files with [run] member_offset")
+        stride = total
+        for size, block in zip(sizes, blocks):  # the product's order: the last block varies fastest
+            stride //= size
+            index = (np.arange(total, dtype=np.int64) // stride) % size
             for pname, values in block.items():
-                members[pname] = values[index[:, j]]
+                members[pname] = values[index]
     record = None
     if "record" in doc:
         record = _record(doc["record"])
