@@ -12,6 +12,7 @@ import shutil
 import socket
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -388,6 +389,32 @@ def test_two_runs_started_at_once_one_is_refused(tmp_path, sweep):
     errors = [line for line in second.stderr.splitlines() if line.startswith("warpfric: error:")]
     assert second.returncode == 4 and len(errors) == 1 and "being written by another warpfric run" in errors[0]
     assert open_ensemble(out).sizes["member"] == 6 and not lock.exists()
+
+
+def test_sigterm_keeps_the_finished_chunks_and_removes_the_lock(tmp_path):
+    """`timeout`, `kill` or a batch system's time limit (SIGTERM) ended a sweep without a word and
+    left its lock, which another host could not take over: now it ends as Ctrl-C does (exit 130,
+    the finished chunks kept, the --resume command said, the lock removed), and --resume finishes."""
+    import signal
+
+    slow = tmp_path / "slow.toml"
+    slow.write_text(TINY_SWEEP.replace("[-0.2, 0.0, 0.2]", "{start = -0.3, stop = 0.3, num = 40}"))
+    out = tmp_path / "slow.nc"
+    cmd = [sys.executable, "-m", "warpfric", "run", str(slow), "-o", str(out), "--chunk", "1", "--device", "cpu",
+           "--quiet"]
+    run = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
+    first_chunk = tmp_path / "slow.nc.parts" / "chunk-000000.nc"
+    deadline = time.monotonic() + 120
+    while not first_chunk.exists() and run.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
+    run.send_signal(signal.SIGTERM)
+    _, err = run.communicate(timeout=120)
+    last = err.strip().splitlines()[-1]
+    assert run.returncode == 130, err
+    assert last.startswith("warpfric: interrupted; the ") and last.endswith("--resume --device cpu` goes on from them"), err
+    assert not (tmp_path / "slow.nc.lock").exists() and first_chunk.exists() and not out.exists()
+    assert subprocess.run(cmd[:-1] + ["--resume"], capture_output=True, timeout=300).returncode == 0
+    assert open_ensemble(out).sizes["member"] == 40
 
 
 @pytest.mark.parametrize("extra, run_table, words", [

@@ -2,10 +2,12 @@
 after a kill, bad input)."""
 
 import os
+import re
 import signal
 import subprocess
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -165,7 +167,10 @@ def test_resume_after_kill_gives_the_uninterrupted_result(tmp_path):
     assert 2 <= len(finished) < 12 and not out.exists()
     res = _cli("info", str(out))
     assert res.returncode == 1 and "INCOMPLETE" in res.stdout and "--resume" in res.stdout
-    with pytest.raises(ValueError, match="incomplete"):
+    # plot, info of several files and open_ensemble said "run the same command again with --resume",
+    # which plot and info do not take: the command itself
+    with pytest.raises(ValueError, match=f"incomplete run, .* finished in .*; `warpfric run {sweep} -o {out} --resume "
+                                         f"--device {DEVICE}` finishes it"):
         open_ensemble(out)
     res = _cli("run", str(sweep), "-o", str(out), "--device", DEVICE)  # no --resume: refuses, exit 2
     assert res.returncode == 2 and "--resume" in res.stderr
@@ -207,7 +212,41 @@ BAD = [
     ("[grid]\neccentricity = [0.0]\n[zip]\neccentricity = [0.1]\n", ["eccentricity", "twice"]),
     ("[scene]\nnormal_force = -5.0\n", ["normal_force", "-5.0", "valid range"]),
     ("[fronts]\nthreshold = 2.0\n", ["threshold", "(0, 1)"]),
+    ("[fronts]\nevent = ['contact', 3]\n", ["[fronts] event = ['contact', 3]: expected an event name or a list"]),
+    ("[fronts]\nevent = ['contact', 'strenght']\n", ["strenght"]),
 ]
+
+
+@pytest.mark.parametrize("body, words", [
+    ("[grid]\neccentricity = [0.0, 0.0, 0.1]\n", "[grid] eccentricity repeats a value (eccentricity = 0: 2 times)"),
+    ("[zip]\neccentricity = [0.0, 0.0]\nnormal_force = [500.0, 500.0]\n",
+     "[zip] repeats a row (eccentricity = 0, normal_force = 500: 2 times)"),
+])
+def test_a_sweep_file_that_repeats_members_is_warned(tmp_path, body, words):
+    """Repeated members ran without a word, and by_parameters then refused the file."""
+    from warpfric.sweep_file import load_sweep
+
+    path = tmp_path / "s.toml"
+    path.write_text(body)
+    with pytest.warns(UserWarning, match=re.escape(words)):
+        load_sweep(path)
+    path.write_text("[grid]\neccentricity = [0.0, 0.1]\nnormal_force = [500.0, 600.0]\n[zip]\n"
+                    "aging_coefficient = [0.05, 0.05]\nmemory_length = [5e-7, 6e-7]\n")  # distinct members
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert load_sweep(path).n_members == 8
+
+
+def test_a_sweep_file_may_ask_for_several_front_events():
+    """[fronts] event = ["contact", "strength"] was refused ("expected a string"), although docs/sweeps.md
+    speaks of every front event in the file and Fronts takes several."""
+    import tempfile
+
+    from warpfric.sweep_file import load_sweep
+
+    path = Path(tempfile.mkdtemp()) / "s.toml"
+    path.write_text("[fronts]\nevent = ['contact', 'strength']\n[grid]\neccentricity = [0.0]\n")
+    assert load_sweep(path).fronts.events == ("contact", "strength")
 
 
 def test_a_sample_may_reach_an_open_upper_limit():

@@ -28,7 +28,9 @@ import contextlib
 import difflib
 import re
 import shlex
+import signal
 import sys
+import threading
 import warnings
 from pathlib import Path
 
@@ -271,17 +273,8 @@ def _run(args) -> int:
     return _run_sweep(args)
 
 
-def resume_command(store, path: Path) -> str:
-    """The command that finishes an interrupted chunked run (chunk size and member offset come
-    from the manifest)."""
-    words = ["warpfric", "run", store.manifest.get("sweep_file", "SWEEP.toml"), "-o", str(path), "--resume"]
-    if store.manifest.get("device"):
-        words += ["--device", store.manifest["device"]]
-    return shlex.join(words)
-
-
 def _info(args) -> int:
-    from .io import ChunkStore, open_ensemble, open_ensembles, parts_dir
+    from .io import ChunkStore, open_ensemble, open_ensembles, parts_dir, resume_command
 
     if len(args.file) > 1:  # several files: their combination (refused when member numbers repeat)
         ds = open_ensembles(args.file)
@@ -552,6 +545,28 @@ def join_negative_values(argv: list, value_options: set) -> list:
     return out
 
 
+@contextlib.contextmanager
+def _sigterm_as_ctrl_c():
+    """SIGTERM (`timeout`, `kill`, a batch system's time limit) handled as Ctrl-C: the sweep keeps its
+    finished chunks, says how to resume and removes its lock (killed by SIGTERM, it left the lock
+    and said nothing). It goes through SIGINT's handler of the moment, so a netCDF write that holds
+    Ctrl-C back holds it too. Only in the main thread, where signals can be handled."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def as_ctrl_c(signum, frame):
+        handler = signal.getsignal(signal.SIGINT)
+        if callable(handler):
+            handler(signal.SIGINT, frame)
+
+    previous = signal.signal(signal.SIGTERM, as_ctrl_c)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
 def main(argv=None) -> int:
     from .io import OutputBusy, OutputWriteError
 
@@ -563,7 +578,7 @@ def main(argv=None) -> int:
     args.command_line = shlex.join(["warpfric", *argv])  # the files' history attribute
     handlers = {"run": _run, "info": _info, "plot": _plot, "sensitivity": _sensitivity}
     try:
-        with one_line_warnings(args.output if args.command == "run" else None):
+        with one_line_warnings(args.output if args.command == "run" else None), _sigterm_as_ctrl_c():
             return handlers[args.command](args)
     except ValueError as err:  # bad input, or an output folder that cannot be written: one line, exit 2
         return _fail(str(err))

@@ -61,6 +61,7 @@ import errno
 import hashlib
 import json
 import os
+import shlex
 import shutil
 import signal
 import socket
@@ -637,6 +638,15 @@ def _read(path) -> xr.Dataset:
         raise ValueError(f"{path}: not a readable netCDF file ({reason})") from None
 
 
+def resume_command(store, path) -> str:
+    """The command that finishes an interrupted chunked run (chunk size and member offset come
+    from the manifest)."""
+    words = ["warpfric", "run", store.manifest.get("sweep_file", "SWEEP.toml"), "-o", str(path), "--resume"]
+    if store.manifest.get("device"):
+        words += ["--device", store.manifest["device"]]
+    return shlex.join(words)
+
+
 def open_ensemble(path) -> xr.Dataset:
     """Open a warpfric netCDF file (loaded into memory): simulate()'s layout, but for the parameters
     that do not vary in the file (not in its ``varying_parameters``), which come back as scalars
@@ -649,7 +659,7 @@ def open_ensemble(path) -> xr.Dataset:
             store = ChunkStore.load(parts)
             raise ValueError(
                 f"{path}: incomplete run, {store.done_count()}/{store.n_chunks} chunks finished in {parts}; "
-                "run the same command again with --resume"
+                f"`{resume_command(store, path)}` finishes it"
             )
         raise ValueError(f"{path}: no such file")
     if path.is_dir():

@@ -27,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import tomllib
+import warnings
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -113,6 +114,10 @@ def _dataclass_kwargs(table: dict, cls, where: str, parameters: bool = False) ->
             out[key] = value
         elif isinstance(default, float):
             out[key] = _number(value, _where(where, key))
+        elif cls is Fronts and key == "event" and isinstance(value, list):  # several events: Fronts' tuple
+            if not value or not all(isinstance(v, str) for v in value):
+                raise SweepError(f"{_where(where, key)} = {value!r}: expected an event name or a list of them")
+            out[key] = tuple(value)
         else:
             if not isinstance(value, str):
                 raise SweepError(f"{_where(where, key)} = {value!r}: expected a string")
@@ -226,6 +231,7 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
         raise SweepError(str(err)) from None
 
     blocks = []  # lists of {name: (k,) array}
+    block_names = []  # where each block is written: "[grid] name", "[zip]", "[sample]"
     seen: dict[str, str] = {}
 
     def claim(pname: str, where: str):
@@ -238,6 +244,7 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
     for pname, spec in doc.get("grid", {}).items():
         claim(pname, _where("grid", pname))
         blocks.append({pname: _values(spec, _where("grid", pname))})
+        block_names.append(f"[grid] {pname}")
     zipped = doc.get("zip", {})
     if zipped:
         cols = {}
@@ -248,6 +255,7 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
         if len(set(lengths.values())) != 1:
             raise SweepError(f"[zip] lists differ in length: {lengths}; all must have one length")
         blocks.append(cols)
+        block_names.append("[zip]")
     sample = dict(doc.get("sample", {}))
     if sample:
         n = sample.pop("n", None)
@@ -264,6 +272,7 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
             claim(pname, _where("sample", pname))
             cols[pname] = _draw(pname, spec, n, seed, _where("sample", pname))
         blocks.append(cols)
+        block_names.append("[sample]")
     members: dict[str, np.ndarray] = {}
     design = None
     if "design" in doc:
@@ -279,6 +288,17 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
             where = seen.get(pname) or f"[design] {pname}"
             raise SweepError(f"parameter {pname!r} is set in [scene] and swept in {where}: each member takes the "
                              "swept value, so [scene]'s would be ignored; remove one of them")
+    for block, table in zip(blocks, block_names):
+        if table == "[sample]":  # continuous draws
+            continue
+        rows = np.stack([np.asarray(v, dtype=np.float64) for v in block.values()], axis=1)
+        unique, counts = np.unique(rows, axis=0, return_counts=True)
+        if (counts > 1).any():
+            k = int(np.argmax(counts > 1))
+            example = ", ".join(f"{n} = {v:g}" for n, v in zip(block, unique[k]))
+            warnings.warn(f"{table} repeats {'a value' if len(block) == 1 else 'a row'} ({example}: "
+                          f"{int(counts[k])} times): its members run more than once, with equal results, and "
+                          "warpfric.io.by_parameters refuses such a file", stacklevel=2)
     if blocks:
         sizes = [len(next(iter(b.values()))) for b in blocks]
         total = math.prod(sizes)  # checked before any table of that length is built
