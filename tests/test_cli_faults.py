@@ -291,12 +291,13 @@ def test_a_sweep_too_large_for_the_machine_is_refused_before_anything(tmp_path, 
 
 
 @pytest.mark.parametrize("size, words", [
-    ("300k", ["disk full: 29", "free in", "needs about 851.2 KiB"]),  # refused before the run
-    ("500k", ["disk full while writing", "finished chunk", "--resume"]),  # the run fills it
+    ("300k", ["disk full: 29", "free in", "needs about 1.6 MiB"]),  # refused before the run
+    ("1000k", ["disk full while writing", "finished chunk", "--resume"]),  # the run fills it
 ])
 def test_a_really_full_disk(tmp_path, capsys, size, words):
     """A small tmpfs (where this process may mount one): too small for the estimate, the run is
-    refused; big enough for the estimate but not for the chunks and the combined file, the write
+    refused; big enough for the estimate (refused below half of it, 0.8 MiB) but not for the chunks
+    and the combined file (1.27 MB: 3 x 274 + 445 kB, ~190 kB of netCDF headers a file), the write
     that does not fit ends the run; exit 3 either way, and no temporary file or lock stays."""
     folder = tmp_path / "small"
     if not _mount_tmpfs(folder, f"size={size}"):
@@ -516,6 +517,21 @@ def test_ctrl_c_in_a_sweep_says_what_was_kept(tmp_path, sweep, capsys, monkeypat
     assert err[-1] == (f"warpfric: interrupted; the 2 finished chunks are kept in '{tmp_path / 's.nc.parts'}'; "
                        f"`warpfric run {sweep} -o {out} --resume --device {DEVICE}` goes on from them")
     assert not list(tmp_path.rglob("*.tmp")) and not (tmp_path / "s.nc.lock").exists()
+
+
+def test_resume_with_other_settings_names_the_one_that_differs(tmp_path, sweep, capsys, monkeypatch):
+    """It said 'a different sweep, chunk size (1) or member offset (0)' whichever differed."""
+    out = tmp_path / "s.nc"
+    code, _ = _interrupted_run(tmp_path, sweep, capsys, monkeypatch, out, 3)
+    assert code == 130
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--chunk", 2, "--device", DEVICE)
+    assert code == 2
+    _error_line(err, "belongs to a run with another chunk size (1, now 2); resume with the interrupted run's settings")
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--member-offset", 5, "--device", DEVICE)
+    _error_line(err, "another member offset (0, now 5)")
+    sweep.write_text(sweep.read_text().replace("nodes = 11", "nodes = 13"))
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
+    _error_line(err, "another sweep file (its text changed)")
 
 
 def test_an_interrupted_overwrite_is_resumed_with_the_command_it_printed(tmp_path, sweep, capsys, monkeypatch):

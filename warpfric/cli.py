@@ -1,9 +1,10 @@
 """warpfric command line.
 
-  warpfric run [SWEEP.toml] [-o OUT.nc] [--device D] [--chunk M] [--member-offset K] [--resume | --overwrite]
+  warpfric run [SWEEP.toml] [-o OUT.nc] [--device D] [--cpu-workers N] [--chunk M] [--member-offset K]
+               [--resume | --overwrite] [--quiet] [--scheduler ADDR | --local-cluster [--workers N]]
   warpfric info OUT.nc [MORE.nc ...]
   warpfric plot OUT.nc [--outdir DIR]
-  warpfric sensitivity OUT.nc [--output mu_s --output v_middle ...] [--on-failure refuse|fill-mean]
+  warpfric sensitivity OUT.nc [--output mu_s --output v_middle ...] [--on-failure refuse|fill-mean] [--log]
                        [-o RESULT.nc] [--overwrite]
 
 Without a sweep file, ``run`` simulates the paper's default scene (one member, F = 1000 N, e = 0,
@@ -18,7 +19,7 @@ Exit codes (one line on stderr for each fault):
   3    an output could not be written during the run: disk full or another I/O error (no partial
        file stays; a sweep's finished chunks are kept for --resume)
   4    another run is writing the same output (its OUT.nc.lock exists)
-  130  interrupted (Ctrl-C)
+  130  interrupted (Ctrl-C, or SIGTERM)
 """
 
 from __future__ import annotations
@@ -327,7 +328,7 @@ def summary(ds, name: str) -> str:
     for pname in swept:
         v = ds[pname].values
         units = units_text(ds[pname].attrs.get("units", ""))
-        lines.append(f"    {pname:<22} {np.unique(v).size:>6} values in [{v.min():.6g}, {v.max():.6g}]"
+        lines.append(f"    {pname:<22} {np.unique(v).size:>6} value{'s' if np.unique(v).size != 1 else ' '} in [{v.min():.6g}, {v.max():.6g}]"
                      + (f" {units}" if units else " (dimensionless)"))
     meanings = ds.status.attrs["flag_meanings"].split()
     codes = np.unique(ds.status.values)

@@ -328,14 +328,16 @@ class RunInterrupted(KeyboardInterrupt):
         self.message = message
 
 
-def sweep_bytes(sweep, n_members: int) -> int:
-    """Estimated bytes of a sweep's output before compression (see warpfric.io.estimate_bytes)."""
+def sweep_bytes(sweep, n_members: int, files: int = 1) -> int:
+    """Estimated bytes of ``files`` files of a sweep holding ``n_members`` members, before compression
+    (see warpfric.io.estimate_bytes)."""
     from .io import estimate_bytes
 
     record = sweep.record
     return estimate_bytes(n_members, sweep.solver.nodes, final_fields=sweep.run.get("final_fields", True),
                           front_events=len(sweep.fronts.events) if sweep.fronts is not None else 0,
-                          recorded=len(record.members) if record else 0, times=len(record.times) if record else 0)
+                          recorded=len(record.members) if record else 0, times=len(record.times) if record else 0,
+                          files=files)
 
 
 def run_sweep(sweep_file, output=None, *, chunk: int | None = None, member_offset: int | None = None,
@@ -428,17 +430,21 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         device = check_device(device)
     digest = sweep_digest(f"{sweep.text}\nchunk={chunk}" + (f"\nmember_offset={offset}" if offset else ""))
     if previous is not None and previous.digest != digest:
-        raise RunError(f"{str(parts)!r} belongs to a different sweep, chunk size ({previous.chunk}) or member "
-                       f"offset ({previous.member_offset}); run with --overwrite to start again")
+        differ = ([f"chunk size ({previous.chunk}, now {chunk})"] if chunk != previous.chunk else []) + (
+            [f"member offset ({previous.member_offset}, now {offset})"] if offset != previous.member_offset else [])
+        what = " and ".join(differ) or "sweep file (its text changed)"
+        raise RunError(f"{str(parts)!r} belongs to a run with another {what}; resume with the interrupted run's "
+                       "settings, or run with --overwrite to start again")
     # the chunk files and the combined file exist side by side until the parts are removed; a resumed
     # run's finished chunks are on the disk already
     done = sum(previous.members(i).stop - previous.members(i).start for i in range(previous.n_chunks)
                if previous.is_done(i)) if previous is not None else 0
-    check_space(out, sweep_bytes(sweep, sweep.n_members - done) + sweep_bytes(sweep, sweep.n_members),
-                f"this run ({sweep.n_members - done} members of {sweep.solver.nodes} nodes to run, chunks and "
-                "combined file)")
+    remaining = sweep.n_members - done
+    chunk_files = -(-remaining // chunk)  # at most: a resumed run's missing chunks may be fewer members each
+    check_space(out, sweep_bytes(sweep, remaining, chunk_files) + sweep_bytes(sweep, sweep.n_members),
+                f"this run ({remaining} members of {sweep.solver.nodes} nodes to run, chunks and combined file)")
     try:  # a chunk's members are held at once: more than the machine has is refused before any file
-        check_memory(min(chunk, sweep.n_members - done), sweep.solver, device or "cuda", "a chunk")
+        check_memory(min(chunk, remaining), sweep.solver, device or "cuda", "a chunk")
     except ValueError as err:
         raise RunError(str(err)) from None
     # for the members still to run, once (each chunk's own is dropped: run_chunk), on this process's

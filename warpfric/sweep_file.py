@@ -37,7 +37,7 @@ import numpy as np
 from .members import resolve_members
 from .parameters import (PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solver, did_you_mean, parameter_range_text,
                          parameter_units, units_text, validate_value)
-from .progress import machine_memory_bytes
+from .progress import machine_memory_bytes, plural
 
 TOP_KEYS = ("title", "description", "scene", "model", "solver", "fronts", "record", "grid", "zip", "sample", "design",
             "run")
@@ -339,7 +339,7 @@ def check_member_offset(offset: int, n_members: int, where: str) -> int:
     top = MEMBER_NUMBER_LIMIT - n_members
     if not 0 <= offset <= top:
         raise SweepError(f"{where} = {offset}: expected an integer in [0, {top}] (the number of the first of "
-                         f"{n_members} members; member numbers are int32)")
+                         f"{plural(n_members, 'member')}; member numbers are int32)")
     return offset
 
 
