@@ -534,6 +534,25 @@ def test_resume_with_other_settings_names_the_one_that_differs(tmp_path, sweep, 
     _error_line(err, "another sweep file (its text changed)")
 
 
+def test_info_on_a_run_still_going_says_so(tmp_path, sweep, capsys, monkeypatch):
+    """info on a sweep whose lock a living run holds called it INCOMPLETE and offered --resume (which
+    that run's lock then refused): it says RUNNING and who writes it, without a resume command."""
+    out = tmp_path / "s.nc"
+    code, _ = _interrupted_run(tmp_path, sweep, capsys, monkeypatch, out, 3)
+    assert code == 130
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        _hold_lock(out, other.pid)
+        code, lines, _ = run_cli(capsys, "info", out)
+        assert code == 1 and lines[0].startswith(f"{out}: RUNNING: being written by warpfric run (pid {other.pid} on ")
+        assert "2/3 chunks" in lines[0] and "--resume" not in lines[0]
+    finally:
+        other.kill()
+        other.wait()
+    code, lines, _ = run_cli(capsys, "info", out)  # its process gone: interrupted
+    assert code == 1 and "INCOMPLETE" in lines[0] and "--resume" in lines[0]
+
+
 def test_an_interrupted_overwrite_is_resumed_with_the_command_it_printed(tmp_path, sweep, capsys, monkeypatch):
     """A run with --overwrite over a complete file, interrupted after a chunk, printed `... --resume`;
     that command answered 'exists; pass --overwrite (it is complete: nothing to resume)' and the

@@ -306,7 +306,7 @@ def test_info_prints_a_resume_command_that_works(tmp_path, capsys, monkeypatch):
     assert command[:2] == ["warpfric", "run"] and "--resume" in command and "--chunk" not in command
     code, _, err = run_cli(capsys, *command[1:], "--chunk", 2)  # another chunk size: refused, names it
     assert code == 2
-    one_line_error(err, "chunk size (1)", "--overwrite")
+    one_line_error(err, "chunk size (1, now 2)", "--overwrite")
     code, _, err = run_cli(capsys, *command[1:], "--quiet")
     assert code == 0, err
     assert "(numbers 10..12) in 3 chunks of <= 1, 2 to run" in err[0]

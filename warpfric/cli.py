@@ -275,7 +275,7 @@ def _run(args) -> int:
 
 
 def _info(args) -> int:
-    from .io import ChunkStore, open_ensemble, open_ensembles, parts_dir, resume_command
+    from .io import ChunkStore, open_ensemble, open_ensembles, parts_dir, resume_command, running_writer
 
     if len(args.file) > 1:  # several files: their combination (refused when member numbers repeat)
         ds = open_ensembles(args.file)
@@ -284,10 +284,13 @@ def _info(args) -> int:
     path = Path(args.file[0])
     if not path.exists() and parts_dir(path).exists():
         store = ChunkStore.load(parts_dir(path))
-        print(f"{path}: INCOMPLETE run: {store.done_count()}/{_plural(store.n_chunks, 'chunk')} of <= "
-              f"{_plural(store.chunk, 'member')} finished ({_plural(store.n_members, 'member')} in all) in "
-              f"{parts_dir(path)}; finish it with "
-              f"`{resume_command(store, path)}`")
+        done = (f"{store.done_count()}/{_plural(store.n_chunks, 'chunk')} of <= {_plural(store.chunk, 'member')} "
+                f"finished ({_plural(store.n_members, 'member')} in all) in {parts_dir(path)}")
+        writer = running_writer(path)
+        if writer is not None:  # not interrupted: still being written
+            print(f"{path}: RUNNING: being written by warpfric run ({writer}); {done} so far")
+        else:
+            print(f"{path}: INCOMPLETE run: {done}; finish it with `{resume_command(store, path)}`")
         return 1
     ds = open_ensemble(path)
     print(summary(ds, str(path)))

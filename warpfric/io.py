@@ -218,6 +218,15 @@ def _holder(lock: Path) -> str:
         return "unknown process"
 
 
+def running_writer(path) -> str | None:
+    """Who holds ``OUT.nc.lock`` beside ``path`` ('pid P on HOST, since T'), where a living run holds it
+    (or one on another host, which this host cannot check); None where there is no lock or a stale one."""
+    lock = lock_path(path)
+    if not lock.exists() or _stale(lock):
+        return None
+    return _holder(lock)
+
+
 def lock_output(path, command: str | None = None) -> Path:
     """Take ``OUT.nc.lock`` beside ``path`` (O_EXCL) and return it; release with
     :func:`unlock_output`. A lock whose process is gone (same host) is taken over. Raises
