@@ -663,6 +663,17 @@ def test_a_figure_folder_that_cannot_be_written_is_one_line(tmp_path, capsys, mo
         _error_line(err, f"figure folder '{tmp_path / 'figures'}': cannot write in it ({reason})", "--outdir DIR")
 
 
+def test_figures_are_not_written_into_a_sweeps_parts_folder(tmp_path, capsys, no_simulation):
+    """`warpfric plot OUT.nc.parts/chunk-000000.nc` wrote its PNGs into the parts folder, which the
+    sweep's end (or --resume) removes with them."""
+    parts = tmp_path / "s.nc.parts"
+    parts.mkdir()
+    for argv in (["plot", parts / "chunk-000000.nc"], ["plot", tmp_path / "s.nc", "--outdir", parts / "figs"]):
+        code, _out, err = run_cli(capsys, *argv)
+        assert code == 2
+        _error_line(err, f"lies in '{parts}', the chunks of a sweep, which is removed when the sweep ends", "--outdir")
+
+
 def test_a_figure_folder_that_is_a_file_is_refused(tmp_path, capsys):
     """`warpfric plot OUT.nc --outdir FILE` (or an ensemble file without a suffix, whose default
     folder is its own name) ended in mkdir's traceback."""

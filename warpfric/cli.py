@@ -371,12 +371,17 @@ def summary(ds, name: str) -> str:
 
 
 def _plot(args) -> int:
-    from .io import open_ensemble, os_error_reason
+    from .io import PARTS_SUFFIX, open_ensemble, os_error_reason
     from .plots import quick_look
 
     outdir = Path(args.outdir) if args.outdir else Path(args.file).with_suffix("")
     if outdir.exists() and not outdir.is_dir():
         raise UsageError(f"figure folder {str(outdir)!r} is a file; give another with --outdir DIR")
+    parts = next((f for f in (outdir.resolve(), *outdir.resolve().parents) if f.name.endswith(".nc" + PARTS_SUFFIX)),
+                 None)
+    if parts is not None:  # a chunk's figures would go with the folder when the run ends
+        raise UsageError(f"figure folder {str(outdir)!r} lies in {str(parts)!r}, the chunks of a sweep, which is "
+                         "removed when the sweep ends; give a folder outside it with --outdir DIR")
     ds = open_ensemble(args.file)
     try:
         outdir.mkdir(parents=True, exist_ok=True)
@@ -525,7 +530,8 @@ def build_parser() -> tuple[argparse.ArgumentParser, set]:
         help="ensemble file (OUT.nc, or the OUT.nc of an interrupted run); several: their combination")
     plot = sub.add_parser("plot", help="quick-look PNGs of an ensemble file")
     add(plot, "file", metavar="FILE", help="ensemble file (netCDF, from warpfric run)")
-    add(plot, "--outdir", default=None, help="folder for the PNGs (default: OUT next to OUT.nc)")
+    add(plot, "--outdir", default=None,
+        help="folder for the PNGs (default: OUT next to OUT.nc; the PNGs of an earlier plot there are replaced)")
     sens = sub.add_parser("sensitivity", help="Sobol (Saltelli design) or Morris indices of a design's outputs (needs SALib)")
     add(sens, "file", metavar="FILE", help="ensemble file of a sweep with a [design] table")
     add(sens, "--output", action="append", help="per-member output to analyse (repeatable; default mu_s)")
