@@ -280,3 +280,19 @@ def test_a_split_run_warns_of_late_recording_times_once_for_the_ensemble():
              for m in (3, 0)]
     assert all(0 < int((np.asarray(times) > ends[m]).sum()) for m in (3, 0))
     assert late[0].index(named[0]) < late[0].index(named[1]), late[0]
+
+
+def test_more_workers_than_cores_are_started_with_a_warning(monkeypatch):
+    """--cpu-workers 3 on 2 cores started 3 processes without a word: allowed, since asked for, but
+    said to buy nothing; as many as the cores, or fewer, say nothing."""
+    import warnings
+
+    monkeypatch.setattr(pool, "cpu_cores", lambda: 2)
+    solver = wf.Solver(nodes=20)
+    with pytest.warns(UserWarning, match=r"workers = 3 on 2 CPU cores: the processes share the cores and run no "
+                                         r"faster than 2 would"):
+        assert pool.plan(3, "cpu", 8, solver, None, None) == 3
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert pool.plan(2, "cpu", 8, solver, None, None) == 2
+        assert pool.plan(3, "cpu", 2, solver, None, None) == 2  # no more workers than members

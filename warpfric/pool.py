@@ -99,6 +99,9 @@ def plan(workers, device, n_members: int, solver, fronts, record) -> int:
         n = min(cpu_cores(), n_members) if cpu and n_members > 1 and pays and _top_level() else 1
     else:
         n = min(int(workers), n_members)
+        if cpu and n > cpu_cores() and not _IN_WORKER:  # allowed (as asked), but it buys nothing
+            warnings.warn(f"workers = {n} on {cpu_cores()} CPU cores: the processes share the cores and run no "
+                          f"faster than {cpu_cores()} would (Warp runs a CPU launch on one core)", stacklevel=3)
     if not _IN_WORKER:
         progress_module.check_memory(n_members, solver, device)
         progress_module.size_warning(n_members, solver, passes, device, n)

@@ -55,7 +55,8 @@ def simulate(
               that the files of separate runs combine without repeated member numbers.
     workers:  worker processes on the CPU (Warp runs a CPU launch on one core). None: all cores for
               an ensemble large enough to pay (one core: >= 2 s), else this process; 1: this process;
-              an integer: that many. Outputs equal one process's bit for bit, except which members the
+              an integer: that many (more than the cores: started, with a warning that they share
+              the cores). Outputs equal one process's bit for bit, except which members the
               straggler rule stops (warpfric/pool.py).
 
     Returns an ``xarray.Dataset`` with dims ``member`` and ``x`` (node position, m): every input
