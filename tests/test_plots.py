@@ -85,7 +85,7 @@ def test_one_member_is_one_member_in_legends_and_titles():
     ax = plots.mu_s_figure(ds, "normal_force").axes[0]
     assert [t.get_text() for t in ax.get_legend().get_texts()] == ["1 ok member"]
     speeds = plots.front_speeds_figure(ds, "normal_force").axes[0]
-    assert speeds.get_title().endswith("(1 ok member)") and "v_middle (1 member)" in [
+    assert speeds.get_title().endswith("(1 ok member; 1 status 1)") and "v_middle (1 member)" in [
         t.get_text() for t in speeds.get_legend().get_texts()]
 
 
@@ -98,7 +98,7 @@ def test_a_third_swept_parameter_is_named_in_the_titles(grid):
     fig = plots.mu_s_figure(three, "normal_force", "eccentricity", mixed=("disc_velocity", "damping"))
     assert fig.axes[0].get_title().endswith("\n" + note)
     fig = plots.front_speeds_figure(three, "normal_force", "eccentricity", mixed=("disc_velocity",))
-    assert fig._suptitle.get_text() == note
+    assert fig._suptitle.get_text() == "detachment front speeds, first front's segments (15 ok members)\n" + note
     assert "also varying" not in plots.mu_s_figure(grid, "normal_force", "eccentricity").axes[0].get_title()
 
 
@@ -116,8 +116,9 @@ def test_many_values_of_the_second_parameter_get_a_colour_bar():
 def test_front_speeds_one_panel_per_segment_with_every_value_in_the_legend(grid):
     fig = plots.front_speeds_figure(grid, "normal_force", colour_by="eccentricity")
     panels = fig.axes
-    assert [ax.get_title().split(" segment")[0] for ax in panels] == [
-        "first front's left", "first front's middle", "first front's right"]
+    # short panel titles (they overlapped beside a colour bar); the figure's title says whose segments
+    assert [ax.get_title().split(" segment")[0] for ax in panels] == ["left", "middle", "right"]
+    assert fig._suptitle.get_text().startswith("detachment front speeds, first front's segments")
     # v_left is absent at 2e/L = 0.2; the legend (on the last panel) still names it
     texts = [t.get_text() for t in panels[-1].get_legend().get_texts()]
     assert texts == ["2e/L = -0.2", "2e/L = 0", "2e/L = 0.2"]
@@ -129,7 +130,7 @@ def test_a_second_front_gets_its_own_panel_where_a_member_has_one(grid):
     """v_second is drawn where some ok member has a second front (4 panels), not where none has."""
     two = grid.assign(v_second=("member", np.where(grid.eccentricity.values < 0, 30.0, np.nan), {"units": "m s-1"}))
     fig = plots.front_speeds_figure(two, "normal_force", colour_by="eccentricity")
-    assert [ax.get_title() for ax in fig.axes][3] == "second front (whole), 5 members"
+    assert [ax.get_title() for ax in fig.axes][3] == "second front, 5 members"
     single = plots.front_speeds_figure(two, "normal_force")
     assert [t.get_text() for t in single.axes[0].get_legend().get_texts()][-1] == "v_second (5 members)"
     none = grid.assign(v_second=("member", np.full(grid.sizes["member"], np.nan), {"units": "m s-1"}))
@@ -142,7 +143,7 @@ def test_arrival_time_curves_have_a_legend_with_their_swept_values(grid):
     legend = ax.get_legend()
     assert legend is not None and len(ax.get_lines()) == len(legend.get_texts()) == plots.MAX_CURVES
     assert legend.get_texts()[0].get_text() == "F = 100 N, 2e/L = -0.2"
-    assert "8 of 15 members" in ax.get_title()
+    assert "8 of the 15 ok members with a front" in ax.get_title()
     assert {line.get_linestyle() for line in ax.get_lines()} == {"-", "--", ":"}  # eccentricity as the line style
 
 
@@ -217,7 +218,8 @@ def test_the_space_time_map_draws_the_contact_fronts_arrival_times(contact_run):
     # the default scene's contact front is two fronts: the meeting point is marked on the curve
     ax = plots.arrival_times_figure(ds).axes[0]
     assert int(ds.front_count.values[0]) == 2
-    assert ax.get_title() == "contact front arrival times (1 of 1 members; \u25bd where two fronts meet: 1)"
+    assert ax.get_title() == ("contact front arrival times (1 of the 1 ok member with a front; 1 no_peak; "
+                              "\u25bd where two fronts meet: 1)")
     (mx, my), = [line.get_data() for line in ax.get_lines() if line.get_label() == "_meeting"]
     assert mx[0] == pytest.approx(float(ds.collision_position.values[0]) * 1e3)
     assert my[0] == pytest.approx((float(ds.collision_time.values[0]) - ta.min()) * 1e3)
@@ -244,13 +246,18 @@ def test_a_member_without_a_front_gets_no_curve(contact_run, tmp_path):
     assert np.isnan(ds.arrival_time.values[1]).all()
     ax = plots.space_time_figure(ds, 1).axes[0]
     assert not ax.get_lines() and not contours(ax)
-    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["no contact front"]  # no_peak: no failure
+    # no_peak: its front outputs are NaN whether or not a front ran (fig11's stopped member shows one
+    # on the map), so not "no contact front"
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["contact front: not given (status no_peak)"]
+    ok = ds.assign(status=ds.status.copy(data=np.zeros(ds.sizes["member"], np.int32)))
+    ax = plots.space_time_figure(ok, 1).axes[0]
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["no contact front"]
     failed = ds.copy()
     failed["status"] = failed.status.copy(data=np.where(np.arange(failed.sizes["member"]) == 1,
                                                           failed.status.attrs["flag_meanings"].split().index("stalled"),
                                                           failed.status.values))
     ax = plots.space_time_figure(failed, 1).axes[0]
-    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["no contact front (status stalled)"]
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["contact front: not given (status stalled)"]
     written = plots.quick_look(ds, tmp_path)
     assert {"space_time_member0.png", "space_time_member1.png"} <= {p.name for p in written}
     # a run without fronts at all: the map alone
@@ -275,4 +282,88 @@ def test_the_velocity_event_adds_its_threshold_contour(tmp_path):
     assert list(meeting_marks(ax)) == [f"contact front: {MEETS}"]  # the velocity front here is one front
     ax = plots.space_time_figure(ds, 1).axes[0]
     assert not ax.get_lines() and not contours(ax)
-    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["no velocity front", "no contact front"]
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == ["velocity front: not given (status no_peak)",
+                                                                        "contact front: not given (status no_peak)"]
+
+
+def legend_texts(ax):
+    return [t.get_text() for t in ax.get_legend().get_texts()]
+
+
+def test_an_infinite_parameter_value_is_a_legend_entry_and_counted_off_the_axis(grid):
+    """stop_time = inf (no stop) against 20.5: the inf members were dropped from the figures while
+    the title counted them (a sweep of end_time with inf gave empty figures)."""
+    stops = np.where(np.arange(grid.sizes["member"]) % 2 == 0, np.inf, 20.5)
+    ds = grid.assign(stop_time=("member", stops, {"units": "s"}))
+    ds.attrs["varying_parameters"] = "normal_force stop_time"
+    ax = plots.mu_s_figure(ds, "normal_force", "stop_time").axes[0]
+    assert legend_texts(ax) == ["t_stop = 20.5 s", "t_stop = inf s"]
+    assert sum(line.get_xdata().size for line in ax.get_lines()) == ds.sizes["member"]  # every member drawn
+    ax = plots.mu_s_figure(ds, "stop_time", "normal_force").axes[0]
+    assert "; 8 members at stop_time = inf not on the axis)" in ax.get_title()
+
+
+def test_all_negative_velocities_spanning_decades_get_a_log_axis_of_their_magnitude(grid):
+    """-1e-3, -1e-4, -1e-5 m/s on a linear axis put the last two on top of each other at 0."""
+    ds = grid.isel(member=[0, 1, 2]).assign(disc_velocity=("member", [-1e-3, -1e-4, -1e-5], {"units": "m s-1"}))
+    ax = plots.mu_s_figure(ds, "disc_velocity").axes[0]
+    assert ax.get_xscale() == "log" and ax.get_xlabel() == "|disc velocity v| (m/s), all negative"
+    np.testing.assert_allclose(np.sort(ax.get_lines()[0].get_xdata()), [1e-5, 1e-4, 1e-3])
+
+
+def test_figures_with_nothing_to_show_say_why(grid):
+    """All members failed: the figures had made-up axes (-0.04..0.04) and said '0 of 3 members ok'
+    only; they say which statuses and that there is nothing to show, with no axes."""
+    failed = grid.assign(status=grid.status.copy(data=np.ones(grid.sizes["member"], np.int32)))
+    failed.status.attrs["flag_meanings"] = "ok max_steps_reached"
+    for fig in (plots.mu_s_figure(failed, "normal_force"), plots.front_speeds_figure(failed, "normal_force"),
+                plots.arrival_times_figure(failed)):
+        ax = fig.axes[0]
+        assert "; 15 max_steps_reached" in ax.get_title() and not ax.get_xticks().size
+        assert [t.get_text() for t in ax.texts][0].startswith("no ")
+
+
+def test_misuse_is_named(grid, contact_run):
+    """by_parameters views, a DataArray, a wrong name, a run without fronts and a wrong recorded
+    index raised KeyError, AttributeError or IndexError without naming the problem."""
+    with pytest.raises(ValueError, match="a by_parameters view"):
+        plots.mu_s_figure(wf.io.by_parameters(grid), "normal_force")
+    with pytest.raises(ValueError, match="quick_look: expects the ensemble's xarray Dataset .* got DataArray"):
+        plots.quick_look(grid.mu_s, "unused")
+    with pytest.raises(ValueError, match=r"'ecc' is not a parameter of the ensemble; valid: .* normal_force, eccentricity"):
+        plots.mu_s_figure(grid, "ecc")
+    with pytest.raises(ValueError, match="no front outputs"):
+        plots.front_speeds_figure(grid.drop_vars(["v_left", "v_middle", "v_right", "arrival_time"]), "normal_force")
+    with pytest.raises(ValueError, match=r"recorded_index = 5; valid: 0..1, .*numbers 0, 1"):
+        plots.space_time_figure(contact_run, 5)
+
+
+def test_a_selection_without_a_recorded_member_and_times_after_the_end(contact_run, tmp_path):
+    """quick_look on ds.sel(member=[...]) that leaves a recorded member out raised IndexError; times
+    after a member's end (NaN) were white, the colour of zero velocity: grey, and said so."""
+    written = plots.quick_look(contact_run.sel(member=[0]), tmp_path)
+    assert "space_time_member0.png" in {p.name for p in written} and "space_time_member1.png" not in {p.name for p in written}
+    v = contact_run.velocity_history.values.copy()
+    v[0, 30:] = np.nan  # the member ended before the window's end
+    ds = contact_run.assign(velocity_history=contact_run.velocity_history.copy(data=v))
+    ax = plots.space_time_figure(ds, 0).axes[0]
+    end = float(ds.final_time.values[0])
+    assert f"not recorded: after the run's end (t = {end:.6g} s)" in legend_texts(ax)
+    mesh = ax.collections[0]
+    assert mesh.cmap.get_bad()[:3] == pytest.approx((0.8, 0.8, 0.8))
+    assert ax.get_title() == "member 0: pad velocity (t_stop = inf s)"
+
+
+def test_write_ensemble_keeps_integer_outputs_integer(tmp_path):
+    """ds.where(..., drop=True) turns status and the step counts into floats, and the file broke CF
+    (flag_values int against a float variable); a where() without drop leaves NaN statuses: refused."""
+    ds = run({"eccentricity": [0.0, 0.1, 0.2]}, nodes=11, rtol=1e-4, fronts=wf.Fronts())
+    picked = ds.where(ds.eccentricity > 0.05, drop=True)
+    assert picked.status.dtype.kind == "f"
+    back = open_ensemble(write_ensemble(picked, tmp_path / "w.nc"))
+    assert (back.status.dtype, back.steps_accepted.dtype, back.nucleation_edge.dtype) == (np.int32, np.int32, np.int8)
+    np.testing.assert_array_equal(back.steps_accepted.values, ds.steps_accepted.values[1:])
+    with pytest.raises(ValueError, match="'status' is float64 with 1 NaN values .*drop=True"):
+        write_ensemble(ds.where(ds.eccentricity > 0.05), tmp_path / "x.nc")
+    with pytest.raises(ValueError, match="expects the ensemble's Dataset along the dimension member .* got DataArray"):
+        write_ensemble(ds.mu_s, tmp_path / "x.nc")

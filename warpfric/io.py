@@ -535,6 +535,35 @@ def _in_process_locks():
     return dask.config.set(scheduler="synchronous")
 
 
+# the integer outputs of simulate and their types (a front event's nucleation_edge also prefixed):
+# xarray's where() and by_parameters' padding turn them into floats, which a file must not keep
+# (CF: flag_values of the variable's own type; the layout: integers are int32 or int8)
+INTEGER_OUTPUTS = {"status": np.int32, "working_precision": np.int8, "lift_off": np.int8, "nucleation_edge": np.int8,
+                   **{name: np.int32 for name in ("steps_accepted", "steps_rejected", "rejected_error_test",
+                                                  "rejected_newton", "rejected_switch", "missed_predictions",
+                                                  "newton_iterations", "gate_switches", "unlocated_switches")}}
+
+
+def _integer_outputs_restored(ds: xr.Dataset) -> xr.Dataset:
+    """``ds`` with its integer outputs (INTEGER_OUTPUTS) back in their types where an xarray operation
+    made them floats of whole values (``ds.where(cond, drop=True)``); ValueError, naming the variable
+    and what to do, where one holds NaN (a where() without drop masks members, by_parameters pads
+    missing combinations): a file holds each member's status and counts, not gaps."""
+    out = ds
+    for name, var in ds.data_vars.items():
+        kind = INTEGER_OUTPUTS.get(name) or (np.int8 if name.endswith("_nucleation_edge") else None)
+        if kind is None or var.dtype.kind != "f":
+            continue
+        values = var.values
+        if not np.isfinite(values).all() or (values != np.round(values)).any():
+            bad = int((~np.isfinite(values)).sum())
+            raise ValueError(f"write_ensemble: {name!r} is {var.dtype} with {bad} NaN values (masked members: an "
+                             "xarray where() without drop=True, or by_parameters' padding); write the members "
+                             "themselves: ds.sel(member=...) or ds.where(..., drop=True)")
+        out = out.assign({name: var.astype(kind)})
+    return out
+
+
 def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, command: str | None = None,
                    run_id: str | None = None) -> Path:
     """Write ``ds`` (from :func:`warpfric.simulate`) to netCDF4 at ``path``, atomically.
@@ -553,9 +582,14 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
     Raises OutputWriteError when the file cannot be written (its temporary file removed), and
     OutputBusy when another run holds the output's lock (``OUT.nc.lock``, :func:`lock_output`).
     """
+    if not isinstance(ds, xr.Dataset) or "member" not in ds.dims:
+        found = type(ds).__name__ if not isinstance(ds, xr.Dataset) else f"a Dataset with dimensions {tuple(ds.dims)}"
+        raise ValueError(f"write_ensemble: expects the ensemble's Dataset along the dimension member (from simulate or "
+                         f"open_ensemble), got {found}")
     path = Path(path)
     _require_folder(path)
     refuse_if_locked(path)
+    ds = _integer_outputs_restored(ds)
     if varying is None:
         varying = ds.attrs.get("varying_parameters", "").split()
     if "recorded_member" in ds.coords and not np.isin(ds.recorded_member.values, ds.member.values).all():

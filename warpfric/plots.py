@@ -99,9 +99,12 @@ def _scale(ax, which: str, values) -> str:
 
 
 def _value(ds, name: str, value: float) -> str:
-    """Legend entry: 'F = 1000 N'."""
+    """Legend entry: 'F = 1000 N', 't_stop = 20.15 s' (the value to 6 digits: a member's value, not a
+    tick, which _number rounds to 3)."""
     units = _units(ds, name)
-    return f"{_SYMBOLS.get(name, name)} = {_number(value)}{' ' + units if units else ''}"
+    value = float(value)
+    text = f"{value:.0f}" if value.is_integer() and abs(value) < 1e7 else f"{value:.6g}"
+    return f"{_SYMBOLS.get(name, name)} = {text}{' ' + units if units else ''}"
 
 
 def _meeting_point(ds, prefix: str, m: int, metres: bool):
@@ -140,6 +143,65 @@ def _per_member(ds, name: str) -> np.ndarray:
     return np.broadcast_to(np.asarray(ds[name].values, dtype=float), (ds.sizes["member"],))
 
 
+def _require_ensemble(ds, what: str) -> None:
+    """ValueError unless ``ds`` is an ensemble Dataset (simulate's, open_ensemble's): a Dataset with
+    the dimension member and the status of each member."""
+    import xarray as xr
+
+    if not isinstance(ds, xr.Dataset):
+        raise ValueError(f"{what}: expects the ensemble's xarray Dataset (from simulate or open_ensemble), got "
+                         f"{type(ds).__name__}")
+    if "member" not in ds.dims or "status" not in ds:
+        found = "a by_parameters view (its members are dimensions)" if "member_number" in ds else \
+            f"dimensions {tuple(ds.dims)}"
+        raise ValueError(f"{what}: expects an ensemble along the dimension member with each member's status, got "
+                         f"{found}; pass the ensemble itself (select members with ds.sel(member=...))")
+
+
+def _require_parameter(ds, name: str, what: str) -> None:
+    if name not in ds:
+        swept = ds.attrs.get("varying_parameters", "").split()
+        raise ValueError(f"{what}: {name!r} is not a parameter of the ensemble; valid: a parameter, e.g. the swept "
+                         f"{', '.join(swept) or 'none'}")
+
+
+def _require_fronts(ds, what: str) -> None:
+    if "v_middle" not in ds or "arrival_time" not in ds:
+        raise ValueError(f"{what}: the ensemble has no front outputs (run with fronts=None, or written without "
+                         "them); run with fronts=warpfric.Fronts()")
+
+
+def _status_text(ds, ok: np.ndarray) -> str:
+    """The members that are not ok, by status, for a title: '; 3 max_steps_reached', or ''."""
+    if ok.all():
+        return ""
+    meanings = ds.status.attrs.get("flag_meanings", "").split()
+    codes, counts = np.unique(ds.status.values[~ok], return_counts=True)
+    return "; " + ", ".join(f"{k} {meanings[c] if c < len(meanings) else f'status {c}'}" for c, k in zip(codes, counts))
+
+
+def _nothing_to_plot(ax, reason: str) -> None:
+    """An empty panel that says why, without the made-up axes of an empty plot."""
+    ax.text(0.5, 0.5, reason, transform=ax.transAxes, ha="center", va="center", fontsize=9, wrap=True)
+    ax.set_xticks([])
+    ax.set_yticks([])
+
+
+def _axis_values(ds, name: str, sel: np.ndarray):
+    """(x, label, note) of parameter ``name`` as an axis: its values, or their magnitude where all of
+    ``sel``'s are negative and span a decade (a log axis of |v|; a linear one put -1e-4 and -1e-5
+    on top of each other); ``note`` counts the members at an infinite value, which no axis shows."""
+    x = _per_member(ds, name)
+    label = _label(ds, name)
+    finite = x[sel & np.isfinite(x)]
+    if finite.size and (finite < 0).all() and _axis_scale(-finite) == "log":
+        x, label = -x, f"|{label.split(' (')[0]}|" + (f" ({_units(ds, name)}), all negative" if _units(ds, name)
+                                                        else ", all negative")
+    infinite = int((sel & np.isinf(x)).sum())
+    note = f"; {plural(infinite, 'member')} at {name} = inf not on the axis" if infinite else ""
+    return x, label, note
+
+
 class _Colours:
     """A second swept parameter as colour: per member ``colour``; ``discrete`` (at most MAX_LEGEND
     values): one colour per value for a legend, else a colour map for a colour bar; viridis, log
@@ -151,13 +213,17 @@ class _Colours:
 
         self.ds, self.name = ds, name
         self.values = _per_member(ds, name)
-        finite = self.values[sel & np.isfinite(self.values)]
-        self.levels = np.unique(finite)
+        # inf (no stop, the automatic end) is a value of its own in a legend; a colour bar has no place
+        # for it, so it is left out there (the figure's own count says so)
+        self.levels = np.unique(self.values[sel & ~np.isnan(self.values)])
         self.discrete = self.levels.size <= MAX_LEGEND
-        lo, hi = (self.levels.min(), self.levels.max()) if self.levels.size else (0.0, 1.0)
+        if not self.discrete:
+            self.levels = self.levels[np.isfinite(self.levels)]
+        finite = self.levels[np.isfinite(self.levels)]
+        lo, hi = (finite.min(), finite.max()) if finite.size else (0.0, 1.0)
         if hi == lo:
             lo, hi = lo - 1.0, hi + 1.0
-        self.norm = colors.LogNorm(lo, hi) if _axis_scale(self.levels) == "log" else colors.Normalize(lo, hi)
+        self.norm = colors.LogNorm(lo, hi) if _axis_scale(finite) == "log" else colors.Normalize(lo, hi)
         self.cmap = matplotlib.colormaps["viridis"]
         self.mappable = cm.ScalarMappable(norm=self.norm, cmap=self.cmap)
 
@@ -206,7 +272,7 @@ def _plot_by(ax, x, y, sel, colours: _Colours | None, ds, marker="o", label=None
         for value, members in colours.groups(sel):
             _series(ax, x, y, members, marker, color=colours.colour(value), label=_value(ds, colours.name, value))
     else:
-        use = sel & np.isfinite(x) & np.isfinite(y)
+        use = sel & np.isfinite(x) & np.isfinite(y) & np.isfinite(colours.values)
         ax.scatter(x[use], y[use], c=colours.values[use], cmap=colours.cmap, norm=colours.norm, s=14, marker=marker)
 
 
@@ -227,18 +293,26 @@ def _mixed_note(ds, names, ok: np.ndarray) -> str:
 def mu_s_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     """mu_s against ``pname`` (ok members), coloured by ``colour_by``; the title names the other
     swept parameters ``mixed`` (their members share the axes)."""
+    _require_ensemble(ds, "mu_s_figure")
+    for name in (pname, colour_by) if colour_by else (pname,):
+        _require_parameter(ds, name, "mu_s_figure")
     plt = _plt()
     ok = ds.status.values == 0
-    x, mu = _per_member(ds, pname), np.asarray(ds.mu_s.values, dtype=float)
+    x, xlabel, off_axis = _axis_values(ds, pname, ok)
+    mu = np.asarray(ds.mu_s.values, dtype=float)
     colours = _Colours(ds, colour_by, ok) if colour_by else None
     fig, ax = plt.subplots(figsize=(5.6, 3.8))
+    ax.set_title(f"mu_s against {pname.replace('_', ' ')} ({ok.sum()} of {plural(ok.size, 'member')} ok"
+                 f"{_status_text(ds, ok)}{off_axis})" + _mixed_note(ds, mixed, ok), fontsize=10)
+    shown = ok & np.isfinite(x) & np.isfinite(mu)
+    if not shown.any():
+        _nothing_to_plot(ax, "no member has a mu_s to show")
+        return fig
     _plot_by(ax, x, mu, ok, colours, ds, label=plural(int(ok.sum()), "ok member"), colour="C0")
-    _scale(ax, "x", x[ok])
-    _scale(ax, "y", mu[ok])
-    ax.set_xlabel(_label(ds, pname))
+    _scale(ax, "x", x[shown])
+    _scale(ax, "y", mu[shown])
+    ax.set_xlabel(xlabel)
     ax.set_ylabel("static friction coefficient mu_s")
-    ax.set_title(f"mu_s against {pname.replace('_', ' ')} ({ok.sum()} of {ok.size} members ok)"
-                 + _mixed_note(ds, mixed, ok), fontsize=10)
     ax.grid(alpha=0.3, which="both" if ax.get_xscale() == "log" else "major")
     if colours is not None:
         colours.explain(fig, [ax])
@@ -251,49 +325,55 @@ _SEGMENTS = (("left", "v"), ("middle", "o"), ("right", "^"))
 _SECOND = ("second", "s")
 
 
-def _segment_title(seg: str) -> str:
-    return "second front (whole)" if seg == "second" else f"first front's {seg} segment"
-
-
 def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     """The first front's v_left, v_middle, v_right, and v_second where some member has a second front,
     against ``pname``: one panel, the segments as markers; with ``colour_by``, one panel per segment,
     coloured by it; the title names the other swept parameters ``mixed``."""
+    _require_ensemble(ds, "front_speeds_figure")
+    _require_fronts(ds, "front_speeds_figure")
+    for name in (pname, colour_by) if colour_by else (pname,):
+        _require_parameter(ds, name, "front_speeds_figure")
     plt = _plt()
     ok = ds.status.values == 0
-    x = _per_member(ds, pname)
+    x, xlabel, off_axis = _axis_values(ds, pname, ok)
     segments = _SEGMENTS
     if "v_second" in ds and np.isfinite(np.asarray(ds.v_second.values, dtype=float)[ok]).any():
         segments = _SEGMENTS + (_SECOND,)
     speeds = {seg: np.asarray(ds[f"v_{seg}"].values, dtype=float) for seg, _ in segments}
-    every = np.concatenate([v[ok] for v in speeds.values()])
+    shown = {seg: ok & np.isfinite(x) & np.isfinite(v) for seg, v in speeds.items()}
+    every = np.concatenate([speeds[seg][shown[seg]] for seg in speeds])
+    title = f"{_front_name(ds)} speeds ({plural(int(ok.sum()), 'ok member')}{_status_text(ds, ok)}{off_axis})"
+    if not every.size:
+        fig, ax = plt.subplots(figsize=(5.6, 3.8))
+        ax.set_title(title, fontsize=10)
+        _nothing_to_plot(ax, f"no ok member has a {_front_name(ds)}")
+        return fig
     if colour_by is None:
         fig, ax = plt.subplots(figsize=(5.6, 3.8))
         for k, (seg, marker) in enumerate(segments):
-            present = ok & np.isfinite(speeds[seg])
-            _plot_by(ax, x, speeds[seg], present, None, ds, marker,
-                     label=f"v_{seg} ({plural(int(present.sum()), 'member')})",
-                     colour=f"C{k}")
+            _plot_by(ax, x, speeds[seg], shown[seg], None, ds, marker,
+                     label=f"v_{seg} ({plural(int(shown[seg].sum()), 'member')})", colour=f"C{k}")
         axes = [ax]
         ax.legend(fontsize=8)
         ax.set_ylabel("front speed (m/s)")
-        ax.set_title(f"{_front_name(ds)} speeds ({plural(int(ok.sum()), 'ok member')})", fontsize=10)
+        ax.set_title(title, fontsize=10)
     else:
         colours = _Colours(ds, colour_by, ok)
         fig, axes = plt.subplots(1, len(segments), figsize=(3.85 * len(segments), 3.6), sharex=True, sharey=True)
         for ax, (seg, marker) in zip(axes, segments):
-            present = ok & np.isfinite(speeds[seg])
-            _plot_by(ax, x, speeds[seg], present, colours, ds, marker)
-            ax.set_title(f"{_segment_title(seg)}, {plural(int(present.sum()), 'member')}", fontsize=10)
+            _plot_by(ax, x, speeds[seg], shown[seg], colours, ds, marker)
+            # short panel titles (the first front's segments: the figure's title says so), which
+            # did not fit beside each other with a colour bar
+            ax.set_title(f"{'second front' if seg == 'second' else seg + ' segment'}, "
+                         f"{plural(int(shown[seg].sum()), 'member')}", fontsize=9)
         axes[0].set_ylabel("front speed (m/s)")
         colours.explain(fig, axes)
-        note = _mixed_note(ds, mixed, ok)
-        if note:
-            fig.suptitle(note.strip(), fontsize=9)
+        fig.suptitle(title.replace(" speeds (", " speeds, first front's segments (", 1) + _mixed_note(ds, mixed, ok),
+                     fontsize=10)
     for ax in axes:
-        _scale(ax, "x", x[ok])
+        _scale(ax, "x", x[np.any(list(shown.values()), axis=0)])
         _scale(ax, "y", every)
-        ax.set_xlabel(_label(ds, pname))
+        ax.set_xlabel(xlabel)
         ax.grid(alpha=0.3, which="both")
     return fig
 
@@ -302,6 +382,8 @@ def arrival_times_figure(ds, max_curves: int = MAX_CURVES):
     """Arrival time minus the first arrival against x for up to ``max_curves`` ok members spread
     over the ensemble, coloured by the first swept parameter, dashed or dotted by the second (where
     it takes at most 4 values among them) and labelled with every swept value."""
+    _require_ensemble(ds, "arrival_times_figure")
+    _require_fronts(ds, "arrival_times_figure")
     plt = _plt()
     swept = ds.attrs.get("varying_parameters", "").split()
     ok = ds.status.values == 0
@@ -331,11 +413,15 @@ def arrival_times_figure(ds, max_curves: int = MAX_CURVES):
             meetings += 1
     ax.set_xlabel("x (mm)" if metres else "x / L")
     ax.set_ylabel("t_a - first arrival (ms)")
-    shown = f"{candidates.size} of {int((ok & arrived).sum())} members" if candidates.size else "no member with a front"
+    with_front = int((ok & arrived).sum())
+    shown = (f"{candidates.size} of the {plural(with_front, 'ok member')} with a front" if candidates.size
+             else "no ok member with a front")
     met = f"; \u25bd where two fronts meet: {meetings}" if meetings else ""
-    ax.set_title(f"{_front_name(ds)} arrival times ({shown}{met})", fontsize=10)
+    ax.set_title(f"{_front_name(ds)} arrival times ({shown}{_status_text(ds, ok)}{met})", fontsize=10)
     ax.grid(alpha=0.3)
-    if candidates.size:
+    if not candidates.size:
+        _nothing_to_plot(ax, f"no ok member has a {_front_name(ds)}")
+    else:
         ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, frameon=False)
     return fig
 
@@ -344,6 +430,7 @@ def quick_look(ds, outdir, max_curves: int = MAX_CURVES) -> list:
     """Write PNGs into ``outdir``: mu_s and front speeds against each swept parameter (coloured by
     another swept parameter), arrival-time curves, and the space-time map of every recorded member.
     Returns the paths written."""
+    _require_ensemble(ds, "quick_look")
     plt = _plt()
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
@@ -370,7 +457,8 @@ def quick_look(ds, outdir, max_curves: int = MAX_CURVES) -> list:
         _finish(arrival_times_figure(ds, max_curves), outdir / "arrival_times.png", written)
     if "velocity_history" in ds:
         for r, member in enumerate(ds.recorded_member.values):
-            written.append(space_time_map(ds, r, outdir / f"space_time_member{int(member)}.png"))
+            if member in ds.member.values:  # a selection of members may leave recorded ones out
+                written.append(space_time_map(ds, r, outdir / f"space_time_member{int(member)}.png"))
     return written
 
 
@@ -385,25 +473,48 @@ def space_time_map(ds, recorded_index: int, path) -> Path:
 def space_time_figure(ds, recorded_index: int):
     """Pad velocity over (x, t) of one recorded member (the paper's Fig. 3 style), with the member's
     arrival-time curve t_a(x) of each front event the Dataset holds (over the nodes the front
-    reached; none where it reached none: 'no contact front' in the legend) and, for the velocity
+    reached; none where it reached none: 'no contact front' in the legend, or 'not given' with the
+    status of a member that is not ok, whose front outputs are NaN); grey where nothing was recorded
+    (after the member's end); and, for the velocity
     event, the contour of threshold x its event maximum on the recorded field (event_max_velocity
     exists only for that event), and a triangle where the first front meets another. The legend
     names the event of each curve; the axes keep the recorded window."""
+    import matplotlib
+    from matplotlib import patheffects
     from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
 
+    _require_ensemble(ds, "space_time_figure")
+    if "velocity_history" not in ds:
+        raise ValueError("space_time_figure: the ensemble has no recorded fields (run with record=warpfric.Record(...))")
+    recorded = [int(m) for m in ds.recorded_member.values]
+    if not (isinstance(recorded_index, (int, np.integer)) and 0 <= recorded_index < len(recorded)):
+        raise ValueError(f"space_time_figure: recorded_index = {recorded_index!r}; valid: 0..{len(recorded) - 1}, the "
+                         f"position among the recorded members (numbers {', '.join(map(str, recorded))})")
+    member = recorded[recorded_index]
+    if member not in ds.member.values:
+        raise ValueError(f"space_time_figure: recorded member {member} is not among the ensemble's members (a "
+                         "selection left it out)")
     plt = _plt()
-    member = int(ds.recorded_member.values[recorded_index])
     position = int(np.flatnonzero(ds.member.values == member)[0])  # member numbers may start past 0
     v = ds.velocity_history.values[recorded_index]
     t = ds.time.values
     metres = ds.x.attrs.get("units") == "m"
     x = ds.x.values * (1e3 if metres else 1.0)
     fig, ax = plt.subplots(figsize=(6, 4))
-    scale = np.nanmax(np.abs(v)) or 1.0
-    mesh = ax.pcolormesh(x, t, v * 1e9, cmap="RdBu_r", vmin=-scale * 1e9, vmax=scale * 1e9, shading="nearest")
+    recorded_values = np.isfinite(v)
+    scale = float(np.abs(v[recorded_values]).max()) if recorded_values.any() else 0.0
+    scale = scale or 1.0
+    cmap = matplotlib.colormaps["RdBu_r"].copy()
+    cmap.set_bad("0.8")  # NaN (after the member's end) grey, not the white of zero velocity
+    mesh = ax.pcolormesh(x, t, v * 1e9, cmap=cmap, vmin=-scale * 1e9, vmax=scale * 1e9, shading="nearest")
     fig.colorbar(mesh, ax=ax, label="pad velocity (nm/s)")
     window = ax.get_xlim(), ax.get_ylim()
     handles = []
+    if not recorded_values.all():
+        end = float(_per_member(ds, "final_time")[position]) if "final_time" in ds else np.nan
+        handles.append(Patch(color="0.8", label="not recorded: after the run's end" +
+                             (f" (t = {end:.6g} s)" if np.isfinite(end) else "")))
     for event, prefix in front_events(ds):
         front = f"{event} front" if event else "front"
         event_max = f"{prefix}event_max_velocity"  # the velocity event's: its threshold contour
@@ -421,14 +532,19 @@ def space_time_figure(ds, recorded_index: int):
             status = int(_per_member(ds, "status")[position]) if "status" in ds else 0
             meanings = ds.status.attrs.get("flag_meanings", "").split() if "status" in ds else []
             meaning = meanings[status] if status < len(meanings) else str(status)
-            why = f" (status {meaning})" if meaning not in ("ok", "no_peak") else ""  # failed before any front
-            handles.append(Line2D([], [], ls="none", label=f"no {front}{why}"))
+            # a member that is not ok has NaN front outputs whether or not a front ran (no_peak: the
+            # map may show one): not "no front"
+            text = f"no {front}" if meaning == "ok" else f"{front}: not given (status {meaning})"
+            handles.append(Line2D([], [], ls="none", label=text))
             continue
         gaps = np.flatnonzero(np.diff(reached) > 1) + 1  # no line across nodes the front did not reach
         colour, style = _ARRIVAL_STYLES.get(event, ("k", ":"))
         seen = (ta[reached] >= t.min()) & (ta[reached] <= t.max())
+        # a white curve (the velocity event's, on its black contour) is outlined, so that its legend
+        # entry shows on the legend's white
+        outline = [patheffects.withStroke(linewidth=2.6, foreground="k")] if colour == "w" else None
         handles += ax.plot(np.insert(x[reached], gaps, np.nan), np.insert(ta[reached], gaps, np.nan), color=colour,
-                           ls=style, lw=1.5, label=f"{front}: arrival time t_a"
+                           ls=style, lw=1.5, path_effects=outline, label=f"{front}: arrival time t_a"
                            + ("" if seen.any() else " (outside the recorded times)"))
         meet = _meeting_point(ds, prefix, position, metres)
         if meet is not None:
@@ -440,6 +556,8 @@ def space_time_figure(ds, recorded_index: int):
         ax.legend(handles=handles, fontsize=7, loc="upper right", framealpha=0.8)
     ax.set_xlabel("x (mm)" if metres else "x / L")
     ax.set_ylabel("t (s)")
-    ax.set_title(f"member {member}: pad velocity")
+    swept = [name for name in ds.attrs.get("varying_parameters", "").split() if name in ds]
+    values = ", ".join(_value(ds, name, _per_member(ds, name)[position]) for name in swept[:3])
+    ax.set_title(f"member {member}: pad velocity" + (f" ({values})" if values else ""), fontsize=10)
     fig.tight_layout()
     return fig
