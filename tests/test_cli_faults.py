@@ -392,10 +392,12 @@ def test_two_runs_started_at_once_one_is_refused(tmp_path, sweep):
     assert open_ensemble(out).sizes["member"] == 6 and not lock.exists()
 
 
-def test_sigterm_keeps_the_finished_chunks_and_removes_the_lock(tmp_path):
+@pytest.mark.parametrize("sigint_ignored", [False, True])
+def test_sigterm_keeps_the_finished_chunks_and_removes_the_lock(tmp_path, sigint_ignored):
     """`timeout`, `kill` or a batch system's time limit (SIGTERM) ended a sweep without a word and
     left its lock, which another host could not take over: now it ends as Ctrl-C does (exit 130,
-    the finished chunks kept, the --resume command said, the lock removed), and --resume finishes."""
+    the finished chunks kept, the --resume command said, the lock removed), and --resume finishes;
+    also where SIGINT is ignored (a job started with & from a script), where SIGTERM was ignored too."""
     import signal
 
     slow = tmp_path / "slow.toml"
@@ -403,7 +405,8 @@ def test_sigterm_keeps_the_finished_chunks_and_removes_the_lock(tmp_path):
     out = tmp_path / "slow.nc"
     cmd = [sys.executable, "-m", "warpfric", "run", str(slow), "-o", str(out), "--chunk", "1", "--device", "cpu",
            "--quiet"]
-    run = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True)
+    ignore = (lambda: signal.signal(signal.SIGINT, signal.SIG_IGN)) if sigint_ignored else None
+    run = subprocess.Popen(cmd, stderr=subprocess.PIPE, text=True, preexec_fn=ignore)
     first_chunk = tmp_path / "slow.nc.parts" / "chunk-000000.nc"
     deadline = time.monotonic() + 120
     while not first_chunk.exists() and run.poll() is None and time.monotonic() < deadline:

@@ -559,16 +559,16 @@ def join_negative_values(argv: list, value_options: set) -> list:
 def _sigterm_as_ctrl_c():
     """SIGTERM (`timeout`, `kill`, a batch system's time limit) handled as Ctrl-C: the sweep keeps its
     finished chunks, says how to resume and removes its lock (killed by SIGTERM, it left the lock
-    and said nothing). It goes through SIGINT's handler of the moment, so a netCDF write that holds
-    Ctrl-C back holds it too. Only in the main thread, where signals can be handled."""
+    and said nothing). It goes through SIGINT's handler of the moment where that is a Python one, else
+    (SIGINT ignored, as in a job started with & from a script) raises KeyboardInterrupt itself; a
+    netCDF write holds both back (warpfric.io). Only in the main thread, where signals can be handled."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def as_ctrl_c(signum, frame):
         handler = signal.getsignal(signal.SIGINT)
-        if callable(handler):
-            handler(signal.SIGINT, frame)
+        (handler if callable(handler) else signal.default_int_handler)(signal.SIGINT, frame)
 
     previous = signal.signal(signal.SIGTERM, as_ctrl_c)
     try:

@@ -622,21 +622,30 @@ def _require_folder(path: Path) -> None:
 
 @contextlib.contextmanager
 def _sigint_held():
-    """Ctrl-C (SIGINT) held back while the block runs; yields a list that holds True once one came.
-    A netCDF write cannot be interrupted halfway: a KeyboardInterrupt inside xarray's file locks left
-    one half taken, and the writer's own close then waited on it for ever (a Ctrl-C while a sweep
-    wrote its combined file hung `warpfric run`). Only where Python's own handler is in place, in the
-    main thread; elsewhere the block runs as it is."""
+    """Ctrl-C (SIGINT), and SIGTERM where a Python handler turns it into one (the command line's),
+    held back while the block runs; yields a list that holds True once one came. A netCDF write
+    cannot be interrupted halfway: a KeyboardInterrupt inside xarray's file locks left one half
+    taken, and the writer's own close then waited on it for ever (a Ctrl-C while a sweep wrote its
+    combined file hung `warpfric run`). SIGINT only where Python's own handler is in place; all in
+    the main thread only; elsewhere the block runs as it is."""
     interrupted = []
-    if (threading.current_thread() is not threading.main_thread()
-            or signal.getsignal(signal.SIGINT) is not signal.default_int_handler):
+    if threading.current_thread() is not threading.main_thread():
         yield interrupted
         return
-    previous = signal.signal(signal.SIGINT, lambda signum, frame: interrupted.append(True))
+    previous = {}
+
+    def hold(signum, frame):
+        interrupted.append(True)
+
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        previous[signal.SIGINT] = signal.signal(signal.SIGINT, hold)
+    if callable(signal.getsignal(signal.SIGTERM)):
+        previous[signal.SIGTERM] = signal.signal(signal.SIGTERM, hold)
     try:
         yield interrupted
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
 
 
 def replace_atomically(path, write, suffix: str = "") -> Path:
