@@ -199,6 +199,10 @@ def main(argv=None):
     ap.add_argument("args", nargs=argparse.REMAINDER, help="the subcommand's own options")
     args = ap.parse_args(argv)
     sub, rest = args.subcommand, list(args.args)
+    if sub == "peers" and rest in (["-h"], ["--help"]):
+        print("bench.py peers scipy|diffrax [options]: the peer baselines (`bench.py peers scipy --help` lists "
+              "each one's options)")
+        return
     if sub == "peers" and (not rest or rest[0] not in PEERS):
         ap.error("peers needs 'scipy' or 'diffrax' first, e.g. bench.py peers scipy --nodes 40")
     result, out_path, tmp = None, None, None

@@ -42,9 +42,12 @@ def float32():
 
 
 def main(argv=None):
-    argv = sys.argv[1:] if argv is None else argv
-    name = (argv or ["all"])[0]
+    import argparse
+
     checks = {"vibration": vibration, "float32": float32}
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("check", nargs="?", default="all", choices=[*checks, "all"], help="which measurement (default all)")
+    name = ap.parse_args(sys.argv[1:] if argv is None else argv).check
     for key in (checks if name == "all" else [name]):
         print(f"== {key}: {checks[key].__doc__.split(chr(10))[0]}")
         checks[key]()

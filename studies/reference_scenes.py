@@ -3,7 +3,13 @@ F = 500, 1000, 5000 N; viscous_coefficient 2.7e13 Pa s/m (27 MPa s/um) and 0: 18
 
     python studies/reference_scenes.py [--nodes 100 200 400] [--rtols 1e-6 1e-7 1e-8]
                                        [--end-time 20.6] [--device cpu]
+                                       [--relaxation-gate none] [--front-event velocity]
                                        [--out studies/reference/reference_scenes.nc]
+
+The defaults are those of the committed studies/reference/reference_scenes.nc: the gate-less law
+and the velocity front (the stress gate without velocity strengthening is a dynamic rupture, ~30x
+the steps; docs/performance.md, "Known limits"). The run replaces --out: give another file to
+compare with the committed one.
 
 The runs end at 20.6 s: mu_s is reached by ~20.28 s and the fronts are over by ~20.35 s.
 The scenes with viscous_coefficient = 0 are refined to rtol 1e-7 only: without the viscous
@@ -36,9 +42,10 @@ def scenes() -> dict:
     return {"eccentricity": e.ravel(), "normal_force": f.ravel(), "viscous_coefficient": eta.ravel()}
 
 
-def run(members: dict, nodes: int, rtol: float, device: str, end_time: float) -> xr.Dataset:
+def run(members: dict, nodes: int, rtol: float, device: str, end_time: float, model: wf.Model,
+        fronts: wf.Fronts) -> xr.Dataset:
     t0 = time.perf_counter()
-    ds = wf.simulate(members, scene=wf.Parameters(end_time=end_time),
+    ds = wf.simulate(members, scene=wf.Parameters(end_time=end_time), model=model, fronts=fronts,
                      solver=wf.Solver(nodes=nodes, rtol=rtol, max_steps=10**7), device=device, progress=False)
     if (ds.status.values != 0).any():
         raise SystemExit(f"N = {nodes}, rtol = {rtol:g}: members failed: {ds.status.values}")
@@ -47,13 +54,13 @@ def run(members: dict, nodes: int, rtol: float, device: str, end_time: float) ->
     return ds
 
 
-def refine(members: dict, nodes, rtols, device, end_time):
+def refine(members: dict, nodes, rtols, device, end_time, model, fronts):
     """{('N', n): ds at the tightest rtol} and {('rtol', r): ds on the finest grid}."""
     rt = min(rtols)
     fine = max(nodes)
-    out = {("N", n): run(members, n, rt, device, end_time) for n in sorted(nodes)}
+    out = {("N", n): run(members, n, rt, device, end_time, model, fronts) for n in sorted(nodes)}
     for r in sorted(rtols, reverse=True):
-        out[("rtol", r)] = out[("N", fine)] if r == rt else run(members, fine, r, device, end_time)
+        out[("rtol", r)] = out[("N", fine)] if r == rt else run(members, fine, r, device, end_time, model, fronts)
     return out
 
 
@@ -66,15 +73,20 @@ def main(argv=None):
                     help="tolerances for viscous_coefficient = 0 (see the module docstring)")
     ap.add_argument("--end-time", type=float, default=20.6)
     ap.add_argument("--device", default="cpu")
+    ap.add_argument("--relaxation-gate", default="none", choices=["none", "stress", "velocity"],
+                    help="the law (default none: the committed file's)")
+    ap.add_argument("--front-event", default="velocity", choices=["velocity", "contact", "strength"],
+                    help="the front event (default velocity: the committed file's)")
     ap.add_argument("--out", default="studies/reference/reference_scenes.nc")
     args = ap.parse_args(argv)
+    model, fronts = wf.Model(relaxation_gate=args.relaxation_gate), wf.Fronts(event=args.front_event)
     all_members = scenes()
     ns = sorted(args.nodes)
     parts = []
     for viscous, rtols in ((True, args.rtols), (False, args.rtols_inviscid)):
         sel = (all_members["viscous_coefficient"] > 0) == viscous
         members = {k: v[sel] for k, v in all_members.items()}
-        runs = refine(members, ns, rtols, args.device, args.end_time)
+        runs = refine(members, ns, rtols, args.device, args.end_time, model, fronts)
         rtols = sorted(rtols, reverse=True)
         best = runs[("N", ns[-1])]
         out = best.drop_vars([v for v in best.data_vars if "x" in best[v].dims]).drop_dims("x")
