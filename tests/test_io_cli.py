@@ -82,7 +82,7 @@ def test_by_parameters_puts_every_member_at_its_swept_values(tmp_path):
         by_parameters(ds, "normal_force")
     with pytest.raises(ValueError, match="'density' is 1200 kg m-3 in every member"):
         by_parameters(ds, ["density", "eccentricity"])
-    with pytest.raises(ValueError, match="no parameter varies among these 1 members"):
+    with pytest.raises(ValueError, match="no parameter varies among this member"):
         by_parameters(run(None, nodes=11))
     holed = ds.assign(eccentricity=ds.eccentricity.where(ds.member != 3))
     with pytest.raises(ValueError, match=r"'eccentricity' is not finite in 1 member\(s\) \(numbers 3\)"):

@@ -12,7 +12,7 @@ import warnings
 import numpy as np
 import pytest
 import xarray as xr
-from conftest import DEVICE
+from conftest import DEVICE, run
 
 import warpfric as wf
 from warpfric.cli import main
@@ -165,3 +165,11 @@ def test_open_ensembles_refuses_different_recording_times_in_one_line(tmp_path, 
         open_ensembles([a, tmp_path / "b.nc"])
     assert "recorded their fields at different times" in str(err.value) and "group='recorded'" in str(err.value)
     assert "\n" not in str(err.value)
+
+
+def test_different_solver_settings_are_named_as_plain_values(tmp_path):
+    """'differ in solver_nodes (np.int32(24), np.int32(30))': the values as a reader writes them."""
+    a = write_ensemble(run({"eccentricity": [0.0]}, nodes=11, rtol=1e-4), tmp_path / "a.nc")
+    b = write_ensemble(run({"eccentricity": [0.1]}, nodes=13, rtol=1e-4).assign_coords(member=[1]), tmp_path / "b.nc")
+    with pytest.raises(ValueError, match=r"differ in solver_nodes \(11, 13\): not one ensemble"):
+        open_ensembles([a, b])

@@ -484,7 +484,7 @@ def by_parameters(ds: xr.Dataset, names=None) -> xr.Dataset:
     else:
         names = [names] if isinstance(names, str) else list(names)
     if not names:
-        raise ValueError(f"by_parameters: no parameter varies among these {ds.sizes['member']} members (swept: "
+        raise ValueError(f"by_parameters: no parameter varies among {'this member' if ds.sizes['member'] == 1 else 'these ' + str(ds.sizes['member']) + ' members'} (swept: "
                          f"{' '.join(swept) or 'none'}); valid: names of parameters that vary along member")
     bad = [n for n in names if n not in ds or ds[n].dims != ("member",)]
     if bad:
@@ -868,8 +868,10 @@ def concat_members(datasets, names=None) -> xr.Dataset:
         if key.startswith(("model_", "solver_", "fronts_")):
             for name, ds in zip(names[1:], datasets[1:]):
                 if ds.attrs.get(key) != value:
-                    raise ValueError(f"{names[0]} and {name} differ in {key} ({value!r}, {ds.attrs.get(key)!r}): "
-                                     "not one ensemble")
+                    def plain(v):  # 24, not np.int32(24)
+                        return v.item() if isinstance(v, np.generic) else v
+                    raise ValueError(f"{names[0]} and {name} differ in {key} ({plain(value)!r}, "
+                                     f"{plain(ds.attrs.get(key))!r}): not one ensemble")
     varying = set()
     for ds in datasets:
         varying |= set(ds.attrs.get("varying_parameters", "").split())
