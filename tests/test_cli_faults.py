@@ -537,6 +537,25 @@ def test_resume_with_other_settings_names_the_one_that_differs(tmp_path, sweep, 
     _error_line(err, "another sweep file (its text changed)")
 
 
+def test_a_parts_folder_without_a_manifest(tmp_path, sweep, capsys):
+    """A run killed between creating OUT.nc.parts/ and writing its manifest left an empty folder: the
+    next run was told to --resume, and --resume failed on 'unreadable chunk manifest
+    (FileNotFoundError(2, ...))'. An empty folder is removed (nothing to lose); a folder with chunks
+    but no readable manifest says that --overwrite starts again."""
+    out = tmp_path / "s.nc"
+    (tmp_path / "s.nc.parts").mkdir()
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--device", DEVICE, "--quiet")
+    assert code == 0, err
+    assert _files(tmp_path) == ["s.nc", "s.toml"]
+    other = tmp_path / "t.nc"
+    (tmp_path / "t.nc.parts").mkdir()
+    (tmp_path / "t.nc.parts" / "chunk-000000.nc").write_bytes(b"a chunk")
+    code, _, err = run_cli(capsys, "run", sweep, "-o", other, "--resume", "--device", DEVICE)
+    assert code == 2
+    _error_line(err, "unreadable chunk manifest (no such file or directory); nothing can be resumed from it: "
+                     "--overwrite starts the run again")
+
+
 def test_info_on_a_run_still_going_says_so(tmp_path, sweep, capsys, monkeypatch):
     """info on a sweep whose lock a living run holds called it INCOMPLETE and offered --resume (which
     that run's lock then refused): it says RUNNING and who writes it, without a resume command."""
@@ -554,6 +573,12 @@ def test_info_on_a_run_still_going_says_so(tmp_path, sweep, capsys, monkeypatch)
         other.wait()
     code, lines, _ = run_cli(capsys, "info", out)  # its process gone: interrupted
     assert code == 1 and "INCOMPLETE" in lines[0] and "--resume" in lines[0]
+    # beside a complete file: the same line and exit 1 (it was exit 2 and "run the same command
+    # again with --resume", which info does not take)
+    whole = tmp_path / "whole.nc"
+    assert run_cli(capsys, "run", sweep, "-o", whole, "--device", DEVICE, "--quiet")[0] == 0
+    code, lines, _ = run_cli(capsys, "info", whole, out)
+    assert code == 1 and lines == [line for line in lines if line.startswith(f"{out}: INCOMPLETE run: 2/3 chunks")]
 
 
 def test_an_interrupted_overwrite_is_resumed_with_the_command_it_printed(tmp_path, sweep, capsys, monkeypatch):

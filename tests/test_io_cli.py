@@ -213,6 +213,8 @@ BAD = [
     ("[scene]\nnormal_force = -5.0\n", ["normal_force", "-5.0", "valid range"]),
     ("[fronts]\nthreshold = 2.0\n", ["threshold", "(0, 1)"]),
     ("[fronts]\nevent = ['contact', 3]\n", ["[fronts] event = ['contact', 3]: expected an event name or a list"]),
+    # refused at load, not after the run's first line (inside its first chunk)
+    ("[solver]\ndtype = 'float32'\n[grid]\neccentricity = [0.0]\n", ["'float32' is invalid with relaxation_gate='stress'"]),
     ("[fronts]\nevent = ['contact', 'strenght']\n", ["strenght"]),
 ]
 

@@ -277,21 +277,27 @@ def _run(args) -> int:
 def _info(args) -> int:
     from .io import ChunkStore, open_ensemble, open_ensembles, parts_dir, resume_command, running_writer
 
-    if len(args.file) > 1:  # several files: their combination (refused when member numbers repeat)
-        ds = open_ensembles(args.file)
-        print(summary(ds, " + ".join(args.file)))
-        return 0
-    path = Path(args.file[0])
-    if not path.exists() and parts_dir(path).exists():
+    def unfinished(path: Path) -> str | None:
+        """The line of a sweep that is still running or was interrupted (no file yet, its parts), or None."""
+        if path.exists() or not parts_dir(path).exists():
+            return None
         store = ChunkStore.load(parts_dir(path))
         done = (f"{store.done_count()}/{_plural(store.n_chunks, 'chunk')} of <= {_plural(store.chunk, 'member')} "
                 f"finished ({_plural(store.n_members, 'member')} in all) in {parts_dir(path)}")
         writer = running_writer(path)
         if writer is not None:  # not interrupted: still being written
-            print(f"{path}: RUNNING: being written by warpfric run ({writer}); {done} so far")
-        else:
-            print(f"{path}: INCOMPLETE run: {done}; finish it with `{resume_command(store, path)}`")
+            return f"{path}: RUNNING: being written by warpfric run ({writer}); {done} so far"
+        return f"{path}: INCOMPLETE run: {done}; finish it with `{resume_command(store, path)}`"
+
+    lines = [line for line in map(unfinished, map(Path, args.file)) if line]
+    if lines:  # exit 1, as for one file, with each unfinished file's line
+        print("\n".join(lines))
         return 1
+    if len(args.file) > 1:  # several files: their combination (refused when member numbers repeat)
+        ds = open_ensembles(args.file)
+        print(summary(ds, " + ".join(args.file)))
+        return 0
+    path = Path(args.file[0])
     ds = open_ensemble(path)
     print(summary(ds, str(path)))
     if parts_dir(path).exists():  # an interrupted --overwrite run is replacing it

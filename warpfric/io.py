@@ -790,7 +790,9 @@ class ChunkStore:
             manifest = json.loads((directory / MANIFEST).read_text())
             return cls(directory, manifest["digest"], manifest["n_members"], manifest["chunk"], manifest)
         except (OSError, ValueError, KeyError, TypeError) as err:
-            raise ValueError(f"{directory}: unreadable chunk manifest ({err!r})") from None
+            reason = os_error_reason(err) if isinstance(err, OSError) else f"{type(err).__name__}: {err}"
+            raise ValueError(f"{directory}: unreadable chunk manifest ({reason}); nothing can be resumed from it: "
+                             "--overwrite starts the run again") from None
 
     def chunk_path(self, index: int) -> Path:
         return self.directory / f"chunk-{index:06d}.nc"

@@ -283,6 +283,16 @@ class Model:
         return texts
 
 
+def check_precision(model: "Model", solver: "Solver") -> None:
+    """ValueError for float32 under the stress gate (docs/model.md, "Precision": the located switches
+    need steps that float32 cannot integrate), before anything runs or is written."""
+    if solver.dtype == "float32" and model.relaxation_gate == "stress":
+        raise ValueError(
+            "solver setting 'dtype' = 'float32' is invalid with relaxation_gate='stress'; valid: 'float64' "
+            "(float32 stalls at the gate switches), or float32 with relaxation_gate='none' or 'velocity'"
+        )
+
+
 _DTYPES = ("float32", "float64")
 _METHODS = ("tr_bdf2", "esdirk4")
 FLOAT32_MIN_RTOL = 1e-5  # docs/performance.md: float32 stalls below this

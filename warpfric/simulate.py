@@ -18,8 +18,8 @@ from .device import check_device, init_warp
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
 from .parameters import (ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, MEMBERS_NOT_OK, MEMBERS_NOT_OK_HINT,
-                         PARAMETERS_UNUSED, RECORD_PAST_END, Fronts, Model, Parameters, Record, Solver, parameter_long_name,
-                         parameter_units)
+                         PARAMETERS_UNUSED, RECORD_PAST_END, Fronts, Model, Parameters, Record, Solver, check_precision,
+                         parameter_long_name, parameter_units)
 
 
 def simulate(
@@ -90,12 +90,7 @@ def simulate(
         raise ValueError(f"model: expected a warpfric.Model, got {type(model).__name__}")
     if not isinstance(solver, Solver):
         raise ValueError(f"solver: expected a warpfric.Solver, got {type(solver).__name__}")
-    if solver.dtype == "float32" and model.relaxation_gate == "stress":
-        # docs/model.md, "Precision": the located switches need steps that float32 cannot integrate
-        raise ValueError(
-            "solver setting 'dtype' = 'float32' is invalid with relaxation_gate='stress'; valid: 'float64' "
-            "(float32 stalls at the gate switches), or float32 with relaxation_gate='none' or 'velocity'"
-        )
+    check_precision(model, solver)
     if fronts is not None and not isinstance(fronts, Fronts):
         hint = (f" (for that event: fronts=warpfric.Fronts(event={fronts!r}))"
                 if isinstance(fronts, str) and fronts in FRONT_EVENTS else "")

@@ -35,8 +35,8 @@ from pathlib import Path
 import numpy as np
 
 from .members import resolve_members
-from .parameters import (PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solver, did_you_mean, parameter_range_text,
-                         parameter_units, units_text, validate_value)
+from .parameters import (PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solver, check_precision, did_you_mean,
+                         parameter_range_text, parameter_units, units_text, validate_value)
 from .progress import machine_memory_bytes, plural
 
 TOP_KEYS = ("title", "description", "scene", "model", "solver", "fronts", "record", "grid", "zip", "sample", "design",
@@ -220,6 +220,7 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
         scene = Parameters(**_dataclass_kwargs(doc.get("scene", {}), Parameters, "scene", parameters=True))
         model = Model(**_dataclass_kwargs(doc.get("model", {}), Model, "model"))
         solver = Solver(**_dataclass_kwargs(doc.get("solver", {}), Solver, "solver"))
+        check_precision(model, solver)  # before the run's first line, not inside its first chunk
         fronts_spec = doc.get("fronts", {})
         if fronts_spec is False:
             fronts = None
