@@ -2,6 +2,8 @@
 
     python studies/known_limits.py vibration     # inviscid pad vibration: steps against rtol and damping
     python studies/known_limits.py float32       # float32 at low disc velocity against float64
+    python studies/known_limits.py float32-wide  # float32 against float64 over members drawn wider
+    python studies/known_limits.py stop-lift-off # a sudden stop of eccentric pads that lift off, with damping
     python studies/known_limits.py all
     (also: python studies/bench.py limits vibration|float32|all)
 """
@@ -41,10 +43,47 @@ def float32():
               f"{float(b.mu_s[0]) / ref - 1:12.2e}")
 
 
+def float32_wide():
+    """float32 against float64 over members drawn wider (12 members: e uniform in [-0.5, 0.5], F
+    log-uniform in [100, 1e4] N, |v_max| log-uniform in [1e-6, 1e-2] m/s, the last 6 negative; numpy's
+    default_rng(0), drawn in that order), N = 40, the gate-less law and the velocity gate, fronts off:
+    the largest and median relative difference of mu_s at rtol 1e-4 and 1e-5."""
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    n = 12
+    members = {"eccentricity": rng.uniform(-0.5, 0.5, n), "normal_force": 10 ** rng.uniform(2, 4, n),
+               "disc_velocity": np.r_[10 ** rng.uniform(-6, -2, n // 2), -10 ** rng.uniform(-6, -2, n - n // 2)]}
+    print(f"{'gate':>9} {'rtol':>6} {'both ok':>8} {'largest':>9} {'median':>9}")
+    for gate in ("none", "velocity"):
+        for rtol in (1e-4, 1e-5):
+            r = {dt: wf.simulate(members, model=wf.Model(relaxation_gate=gate), fronts=None, device="cpu", workers=1,
+                                 solver=wf.Solver(nodes=40, rtol=rtol, dtype=dt, stall_factor=float("inf")))
+                 for dt in ("float64", "float32")}
+            ok = (r["float64"].status.values == 0) & (r["float32"].status.values == 0)
+            d = np.abs(r["float32"].mu_s.values / r["float64"].mu_s.values - 1)[ok]
+            print(f"{gate:>9} {rtol:6.0e} {int(ok.sum()):8d} {d.max():9.2e} {np.median(d):9.1e}")
+
+
+def stop_lift_off():
+    """A sudden stop at 21 s of eccentric pads that lift off (end 22 s, N = 40, rtol 1e-5, max_steps
+    20,000, no straggler rule), without and with damping 1e6 Pa s/m: status, final time, accepted
+    steps, mu at 22 s."""
+    print(f"{'damping':>8} {'2e/L':>6} {'status':>7} {'final t s':>10} {'accepted':>9} {'mu_final':>11}")
+    for damping in (0.0, 1e6):
+        ds = wf.simulate({"eccentricity": [-0.35, -0.25, 0.45]}, fronts=None, device="cpu", workers=1,
+                         scene=wf.Parameters(stop_time=21.0, end_time=22.0, damping=damping),
+                         solver=wf.Solver(nodes=40, max_steps=20000, stall_factor=float("inf")))
+        for m in range(ds.sizes["member"]):
+            print(f"{damping:8.0e} {float(ds.eccentricity[m]):6.2f} {int(ds.status[m]):7d} {float(ds.final_time[m]):10.6f} "
+                  f"{int(ds.steps_accepted[m]):9d} {float(ds.mu_final[m]):11.8f}")
+
+
 def main(argv=None):
     import argparse
 
-    checks = {"vibration": vibration, "float32": float32}
+    checks = {"vibration": vibration, "float32": float32, "float32-wide": float32_wide,
+              "stop-lift-off": stop_lift_off}
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("check", nargs="?", default="all", choices=[*checks, "all"], help="which measurement (default all)")
     name = ap.parse_args(sys.argv[1:] if argv is None else argv).check

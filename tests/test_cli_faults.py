@@ -547,6 +547,10 @@ def test_a_parts_folder_without_a_manifest(tmp_path, sweep, capsys):
     code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--device", DEVICE, "--quiet")
     assert code == 0, err
     assert _files(tmp_path) == ["s.nc", "s.toml"]
+    (tmp_path / "s.nc.parts").mkdir()  # beside a complete file: info reads the file, exit 0 (it was 2)
+    code, lines, _ = run_cli(capsys, "info", out)
+    assert code == 0 and "complete" in lines[0] and not any("replace" in line for line in lines)
+    (tmp_path / "s.nc.parts").rmdir()
     other = tmp_path / "t.nc"
     (tmp_path / "t.nc.parts").mkdir()
     (tmp_path / "t.nc.parts" / "chunk-000000.nc").write_bytes(b"a chunk")
@@ -594,6 +598,16 @@ def test_an_interrupted_overwrite_is_resumed_with_the_command_it_printed(tmp_pat
     assert code == 130 and err[-1].endswith(f"`warpfric run {sweep} -o {out} --resume --device {DEVICE}` goes on from them")
     code, stdout, _ = run_cli(capsys, "info", out)  # the old file, complete, and what is replacing it
     assert code == 0 and stdout[-1].startswith(f"  an interrupted run that replaces it: 1/3 chunks finished in {out}.parts")
+    other = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:  # still running: no resume command (the run's lock would refuse it)
+        _hold_lock(out, other.pid)
+        code, stdout, _ = run_cli(capsys, "info", out)
+        assert code == 0 and stdout[-1].startswith(f"  being replaced by a running warpfric run (pid {other.pid} ")
+        assert "--resume" not in stdout[-1]
+    finally:
+        other.kill()
+        other.wait()
+        (tmp_path / "s.nc.lock").unlink()
     code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
     assert code == 0, err
     assert any(f"'{out}' is replaced when the interrupted run it belongs to ends" in line for line in err), err
@@ -626,6 +640,34 @@ def test_a_ctrl_c_during_a_write_waits_for_the_write_and_then_stops_it(tmp_path)
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # Python's own handler again
     replace_atomically(out, lambda tmp: Path(tmp).write_text("written"))  # and a write without one
     assert out.read_text() == "written" and _files(tmp_path) == ["out.nc"]
+
+
+def test_a_write_holds_the_command_lines_sigterm_and_leaves_a_users_own_handler_alone(tmp_path):
+    """The command line's SIGTERM (as Ctrl-C) is held during a write like Ctrl-C; a SIGTERM handler of
+    the user's own (a batch job's 'stop after this' flag) was swallowed too, its write thrown away
+    with KeyboardInterrupt: it runs, and the write completes."""
+    import signal
+
+    from warpfric.io import replace_atomically, sigterm_as_ctrl_c
+
+    out = tmp_path / "out.nc"
+
+    def write(tmp):
+        Path(tmp).write_text("half")
+        os.kill(os.getpid(), signal.SIGTERM)
+        Path(tmp).write_text("the new result")
+
+    calls = []
+    previous = signal.signal(signal.SIGTERM, lambda signum, frame: calls.append(signum))
+    try:
+        replace_atomically(out, write)
+        assert calls == [signal.SIGTERM] and out.read_text() == "the new result"
+        signal.signal(signal.SIGTERM, sigterm_as_ctrl_c)
+        with pytest.raises(KeyboardInterrupt):
+            replace_atomically(out, write)
+        assert out.read_text() == "the new result" and _files(tmp_path) == ["out.nc"]  # held, then stopped
+    finally:
+        signal.signal(signal.SIGTERM, previous)
 
 
 def test_write_ensemble_removes_its_temporary_file_on_ctrl_c(tmp_path, monkeypatch):

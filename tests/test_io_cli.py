@@ -239,14 +239,12 @@ def test_a_sweep_file_that_repeats_members_is_warned(tmp_path, body, words):
         assert load_sweep(path).n_members == 8
 
 
-def test_a_sweep_file_may_ask_for_several_front_events():
+def test_a_sweep_file_may_ask_for_several_front_events(tmp_path):
     """[fronts] event = ["contact", "strength"] was refused ("expected a string"), although docs/sweeps.md
     speaks of every front event in the file and Fronts takes several."""
-    import tempfile
-
     from warpfric.sweep_file import load_sweep
 
-    path = Path(tempfile.mkdtemp()) / "s.toml"
+    path = tmp_path / "s.toml"
     path.write_text("[fronts]\nevent = ['contact', 'strength']\n[grid]\neccentricity = [0.0]\n")
     assert load_sweep(path).fronts.events == ("contact", "strength")
 

@@ -80,12 +80,13 @@ def test_small_linear_values_share_a_power_of_ten_instead_of_long_tick_labels():
 
 def test_one_member_is_one_member_in_legends_and_titles():
     ds = ensemble(np.array([1000.0, 2000.0]), np.zeros(2))
-    ds["status"] = ("member", np.array([0, 1], np.int32))
+    ds["status"] = ("member", np.array([0, 1], np.int32), {"flag_values": np.array([0, 1], np.int32),
+                                                          "flag_meanings": "ok max_steps_reached"})
     ds.attrs["varying_parameters"] = "normal_force"
     ax = plots.mu_s_figure(ds, "normal_force").axes[0]
     assert [t.get_text() for t in ax.get_legend().get_texts()] == ["1 ok member"]
     speeds = plots.front_speeds_figure(ds, "normal_force").axes[0]
-    assert speeds.get_title().endswith("(1 ok member; 1 status 1)") and "v_middle (1 member)" in [
+    assert speeds.get_title().endswith("(1 ok member; 1 max_steps_reached)") and "v_middle (1 member)" in [
         t.get_text() for t in speeds.get_legend().get_texts()]
 
 
@@ -365,5 +366,20 @@ def test_write_ensemble_keeps_integer_outputs_integer(tmp_path):
     np.testing.assert_array_equal(back.steps_accepted.values, ds.steps_accepted.values[1:])
     with pytest.raises(ValueError, match="'status' is float64 with 1 NaN values .*drop=True"):
         write_ensemble(ds.where(ds.eccentricity > 0.05), tmp_path / "x.nc")
+    with pytest.raises(ValueError, match=r"'steps_accepted' holds values that are not whole numbers \(e.g. [0-9]+\.5\)"):
+        write_ensemble(ds.assign(steps_accepted=ds.steps_accepted / 1.0 + 0.5), tmp_path / "x.nc")
     with pytest.raises(ValueError, match="expects the ensemble's Dataset along the dimension member .* got DataArray"):
         write_ensemble(ds.mu_s, tmp_path / "x.nc")
+
+
+def test_members_at_inf_beside_a_colour_bar_are_counted():
+    """More colour values than a legend holds: a colour bar, which has no colour for inf; those
+    members were left out without a word."""
+    rng = np.random.default_rng(3)
+    ds = ensemble(rng.uniform(200, 5000, 20), np.zeros(20))
+    stops = np.where(np.arange(20) < 4, np.inf, 20.2 + 0.01 * np.arange(20))
+    ds = ds.assign(stop_time=("member", stops, {"units": "s"}))
+    ax = plots.mu_s_figure(ds, "normal_force", "stop_time").axes[0]
+    assert ax.get_title().endswith("; 4 members at stop_time = inf not shown (no colour for inf))")
+    fig = plots.front_speeds_figure(ds, "normal_force", "stop_time")
+    assert "4 members at stop_time = inf not shown" in fig._suptitle.get_text()

@@ -211,7 +211,8 @@ def _run_default(args) -> int:
             check_output_name(output)
             stack.enter_context(output_lock(output, args.command_line))
             check_output(output, False, args.overwrite)
-            check_free_space(output, estimate_bytes(1, solver.nodes), "the file")
+            check_free_space(output, estimate_bytes(1, solver.nodes, front_events=0 if fronts is None else
+                                                    len(fronts.events)), "the file")
             remove_stale_temporaries(output)
         try:
             ds = simulate(scene=scene, model=model, solver=solver, fronts=fronts, device=args.device,
@@ -300,10 +301,18 @@ def _info(args) -> int:
     path = Path(args.file[0])
     ds = open_ensemble(path)
     print(summary(ds, str(path)))
-    if parts_dir(path).exists():  # an interrupted --overwrite run is replacing it
-        store = ChunkStore.load(parts_dir(path))
-        print(f"  an interrupted run that replaces it: {store.done_count()}/{_plural(store.n_chunks, 'chunk')} "
-              f"finished in {parts_dir(path)}; `{resume_command(store, path)}` finishes it and replaces this file")
+    try:  # a --overwrite run replacing it, running or interrupted (a parts folder without a manifest: none)
+        store = ChunkStore.load(parts_dir(path)) if parts_dir(path).is_dir() else None
+    except ValueError:
+        store = None
+    if store is not None:
+        done = f"{store.done_count()}/{_plural(store.n_chunks, 'chunk')} finished in {parts_dir(path)}"
+        writer = running_writer(path)
+        if writer is not None:
+            print(f"  being replaced by a running warpfric run ({writer}): {done} so far")
+        else:
+            print(f"  an interrupted run that replaces it: {done}; `{resume_command(store, path)}` finishes it and "
+                  "replaces this file")
     return 0
 
 
@@ -568,15 +577,12 @@ def _sigterm_as_ctrl_c():
     and said nothing). It goes through SIGINT's handler of the moment where that is a Python one, else
     (SIGINT ignored, as in a job started with & from a script) raises KeyboardInterrupt itself; a
     netCDF write holds both back (warpfric.io). Only in the main thread, where signals can be handled."""
+    from .io import sigterm_as_ctrl_c
+
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-
-    def as_ctrl_c(signum, frame):
-        handler = signal.getsignal(signal.SIGINT)
-        (handler if callable(handler) else signal.default_int_handler)(signal.SIGINT, frame)
-
-    previous = signal.signal(signal.SIGTERM, as_ctrl_c)
+    previous = signal.signal(signal.SIGTERM, sigterm_as_ctrl_c)
     try:
         yield
     finally:

@@ -555,11 +555,15 @@ def _integer_outputs_restored(ds: xr.Dataset) -> xr.Dataset:
         if kind is None or var.dtype.kind != "f":
             continue
         values = var.values
-        if not np.isfinite(values).all() or (values != np.round(values)).any():
-            bad = int((~np.isfinite(values)).sum())
-            raise ValueError(f"write_ensemble: {name!r} is {var.dtype} with {bad} NaN values (masked members: an "
+        missing = int((~np.isfinite(values)).sum())
+        if missing:
+            raise ValueError(f"write_ensemble: {name!r} is {var.dtype} with {missing} NaN values (masked members: an "
                              "xarray where() without drop=True, or by_parameters' padding); write the members "
                              "themselves: ds.sel(member=...) or ds.where(..., drop=True)")
+        if (values != np.round(values)).any():
+            raise ValueError(f"write_ensemble: {name!r} holds values that are not whole numbers (e.g. "
+                             f"{values[values != np.round(values)].flat[0]:g}); it is a count or a flag: write it "
+                             "as simulate gave it")
         out = out.assign({name: var.astype(kind)})
     return out
 
@@ -620,14 +624,22 @@ def _require_folder(path: Path) -> None:
         raise OutputWriteError(f"could not write {str(path)!r}: folder {str(path.parent)!r} does not exist")
 
 
+def sigterm_as_ctrl_c(signum, frame):
+    """The command line's SIGTERM handler (warpfric.cli): SIGINT's Python handler of the moment where
+    there is one (a netCDF write's hold, or Python's KeyboardInterrupt), else KeyboardInterrupt
+    (SIGINT ignored, as in a job started with & from a script)."""
+    handler = signal.getsignal(signal.SIGINT)
+    (handler if callable(handler) else signal.default_int_handler)(signal.SIGINT, frame)
+
+
 @contextlib.contextmanager
 def _sigint_held():
-    """Ctrl-C (SIGINT), and SIGTERM where a Python handler turns it into one (the command line's),
-    held back while the block runs; yields a list that holds True once one came. A netCDF write
-    cannot be interrupted halfway: a KeyboardInterrupt inside xarray's file locks left one half
-    taken, and the writer's own close then waited on it for ever (a Ctrl-C while a sweep wrote its
-    combined file hung `warpfric run`). SIGINT only where Python's own handler is in place; all in
-    the main thread only; elsewhere the block runs as it is."""
+    """Ctrl-C (SIGINT), and SIGTERM where the command line turns it into one (sigterm_as_ctrl_c; a
+    handler of the user's own is left alone), held back while the block runs; yields a list that
+    holds True once one came. A netCDF write cannot be interrupted halfway: a KeyboardInterrupt
+    inside xarray's file locks left one half taken, and the writer's own close then waited on it for
+    ever (a Ctrl-C while a sweep wrote its combined file hung `warpfric run`). SIGINT only where
+    Python's own handler is in place; all in the main thread only; elsewhere the block runs as it is."""
     interrupted = []
     if threading.current_thread() is not threading.main_thread():
         yield interrupted
@@ -639,7 +651,7 @@ def _sigint_held():
 
     if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
         previous[signal.SIGINT] = signal.signal(signal.SIGINT, hold)
-    if callable(signal.getsignal(signal.SIGTERM)):
+    if signal.getsignal(signal.SIGTERM) is sigterm_as_ctrl_c:
         previous[signal.SIGTERM] = signal.signal(signal.SIGTERM, hold)
     try:
         yield interrupted

@@ -217,8 +217,12 @@ class _Colours:
         # for it, so it is left out there (the figure's own count says so)
         self.levels = np.unique(self.values[sel & ~np.isnan(self.values)])
         self.discrete = self.levels.size <= MAX_LEGEND
+        self.note = ""  # the members a colour bar leaves out, for the title
         if not self.discrete:
             self.levels = self.levels[np.isfinite(self.levels)]
+            left_out = int((sel & np.isinf(self.values)).sum())
+            if left_out:
+                self.note = f"; {plural(left_out, 'member')} at {name} = inf not shown (no colour for inf)"
         finite = self.levels[np.isfinite(self.levels)]
         lo, hi = (finite.min(), finite.max()) if finite.size else (0.0, 1.0)
         if hi == lo:
@@ -303,7 +307,8 @@ def mu_s_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     colours = _Colours(ds, colour_by, ok) if colour_by else None
     fig, ax = plt.subplots(figsize=(5.6, 3.8))
     ax.set_title(f"mu_s against {pname.replace('_', ' ')} ({ok.sum()} of {plural(ok.size, 'member')} ok"
-                 f"{_status_text(ds, ok)}{off_axis})" + _mixed_note(ds, mixed, ok), fontsize=10)
+                 f"{_status_text(ds, ok)}{off_axis}{colours.note if colours else ''})" + _mixed_note(ds, mixed, ok),
+                 fontsize=10)
     shown = ok & np.isfinite(x) & np.isfinite(mu)
     if not shown.any():
         _nothing_to_plot(ax, "no member has a mu_s to show")
@@ -342,7 +347,9 @@ def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     speeds = {seg: np.asarray(ds[f"v_{seg}"].values, dtype=float) for seg, _ in segments}
     shown = {seg: ok & np.isfinite(x) & np.isfinite(v) for seg, v in speeds.items()}
     every = np.concatenate([speeds[seg][shown[seg]] for seg in speeds])
-    title = f"{_front_name(ds)} speeds ({plural(int(ok.sum()), 'ok member')}{_status_text(ds, ok)}{off_axis})"
+    colour_note = _Colours(ds, colour_by, ok).note if colour_by else ""
+    title = (f"{_front_name(ds)} speeds ({plural(int(ok.sum()), 'ok member')}{_status_text(ds, ok)}{off_axis}"
+             f"{colour_note})")
     if not every.size:
         fig, ax = plt.subplots(figsize=(5.6, 3.8))
         ax.set_title(title, fontsize=10)

@@ -443,11 +443,12 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
     done = sum(previous.members(i).stop - previous.members(i).start for i in range(previous.n_chunks)
                if previous.is_done(i)) if previous is not None else 0
     remaining = sweep.n_members - done
-    chunk_files = -(-remaining // chunk)  # at most: a resumed run's missing chunks may be fewer members each
+    chunk_files = -(-remaining // chunk)  # at least (a resumed run's missing chunks may be short ones)
     check_space(out, sweep_bytes(sweep, remaining, chunk_files) + sweep_bytes(sweep, sweep.n_members),
                 f"this run ({remaining} members of {sweep.solver.nodes} nodes to run, chunks and combined file)")
-    try:  # a chunk's members are held at once: more than the machine has is refused before any file
-        check_memory(min(chunk, remaining), sweep.solver, device or "cuda", "a chunk")
+    try:  # a chunk's members are held at once: more than this machine has is refused before any file
+        if not use_cluster:  # (on a cluster, by the workers' machines)
+            check_memory(min(chunk, remaining), sweep.solver, device or "cuda", "a chunk")
     except ValueError as err:
         raise RunError(str(err)) from None
     # for the members still to run, once (each chunk's own is dropped: run_chunk), on this process's

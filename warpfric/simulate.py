@@ -535,11 +535,17 @@ def _member_status(st: np.ndarray, values, meanings, rtol: float) -> np.ndarray:
     stop so soon after the peak, before the next accepted step, that no step resolved the peak:
     the value at the stop is then within the step's change of mu_s, but cannot be told from a
     still rising mu, so it is not given either), or never fell below its maximum by more than the
-    solver's relative tolerance ``rtol`` by the end of the run (a plateau: steady sliding without a
-    static peak, whose maximum is round-off or the error control's ripple, not mu_s)."""
+    solver's relative tolerance ``rtol`` (at most AUTO_END_PEAK_DROP, the automatic end's own fall)
+    by the end of the run (a plateau: steady sliding without a static peak, whose maximum is
+    round-off or the error control's ripple, not mu_s)."""
+    from warpfric.kernels.observers import AUTO_END_PEAK_DROP
+
     status = st["status"].astype(np.int32)
+    # the fall that tells a peak from a plateau: rtol, but no more than the automatic end's own drop
+    # (at rtol >= 0.01 the automatic end stops a genuine peak before mu has fallen by rtol)
+    fall = min(rtol, AUTO_END_PEAK_DROP)
     with np.errstate(invalid="ignore"):
-        plateau = ~(st["mu_final"] < (1.0 - rtol) * st["mu_s"])
+        plateau = ~(st["mu_final"] < (1.0 - fall) * st["mu_s"])
     no_peak = ((st["mu_s_time"] >= st["t"]) | (st["mu_s_time"] <= values["rest_until"])
                | (st["mu_s_time"] >= values["stop_time"]) | plateau)
     return np.where((status == 0) & no_peak, meanings.index("no_peak"), status).astype(np.int32)
