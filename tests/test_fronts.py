@@ -301,6 +301,11 @@ def test_contact_front_without_a_yield_threshold_is_nan_and_says_so():
         ds = run({"eccentricity": [0.0]}, nodes=20, rtol=1e-5, model=wf.Model(relaxation_gate="none"), fronts=wf.Fronts())
     assert np.isnan(ds.arrival_time.values).all() and np.isnan(ds.v_main.values).all()
     assert ds.nucleation_edge.values[0] == -2 and ds.status.values[0] == 0
+    # once, also with the grid check's coarse run (it said so twice)
+    with pytest.warns(UserWarning) as caught:
+        run({"eccentricity": [0.0]}, nodes=20, rtol=1e-5, model=wf.Model(relaxation_gate="none"),
+            fronts=wf.Fronts(grid_check=True))
+    assert len([w for w in caught if "no yield threshold" in str(w.message)]) == 1
 
 
 @pytest.mark.parametrize("gate", ["stress", "none", "velocity"])

@@ -208,6 +208,8 @@ def test_the_ends_that_take_inf_say_so_and_a_per_member_none_points_to_inf():
         simulate({"end_time": [None, 21.0]})
     with pytest.raises(ValueError, match=r"'normal_force': value \[None, 2.0\] is not a real number; valid range \(0, inf\)$"):
         simulate({"normal_force": [None, 2.0]})
+    with pytest.raises(ValueError, match=r"'torque_arm'.*\(per member, write the member's pad height where you mean None"):
+        simulate({"torque_arm": [None, 0.01]})
 
 
 def test_parameters_that_the_model_switches_ignore_are_named():

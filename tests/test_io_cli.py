@@ -345,8 +345,9 @@ def test_progress_on_a_terminal_of_zero_size(tmp_path):
     os.close(master)
     assert proc.wait(timeout=300) == 0, data
     lines = data.decode().replace("\r\n", "\n").split("\n")
-    bars = [line.split("\r")[-1] for line in lines if "chunk 1/2 (" in line or "chunk 2/2 (" in line]
-    # at 80 columns the label gives way to the counts (the tool's name first): each ends whole
+    bars = [line.split("\r")[-1] for line in lines if "chunk 1/2" in line or "chunk 2/2" in line]
+    # at 80 columns the label gives way to the counts (the tool's name, then the member range: the
+    # chunk's number stays): each ends whole
     assert [bar[:9] for bar in bars] == ["chunk 1/2", "chunk 2/2"], lines
     assert all("100.0%|" in bar and len(bar) == 80 and bar.endswith("3/3 done]") for bar in bars), bars
     assert "" not in [line.strip() for line in lines[:-1]], lines

@@ -189,7 +189,7 @@ def test_a_terminal_of_zero_size_draws_80_columns(clock, monkeypatch):
     assert all(text.rstrip("\n").endswith(" done]") for _, text in frames), frames
     # the label keeps one length over the run (reckoned for the widest counts), so it does not jump
     assert len({text.split(": ")[0] for _, text in frames}) == 1, frames
-    assert frames[-1][0] == 100 and frames[-1][1].startswith("chunk 1/4 (mem…: 100.0%|")
+    assert frames[-1][0] == 100 and frames[-1][1].startswith("chunk 1/4: 100.0%|")
     assert frames[-1][1].rstrip("\n").endswith("1200/1200 done]")
     monkeypatch.setenv("COLUMNS", "60")  # a size the environment gives
     assert progress._terminal_size(terminal) == (60, 24)
@@ -214,6 +214,40 @@ def test_a_label_too_long_for_the_line_is_left_out_not_cut_to_a_stub(clock, monk
     text = drawn(terminal)[-1][1].rstrip("\n")
     assert len(text) == 80 and text.startswith("100.0%|") and text.endswith("300/300 done, 2 workers]"), text
     assert "…" not in text
+
+
+def test_the_chunk_number_stays_beside_a_note_at_80_columns(clock, monkeypatch):
+    """With worker processes ('2 workers') the chunk's label was left out at 80 columns: nothing said
+    which chunk ran. Its head ('chunk 1/4') stays, the bar narrower."""
+    terminal = UnsizedTerminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    monkeypatch.setenv("COLUMNS", "80")
+    line = progress.Line(500, "chunk 1/4 (members 0..499)", clock=clock)
+    clock.now += 1.0
+    line.show(0.5, 250, "2 workers")
+    line.close("2 workers")
+    text = drawn(terminal)[-1][1].rstrip("\n")
+    assert len(text) == 80 and text.startswith("chunk 1/4: 100.0%|") and text.endswith("500/500 done, 2 workers]"), text
+
+
+def test_an_interrupted_run_ends_its_line_before_the_message(clock, monkeypatch):
+    """Ctrl-C inside the engine left the bar open: the message followed it on its line, and Python
+    redrew the bar below the message when it cleaned up. simulate ends every open line first."""
+    import warpfric as wf
+    from warpfric import engine
+
+    terminal = UnsizedTerminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    opened = []
+
+    def interrupted(*args, **kwargs):
+        opened.append(progress.Line(10, "", stream=terminal, clock=clock))
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(engine, "run", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        wf.simulate({"eccentricity": [0.0]}, solver=wf.Solver(nodes=11), device="cpu", progress=True, workers=1)
+    assert opened[0].closed and terminal.getvalue().endswith("\n") and not progress._OPEN_LINES
 
 
 def test_durations_and_counts_read_as_words():

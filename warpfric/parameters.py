@@ -191,6 +191,8 @@ def resolve_value(name: str, value: Any, scene: Parameters | None = None):
         hint = ""
         if meta["none_means"] is not None and arr.ndim > 0:  # [None, 21.0]: None only stands for the whole
             hint = f" (per member, write {meta['none_means']:g} where you mean None)"
+        elif name == "torque_arm" and arr.ndim > 0:  # None: the pad height, which may differ per member
+            hint = " (per member, write the member's pad height where you mean None, e.g. 0.015 m)"
         raise ValueError(f"parameter {name!r}: value {value!r} is not a real number; valid range "
                          f"{_range_text(meta)}{hint}")
     return arr.astype(np.float64)
@@ -623,7 +625,9 @@ FRONTS_SETTINGS_UNUSED = "fronts settings of the velocity event only, unused wit
 # chunks, the float32 fallback, the grid check) drop their own
 # how simulate's warning of parameters that the model switches leave without effect begins
 PARAMETERS_UNUSED = "parameters without effect under these model switches"
-ENSEMBLE_WARNINGS = (RECORD_PAST_END, MEMBERS_NOT_OK, FRONTS_SETTINGS_UNUSED, PARAMETERS_UNUSED)
+# how simulate's warning of the contact front under a law without the yield gate begins
+CONTACT_WITHOUT_GATE = "fronts event 'contact' with relaxation_gate="
+ENSEMBLE_WARNINGS = (RECORD_PAST_END, MEMBERS_NOT_OK, FRONTS_SETTINGS_UNUSED, PARAMETERS_UNUSED, CONTACT_WITHOUT_GATE)
 
 
 def _with_named_keywords(cls):

@@ -22,6 +22,7 @@ import os
 import sys
 import time
 import warnings
+import weakref
 from pathlib import Path
 
 import numpy as np
@@ -214,6 +215,14 @@ def _terminal_size(stream) -> tuple[int, int]:
 
 LINE_MIN_BAR = 5  # characters of the bar itself that a line keeps (Line._fitted_label)
 LINE_MIN_LABEL = 8  # a label cut shorter than this (with its ellipsis) is left out instead
+_OPEN_LINES = weakref.WeakSet()  # lines drawn in a terminal and not yet closed (stop_open_lines)
+
+
+def stop_open_lines() -> None:
+    """End every open progress line where it stands: a run interrupted inside the engine (Ctrl-C,
+    SIGTERM) left its bar open, and Python redrew it below the interruption's message."""
+    for line in list(_OPEN_LINES):
+        line.stop()
 
 
 class Line:
@@ -250,6 +259,7 @@ class Line:
             self.bar = _Bar(total=self.n, desc=self._fitted_label(postfix), postfix=postfix, unit=" members",
                             file=self.stream, mininterval=0, miniters=0, smoothing=0.1, ncols=columns, nrows=rows,
                             leave=True, bar_format="{desc}{percentage:5.1f}%|{bar}| [{elapsed}<{remaining}{postfix}]")
+            _OPEN_LINES.add(self)
 
     def _set_postfix(self) -> None:
         """The bar's counts and its label, fitted to the terminal (drawn at the next update)."""
@@ -269,12 +279,17 @@ class Line:
         # tqdm writes them (MM:SS, or H:MM:SS from an hour on), ", " and "]"
         clock_width = sum(5 if t < 3600 else len(f"{int(t // 3600)}:00:00") for t in (elapsed, remaining))
         widest = len(f"1.23e+03 members/s, {self.n}/{self.n} done") + (len(f", {self.note}") if self.note else 0)
-        room = self.columns - max(len(postfix), widest) - (7 + LINE_MIN_BAR + 3 + clock_width + 1 + 2 + 1) - 2
-        for label in (self.label, self.label.removeprefix("warpfric ")):
-            if len(label) <= room:
-                return f"{label}: "
         short = self.label.removeprefix("warpfric ")
-        return f"{short[:room - 1]}…: " if room >= LINE_MIN_LABEL else ""
+        head = short.split(" (")[0]  # "chunk 1/4 (members 0..49)" -> "chunk 1/4": which chunk, at least
+
+        def room(bar: int) -> int:
+            return self.columns - max(len(postfix), widest) - (7 + bar + 3 + clock_width + 1 + 2 + 1) - 2
+
+        own = [(head, LINE_MIN_BAR), (head, 1)] if short != "warpfric" else []  # a label of the run's own
+        for label, bar in [(self.label, LINE_MIN_BAR), (short, LINE_MIN_BAR), *own]:
+            if len(label) <= room(bar):
+                return f"{label}: "
+        return f"{short[:room(LINE_MIN_BAR) - 1]}…: " if room(LINE_MIN_BAR) >= LINE_MIN_LABEL else ""
 
     def _postfix(self) -> str:
         rate = self.fraction * self.n / max(self.clock() - self.t0, 1e-9)  # members (or their fractions) per second
@@ -299,6 +314,7 @@ class Line:
 
     def stop(self) -> None:
         """An interrupted run: end the bar's line where it stands (nothing elsewhere)."""
+        _OPEN_LINES.discard(self)
         if self.bar is not None and not self.closed:
             self.closed = True
             self.bar.close()
@@ -306,6 +322,7 @@ class Line:
     def close(self, summary: str = "") -> None:
         """The final state: the full bar in a terminal, else one summary line (members, seconds,
         members/s and ``summary``)."""
+        _OPEN_LINES.discard(self)
         if self.closed:
             return
         self.closed = True

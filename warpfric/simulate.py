@@ -17,9 +17,9 @@ from . import __version__
 from .device import check_device, init_warp
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
-from .parameters import (ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, MEMBERS_NOT_OK, MEMBERS_NOT_OK_HINT,
-                         PARAMETERS_UNUSED, RECORD_PAST_END, Fronts, Model, Parameters, Record, Solver, check_precision,
-                         parameter_long_name, parameter_units)
+from .parameters import (CONTACT_WITHOUT_GATE, ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, MEMBERS_NOT_OK,
+                         MEMBERS_NOT_OK_HINT, PARAMETERS_UNUSED, RECORD_PAST_END, Fronts, Model, Parameters, Record,
+                         Solver, check_precision, parameter_long_name, parameter_units)
 
 
 def simulate(
@@ -105,6 +105,10 @@ def simulate(
         raise NotImplementedError(f"the velocity front with solver setting 'method' = {solver.method!r} is not implemented "
                                   "(its arrival times read TR-BDF2's second stage); use the contact or strength front, "
                                   "or method='tr_bdf2'")
+    if fronts is not None and "contact" in fronts.events and model.relaxation_gate != "stress":
+        warnings.warn(f"{CONTACT_WITHOUT_GATE}{model.relaxation_gate!r}: this law has no yield threshold, so the "
+                      "contact area falls everywhere as soon as the disc moves and there is no stick-to-slip front; "
+                      "its outputs are NaN (event='strength' exists under every law)", stacklevel=2)
     unused = fronts.unused_settings() if fronts is not None else []
     if unused:  # asked for, and silently without effect
         warnings.warn(f"{FRONTS_SETTINGS_UNUSED}: {', '.join(unused)} (event={fronts.event!r}); "
@@ -138,7 +142,14 @@ def simulate(
     init_warp()
     show = sys.stderr.isatty() if progress is None else bool(progress)
     t_start = time.perf_counter()
-    result = engine.run(values, model, solver, fronts, record, device, show, progress if isinstance(progress, str) else "")
+    try:
+        result = engine.run(values, model, solver, fronts, record, device, show,
+                            progress if isinstance(progress, str) else "")
+    except BaseException:  # Ctrl-C, SIGTERM, an error: the line ends before the message that follows
+        from .progress import stop_open_lines
+
+        stop_open_lines()
+        raise
     front = None
     if fronts is not None:
         front = _front_metrics(fronts, model, values, result, device)
@@ -346,11 +357,6 @@ def _front_metrics(fronts: Fronts, model: Model, values, result, device: str) ->
     out = {}
     for k, event in enumerate(fronts.events):
         prefix = "" if k == 0 else f"{event}_"
-        if event == "contact" and model.relaxation_gate != "stress":
-            warnings.warn(f"fronts event 'contact' with relaxation_gate={model.relaxation_gate!r}: this law has no yield "
-                          "threshold, so the contact area falls everywhere as soon as the disc moves and there is no "
-                          "stick-to-slip front; its outputs are NaN (event='strength' exists under every law)",
-                          stacklevel=3)
         row = FRONT_EVENTS.index(event)
         # the engine's read-back is (node, member), the layout the segmentation kernel takes; the
         # Dataset gets its transposed view (member, x), no copy
