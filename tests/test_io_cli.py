@@ -379,3 +379,15 @@ def test_info_and_run_speak_plainly(tmp_path, capsys):
     ds.attrs["wall_time_s"] = 0.0432
     text = summary(ds, "one.nc")
     assert text.startswith("one.nc: 1 member (number 7), 11 nodes, complete") and "wall 0.043 s" in text, text
+
+
+def test_a_chunked_sweep_warns_once_of_its_members_not_ok(tmp_path, capsys):
+    """Each chunk warned of its own failed members (92 of 100, then 46 of 100, ...: a run of many
+    chunks, many warnings): one warning for the sweep, with its totals, once the file is written."""
+    sweep = tmp_path / "fail.toml"
+    sweep.write_text("[solver]\nnodes = 11\nmax_steps = 50\n[grid]\neccentricity = [-0.2, -0.1, 0.0, 0.1, 0.2, 0.15]\n")
+    code = main(["run", str(sweep), "-o", str(tmp_path / "fail.nc"), "--chunk", "2", "--device", "cpu", "--quiet"])
+    err = capsys.readouterr().err
+    warned = [line for line in err.splitlines() if "members that did not end ok" in line]
+    assert code == 1 and len(warned) == 1, err
+    assert "6 of 6 members: 6 max_steps_reached" in warned[0] and "warpfric info" in warned[0]

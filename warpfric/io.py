@@ -830,8 +830,9 @@ class ChunkStore:
     def done_count(self) -> int:
         return sum(self.is_done(i) for i in range(self.n_chunks))
 
-    def combine(self, path, command: str | None = None) -> Path:
-        """Concatenate the chunks along member into ``path`` (atomically) and remove the parts."""
+    def combine(self, path, command: str | None = None, on_combined=None) -> Path:
+        """Concatenate the chunks along member into ``path`` (atomically) and remove the parts;
+        ``on_combined(ds)`` is called with the combined Dataset once it is written (the run's warnings)."""
         datasets = [_read(self.chunk_path(i)) for i in range(self.n_chunks)]
         combined = concat_members(datasets, names=[self.chunk_path(i).name for i in range(self.n_chunks)])
         combined.attrs.pop("chunk_index", None)
@@ -848,6 +849,8 @@ class ChunkStore:
         combined.attrs["chunks"] = self.n_chunks
         write_ensemble(combined, path, command=command, run_id=self.manifest.get("run_id"))
         shutil.rmtree(self.directory)
+        if on_combined is not None:
+            on_combined(combined)
         return Path(path)
 
 

@@ -80,7 +80,7 @@ def _top_level() -> bool:
     return not _IN_WORKER and mp.parent_process() is None and threading.current_thread() is threading.main_thread()
 
 
-def plan(workers, device, n_members: int, solver, fronts, record) -> int:
+def plan(workers, device, n_members: int, solver, fronts, record, model=None) -> int:
     """How many worker processes run the ensemble (1: this process). Validates ``workers`` and
     ``record``'s members, and warns (progress.SizeWarning) before a run far beyond the usual size."""
     from .engine import record_slots
@@ -95,7 +95,7 @@ def plan(workers, device, n_members: int, solver, fronts, record) -> int:
     record_slots(record, n_members)  # a recorded member beyond the ensemble: the same error as in one process
     passes = progress_module.front_passes(fronts)
     if workers is None:
-        pays = progress_module.cpu_seconds(n_members, solver, passes) >= MIN_CPU_SECONDS
+        pays = progress_module.cpu_seconds(n_members, solver, passes, model) >= MIN_CPU_SECONDS
         n = min(cpu_cores(), n_members) if cpu and n_members > 1 and pays and _top_level() else 1
     else:
         n = min(int(workers), n_members)

@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
+import re
 import sys
 import time
 import warnings
@@ -27,6 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .parameters import MEMBERS_NOT_OK
 from .pool import cpu_cores, warn_once, warning_pairs
 from .progress import (SizeWarning, check_memory, front_passes, member_range, plural, seconds_text,
                        size_warning)
@@ -97,6 +99,14 @@ def worker_device(worker=None) -> str:
     return device
 
 
+def _warn_members_not_ok(ds, solver) -> None:
+    """The sweep's one warning of its members not ok, from the combined file (each chunk's own is
+    dropped: a run of many chunks printed one per chunk)."""
+    from .simulate import _warn_members_not_ok as warn
+
+    warn(ds, solver)
+
+
 def run_chunk(job: ChunkJob) -> dict:
     """Simulate the members of one chunk and write its file atomically; return a report (chunk
     index, members, failed members, device, wall time, process id)."""
@@ -119,8 +129,9 @@ def run_chunk(job: ChunkJob) -> dict:
     label = _chunk_label(job) if job.progress else False
     collect = job.parent_pid is not None and job.parent_pid != os.getpid()  # not a thread of the parent
     with warnings.catch_warnings(record=True) if collect else contextlib.nullcontext() as caught:
-        with warnings.catch_warnings():  # the size warning is the whole sweep's, said once by run_sweep
-            warnings.filterwarnings("ignore", category=SizeWarning)
+        with warnings.catch_warnings():  # the size warning and the members not ok are the whole sweep's,
+            warnings.filterwarnings("ignore", category=SizeWarning)  # said once by run_sweep
+            warnings.filterwarnings("ignore", message=re.escape(MEMBERS_NOT_OK))
             ds = simulate(sweep.member_slice(sl) or None, scene=sweep.scene, model=sweep.model, solver=sweep.solver,
                           fronts=sweep.fronts, record=record, device=device, progress=label,
                           member_offset=job.member_offset + job.start, workers=job.cpu_workers)
@@ -478,7 +489,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
             _say(f"{plural(len(missing), 'chunk')} missing ({ranges}; {len(errors)} raised, see above); the "
                  f"finished chunks are kept in {parts}: `{resume_command}` runs the rest", False)
             return RunReport(chunks=reports, errors=errors, output=None, wall_s=wall)
-        store.combine(out, command=command)
+        store.combine(out, command=command, on_combined=lambda ds: _warn_members_not_ok(ds, sweep.solver))
     except BaseException as err:  # noqa: BLE001 - cleaned up, then raised again
         kept = _keep_or_remove(store, previous is None)
         if not isinstance(err, (OutputWriteError, KeyboardInterrupt)):
