@@ -621,12 +621,12 @@ MEMBERS_NOT_OK = "members that did not end ok have NaN mu_s and fronts"
 MEMBERS_NOT_OK_HINT = 'their numbers: ds.member[ds.status != 0] (docs/model.md, "Statuses")'
 # how simulate's warning of velocity-front settings that no requested event reads begins
 FRONTS_SETTINGS_UNUSED = "fronts settings of the velocity event only, unused without it"
-# the warnings simulate raises once for the whole ensemble: the runs inside it (worker processes'
-# chunks, the float32 fallback, the grid check) drop their own
 # how simulate's warning of parameters that the model switches leave without effect begins
 PARAMETERS_UNUSED = "parameters without effect under these model switches"
 # how simulate's warning of the contact front under a law without the yield gate begins
 CONTACT_WITHOUT_GATE = "fronts event 'contact' with relaxation_gate="
+# the warnings simulate raises once for the whole ensemble: the runs inside it (worker processes'
+# chunks, the float32 fallback, the grid check) drop their own
 ENSEMBLE_WARNINGS = (RECORD_PAST_END, MEMBERS_NOT_OK, FRONTS_SETTINGS_UNUSED, PARAMETERS_UNUSED, CONTACT_WITHOUT_GATE)
 
 
