@@ -585,6 +585,37 @@ def test_info_on_a_run_still_going_says_so(tmp_path, sweep, capsys, monkeypatch)
     assert code == 1 and lines == [line for line in lines if line.startswith(f"{out}: INCOMPLETE run: 2/3 chunks")]
 
 
+def test_chunks_that_all_raise_leave_no_parts_folder(tmp_path, sweep, capsys, monkeypatch):
+    """On a Dask cluster a run whose every chunk raised (e.g. a device the workers lack) kept a parts
+    folder with only its manifest and advised a --resume that could only fail again; the next plain
+    run was then told to --resume. Nothing finished: nothing is kept."""
+    import warpfric.runner as runner
+
+    def all_raise(sweep_, sweep_file, store, *args):
+        return [], [dict(index=i, start=store.members(i).start, stop=store.members(i).stop, error="RunError: no GPU")
+                    for i in range(store.n_chunks)], 0.1
+
+    monkeypatch.setattr(runner, "_run_chunks", all_raise)
+    out = tmp_path / "s.nc"
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--chunk", 2, "--device", DEVICE)
+    assert code == 1 and err[-1].endswith("no chunk finished, nothing was kept"), err
+    assert _files(tmp_path) == ["s.toml"]
+
+
+def test_a_resumed_run_exits_1_for_failed_members_of_earlier_chunks(tmp_path, capsys, monkeypatch):
+    """The exit code counted only the chunks run now: a resume whose own chunks were ok exited 0 although
+    the file holds a member that is not ok (from the interrupted run's chunk). It is the file's now."""
+    sweep = tmp_path / "s.toml"
+    sweep.write_text("fronts = false\n[solver]\nnodes = 11\n[zip]\ndisc_velocity = [0.0, 1e-4, 1e-4]\n"
+                     "eccentricity = [0.0, 0.0, 0.1]\n")  # member 0: a disc that never moves, no_peak
+    out = tmp_path / "s.nc"
+    code, _ = _interrupted_run(tmp_path, sweep, capsys, monkeypatch, out, 2)
+    assert code == 130
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
+    assert code == 1, err
+    assert err[-1].endswith("0 failed members in the chunks run now, 1 in the file)"), err
+
+
 def test_an_interrupted_overwrite_is_resumed_with_the_command_it_printed(tmp_path, sweep, capsys, monkeypatch):
     """A run with --overwrite over a complete file, interrupted after a chunk, printed `... --resume`;
     that command answered 'exists; pass --overwrite (it is complete: nothing to resume)' and the

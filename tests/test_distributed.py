@@ -157,11 +157,12 @@ def test_a_killed_client_leaves_a_run_that_resume_completes(reference, tmp_path)
 
 def test_a_chunk_that_fails_is_reported_by_member_range(reference, client, tmp_path):
     """Chunks asking for a GPU on CPU-only workers raise on the worker: each is reported with its
-    member range and error, nothing is combined, and the parts stay for --resume."""
+    member range and error, nothing is combined, and, none having finished, no parts folder is kept
+    (it blocked the next plain run, and a --resume could only fail again)."""
     sweep, _ = reference
     out = tmp_path / "gpu.nc"
     report = run_sweep(sweep, out, client=client, device="cuda:0", quiet=True)
-    assert report.output is None and not out.exists() and parts_dir(out).exists()
+    assert report.output is None and not out.exists() and not parts_dir(out).exists()
     assert [(e["start"], e["stop"]) for e in sorted(report.errors, key=lambda e: e["start"])] == [
         (0, 2), (2, 4), (4, 6), (6, 8), (8, 10)]
     assert all("has no CUDA device" in e["error"] for e in report.errors)

@@ -233,7 +233,8 @@ def _run_sweep(args) -> int:
                        resume=args.resume, overwrite=args.overwrite, scheduler=args.scheduler,
                        local=True if args.local_cluster else None, workers=args.workers, quiet=args.quiet,
                        command=args.command_line, cpu_workers=args.cpu_workers)
-    return 0 if report.output is not None and report.failed_members == 0 else EXIT_FAILED_MEMBERS
+    failed = report.file_failed_members if report.file_failed_members is not None else report.failed_members
+    return 0 if report.output is not None and failed == 0 else EXIT_FAILED_MEMBERS  # the whole file's (resumed too)
 
 
 def _run(args) -> int:

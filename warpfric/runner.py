@@ -196,6 +196,7 @@ class RunReport:
     errors: list
     output: Path | None
     wall_s: float
+    file_failed_members: int | None = None  # the written file's members not ok (a resumed run's too)
 
     @property
     def failed_members(self) -> int:
@@ -269,10 +270,9 @@ def local_cluster(workers: int | None = None):
         from distributed import Client, LocalCluster
     except ImportError:
         raise RunError("a Dask cluster needs the distributed package: pip install 'warpfric[distributed]'") from None
-    import warp as wp
+    from .device import init_warp
 
-    wp.config.quiet = True
-    wp.init()
+    wp = init_warp()  # quietly: no banner on stdout (Warp 1.19 reads its log level, not config.quiet)
     n_gpus = wp.get_cuda_device_count()
     if workers is not None and (isinstance(workers, bool) or workers < 1):
         raise RunError(f"--workers {workers}: expected an integer >= 1")
@@ -486,10 +486,18 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         missing = [i for i in range(store.n_chunks) if not store.is_done(i)]
         if errors or missing:
             ranges = ", ".join(_members(offset + store.members(i).start, offset + store.members(i).stop) for i in missing)
-            _say(f"{plural(len(missing), 'chunk')} missing ({ranges}; {len(errors)} raised, see above); the "
-                 f"finished chunks are kept in {parts}: `{resume_command}` runs the rest", False)
+            kept = _keep_or_remove(store, previous is None)  # none finished: no parts folder to block the next run
+            what = (f"the finished chunks are kept in {parts}: `{resume_command}` runs the rest" if kept else
+                    "no chunk finished, nothing was kept")
+            _say(f"{plural(len(missing), 'chunk')} missing ({ranges}; {len(errors)} raised, see above); {what}", False)
             return RunReport(chunks=reports, errors=errors, output=None, wall_s=wall)
-        store.combine(out, command=command, on_combined=lambda ds: _warn_members_not_ok(ds, sweep.solver))
+        in_file = []
+
+        def on_combined(ds):
+            in_file.append(int((ds.status.values != 0).sum()))
+            _warn_members_not_ok(ds, sweep.solver)
+
+        store.combine(out, command=command, on_combined=on_combined)
     except BaseException as err:  # noqa: BLE001 - cleaned up, then raised again
         kept = _keep_or_remove(store, previous is None)
         if not isinstance(err, (OutputWriteError, KeyboardInterrupt)):
@@ -507,9 +515,10 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
             own_client.close()
             if cluster is not None:
                 cluster.close()
-    report = RunReport(chunks=reports, errors=[], output=out, wall_s=wall)
+    report = RunReport(chunks=reports, errors=[], output=out, wall_s=wall, file_failed_members=in_file[0])
+    resumed = f", {report.file_failed_members} in the file" if previous is not None else ""
     _say(f"wrote {out} ({plural(sweep.n_members, 'member')}, {seconds_text(wall)} s this run, "
-         f"{plural(report.failed_members, 'failed member')} in the chunks run now)", False)
+         f"{plural(report.failed_members, 'failed member')} in the chunks run now{resumed})", False)
     return report
 
 
