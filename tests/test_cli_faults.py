@@ -585,6 +585,20 @@ def test_info_on_a_run_still_going_says_so(tmp_path, sweep, capsys, monkeypatch)
     assert code == 1 and lines == [line for line in lines if line.startswith(f"{out}: INCOMPLETE run: 2/3 chunks")]
 
 
+def test_a_chunk_of_another_run_is_not_counted_as_done(tmp_path, sweep, capsys, monkeypatch):
+    """A cluster's worker can finish a chunk of an interrupted run after that run has exited; its file
+    must not count as a chunk of the next run on the same output (an --overwrite of an edited sweep
+    would have combined it): a chunk is done only with this run's id in its member labels."""
+    import shutil
+
+    a, b = tmp_path / "a.nc", tmp_path / "b.nc"
+    assert _interrupted_run(tmp_path, sweep, capsys, monkeypatch, a, 3)[0] == 130  # chunks 0 and 1
+    assert _interrupted_run(tmp_path, sweep, capsys, monkeypatch, b, 2)[0] == 130  # chunk 0
+    shutil.copy(tmp_path / "a.nc.parts" / "chunk-000001.nc", tmp_path / "b.nc.parts" / "chunk-000001.nc")
+    store = IO_MODULE.ChunkStore.load(tmp_path / "b.nc.parts")
+    assert [store.is_done(i) for i in range(3)] == [True, False, False]
+
+
 def test_chunks_that_all_raise_leave_no_parts_folder(tmp_path, sweep, capsys, monkeypatch):
     """On a Dask cluster a run whose every chunk raised (e.g. a device the workers lack) kept a parts
     folder with only its manifest and advised a --resume that could only fail again; the next plain

@@ -819,10 +819,15 @@ class ChunkStore:
         if not path.exists():
             return False
         sl = self.members(index)
+        run_id = self.manifest.get("run_id")
         try:
             with xr.open_dataset(path, engine="netcdf4") as ds:
                 numbers = ds[MEMBER_NUMBER] if MEMBER_NUMBER in ds else ds.member
-                return int(ds.attrs.get(COMPLETE_ATTR, 0)) == 1 and np.array_equal(
+                # a chunk of this run (its id in the member labels), not one that a cluster's worker of
+                # an earlier, interrupted run wrote after that run had ended
+                own = run_id is None or MEMBER_NUMBER not in ds or all(
+                    str(label).startswith(f"{run_id}:") for label in ds.member.values)
+                return own and int(ds.attrs.get(COMPLETE_ATTR, 0)) == 1 and np.array_equal(
                     numbers.values, np.arange(sl.start, sl.stop) + self.member_offset)
         except Exception:  # noqa: BLE001 - a damaged chunk is simply redone
             return False

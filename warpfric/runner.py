@@ -233,28 +233,32 @@ def run_on_client(jobs: list, client, quiet: bool = False) -> tuple[list, list]:
     reports, errors = [], []
     write_error = None
     members_done = 0
-    for future in as_completed(list(futures)):
-        job = futures[future]
-        try:
-            report = future.result()
-        except Exception as err:  # noqa: BLE001 - reported by member range, the rest goes on
-            errors.append(dict(index=job.index, start=job.start, stop=job.stop, error=f"{type(err).__name__}: {err}"))
-            _say(f"{_chunk_label(job)} FAILED: "
-                 f"{type(err).__name__}: {err}", False)
-            if isinstance(err, OutputWriteError):
-                # raised below, once every chunk has ended: not cancelled, since a chunk still being
-                # written would race the handler's reads of the parts folder (HDF5 is not
-                # thread-safe, and a cluster may run in this process)
-                write_error = write_error or err
-            continue
-        reports.append(report)
-        members_done += report["members"]
-        elapsed = time.perf_counter() - t0
-        in_flight = len(jobs) - len(reports) - len(errors)
-        _say(f"{len(reports)}/{plural(len(jobs), 'chunk')} done ({plural(members_done, 'member')}, "
-             f"{members_done / elapsed:.1f} members/s), "
-             f"{in_flight} to go; chunk {job.index + 1} ran on {report['device']} (pid {report['pid']}) in "
-             f"{report['wall_s']:.1f} s", quiet)
+    try:
+        for future in as_completed(list(futures)):
+            job = futures[future]
+            try:
+                report = future.result()
+            except Exception as err:  # noqa: BLE001 - reported by member range, the rest goes on
+                errors.append(dict(index=job.index, start=job.start, stop=job.stop, error=f"{type(err).__name__}: {err}"))
+                _say(f"{_chunk_label(job)} FAILED: "
+                     f"{type(err).__name__}: {err}", False)
+                if isinstance(err, OutputWriteError):
+                    # raised below, once every chunk has ended: not cancelled, since a chunk still being
+                    # written would race the handler's reads of the parts folder (HDF5 is not
+                    # thread-safe, and a cluster may run in this process)
+                    write_error = write_error or err
+                continue
+            reports.append(report)
+            members_done += report["members"]
+            elapsed = time.perf_counter() - t0
+            in_flight = len(jobs) - len(reports) - len(errors)
+            _say(f"{len(reports)}/{plural(len(jobs), 'chunk')} done ({plural(members_done, 'member')}, "
+                 f"{members_done / elapsed:.1f} members/s), "
+                 f"{in_flight} to go; chunk {job.index + 1} ran on {report['device']} (pid {report['pid']}) in "
+                 f"{report['wall_s']:.1f} s", quiet)
+    except BaseException:  # Ctrl-C, SIGTERM: the queued chunks are cancelled, not left to run after the exit
+        client.cancel([f for f in futures if not f.done()])
+        raise
     warn_once((w for report in reports for w in report["warnings"]), stacklevel=2)
     if write_error is not None:
         raise write_error
