@@ -469,6 +469,42 @@ def test_the_size_warning_of_a_chunked_sweep_is_the_whole_runs_and_said_once(tmp
     assert len(warned) == 1 and "3 members x 11 nodes" in warned[0], err
 
 
+def test_an_address_that_is_no_dask_scheduler_is_one_line(tmp_path, sweep, capsys, monkeypatch):
+    """A server that accepts and never answers as a scheduler (a dashboard's port, a web server) hung
+    `warpfric run --scheduler` for good, past distributed's own 20 s timeout; one that answers with
+    other bytes ended in a MemoryError traceback. One line, exit 2, nothing written."""
+    import socket
+    import threading
+
+    import warpfric.runner as runner
+
+    pytest.importorskip("distributed")
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(4)
+    accepted = []
+    threading.Thread(target=lambda: accepted.append(server.accept()), daemon=True).start()  # and silence
+    monkeypatch.setattr(runner, "CONNECT_TIMEOUT_S", 2.0)
+    address = f"tcp://127.0.0.1:{server.getsockname()[1]}"
+    try:
+        t0 = time.monotonic()
+        code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--scheduler", address, "--chunk", 1)
+        assert code == 2 and time.monotonic() - t0 < 30
+        _error_line(err, f"scheduler '{address}': no Dask scheduler answered within 2 s")
+        assert _files(tmp_path) == ["s.toml"]
+    finally:
+        server.close()
+    import distributed
+
+    def garbled(address, timeout=None, **kwargs):
+        raise MemoryError("Unable to allocate 3.07 EiB")
+
+    monkeypatch.setattr(distributed, "Client", garbled)
+    code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--scheduler", address, "--chunk", 1)
+    assert code == 2
+    _error_line(err, f"scheduler '{address}': not a Dask scheduler (MemoryError: Unable to allocate 3.07 EiB)")
+
+
 def test_an_unreachable_scheduler_leaves_no_parts_folder(tmp_path, sweep, capsys, monkeypatch):
     distributed = pytest.importorskip("distributed")
 

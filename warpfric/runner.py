@@ -295,16 +295,41 @@ def local_cluster(workers: int | None = None):
     return Client(cluster)
 
 
+CONNECT_TIMEOUT_S = 30.0  # the whole of connecting, the scheduler's handshake included
+
+
 def connect(address: str):
-    """A Dask client of the scheduler at ``address`` (e.g. tcp://host:8786)."""
+    """A Dask client of the scheduler at ``address`` (e.g. tcp://host:8786); RunError where none
+    answers within CONNECT_TIMEOUT_S. Distributed's own timeout (20 s) covers the connection, not the
+    handshake: an address that answers but is no Dask scheduler (its dashboard's port, a web server)
+    hung for good, or ended in a MemoryError reading a reply that is not a Dask frame."""
+    import threading
+
     try:
         from distributed import Client
     except ImportError:
         raise RunError("--scheduler needs the distributed package: pip install 'warpfric[distributed]'") from None
-    try:
-        return Client(address, timeout="20s")
-    except OSError as err:
+    outcome = {}
+
+    def attempt():  # in a daemon thread: one that never returns does not hold the command's exit
+        try:
+            outcome["client"] = Client(address, timeout="20s")
+        except BaseException as err:  # noqa: BLE001 - reported below, in this thread
+            outcome["error"] = err
+
+    thread = threading.Thread(target=attempt, name="warpfric-connect", daemon=True)
+    thread.start()
+    thread.join(CONNECT_TIMEOUT_S)
+    if thread.is_alive():
+        raise RunError(f"scheduler {address!r}: no Dask scheduler answered within {CONNECT_TIMEOUT_S:g} s (is it the "
+                       "scheduler's address? its dashboard has another port)")
+    err = outcome.get("error")
+    if isinstance(err, OSError):
         raise RunError(f"scheduler {address!r}: cannot connect ({err})") from None
+    if err is not None:
+        raise RunError(f"scheduler {address!r}: not a Dask scheduler ({type(err).__name__}: "
+                       f"{' '.join(str(err).split())[:120]})") from None
+    return outcome["client"]
 
 
 def check_output_name(path: Path) -> None:
