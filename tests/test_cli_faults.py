@@ -586,7 +586,10 @@ def test_a_parts_folder_without_a_manifest(tmp_path, sweep, capsys):
     (tmp_path / "s.nc.parts").mkdir()  # beside a complete file: info reads the file, exit 0 (it was 2)
     code, lines, _ = run_cli(capsys, "info", out)
     assert code == 0 and "complete" in lines[0] and not any("replace" in line for line in lines)
-    (tmp_path / "s.nc.parts").rmdir()
+    # nor does it make --resume replace the file (the folder was removed after the check that let it)
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
+    assert code == 2 and not (tmp_path / "s.nc.parts").exists()
+    _error_line(err, "exists; pass --overwrite to replace it (it is complete: nothing to resume)")
     other = tmp_path / "t.nc"
     (tmp_path / "t.nc.parts").mkdir()
     (tmp_path / "t.nc.parts" / "chunk-000000.nc").write_bytes(b"a chunk")

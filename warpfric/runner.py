@@ -351,15 +351,15 @@ def check_output(path: Path, resume: bool, overwrite: bool) -> None:
     if resume and overwrite:
         raise RunError("--resume and --overwrite exclude each other")
     check_output_name(path)
-    # a file beside parts is one that an interrupted --overwrite run is replacing: --resume goes on
-    if path.exists() and not overwrite and not (resume and parts_dir(path).exists()):
-        raise RunError(f"output {str(path)!r} exists; pass --overwrite to replace it"
-                       + (" (it is complete: nothing to resume)" if resume else ""))
     parts = parts_dir(path)
     if parts.is_dir() and not any(parts.iterdir()):  # killed before its manifest: nothing to resume or lose
         parts.rmdir()
-    if parts_dir(path).exists() and not (resume or overwrite):
-        raise RunError(f"{str(parts_dir(path))!r} holds an interrupted run; pass --resume to finish it "
+    # a file beside parts is one that an interrupted --overwrite run is replacing: --resume goes on
+    if path.exists() and not overwrite and not (resume and parts.exists()):
+        raise RunError(f"output {str(path)!r} exists; pass --overwrite to replace it"
+                       + (" (it is complete: nothing to resume)" if resume else ""))
+    if parts.exists() and not (resume or overwrite):
+        raise RunError(f"{str(parts)!r} holds an interrupted run; pass --resume to finish it "
                        "or --overwrite to start again")
 
 
