@@ -346,8 +346,9 @@ def summary(ds, name: str) -> str:
     lines.append("  swept parameters:" + ("" if swept else " none"))
     for pname in swept:
         v = ds[pname].values
+        n_values = np.unique(v).size
         units = units_text(ds[pname].attrs.get("units", ""))
-        lines.append(f"    {pname:<22} {np.unique(v).size:>6} value{'s' if np.unique(v).size != 1 else ' '} in [{v.min():.6g}, {v.max():.6g}]"
+        lines.append(f"    {pname:<22} {n_values:>6} value{'s' if n_values != 1 else ' '} in [{v.min():.6g}, {v.max():.6g}]"
                      + (f" {units}" if units else " (dimensionless)"))
     meanings = ds.status.attrs["flag_meanings"].split()
     codes = np.unique(ds.status.values)
@@ -410,11 +411,9 @@ def _plot(args) -> int:
 
 
 def _sensitivity(args) -> int:
-    from .io import open_ensemble
-    from .sensitivity import analyse, bar_plot
-
-    from .io import replace_atomically
+    from .io import open_ensemble, replace_atomically
     from .runner import check_output_name
+    from .sensitivity import analyse, bar_plot
 
     source = Path(args.file)
     out = Path(args.out) if args.out else source.with_name(source.stem + "_sensitivity.nc")

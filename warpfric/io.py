@@ -484,8 +484,9 @@ def by_parameters(ds: xr.Dataset, names=None) -> xr.Dataset:
     else:
         names = [names] if isinstance(names, str) else list(names)
     if not names:
-        raise ValueError(f"by_parameters: no parameter varies among {'this member' if ds.sizes['member'] == 1 else 'these ' + str(ds.sizes['member']) + ' members'} (swept: "
-                         f"{' '.join(swept) or 'none'}); valid: names of parameters that vary along member")
+        n = ds.sizes["member"]
+        raise ValueError(f"by_parameters: no parameter varies among {'this member' if n == 1 else f'these {n} members'} "
+                         f"(swept: {' '.join(swept) or 'none'}); valid: names of parameters that vary along member")
     bad = [n for n in names if n not in ds or ds[n].dims != ("member",)]
     if bad:
         along = sorted(n for n in PARAMETER_NAMES if n in ds and ds[n].dims == ("member",))
@@ -825,8 +826,8 @@ class ChunkStore:
                 numbers = ds[MEMBER_NUMBER] if MEMBER_NUMBER in ds else ds.member
                 # a chunk of this run (its id in the member labels), not one that a cluster's worker of
                 # an earlier, interrupted run wrote after that run had ended
-                own = run_id is None or MEMBER_NUMBER not in ds or all(
-                    str(label).startswith(f"{run_id}:") for label in ds.member.values)
+                own = run_id is None or MEMBER_NUMBER not in ds or np.array_equal(
+                    ds.member.values.astype(str), member_labels(run_id, numbers.values))
                 return own and int(ds.attrs.get(COMPLETE_ATTR, 0)) == 1 and np.array_equal(
                     numbers.values, np.arange(sl.start, sl.stop) + self.member_offset)
         except Exception:  # noqa: BLE001 - a damaged chunk is simply redone

@@ -277,9 +277,10 @@ class Model:
             "gate_velocity": (self.relaxation_gate != "velocity", f"relaxation_gate={self.relaxation_gate!r}"),
             "density": (not self.inertia, "inertia=False: a quasi-static pad"),
         }
+        scene = Parameters()
         texts = []
         for name, (without_effect, why) in unused.items():
-            default = values["height"] if name == "torque_arm" else getattr(Parameters(), name)
+            default = values["height"] if name == "torque_arm" else getattr(scene, name)
             if without_effect and np.any(np.asarray(values[name]) != default):
                 texts.append(f"{name} ({why})")
         return texts

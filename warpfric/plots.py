@@ -158,11 +158,13 @@ def _require_ensemble(ds, what: str) -> None:
                          f"{found}; pass the ensemble itself (select members with ds.sel(member=...))")
 
 
-def _require_parameter(ds, name: str, what: str) -> None:
-    if name not in ds:
-        swept = ds.attrs.get("varying_parameters", "").split()
-        raise ValueError(f"{what}: {name!r} is not a parameter of the ensemble; valid: a parameter, e.g. the swept "
-                         f"{', '.join(swept) or 'none'}")
+def _require_parameters(ds, what: str, *names) -> None:
+    """ValueError naming the first of ``names`` (None: none asked for) that ``ds`` lacks."""
+    for name in names:
+        if name is not None and name not in ds:
+            swept = ds.attrs.get("varying_parameters", "").split()
+            raise ValueError(f"{what}: {name!r} is not a parameter of the ensemble; valid: a parameter, e.g. the "
+                             f"swept {', '.join(swept) or 'none'}")
 
 
 def _require_fronts(ds, what: str) -> None:
@@ -171,13 +173,18 @@ def _require_fronts(ds, what: str) -> None:
                          "them); run with fronts=warpfric.Fronts()")
 
 
+def _status_name(ds, code: int) -> str:
+    """Status ``code``'s meaning ('max_steps_reached'), or 'status <code>' where the file gives none."""
+    meanings = ds.status.attrs.get("flag_meanings", "").split()
+    return meanings[code] if 0 <= code < len(meanings) else f"status {code}"
+
+
 def _status_text(ds, ok: np.ndarray) -> str:
     """The members that are not ok, by status, for a title: '; 3 max_steps_reached', or ''."""
     if ok.all():
         return ""
-    meanings = ds.status.attrs.get("flag_meanings", "").split()
     codes, counts = np.unique(ds.status.values[~ok], return_counts=True)
-    return "; " + ", ".join(f"{k} {meanings[c] if c < len(meanings) else f'status {c}'}" for c, k in zip(codes, counts))
+    return "; " + ", ".join(f"{k} {_status_name(ds, int(c))}" for c, k in zip(codes, counts))
 
 
 def _nothing_to_plot(ax, reason: str) -> None:
@@ -298,8 +305,7 @@ def mu_s_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     """mu_s against ``pname`` (ok members), coloured by ``colour_by``; the title names the other
     swept parameters ``mixed`` (their members share the axes)."""
     _require_ensemble(ds, "mu_s_figure")
-    for name in (pname, colour_by) if colour_by else (pname,):
-        _require_parameter(ds, name, "mu_s_figure")
+    _require_parameters(ds, "mu_s_figure", pname, colour_by)
     plt = _plt()
     ok = ds.status.values == 0
     x, xlabel, off_axis = _axis_values(ds, pname, ok)
@@ -336,8 +342,7 @@ def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     coloured by it; the title names the other swept parameters ``mixed``."""
     _require_ensemble(ds, "front_speeds_figure")
     _require_fronts(ds, "front_speeds_figure")
-    for name in (pname, colour_by) if colour_by else (pname,):
-        _require_parameter(ds, name, "front_speeds_figure")
+    _require_parameters(ds, "front_speeds_figure", pname, colour_by)
     plt = _plt()
     ok = ds.status.values == 0
     x, xlabel, off_axis = _axis_values(ds, pname, ok)
@@ -347,15 +352,15 @@ def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     speeds = {seg: np.asarray(ds[f"v_{seg}"].values, dtype=float) for seg, _ in segments}
     shown = {seg: ok & np.isfinite(x) & np.isfinite(v) for seg, v in speeds.items()}
     every = np.concatenate([speeds[seg][shown[seg]] for seg in speeds])
-    colour_note = _Colours(ds, colour_by, ok).note if colour_by else ""
+    colours = _Colours(ds, colour_by, ok) if colour_by else None
     title = (f"{_front_name(ds)} speeds ({plural(int(ok.sum()), 'ok member')}{_status_text(ds, ok)}{off_axis}"
-             f"{colour_note})")
+             f"{colours.note if colours else ''})")
     if not every.size:
         fig, ax = plt.subplots(figsize=(5.6, 3.8))
         ax.set_title(title, fontsize=10)
         _nothing_to_plot(ax, f"no ok member has a {_front_name(ds)}")
         return fig
-    if colour_by is None:
+    if colours is None:
         fig, ax = plt.subplots(figsize=(5.6, 3.8))
         for k, (seg, marker) in enumerate(segments):
             _plot_by(ax, x, speeds[seg], shown[seg], None, ds, marker,
@@ -365,7 +370,6 @@ def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
         ax.set_ylabel("front speed (m/s)")
         ax.set_title(title, fontsize=10)
     else:
-        colours = _Colours(ds, colour_by, ok)
         fig, axes = plt.subplots(1, len(segments), figsize=(3.85 * len(segments), 3.6), sharex=True, sharey=True)
         for ax, (seg, marker) in zip(axes, segments):
             _plot_by(ax, x, speeds[seg], shown[seg], colours, ds, marker)
@@ -536,12 +540,10 @@ def space_time_figure(ds, recorded_index: int):
         ta = np.asarray(ds[f"{prefix}arrival_time"].values[position], dtype=float)
         reached = np.flatnonzero(np.isfinite(ta))
         if not reached.size:  # no curve; the legend says so
-            status = int(_per_member(ds, "status")[position]) if "status" in ds else 0
-            meanings = ds.status.attrs.get("flag_meanings", "").split() if "status" in ds else []
-            meaning = meanings[status] if status < len(meanings) else str(status)
+            status = int(ds.status.values[position])  # (_require_ensemble: every ensemble has one)
             # a member that is not ok has NaN front outputs whether or not a front ran (no_peak: the
             # map may show one): not "no front"
-            text = f"no {front}" if meaning == "ok" else f"{front}: not given (status {meaning})"
+            text = f"no {front}" if status == 0 else f"{front}: not given (status {_status_name(ds, status)})"
             handles.append(Line2D([], [], ls="none", label=text))
             continue
         gaps = np.flatnonzero(np.diff(reached) > 1) + 1  # no line across nodes the front did not reach

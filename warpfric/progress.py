@@ -149,13 +149,20 @@ def machine_memory_bytes() -> int | None:
     return total
 
 
+def memory_bytes(n_members: int, solver) -> tuple[float, float]:
+    """(device, host) bytes a run of ``n_members`` holds at once, roughly (DEVICE_BYTES_PER_NODE and
+    HOST_BYTES_PER_NODE a node and member; half in float32). On the CPU the device is the host."""
+    scale = 1.0 if solver.dtype == "float64" else 0.5
+    node_members = n_members * solver.nodes * scale
+    return node_members * DEVICE_BYTES_PER_NODE, node_members * HOST_BYTES_PER_NODE
+
+
 def check_memory(n_members: int, solver, device, what: str = "this run") -> None:
     """ValueError where the members held at once need more memory than this machine has (the
     estimate of size_warning: host and, on the CPU, the kernels' arrays): such a run would only be
     killed by the system, leaving its files behind."""
-    scale = 1.0 if solver.dtype == "float64" else 0.5
-    per_node = HOST_BYTES_PER_NODE + (DEVICE_BYTES_PER_NODE if str(device).startswith("cpu") else 0.0)
-    need = n_members * solver.nodes * per_node * scale
+    device_bytes, host_bytes = memory_bytes(n_members, solver)
+    need = host_bytes + (device_bytes if str(device).startswith("cpu") else 0.0)
     have = machine_memory_bytes()
     if have is not None and need > have:
         raise ValueError(f"{what} ({plural(n_members, 'member')} x {solver.nodes} nodes at once) needs about "
@@ -169,9 +176,7 @@ def size_warning(n_members: int, solver, passes: float, device, workers: int = 1
     nodes = solver.nodes
     if nodes <= USUAL_NODES and n_members * nodes <= USUAL_NODE_MEMBERS:
         return None
-    scale = 1.0 if solver.dtype == "float64" else 0.5
-    device_bytes = n_members * nodes * DEVICE_BYTES_PER_NODE * scale
-    host_bytes = n_members * nodes * HOST_BYTES_PER_NODE * scale
+    device_bytes, host_bytes = memory_bytes(n_members, solver)
     what = f"{n_members} member{'s' if n_members != 1 else ''} x {nodes} nodes"
     usual = f"usual: up to {USUAL_NODES} nodes and {USUAL_NODE_MEMBERS:.0e} node-members"
     if str(device).startswith("cpu"):

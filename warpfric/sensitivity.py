@@ -173,15 +173,17 @@ def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: in
 
     inputs = set(PARAMETER_NAMES) | set(names)
 
-    def is_output(v):  # a per-member result: not an input parameter, not a flag (status, edge codes)
-        return (ds[v].dims == ("member",) and v not in inputs and v != "status"
-                and "flag_meanings" not in ds[v].attrs)
+    def is_flag(v):  # status, the edge codes: categories, not quantities
+        return v == "status" or "flag_meanings" in ds[v].attrs
+
+    def is_output(v):  # a per-member result: not an input parameter, not a flag
+        return ds[v].dims == ("member",) and v not in inputs and not is_flag(v)
 
     for out in outputs:
         if out not in ds or not is_output(out):
             candidates = [v for v in ds.data_vars if is_output(v)]
-            what = ("an input parameter" if out in inputs else "a flag variable" if out in ds
-                    and (out == "status" or "flag_meanings" in ds[out].attrs) else "not a per-member variable of the file")
+            what = ("an input parameter" if out in inputs else "a flag variable" if out in ds and is_flag(out)
+                    else "not a per-member variable of the file")
             raise ValueError(f"output {out!r} is {what}; available: {', '.join(candidates)}")
         Y = ds[out].values.astype(np.float64)
         if log:
