@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import dataclasses
 import difflib
 import re
 import shlex
@@ -37,7 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .parameters import MEMBERS_NOT_OK_HINT, RELAXATION_GATES, Fronts, Model, Parameters, Solver, units_text
+from .parameters import (MAX_RECORD_TIMES, MEMBERS_NOT_OK_HINT, RELAXATION_GATES, Fronts, Model, Parameters, Record,
+                         Solver, units_text)
 from .progress import member_range, plural as _plural, seconds_text as _seconds
 
 
@@ -61,6 +63,7 @@ SCENE_OPTIONS = {
     "front_event": ("--front-event", "[fronts] event"),
     "grid_check": ("--grid-check", "[fronts] grid_check"),
 }
+RECORD_COUNT = 1001  # recording times of --record (0.2 ms apart over the default scene's detachment)
 FRONT_EVENTS = ("contact", "strength", "velocity", "off")  # --front-event; off: no front metrics (fronts=None)
 # a negative number as an option's value: argparse takes "-1e-4" for an option (it knows only -1 and -1.5)
 NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-inf(inity)?$", re.IGNORECASE)
@@ -206,24 +209,74 @@ def _run_default(args) -> int:
     offset = args.member_offset or 0
     check_member_offset(offset, 1, "--member-offset")
     output = Path(args.output) if args.output else None
+    record = _record_option(args.record)
+    if args.record is not None and output is None:
+        raise UsageError("--record writes the member's fields into the file of -o; give -o OUT.nc (without it "
+                         "nothing is written)")
+    record_times = RECORD_COUNT if record is None and args.record is not None else \
+        len(record.times) if record is not None else 0
     with contextlib.ExitStack() as stack:
         if output is not None:  # before the run: the folder takes the file, and no other run writes it
             check_output_name(output)
             stack.enter_context(output_lock(output, args.command_line))
             check_output(output, False, args.overwrite)
             check_free_space(output, estimate_bytes(1, solver.nodes, front_events=0 if fronts is None else
-                                                    len(fronts.events)), "the file")
+                                                    len(fronts.events), recorded=1 if record_times else 0,
+                                                    times=record_times), "the file")
             remove_stale_temporaries(output)
         try:
-            ds = simulate(scene=scene, model=model, solver=solver, fronts=fronts, device=args.device,
-                          progress=not args.quiet, member_offset=offset, workers=args.cpu_workers)
+            run = dict(scene=scene, model=model, solver=solver, device=args.device, progress=not args.quiet,
+                       member_offset=offset, workers=args.cpu_workers)
+            if args.record is not None and record is None:  # --record alone: find the detachment first
+                found = simulate(fronts=None if fronts is None else dataclasses.replace(fronts, grid_check=False),
+                                 **run)
+                record = detachment_record(found)
+                print(f"recording the fields at {len(record.times)} times from {record.times[0]:.6g} to "
+                      f"{record.times[-1]:.6g} s: the detachment found by a first run (a second run records; "
+                      "its outputs are the first's)")
+            ds = simulate(fronts=fronts, record=record, **run)
             _print_member(ds, solver)
             if output is not None:
                 write_ensemble(ds, output, command=args.command_line)
-                print(f"wrote {output}")
+                print(f"wrote {output}" + (f" (with the recorded fields: warpfric plot {shlex.quote(str(output))} draws "
+                                           "them)" if record is not None else ""))
         except KeyboardInterrupt:  # one scene: no chunks to keep, nothing to resume
             raise KeyboardInterrupt("interrupted" + ("; nothing was written" if output is not None else "")) from None
     return 0 if int(ds.status[0]) == 0 else EXIT_FAILED_MEMBERS
+
+
+def _record_option(values: list | None) -> Record | None:
+    """--record START STOP [COUNT] as a Record of member 0 (None: not given, or given alone: the
+    detachment's window, found by a first run)."""
+    if not values:
+        return None
+    usage = ("--record takes no values (the detachment) or START STOP [COUNT]: times in s, START <= STOP, COUNT an "
+             f"integer in [2, {MAX_RECORD_TIMES:,}] (default {RECORD_COUNT})")
+    if len(values) not in (2, 3):
+        raise UsageError(f"--record {' '.join(values)}: {usage}")
+    try:
+        start, stop = float(values[0]), float(values[1])
+        count = int(values[2]) if len(values) == 3 else RECORD_COUNT
+    except ValueError:
+        raise UsageError(f"--record {' '.join(values)}: {usage}") from None
+    if not (np.isfinite(start) and np.isfinite(stop) and 0.0 <= start):
+        raise UsageError(f"--record {' '.join(values)}: START and STOP must be finite times >= 0 s")
+    try:
+        return Record.window(start, stop, count)
+    except ValueError as err:
+        raise UsageError(f"--record {' '.join(values)}: {err}") from None
+
+
+def detachment_record(ds, count: int = RECORD_COUNT) -> Record:
+    """A Record of member 0 at ``count`` times over its detachment: from the earlier of its first
+    front's start and its mu_s peak, less half the time from there to its end, to its end
+    (final_time); the whole run where it has neither."""
+    m = ds.isel(member=0)
+    end = float(m.final_time)
+    marks = [float(m[name]) for name in ("front_start_time", "mu_s_time") if name in m]
+    marks = [t for t in marks if np.isfinite(t) and t < end]
+    start = max(0.0, min(marks) - 0.5 * (end - min(marks))) if marks else 0.0
+    return Record.window(start, end, count)
 
 
 def _run_sweep(args) -> int:
@@ -248,6 +301,9 @@ def _run(args) -> int:
         raise UsageError("--scheduler and --local-cluster exclude each other (an existing cluster, or a new one)")
     if args.resume and args.overwrite:
         raise UsageError("--resume and --overwrite exclude each other")
+    if args.sweep is not None and args.record is not None:
+        raise UsageError(f"--record: for the default scene only; a sweep file records with its own [record] table "
+                         f"(members, times or start, stop, count: docs/sweeps.md) in {args.sweep}")
     if args.sweep is None:
         for flag, given in (("--scheduler", args.scheduler), ("--local-cluster", args.local_cluster),
                             ("--workers", args.workers is not None), ("--chunk", args.chunk is not None),
@@ -530,6 +586,11 @@ def build_parser() -> tuple[argparse.ArgumentParser, set]:
         help=f"relative tolerance of the adaptive step, in [1e-12, 0.1] (default {Solver.rtol:g})")
     add(scene, "--grid-check", action="store_true",
         help="also run on about half the nodes and report each front speed's change (its grid error)")
+    add(scene, "--record", nargs="*", default=None, metavar="T",
+        help="record the member's fields (pad velocity, slip rate, pressure, friction stress, mu(t)) into the file "
+             "of -o: alone, over the detachment (a first run finds it), at "
+             f"{RECORD_COUNT} times; or --record START STOP [COUNT] (s; default COUNT {RECORD_COUNT}); warpfric "
+             "plot draws them")
     add(scene, "--relaxation-gate", default=None, choices=RELAXATION_GATES,
         help=f"what gates the friction law's relaxation and rejuvenation (default {Model.relaxation_gate}): "
              "stress: the yield gate (Bar-Sinai et al., GRL 2012), only where the friction stress exceeds the "

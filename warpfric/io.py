@@ -149,10 +149,10 @@ def estimate_bytes(n_members: int, nodes: int, *, final_fields: bool = True, fro
     """Bytes of ``files`` ensemble files holding ``n_members`` members in all, before compression
     (zlib gains ~10 % on the fields): per file FILE_OVERHEAD_BYTES and FRONT_EVENT_OVERHEAD_BYTES per
     front event; per member ~100 scalars, each front event's arrival times and the final-state fields
-    (8 per node); per recorded member 4 fields at every recording time and node."""
+    (8 per node); per recorded member 4 fields at every recording time and node, and mu(t)."""
     per_member = 8 * (100 + nodes * (front_events + (8 if final_fields else 0)))
     per_file = FILE_OVERHEAD_BYTES + front_events * FRONT_EVENT_OVERHEAD_BYTES
-    return int(files * per_file + n_members * per_member + 4 * 8 * recorded * times * nodes)
+    return int(files * per_file + n_members * per_member + 8 * recorded * times * (4 * nodes + 1))
 
 
 def check_free_space(path, need: int, what: str) -> None:

@@ -5,7 +5,8 @@ parameter is the colour (a legend where it takes at most MAX_LEGEND values, each
 joined along the x axis, else a colour bar). An axis is logarithmic where its positive values span
 a decade or more. Arrival-time curves of up to MAX_CURVES members spread over the ensemble, each
 labelled with its swept values; the space-time map of every recorded member, with its arrival-time
-curve of each front event in the Dataset and, for the velocity event, the threshold contour.
+curve of each front event in the Dataset and, for the velocity event, the threshold contour, and its
+friction coefficient mu(t) over the recorded times.
 """
 
 from __future__ import annotations
@@ -439,7 +440,8 @@ def arrival_times_figure(ds, max_curves: int = MAX_CURVES):
 
 def quick_look(ds, outdir, max_curves: int = MAX_CURVES) -> list:
     """Write PNGs into ``outdir``: mu_s and front speeds against each swept parameter (coloured by
-    another swept parameter), arrival-time curves, and the space-time map of every recorded member.
+    another swept parameter), arrival-time curves, and the space-time map and mu(t) of every recorded
+    member.
     Returns the paths written."""
     _require_ensemble(ds, "quick_look")
     plt = _plt()
@@ -470,7 +472,74 @@ def quick_look(ds, outdir, max_curves: int = MAX_CURVES) -> list:
         for r, member in enumerate(ds.recorded_member.values):
             if member in ds.member.values:  # a selection of members may leave recorded ones out
                 written.append(space_time_map(ds, r, outdir / f"space_time_member{int(member)}.png"))
+                _finish(friction_history_figure(ds, r), outdir / f"friction_member{int(member)}.png", written)
     return written
+
+
+def _recorded_member(ds, recorded_index: int, what: str) -> tuple[int, int]:
+    """(member number, position along member) of the recorded member at ``recorded_index``; a
+    ValueError naming ``what`` where there is none."""
+    _require_ensemble(ds, what)
+    if "velocity_history" not in ds:
+        raise ValueError(f"{what}: the ensemble has no recorded fields (run with record=warpfric.Record(...); the "
+                         "command line: warpfric run -o OUT.nc --record, or [record] in a sweep file)")
+    recorded = [int(m) for m in ds.recorded_member.values]
+    if not (isinstance(recorded_index, (int, np.integer)) and 0 <= recorded_index < len(recorded)):
+        raise ValueError(f"{what}: recorded_index = {recorded_index!r}; valid: 0..{len(recorded) - 1}, the "
+                         f"position among the recorded members (numbers {', '.join(map(str, recorded))})")
+    member = recorded[recorded_index]
+    if member not in ds.member.values:
+        raise ValueError(f"{what}: recorded member {member} is not among the ensemble's members (a selection left "
+                         "it out)")
+    return member, int(np.flatnonzero(ds.member.values == member)[0])  # member numbers may start past 0
+
+
+def friction_history_figure(ds, recorded_index: int):
+    """The friction coefficient mu(t) of one recorded member over its recording times
+    (``friction_coefficient_history``, or computed from the recorded fields of a file written
+    without it), with the member's mu_s at mu_s_time, its mu_final at final_time and the time span
+    of its first front of each front event the Dataset holds, where they lie in the recorded window."""
+    from .simulate import friction_coefficient_history
+
+    member, position = _recorded_member(ds, recorded_index, "friction_history_figure")
+    plt = _plt()
+    mu_all = ds["friction_coefficient_history"] if "friction_coefficient_history" in ds else \
+        friction_coefficient_history(ds)
+    mu = np.asarray(mu_all.values[recorded_index], dtype=float)
+    t = np.asarray(ds.time.values, dtype=float)
+    fig, ax = plt.subplots(figsize=(6, 3.6))
+    ax.plot(t, mu, color="k", lw=1.3, label="mu(t), recorded fields")
+    window = (t.min(), t.max())
+    status = int(ds.status.values[position])
+    marks = (("mu_s", "mu_s_time", "o", "tab:red", "mu_s = {:.6f} (the peak)"),
+             ("mu_final", "final_time", "s", "tab:blue", "mu_final = {:.6f} (the run's end)"))
+    for name, when, marker, colour, text in marks:
+        value, at = float(_per_member(ds, name)[position]), float(_per_member(ds, when)[position])
+        if np.isfinite(value) and window[0] <= at <= window[1]:
+            ax.plot([at], [value], marker, color=colour, mfc="none", ms=8, ls="none", label=text.format(value))
+        elif name == "mu_s":
+            why = ("not given (status " + _status_name(ds, status) + ")" if not np.isfinite(value) else
+                   f"{value:.6f} at t = {at:.6g} s, outside the recorded times")
+            ax.plot([], [], ls="none", label=f"mu_s: {why}")
+    for k, (event, prefix) in enumerate(front_events(ds)):
+        start, end = (float(_per_member(ds, f"{prefix}front_{when}_time")[position]) for when in ("start", "end"))
+        if np.isfinite(start) and np.isfinite(end) and end >= window[0] and start <= window[1]:
+            front = f"{event} front" if event else "front"
+            ax.axvspan(max(start, window[0]), min(end, window[1]), color=f"C{k + 2}", alpha=0.25,
+                       label=f"{front}: t = {start:.5f} .. {end:.5f} s")
+    if not np.isfinite(mu).any():
+        _nothing_to_plot(ax, "no recorded time with a normal force before the member's end")
+    ax.set_xlim(window)
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("friction coefficient mu")
+    ax.ticklabel_format(axis="x", useOffset=False)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="best", framealpha=0.8)
+    swept = [name for name in ds.attrs.get("varying_parameters", "").split() if name in ds]
+    values = ", ".join(_value(ds, name, _per_member(ds, name)[position]) for name in swept[:3])
+    ax.set_title(f"member {member}: friction coefficient" + (f" ({values})" if values else ""), fontsize=10)
+    fig.tight_layout()
+    return fig
 
 
 def space_time_map(ds, recorded_index: int, path) -> Path:
@@ -495,19 +564,8 @@ def space_time_figure(ds, recorded_index: int):
     from matplotlib.lines import Line2D
     from matplotlib.patches import Patch
 
-    _require_ensemble(ds, "space_time_figure")
-    if "velocity_history" not in ds:
-        raise ValueError("space_time_figure: the ensemble has no recorded fields (run with record=warpfric.Record(...))")
-    recorded = [int(m) for m in ds.recorded_member.values]
-    if not (isinstance(recorded_index, (int, np.integer)) and 0 <= recorded_index < len(recorded)):
-        raise ValueError(f"space_time_figure: recorded_index = {recorded_index!r}; valid: 0..{len(recorded) - 1}, the "
-                         f"position among the recorded members (numbers {', '.join(map(str, recorded))})")
-    member = recorded[recorded_index]
-    if member not in ds.member.values:
-        raise ValueError(f"space_time_figure: recorded member {member} is not among the ensemble's members (a "
-                         "selection left it out)")
+    member, position = _recorded_member(ds, recorded_index, "space_time_figure")
     plt = _plt()
-    position = int(np.flatnonzero(ds.member.values == member)[0])  # member numbers may start past 0
     v = ds.velocity_history.values[recorded_index]
     t = ds.time.values
     metres = ds.x.attrs.get("units") == "m"
@@ -516,8 +574,8 @@ def space_time_figure(ds, recorded_index: int):
     recorded_values = np.isfinite(v)
     scale = float(np.abs(v[recorded_values]).max()) if recorded_values.any() else 0.0
     scale = scale or 1.0
-    cmap = matplotlib.colormaps["RdBu_r"].copy()
-    cmap.set_bad("0.8")  # NaN (after the member's end) grey, not the white of zero velocity
+    cmap = matplotlib.colormaps["RdBu_r"].with_extremes(bad="0.8")  # NaN (after the member's end) grey, not
+    # the white of zero velocity
     mesh = ax.pcolormesh(x, t, v * 1e9, cmap=cmap, vmin=-scale * 1e9, vmax=scale * 1e9, shading="nearest")
     fig.colorbar(mesh, ax=ax, label="pad velocity (nm/s)")
     window = ax.get_xlim(), ax.get_ylim()

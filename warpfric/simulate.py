@@ -83,8 +83,9 @@ def simulate(
     prefixed again where it is not the first event: ``strength_strength_peak``); ``grid_check``
     adds ``mu_s_grid_error`` and ``v_*_grid_error``. With record:
     ``velocity_history``, ``slip_rate_history``, ``normal_stress_history``,
-    ``friction_stress_history`` along (recorded, time, x), coordinates ``recorded_member`` and
-    ``time``. Raises ValueError on invalid input before any kernel runs.
+    ``friction_stress_history`` along (recorded, time, x) and ``friction_coefficient_history``
+    (recorded, time): mu(t) of the recorded fields (:func:`friction_coefficient_history`),
+    coordinates ``recorded_member`` and ``time``. Raises ValueError on invalid input before any kernel runs.
     """
     if not isinstance(model, Model):
         raise ValueError(f"model: expected a warpfric.Model, got {type(model).__name__}")
@@ -260,7 +261,7 @@ def _warn_record_past_end(ds: xr.Dataset, record: Record, member_offset: int = 0
             why, automatic = "the automatic end", True
         parts.append(f"member {member_offset + m}: ended at {t:.6g} s ({why}), {n} of {times.size} times later")
     advice = ("; a run ends by itself once its detachment is over (end_time None): an end_time past the last "
-              "recording time (Parameters(end_time=...), [scene] end_time in a sweep file) records there"
+              "recording time (Parameters(end_time=...), --end-time, [scene] end_time in a sweep file) records there"
               if automatic else "")
     warnings.warn(f"{RECORD_PAST_END} ({'; '.join(parts)}){advice}", stacklevel=3)
 
@@ -483,6 +484,28 @@ def _add_record(ds: xr.Dataset, record: Record, recorded: np.ndarray, x, member_
             np.ascontiguousarray(np.transpose(recorded[f], (2, 0, 1))), dims=("recorded", "time", "x"),
             attrs={"units": units, "long_name": long_name + " (recorded)"},
         )
+    ds["friction_coefficient_history"] = friction_coefficient_history(ds)
+
+
+def friction_coefficient_history(ds: xr.Dataset) -> xr.DataArray:
+    """The friction coefficient mu(t) = sign(v_d) * int tau_f dx / int sigma_n+ dx of each recorded
+    member at the recording times, (recorded, time), dimensionless: the engine's mu(t), whose maximum
+    over time is mu_s, integrated by the trapezoid rule (the engine's quadrature) over the recorded
+    fields. NaN where the normal force is zero (mu undefined; the engine counts 0 there) and where a
+    time lies after the member's end. Between accepted steps the fields are interpolated linearly, so
+    there mu(t) is the ratio of interpolated integrals, and its maximum over the recording times lies
+    below mu_s by the sampling (the engine refines its peak between steps)."""
+    positions = [int(np.flatnonzero(ds.member.values == m)[0]) for m in ds.recorded_member.values]
+    disc_velocity = np.broadcast_to(np.asarray(ds["disc_velocity"].values, dtype=float), (ds.sizes["member"],))
+    sign = np.where(disc_velocity[positions] < 0.0, -1.0, 1.0)
+    x = np.asarray(ds.x.values, dtype=float)
+    friction = np.trapezoid(np.asarray(ds.friction_stress_history.values, dtype=float), x, axis=-1)
+    normal = np.trapezoid(np.asarray(ds.normal_stress_history.values, dtype=float), x, axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        mu = np.where(normal > 0.0, sign[:, None] * friction / normal, np.nan)
+    return xr.DataArray(mu, dims=("recorded", "time"), attrs={
+        "units": "1", "long_name": "friction coefficient sign(v_d) int tau_f dx / int sigma_n dx of the recorded "
+        "fields (NaN without normal force)"})
 
 
 _RECORD_ATTRS = {

@@ -1,0 +1,136 @@
+"""Recorded fields of one member as a user meets them: mu(t) of the recorded fields is the engine's
+own mu(t) (its value at the run's end is mu_final, its maximum over a dense window mu_s within the
+sampling), recording changes no output, `warpfric run -o OUT.nc --record` records the default
+scene's detachment (found by a first run) and `warpfric plot` draws mu(t) beside the space-time
+map."""
+
+import warnings
+
+import numpy as np
+import pytest
+from conftest import DEVICE, one_line_error, run, run_cli
+
+import warpfric as wf
+from warpfric import plots
+from warpfric.io import open_ensemble
+
+OUTPUTS = ("mu_s", "mu_s_time", "mu_final", "final_time", "steps_accepted", "steps_rejected", "front_start_time")
+
+
+@pytest.fixture(scope="module")
+def unrecorded():
+    """The default scene and its mirror image (disc the other way), N = 41, rtol 1e-6, no record."""
+    return run({"disc_velocity": [1e-4, -1e-4]}, nodes=41, fronts=wf.Fronts())
+
+
+@pytest.fixture(scope="module")
+def recorded(unrecorded):
+    """The same two members recorded before the load (t = 0: no normal force), densely around the
+    mu_s peak, and at the first member's own final_time."""
+    peak, end = float(unrecorded.mu_s_time[0]), float(unrecorded.final_time[0])
+    times = (0.0, *np.linspace(peak - 2e-3, peak + 2e-3, 401), end)
+    with warnings.catch_warnings():  # the mirror image may end an ulp before the last time
+        warnings.filterwarnings("ignore", "Record: recording times after a member's end")
+        return run({"disc_velocity": [1e-4, -1e-4]}, nodes=41, fronts=wf.Fronts(),
+                   record=wf.Record(members=(0, 1), times=times))
+
+
+def test_recording_changes_no_output(unrecorded, recorded):
+    for name in OUTPUTS:
+        np.testing.assert_array_equal(recorded[name].values, unrecorded[name].values, err_msg=name)
+
+
+def test_the_recorded_friction_coefficient_is_the_engines_mu(unrecorded, recorded):
+    mu = recorded.friction_coefficient_history
+    assert mu.dims == ("recorded", "time") and mu.attrs["units"] == "1"
+    # at the run's last accepted step the fields are the final state: the engine's mu_final, from its
+    # own sums of tau_f and sigma_n+ in the kernel
+    assert abs(float(mu[0, -1]) / float(unrecorded.mu_final[0]) - 1.0) < 1e-12
+    # before the load there is no normal force: mu is undefined, not 0
+    assert np.isnan(mu.values[:, 0]).all()
+    # between accepted steps the fields are interpolated linearly, and under the constant normal force
+    # mu with them, so the recorded maximum is that of the accepted steps; the engine refines its
+    # peak between steps by a parabola: never below, and above by far less than the 1e-5 that mu_s
+    # is converged to at these settings
+    mu_s = float(unrecorded.mu_s[0])
+    peak = np.nanmax(mu.values[0, 1:-1])
+    assert mu_s - 1e-5 < peak <= mu_s
+    # the mirror image (disc the other way): the same mu(t), by the sign of v_d
+    np.testing.assert_allclose(mu.values[1, 1:-1], mu.values[0, 1:-1], rtol=1e-9)
+
+
+def test_the_friction_figure_draws_mu_t_with_mu_s_and_the_front(recorded, tmp_path):
+    fig = plots.friction_history_figure(recorded, 0)
+    ax = fig.axes[0]
+    curve = ax.get_lines()[0]
+    np.testing.assert_array_equal(curve.get_xdata(), recorded.time.values)
+    np.testing.assert_array_equal(curve.get_ydata(), recorded.friction_coefficient_history.values[0])
+    mu_s = float(recorded.mu_s[0])
+    marks = {line.get_label(): (line.get_xdata()[0], line.get_ydata()[0]) for line in ax.get_lines()[1:]
+             if len(line.get_xdata())}
+    assert marks[f"mu_s = {mu_s:.6f} (the peak)"] == (float(recorded.mu_s_time[0]), mu_s)
+    texts = [t.get_text() for t in ax.get_legend().get_texts()]
+    start, end = float(recorded.front_start_time[0]), float(recorded.front_end_time[0])
+    assert f"contact front: t = {start:.5f} .. {end:.5f} s" in texts
+    # a file written without friction_coefficient_history: the figure computes the same curve
+    older = recorded.drop_vars("friction_coefficient_history")
+    np.testing.assert_array_equal(plots.friction_history_figure(older, 1).axes[0].get_lines()[0].get_ydata(),
+                                  recorded.friction_coefficient_history.values[1])
+    with pytest.raises(ValueError, match="recorded_index = 2; valid: 0..1"):
+        plots.friction_history_figure(recorded, 2)
+    with pytest.raises(ValueError, match="no recorded fields .*--record"):
+        plots.friction_history_figure(recorded.drop_vars([v for v in recorded.data_vars if v.endswith("_history")]), 0)
+    names = {p.name for p in plots.quick_look(recorded, tmp_path)}
+    assert {"friction_member0.png", "friction_member1.png", "space_time_member0.png"} <= names
+
+
+def test_run_record_alone_records_the_default_scenes_detachment(tmp_path, capsys):
+    out = tmp_path / "one.nc"
+    code, lines, err = run_cli(capsys, "run", "--device", DEVICE, "--nodes", "21", "--quiet", "-o", out, "--record")
+    assert code == 0, err
+    ds = open_ensemble(out)
+    alone = run(nodes=21, rtol=1e-5, fronts=wf.Fronts())
+    for name in OUTPUTS:  # the file's outputs are those of a run without recording
+        np.testing.assert_array_equal(ds[name].values, alone[name].values, err_msg=name)
+    t = ds.time.values
+    start, peak, end = (float(alone[name][0]) for name in ("front_start_time", "mu_s_time", "final_time"))
+    # the window: from the front's start less half the time from there to the end, to the end
+    assert t.size == 1001 and t[-1] == end
+    assert t[0] == pytest.approx(start - 0.5 * (end - start), abs=1e-12) and t[0] < start < peak < end
+    assert np.isfinite(ds.velocity_history.values).all()  # no time after the member's end
+    assert abs(float(ds.friction_coefficient_history[0, -1]) / float(ds.mu_final[0]) - 1) < 1e-12
+    assert any(line.startswith("recording the fields at 1001 times from") for line in lines)
+    assert lines[-1] == f"wrote {out} (with the recorded fields: warpfric plot {out} draws them)"
+    code, lines, err = run_cli(capsys, "plot", out)
+    assert code == 0 and f"wrote {tmp_path / 'one' / 'friction_member0.png'}" in lines
+
+
+def test_run_record_with_a_window(tmp_path, capsys):
+    out = tmp_path / "w.nc"
+    code, _, err = run_cli(capsys, "run", "--device", DEVICE, "--nodes", "21", "--quiet", "-o", out,
+                           "--record", "20.1", "20.2", "11")
+    assert code == 0, err
+    np.testing.assert_allclose(open_ensemble(out).time.values, np.linspace(20.1, 20.2, 11), rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--record"], ["--record", "-o OUT.nc"]),  # nothing to write into
+    (["-o", "x.nc", "--record", "20"], ["--record 20", "START STOP [COUNT]"]),
+    (["-o", "x.nc", "--record", "20", "21", "many"], ["--record 20 21 many", "COUNT an integer"]),
+    (["-o", "x.nc", "--record", "21", "20"], ["--record 21 20", "start 21.0 s is after stop 20.0 s"]),
+    (["-o", "x.nc", "--record", "20", "21", "1"], ["--record 20 21 1", "count", "[2, 1,000,000]"]),
+])
+def test_bad_record_options_are_one_line(tmp_path, capsys, monkeypatch, args, words):
+    monkeypatch.chdir(tmp_path)
+    code, _, err = run_cli(capsys, "run", "--device", DEVICE, *args)
+    assert code == 2
+    one_line_error(err, *words)
+    assert not (tmp_path / "x.nc").exists()
+
+
+def test_record_with_a_sweep_file_points_to_its_record_table(tmp_path, capsys):
+    sweep = tmp_path / "s.toml"
+    sweep.write_text("fronts = false\n[grid]\neccentricity = [0.0, 0.1]\n")
+    code, _, err = run_cli(capsys, "run", str(sweep), "--record")
+    assert code == 2
+    one_line_error(err, "--record", "[record] table", str(sweep))
