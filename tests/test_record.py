@@ -103,6 +103,13 @@ def test_run_record_alone_records_the_default_scenes_detachment(tmp_path, capsys
     assert lines[-1] == f"wrote {out} (with the recorded fields: warpfric plot {out} draws them)"
     code, lines, err = run_cli(capsys, "plot", out)
     assert code == 0 and f"wrote {tmp_path / 'one' / 'friction_member0.png'}" in lines
+    assert not any("--record" in line for line in lines)
+    # without --record the plot says how to get these figures
+    code, _, err = run_cli(capsys, "run", "--device", DEVICE, "--nodes", "21", "--quiet", "-o", tmp_path / "bare.nc")
+    code, lines, err = run_cli(capsys, "plot", tmp_path / "bare.nc")
+    assert code == 0 and [line for line in lines if not line.startswith("wrote")] == [
+        "(one member without recorded fields: warpfric run -o OUT.nc --record records them, and plot then draws its "
+        "space-time map and mu(t))"]
 
 
 def test_run_record_with_a_window(tmp_path, capsys):

@@ -460,6 +460,9 @@ def _plot(args) -> int:
         outdir.mkdir(parents=True, exist_ok=True)
         for path in quick_look(ds, outdir):
             print(f"wrote {path}")
+        if ds.sizes["member"] == 1 and "velocity_history" not in ds:
+            print("(one member without recorded fields: warpfric run -o OUT.nc --record records them, and plot then "
+                  "draws its space-time map and mu(t))")
     except OSError as err:
         raise UsageError(f"figure folder {str(outdir)!r}: cannot write in it ({os_error_reason(err)}); give another "
                          "with --outdir DIR") from None
