@@ -112,6 +112,19 @@ def test_run_record_alone_records_the_default_scenes_detachment(tmp_path, capsys
         "space-time map and mu(t))"]
 
 
+def test_record_detachment_spans_every_chosen_members_detachment():
+    ds = run({"eccentricity": [0.0, 0.3]}, nodes=21, rtol=1e-5, fronts=wf.Fronts())
+    record = wf.Record.detachment(ds, members=(0, 1), count=11)
+    starts = [float(ds.front_start_time[m]) for m in (0, 1)]
+    ends = [float(ds.final_time[m]) for m in (0, 1)]
+    peaks = [float(ds.mu_s_time[m]) for m in (0, 1)]
+    first = [min(s, p) - 0.5 * (e - min(s, p)) for s, p, e in zip(starts, peaks, ends)]
+    assert record.members == (0, 1) and len(record.times) == 11
+    assert record.times[0] == pytest.approx(min(first), abs=1e-12) and record.times[-1] == max(ends)
+    with pytest.raises(ValueError, match=r"members = \(2,\) is invalid; valid: positions 0..1"):
+        wf.Record.detachment(ds, members=(2,))
+
+
 def test_run_record_with_a_window(tmp_path, capsys):
     out = tmp_path / "w.nc"
     code, _, err = run_cli(capsys, "run", "--device", DEVICE, "--nodes", "21", "--quiet", "-o", out,

@@ -38,8 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .parameters import (MAX_RECORD_TIMES, MEMBERS_NOT_OK_HINT, RELAXATION_GATES, Fronts, Model, Parameters, Record,
-                         Solver, units_text)
+from .parameters import (MAX_RECORD_TIMES, MEMBERS_NOT_OK_HINT, RECORD_COUNT, RELAXATION_GATES, Fronts, Model,
+                         Parameters, Record, Solver, units_text)
 from .progress import member_range, plural as _plural, seconds_text as _seconds
 
 
@@ -63,7 +63,6 @@ SCENE_OPTIONS = {
     "front_event": ("--front-event", "[fronts] event"),
     "grid_check": ("--grid-check", "[fronts] grid_check"),
 }
-RECORD_COUNT = 1001  # recording times of --record (0.2 ms apart over the default scene's detachment)
 FRONT_EVENTS = ("contact", "strength", "velocity", "off")  # --front-event; off: no front metrics (fronts=None)
 # a negative number as an option's value: argparse takes "-1e-4" for an option (it knows only -1 and -1.5)
 NEGATIVE_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-inf(inity)?$", re.IGNORECASE)
@@ -230,7 +229,7 @@ def _run_default(args) -> int:
             if args.record is not None and record is None:  # --record alone: find the detachment first
                 found = simulate(fronts=None if fronts is None else dataclasses.replace(fronts, grid_check=False),
                                  **run)
-                record = detachment_record(found)
+                record = Record.detachment(found)
                 print(f"recording the fields at {len(record.times)} times from {record.times[0]:.6g} to "
                       f"{record.times[-1]:.6g} s: the detachment found by a first run (a second run records; "
                       "its outputs are the first's)")
@@ -265,18 +264,6 @@ def _record_option(values: list | None) -> Record | None:
         return Record.window(start, stop, count)
     except ValueError as err:
         raise UsageError(f"--record {' '.join(values)}: {err}") from None
-
-
-def detachment_record(ds, count: int = RECORD_COUNT) -> Record:
-    """A Record of member 0 at ``count`` times over its detachment: from the earlier of its first
-    front's start and its mu_s peak, less half the time from there to its end, to its end
-    (final_time); the whole run where it has neither."""
-    m = ds.isel(member=0)
-    end = float(m.final_time)
-    marks = [float(m[name]) for name in ("front_start_time", "mu_s_time") if name in m]
-    marks = [t for t in marks if np.isfinite(t) and t < end]
-    start = max(0.0, min(marks) - 0.5 * (end - min(marks))) if marks else 0.0
-    return Record.window(start, end, count)
 
 
 def _run_sweep(args) -> int:

@@ -556,6 +556,7 @@ class Fronts:
 
 
 MAX_RECORD_TIMES = 1_000_000
+RECORD_COUNT = 1001  # recording times of Record.detachment and --record: 0.2 ms apart over the default scene's detachment
 _RECORD_TIMES_WHY = "(each time holds 4 fields at every node of each recorded member: 3.2 GB at 100 nodes)"
 
 
@@ -590,6 +591,27 @@ class Record:
         if start > stop:  # NaN: Record's own check names the times
             raise ValueError(f"record window: start {start!r} s is after stop {stop!r} s; valid: start <= stop")
         return Record(members=tuple(members), times=tuple(np.linspace(float(start), float(stop), int(count))))
+
+    @staticmethod
+    def detachment(ds, members=(0,), count: int = RECORD_COUNT) -> "Record":
+        """``count`` evenly spaced times over the detachment of ``members`` (0-based positions along
+        ``ds.member``) in ``ds``, the outputs of a run without recording: for each member, from the
+        earlier of its first front's start and its mu_s peak, less half the time from there to its
+        end (final_time), to that end (the whole run where it has neither); the window spans every
+        member's. Run the same members again with it: recording changes no output."""
+        n = ds.sizes["member"]
+        positions = np.asarray(members).reshape(-1)
+        if positions.size == 0 or positions.dtype.kind not in "iu" or (positions < 0).any() or (positions >= n).any():
+            raise ValueError(f"Record.detachment: members = {members!r} is invalid; valid: positions 0..{n - 1} "
+                             "along ds.member")
+        starts, ends = [], []
+        for m in positions:
+            end = float(ds.final_time.values[m])
+            marks = [float(ds[name].values[m]) for name in ("front_start_time", "mu_s_time") if name in ds]
+            marks = [t for t in marks if np.isfinite(t) and t < end]
+            starts.append(max(0.0, min(marks) - 0.5 * (end - min(marks))) if marks else 0.0)
+            ends.append(end)
+        return Record.window(min(starts), max(ends), count, members=tuple(int(m) for m in positions))
 
     def __post_init__(self):
         members = np.asarray(self.members).reshape(-1)
