@@ -99,7 +99,8 @@ def test_run_record_alone_records_the_default_scenes_detachment(tmp_path, capsys
     assert t[0] == pytest.approx(start - 0.5 * (end - start), abs=1e-12) and t[0] < start < peak < end
     assert np.isfinite(ds.velocity_history.values).all()  # no time after the member's end
     assert abs(float(ds.friction_coefficient_history[0, -1]) / float(ds.mu_final[0]) - 1) < 1e-12
-    assert any(line.startswith("recording the fields at 1001 times from") for line in lines)
+    assert any(line.startswith("recording the fields at 1001 times from") and "the detachment found by a first run" in line
+               for line in lines)
     assert lines[-1] == f"wrote {out} (with the recorded fields: warpfric plot {out} draws them)"
     code, lines, err = run_cli(capsys, "plot", out)
     assert code == 0 and f"wrote {tmp_path / 'one' / 'friction_member0.png'}" in lines
@@ -123,6 +124,17 @@ def test_record_detachment_spans_every_chosen_members_detachment():
     assert record.times[0] == pytest.approx(min(first), abs=1e-12) and record.times[-1] == max(ends)
     with pytest.raises(ValueError, match=r"members = \(2,\) is invalid; valid: positions 0..1"):
         wf.Record.detachment(ds, members=(2,))
+
+
+def test_run_record_alone_without_a_detachment_records_the_whole_run(tmp_path, capsys):
+    out = tmp_path / "early.nc"
+    code, lines, err = run_cli(capsys, "run", "--device", DEVICE, "--nodes", "21", "--quiet", "-o", out, "--record",
+                               "--end-time", "20.05")
+    assert code == 1  # no_peak: the run ended before mu peaked
+    t = open_ensemble(out).time.values
+    assert (t[0], t[-1], t.size) == (0.0, 20.05, 1001)
+    assert "recording the fields at 1001 times from 0 to 20.05 s, the whole run: a first run found no detachment " \
+           "(status no_peak) (a second run records; its outputs are the first's)" in lines
 
 
 def test_run_record_with_a_window(tmp_path, capsys):

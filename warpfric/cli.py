@@ -230,9 +230,11 @@ def _run_default(args) -> int:
                 found = simulate(fronts=None if fronts is None else dataclasses.replace(fronts, grid_check=False),
                                  **run)
                 record = Record.detachment(found)
+                marks = [found[name].values[0] for name in ("front_start_time", "mu_s_time") if name in found]
+                what = ("the detachment found by a first run" if np.isfinite(marks).any() else
+                        f"the whole run: a first run found no detachment (status {_status_name(found, found.status[0])})")
                 print(f"recording the fields at {len(record.times)} times from {record.times[0]:.6g} to "
-                      f"{record.times[-1]:.6g} s: the detachment found by a first run (a second run records; "
-                      "its outputs are the first's)")
+                      f"{record.times[-1]:.6g} s, {what} (a second run records; its outputs are the first's)")
             ds = simulate(fronts=fronts, record=record, **run)
             _print_member(ds, solver)
             if output is not None:
