@@ -498,9 +498,10 @@ def friction_coefficient_history(ds: xr.Dataset) -> xr.DataArray:
     positions = [int(np.flatnonzero(ds.member.values == m)[0]) for m in ds.recorded_member.values]
     disc_velocity = np.broadcast_to(np.asarray(ds["disc_velocity"].values, dtype=float), (ds.sizes["member"],))
     sign = np.where(disc_velocity[positions] < 0.0, -1.0, 1.0)
-    x = np.asarray(ds.x.values, dtype=float)
-    friction = np.trapezoid(np.asarray(ds.friction_stress_history.values, dtype=float), x, axis=-1)
-    normal = np.trapezoid(np.asarray(ds.normal_stress_history.values, dtype=float), x, axis=-1)
+    # the grid is uniform, so dx cancels in the ratio: trapezoid sums in node spacings, the same
+    # whether x is in m or in units of L (a split run's chunks may differ there from the ensemble)
+    friction, normal = (np.trapezoid(np.asarray(ds[name].values, dtype=float), axis=-1)
+                        for name in ("friction_stress_history", "normal_stress_history"))
     with np.errstate(divide="ignore", invalid="ignore"):
         mu = np.where(normal > 0.0, sign[:, None] * friction / normal, np.nan)
     return xr.DataArray(mu, dims=("recorded", "time"), attrs={
