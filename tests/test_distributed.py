@@ -1,8 +1,10 @@
 """Sweeps on a Dask cluster (warpfric.runner): a LocalCluster of 2 CPU worker processes gives the
 single-process result bit for bit; a worker killed mid-sweep costs only its chunk; a killed client
-leaves a run that --resume completes. CPU only (CI)."""
+leaves a run that --resume completes; an interrupted run (Ctrl-C, SIGTERM) ends in warpfric's lines
+only. CPU only (CI)."""
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -197,3 +199,84 @@ def test_workers_warnings_are_raised_once_by_the_client(client, tmp_path, capfd)
     assert code == 0
     warned = [line for line in err.splitlines() if "Warning" in line or line.startswith("warpfric: warning:")]
     assert len(warned) == 1 and warned[0].startswith("warpfric: warning: fronts event 'contact'"), err
+
+
+# A sweep that runs for a while on 2 CPU workers (80 chunks of 10 members, ~0.2 s a chunk), so that an
+# interrupt after its first chunk leaves chunks running and queued. Each chunk warns once (the contact
+# front under relaxation_gate = "none") and holds one member not ok (eccentricity -0.3 needs more
+# than 150 steps: max_steps_reached); a run to its end reports both once.
+INTERRUPTED_SWEEP = f"""
+title = "interrupted on a cluster"
+[model]
+relaxation_gate = "none"
+[solver]
+nodes = 121
+max_steps = 150
+[grid]
+normal_force = [{", ".join(f"{300.0 + 40.0 * i:.1f}" for i in range(80))}]
+eccentricity = [-0.3, -0.2, -0.1, 0.0, 0.1, 0.2, 0.3, 0.25, -0.25, 0.15]
+[run]
+chunk = 10
+"""
+CUDA_BANNER = "Warp CUDA warning"  # Warp's own line on a host without a GPU, in a run to its end too
+
+
+def _interrupt(argv, sig, cwd):
+    """`warpfric run ARGV` in a session of its own, sent ``sig`` (to its whole process group, its local
+    cluster's workers too, as a terminal's Ctrl-C or a batch system's SIGTERM) once its first chunk is
+    reported done: (exit code, stderr lines, worker pids named in the progress lines)."""
+    proc = subprocess.Popen([sys.executable, "-m", "warpfric", "run", *map(str, argv)], cwd=cwd, text=True,
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
+                            env={**os.environ, "CUDA_VISIBLE_DEVICES": ""})
+    lines, first_chunk = [], threading.Event()
+
+    def read():
+        for line in proc.stderr:
+            lines.append(line.rstrip("\n"))
+            if " chunks done (" in line:
+                first_chunk.set()
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    started = first_chunk.wait(timeout=180)
+    if proc.poll() is None:
+        os.killpg(proc.pid, sig)
+    code = proc.wait(timeout=120)
+    reader.join(timeout=30)
+    assert started, lines
+    pids = {int(p) for line in lines for p in re.findall(r"\(pid (\d+)\)", line)}
+    return code, lines, pids
+
+
+def _kept(line: str) -> int:
+    """N of the interrupt line's 'the N finished chunks are kept'."""
+    found = re.search(r"the (\d+) finished chunks? (?:is|are) kept", line)
+    assert found, line
+    return int(found.group(1))
+
+
+@pytest.fixture(scope="module", params=["SIGINT", "SIGTERM"])
+def interrupted_local_cluster(request, tmp_path_factory):
+    """`warpfric run --local-cluster --workers 2` interrupted by Ctrl-C (SIGINT) or SIGTERM to its
+    process group; the chunk files as they are 2 s after it exited (a chunk takes about 0.2 s: one
+    written late would be there)."""
+    folder = tmp_path_factory.mktemp(f"interrupted-{request.param}")
+    sweep = folder / "slow.toml"
+    sweep.write_text(INTERRUPTED_SWEEP)
+    out = folder / "i.nc"
+    code, err, pids = _interrupt([sweep, "-o", out, "--local-cluster", "--workers", 2], getattr(signal, request.param),
+                                 folder)
+    time.sleep(2)
+    return dict(code=code, err=err, pids=pids, chunks=sorted(parts_dir(out).glob("chunk-*.nc")), out=out)
+
+
+def test_an_interrupted_local_cluster_prints_warpfric_lines_only(interrupted_local_cluster):
+    """The workers got the signal too, and each printed a traceback of its event loop (about 30
+    lines a worker) or its nanny logged a restart; the scheduler and the workers logged the tasks
+    cancelled by the close. The workers now leave the signal to the command, which closes its client,
+    then the cluster, with distributed's shutdown warnings dropped."""
+    run = interrupted_local_cluster
+    assert run["code"] == 130, run["err"]
+    foreign = [line for line in run["err"] if not line.startswith(("warpfric", CUDA_BANNER))]
+    assert foreign == [], "\n".join(run["err"])
+    assert run["err"][-1].startswith("warpfric: interrupted; ")

@@ -269,7 +269,8 @@ def local_cluster(workers: int | None = None):
     """A Dask client on a new local cluster: one worker per CUDA device (dask-cuda's LocalCUDACluster
     when it is installed, else a LocalCluster whose workers pick their GPU by name) when GPUs are
     present, else a LocalCluster of ``workers`` single-threaded CPU processes (default: the core
-    count). The caller closes it (``client.close(); client.cluster.close()``)."""
+    count). Its workers ignore Ctrl-C and SIGTERM (warpfric.cluster_worker): the caller stops them, in
+    order, with close_local_cluster."""
     try:
         from distributed import Client, LocalCluster
     except ImportError:
@@ -292,7 +293,45 @@ def local_cluster(workers: int | None = None):
             cluster = LocalCluster(n_workers=workers or n_gpus, threads_per_worker=1, processes=True)
     else:
         cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True)
-    return Client(cluster)
+    client = Client(cluster)
+    from .cluster_worker import LocalClusterWorker  # Ctrl-C and SIGTERM left to this process: close_local_cluster
+
+    client.register_plugin(LocalClusterWorker(), name="warpfric-local-cluster-worker")
+    return client
+
+
+def close_local_cluster(client, interrupted: bool = False) -> None:
+    """Close ``client`` (from local_cluster), then its cluster. When it returns, every worker process
+    has ended (asked to stop, then killed after distributed's close timeout of about 4 s), so no
+    chunk is written after it: a chunk running at the close is written if it ends within that time,
+    else lost (a ``.tmp`` file that the next run removes). The client goes first, so that the
+    scheduler forgets its tasks before their workers go. ``interrupted``: distributed's log lines
+    in this process (the scheduler's and the nannies') are dropped while it closes: they tell of the
+    shutdown asked for (workers removed with results, a worker killed after the timeout)."""
+    cluster = client.cluster
+    with _distributed_logs_quiet() if interrupted else contextlib.nullcontext():
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+@contextlib.contextmanager
+def _distributed_logs_quiet():
+    """distributed's loggers in this process (those with a level of their own: dask's logging
+    configuration gives "distributed" and "distributed.client" one, each with its handler) at
+    CRITICAL while the block runs."""
+    import logging
+
+    loggers = [logging.getLogger(name) for name in list(logging.root.manager.loggerDict)
+               if name == "distributed" or name.startswith("distributed.")]
+    levels = {lg: lg.level for lg in loggers if lg.level != logging.NOTSET}
+    for lg in levels:
+        lg.setLevel(logging.CRITICAL)
+    try:
+        yield
+    finally:
+        for lg, level in levels.items():
+            lg.setLevel(level)
 
 
 CONNECT_TIMEOUT_S = 30.0  # the whole of connecting, the scheduler's handshake included
@@ -501,6 +540,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         client = own_client
     resume_command = f"warpfric run {sweep_file} -o {out} --resume" + (f" --device {device}" if device else "")
     store = previous
+    interrupted = False
     try:
         if store is None:
             try:
@@ -528,6 +568,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
 
         store.combine(out, command=command, on_combined=on_combined)
     except BaseException as err:  # noqa: BLE001 - cleaned up, then raised again
+        interrupted = isinstance(err, KeyboardInterrupt)
         kept = _keep_or_remove(store, previous is None)
         if not isinstance(err, (OutputWriteError, KeyboardInterrupt)):
             raise
@@ -540,10 +581,10 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         raise OutputWriteError(f"{err}; {what}", err.disk_full) from None
     finally:
         if own_client is not None:
-            cluster = own_client.cluster
-            own_client.close()
-            if cluster is not None:
-                cluster.close()
+            if new_local_cluster:
+                close_local_cluster(own_client, interrupted=interrupted)
+            else:
+                own_client.close()
     report = RunReport(chunks=reports, errors=[], output=out, wall_s=wall, file_failed_members=in_file[0])
     resumed = f", {report.file_failed_members} in the file" if previous is not None else ""
     _say(f"wrote {out} ({plural(sweep.n_members, 'member')}, {seconds_text(wall)} s this run, "
@@ -579,8 +620,11 @@ def _run_chunks(sweep, sweep_file, store, chunk, offset, device, client, quiet, 
         try:  # every worker loads its kernels once, outside the timed run (a task each: heartbeats go on)
             addresses = list(client.scheduler_info().get("workers", {}))
             # loose restriction: a worker that dies meanwhile must not leave its warm-up unrunnable
-            ready = client.gather([client.submit(prepare_worker, sweep.text, str(sweep_file), device, workers=[a],
-                                                 allow_other_workers=True, pure=False) for a in addresses])
+            warm_ups = [client.submit(prepare_worker, sweep.text, str(sweep_file), device, workers=[a],
+                                      allow_other_workers=True, pure=False) for a in addresses]
+            # each result in turn, not client.gather: a gather that Ctrl-C leaves pending ends, once the
+            # client closes, in asyncio's "Task exception was never retrieved" tracebacks (AllExit)
+            ready = [future.result() for future in warm_ups]
             devices = sorted({r["device"] for r in ready})
             _say(f"{plural(len(ready), 'worker')} ready in {time.perf_counter() - t_ready:.1f} s (kernels loaded on "
                  f"{', '.join(devices)})", quiet)
