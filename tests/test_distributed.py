@@ -1,7 +1,7 @@
 """Sweeps on a Dask cluster (warpfric.runner): a LocalCluster of 2 CPU worker processes gives the
 single-process result bit for bit; a worker killed mid-sweep costs only its chunk; a killed client
 leaves a run that --resume completes; an interrupted run (Ctrl-C, SIGTERM) ends in warpfric's lines
-only. CPU only (CI)."""
+only, with its finished chunks' warnings. CPU only (CI)."""
 
 import os
 import re
@@ -280,3 +280,17 @@ def test_an_interrupted_local_cluster_prints_warpfric_lines_only(interrupted_loc
     foreign = [line for line in run["err"] if not line.startswith(("warpfric", CUDA_BANNER))]
     assert foreign == [], "\n".join(run["err"])
     assert run["err"][-1].startswith("warpfric: interrupted; ")
+
+
+def test_an_interrupted_cluster_run_warns_of_its_finished_chunks(interrupted_local_cluster):
+    """The chunks' warnings came back with their reports and were said once the run ended, and the
+    members not ok once the file was combined: an interrupted run said neither. It says each once,
+    the members not ok counted in the chunks it kept (one a chunk here)."""
+    run = interrupted_local_cluster
+    kept = _kept(run["err"][-1])
+    warned = [line for line in run["err"] if line.startswith("warpfric: warning:")]
+    assert len(warned) == 2, "\n".join(run["err"])
+    assert warned[0].startswith("warpfric: warning: fronts event 'contact' with relaxation_gate='none'")
+    assert warned[1].startswith(f"warpfric: warning: members that did not end ok have NaN mu_s and fronts: {kept} of "
+                                f"{10 * kept} members in the {kept} finished chunks: {kept} max_steps_reached ")
+    assert warned[1].endswith(f"their numbers: `warpfric info {run['out']}` once --resume has finished the run")

@@ -21,6 +21,7 @@ import contextlib
 import dataclasses
 import os
 import re
+import shlex
 import sys
 import time
 import warnings
@@ -258,6 +259,8 @@ def run_on_client(jobs: list, client, quiet: bool = False) -> tuple[list, list]:
                  f"{report['wall_s']:.1f} s", quiet)
     except BaseException:  # Ctrl-C, SIGTERM: the queued chunks are cancelled, not left to run after the exit
         client.cancel([f for f in futures if not f.done()])
+        # the finished chunks' warnings, as a run to its end gives them (--resume does not run them again)
+        warn_once((w for report in reports for w in report["warnings"]), stacklevel=2)
         raise
     warn_once((w for report in reports for w in report["warnings"]), stacklevel=2)
     if write_error is not None:
@@ -555,7 +558,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         missing = [i for i in range(store.n_chunks) if not store.is_done(i)]
         if errors or missing:
             ranges = ", ".join(_members(offset + store.members(i).start, offset + store.members(i).stop) for i in missing)
-            kept = _keep_or_remove(store, previous is None)  # none finished: no parts folder to block the next run
+            kept = len(_keep_or_remove(store, previous is None))  # none finished: no parts folder to block the next run
             what = (f"the finished chunks are kept in {parts}: `{resume_command}` runs the rest" if kept else
                     "no chunk finished, nothing was kept")
             _say(f"{plural(len(missing), 'chunk')} missing ({ranges}; {len(errors)} raised, see above); {what}", False)
@@ -572,9 +575,11 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         kept = _keep_or_remove(store, previous is None)
         if not isinstance(err, (OutputWriteError, KeyboardInterrupt)):
             raise
+        if interrupted and kept:  # a run to its end warns of them once, from its file
+            _warn_members_not_ok_kept(store, kept, sweep.solver, out)
         first = "free some space, then " if getattr(err, "disk_full", False) else ""
-        what = (f"the {plural(kept, 'finished chunk')} {'is' if kept == 1 else 'are'} kept in {str(parts)!r}; "
-                f"{first}`{resume_command}` goes on from them"
+        what = (f"the {plural(len(kept), 'finished chunk')} {'is' if len(kept) == 1 else 'are'} kept in "
+                f"{str(parts)!r}; {first}`{resume_command}` goes on from them"
                 if kept else "nothing was kept")
         if isinstance(err, KeyboardInterrupt):
             raise RunInterrupted(f"interrupted; {what}") from None
@@ -592,17 +597,37 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
     return report
 
 
-def _keep_or_remove(store, created: bool) -> int:
-    """The number of finished chunks of ``store``; a parts folder created by this run that holds none
-    is removed (so that the next plain run is not told to --resume)."""
+def _keep_or_remove(store, created: bool) -> list:
+    """The indices of the finished chunks of ``store``; a parts folder created by this run that holds
+    none is removed (so that the next plain run is not told to --resume)."""
     import shutil
 
     if store is None:
-        return 0
-    done = store.done_count() if store.directory.exists() else 0
-    if done == 0 and created:
+        return []
+    done = [i for i in range(store.n_chunks) if store.is_done(i)] if store.directory.exists() else []
+    if not done and created:
         shutil.rmtree(store.directory, ignore_errors=True)
     return done
+
+
+def _warn_members_not_ok_kept(store, kept: list, solver, out: Path) -> None:
+    """The warning of members not ok of an interrupted run, for its finished chunks (``kept``, their
+    indices): a run to its end gives it once, from its combined file, which an interrupted run
+    lacks; the kept chunks are not run again by --resume, whose combined file warns of them again."""
+    import xarray as xr
+
+    from .simulate import members_not_ok_text
+
+    names = ("status", "disc_velocity", "lift_off")
+    datasets = []
+    for i in kept:
+        with xr.open_dataset(store.chunk_path(i), engine="netcdf4") as ds:
+            datasets.append(ds[[n for n in names if n in ds]].load())
+    text = members_not_ok_text(xr.concat(datasets, dim="member"), solver,
+                               where=f" in the {plural(len(kept), 'finished chunk')}")
+    if text is not None:
+        warnings.warn(f"{text}; their numbers: `warpfric info {shlex.quote(str(out))}` once --resume has finished "
+                      "the run", stacklevel=2)
 
 
 def _run_chunks(sweep, sweep_file, store, chunk, offset, device, client, quiet, command, cpu_workers):

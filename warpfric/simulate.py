@@ -209,11 +209,21 @@ def _warn_members_not_ok(ds: xr.Dataset, solver: Solver) -> None:
     with what each means and what to change (docs/model.md, "Statuses"); their mu_s and front outputs
     are NaN. The runs inside simulate (worker processes, the float32 fallback, the grid check) leave
     it to the outer call."""
+    text = members_not_ok_text(ds, solver)
+    if text is not None:
+        warnings.warn(f"{text}; {MEMBERS_NOT_OK_HINT}", stacklevel=3)
+
+
+def members_not_ok_text(ds: xr.Dataset, solver: Solver, where: str = "") -> str | None:
+    """The warning of members not ok without its hint on where to find their numbers
+    ("members that did not end ok ...: 3 of 200 members{where}: 3 max_steps_reached (what to change)"),
+    or None where every member of ``ds`` (a Dataset with status and disc_velocity along member, and
+    lift_off where the run has it) ended ok."""
     meanings = ds.status.attrs["flag_meanings"].split()
     codes, counts = np.unique(ds.status.values, return_counts=True)
     failed = {meanings[c]: int(k) for c, k in zip(codes, counts) if meanings[c] != "ok"}
     if not failed:
-        return
+        return None
     advice = {name: text.format(max_steps=solver.max_steps, stall_factor=solver.stall_factor)
               for name, text in _STATUS_ADVICE.items()}
     if "no_peak" in failed:
@@ -229,8 +239,8 @@ def _warn_members_not_ok(ds: xr.Dataset, solver: Solver) -> None:
                 advice[name] += f"; {lifted} of them: {_LIFTED_OFF_ADVICE}"
     parts = [f"{k} {name} ({advice[name]})" for name, k in failed.items()]
     n = ds.sizes["member"]
-    warnings.warn(f"{MEMBERS_NOT_OK}: {sum(failed.values())} of {n:,} member{'' if n == 1 else 's'}: {'; '.join(parts)}; "
-                  f"{MEMBERS_NOT_OK_HINT}", stacklevel=3)
+    return (f"{MEMBERS_NOT_OK}: {sum(failed.values())} of {n:,} member{'' if n == 1 else 's'}{where}: "
+            f"{'; '.join(parts)}")
 
 
 def _warn_record_past_end(ds: xr.Dataset, record: Record, member_offset: int = 0) -> None:
