@@ -1,7 +1,7 @@
 """Sweeps on a Dask cluster (warpfric.runner): a LocalCluster of 2 CPU worker processes gives the
 single-process result bit for bit; a worker killed mid-sweep costs only its chunk; a killed client
 leaves a run that --resume completes; an interrupted run (Ctrl-C, SIGTERM) ends in warpfric's lines
-only, with its finished chunks' warnings. CPU only (CI)."""
+only, with its finished chunks' warnings and a true count of the chunks kept. CPU only (CI)."""
 
 import os
 import re
@@ -248,6 +248,16 @@ def _interrupt(argv, sig, cwd):
     return code, lines, pids
 
 
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's process, given that number since
+        return True
+    return True
+
+
 def _kept(line: str) -> int:
     """N of the interrupt line's 'the N finished chunks are kept'."""
     found = re.search(r"the (\d+) finished chunks? (?:is|are) kept", line)
@@ -294,3 +304,36 @@ def test_an_interrupted_cluster_run_warns_of_its_finished_chunks(interrupted_loc
     assert warned[1].startswith(f"warpfric: warning: members that did not end ok have NaN mu_s and fronts: {kept} of "
                                 f"{10 * kept} members in the {kept} finished chunks: {kept} max_steps_reached ")
     assert warned[1].endswith(f"their numbers: `warpfric info {run['out']}` once --resume has finished the run")
+
+
+def test_an_interrupted_local_cluster_keeps_the_chunks_it_counts(interrupted_local_cluster):
+    """The chunks running at the interrupt were written while the cluster closed, after the kept
+    chunks were counted: the line said 2 fewer than the folder held. The cluster is stopped first,
+    then the chunks are counted, and no worker outlives the command."""
+    run = interrupted_local_cluster
+    assert "; the local cluster is stopped, so no chunk is written after this; " in run["err"][-1]
+    assert _kept(run["err"][-1]) == len(run["chunks"]) >= 1
+    assert run["pids"] and not any(_alive(pid) for pid in run["pids"])
+
+
+def test_an_interrupted_scheduler_run_says_that_running_chunks_may_still_be_written(client, tmp_path):
+    """--scheduler: the workers are not the command's; the chunks they run at the interrupt are
+    written after it exits, which the line said nothing of. It says so, and those chunks are
+    complete and of this run: --resume takes them as done."""
+    from warpfric.io import ChunkStore
+
+    sweep = tmp_path / "slow.toml"
+    sweep.write_text(INTERRUPTED_SWEEP)
+    out = tmp_path / "s.nc"
+    code, err, _ = _interrupt([sweep, "-o", out, "--scheduler", client.scheduler.address], signal.SIGINT, tmp_path)
+    assert code == 130, err
+    assert [line for line in err if not line.startswith(("warpfric", CUDA_BANNER))] == [], "\n".join(err)
+    assert ", and chunks that were running on the cluster's workers may still be written there; " in err[-1]
+    kept = _kept(err[-1])
+    deadline = time.time() + 60  # the workers end the chunks they were running
+    while time.time() < deadline and any(client.run(lambda dask_worker: len(dask_worker.state.executing)).values()):
+        time.sleep(0.1)
+    written = sorted(parts_dir(out).glob("chunk-*.nc"))
+    assert len(written) >= kept
+    assert ChunkStore.load(parts_dir(out)).done_count() == len(written)  # complete, of this run: --resume skips them
+    assert not list(parts_dir(out).glob("*.tmp"))

@@ -543,7 +543,6 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         client = own_client
     resume_command = f"warpfric run {sweep_file} -o {out} --resume" + (f" --device {device}" if device else "")
     store = previous
-    interrupted = False
     try:
         if store is None:
             try:
@@ -572,22 +571,39 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         store.combine(out, command=command, on_combined=on_combined)
     except BaseException as err:  # noqa: BLE001 - cleaned up, then raised again
         interrupted = isinstance(err, KeyboardInterrupt)
+        # the command's own local cluster is stopped before the finished chunks are counted: the chunks
+        # its workers are running are written meanwhile (or lost), none after the count. The workers of
+        # another cluster go on with theirs, which may be written after the exit (said below)
+        cluster_stopped = False
+        if own_client is not None:
+            closing, own_client = own_client, None
+            try:
+                if new_local_cluster:
+                    close_local_cluster(closing, interrupted=interrupted)
+                    cluster_stopped = True
+                else:
+                    closing.close()
+            except Exception:  # noqa: BLE001 - a cluster that did not stop may still write chunks: said below
+                pass
+        late_writes = interrupted and client is not None and not cluster_stopped
         kept = _keep_or_remove(store, previous is None)
         if not isinstance(err, (OutputWriteError, KeyboardInterrupt)):
             raise
         if interrupted and kept:  # a run to its end warns of them once, from its file
             _warn_members_not_ok_kept(store, kept, sweep.solver, out)
         first = "free some space, then " if getattr(err, "disk_full", False) else ""
+        late = ", and chunks that were running on the cluster's workers may still be written there" if late_writes else ""
         what = (f"the {plural(len(kept), 'finished chunk')} {'is' if len(kept) == 1 else 'are'} kept in "
-                f"{str(parts)!r}; {first}`{resume_command}` goes on from them"
+                f"{str(parts)!r}{late}; {first}`{resume_command}` goes on from them"
                 if kept else "nothing was kept")
-        if isinstance(err, KeyboardInterrupt):
-            raise RunInterrupted(f"interrupted; {what}") from None
+        if interrupted:
+            stopped = "the local cluster is stopped, so no chunk is written after this; " if cluster_stopped else ""
+            raise RunInterrupted(f"interrupted; {stopped}{what}") from None
         raise OutputWriteError(f"{err}; {what}", err.disk_full) from None
     finally:
         if own_client is not None:
             if new_local_cluster:
-                close_local_cluster(own_client, interrupted=interrupted)
+                close_local_cluster(own_client)
             else:
                 own_client.close()
     report = RunReport(chunks=reports, errors=[], output=out, wall_s=wall, file_failed_members=in_file[0])
