@@ -113,8 +113,12 @@ def test_run_record_alone_records_the_default_scenes_detachment(tmp_path, capsys
         "space-time map and mu(t))"]
 
 
-def test_record_detachment_spans_every_chosen_members_detachment():
-    ds = run({"eccentricity": [0.0, 0.3]}, nodes=21, rtol=1e-5, fronts=wf.Fronts())
+def test_record_detachment_spans_every_chosen_members_detachment(tmp_path):
+    members = {"eccentricity": [0.0, 0.3, 0.0], "stop_time": [np.inf, np.inf, 20.03]}  # the last: no_peak
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "members that did not end ok")
+        ds = run(members, nodes=21, rtol=1e-5, fronts=wf.Fronts())
+    assert list(ds.status.values != 0) == [False, False, True]
     record = wf.Record.detachment(ds, members=(0, 1), count=11)
     starts = [float(ds.front_start_time[m]) for m in (0, 1)]
     ends = [float(ds.final_time[m]) for m in (0, 1)]
@@ -122,8 +126,20 @@ def test_record_detachment_spans_every_chosen_members_detachment():
     first = [min(s, p) - 0.5 * (e - min(s, p)) for s, p, e in zip(starts, peaks, ends)]
     assert record.members == (0, 1) and len(record.times) == 11
     assert record.times[0] == pytest.approx(min(first), abs=1e-12) and record.times[-1] == max(ends)
-    with pytest.raises(ValueError, match=r"members = \(2,\) is invalid; valid: positions 0..1"):
-        wf.Record.detachment(ds, members=(2,))
+    # a member without a detachment (its disc stopped early) does not widen the window to t = 0
+    assert wf.Record.detachment(ds, count=11).times == record.times
+    assert wf.Record.detachment(ds, count=11).members == (0, 1, 2)
+    # alone, it is recorded from the disc's start to its end
+    alone = wf.Record.detachment(ds, members=(2,), count=11)
+    assert alone.times[0] == wf.Parameters().rest_until and alone.times[-1] == float(ds.final_time[2])
+    # members are numbers: on a selection of the run, and with the run's member offset
+    assert wf.Record.detachment(ds.sel(member=[1]), count=11).members == (1,)
+    shifted = ds.assign_coords(member=ds.member + 7)  # the run of member_offset=7
+    assert wf.Record.detachment(shifted, members=(8,), member_offset=7, count=11).members == (1,)
+    with pytest.raises(ValueError, match=r"members = \(3,\) is invalid; valid: member numbers of ds \(0, 1, 2\)"):
+        wf.Record.detachment(ds, members=(3,))
+    with pytest.raises(ValueError, match="member 8 lies before member_offset = 9"):
+        wf.Record.detachment(shifted, members=(8,), member_offset=9)
 
 
 def test_run_record_alone_without_a_detachment_records_the_whole_run(tmp_path, capsys):
@@ -132,9 +148,9 @@ def test_run_record_alone_without_a_detachment_records_the_whole_run(tmp_path, c
                                "--end-time", "20.05")
     assert code == 1  # no_peak: the run ended before mu peaked
     t = open_ensemble(out).time.values
-    assert (t[0], t[-1], t.size) == (0.0, 20.05, 1001)
-    assert "recording the fields at 1001 times from 0 to 20.05 s, the whole run: a first run found no detachment " \
-           "(status no_peak) (a second run records; its outputs are the first's)" in lines
+    assert (t[0], t[-1], t.size) == (20.0, 20.05, 1001)  # from the disc's start (rest_until)
+    assert "recording the fields at 1001 times from 20 to 20.05 s, the disc's start to the end: a first run found " \
+           "no detachment (status no_peak) (a second run records; its outputs are the first's)" in lines
 
 
 def test_run_record_with_a_window(tmp_path, capsys):
@@ -149,7 +165,9 @@ def test_run_record_with_a_window(tmp_path, capsys):
     (["--record"], ["--record", "-o OUT.nc"]),  # nothing to write into
     (["-o", "x.nc", "--record", "20"], ["--record 20", "START STOP [COUNT]"]),
     (["-o", "x.nc", "--record", "20", "21", "many"], ["--record 20 21 many", "COUNT an integer"]),
-    (["-o", "x.nc", "--record", "21", "20"], ["--record 21 20", "start 21.0 s is after stop 20.0 s"]),
+    (["-o", "x.nc", "--record", "21", "20"], ["--record 21 20", "0 <= START < STOP"]),
+    (["-o", "x.nc", "--record", "20", "20"], ["--record 20 20", "0 <= START < STOP"]),
+    (["--record", "one.toml", "-o", "x.nc"], ["'one.toml' is a sweep file, not a time", "[record] table"]),
     (["-o", "x.nc", "--record", "20", "21", "1"], ["--record 20 21 1", "count", "[2, 1,000,000]"]),
 ])
 def test_bad_record_options_are_one_line(tmp_path, capsys, monkeypatch, args, words):
@@ -162,7 +180,51 @@ def test_bad_record_options_are_one_line(tmp_path, capsys, monkeypatch, args, wo
 
 def test_record_with_a_sweep_file_points_to_its_record_table(tmp_path, capsys):
     sweep = tmp_path / "s.toml"
-    sweep.write_text("fronts = false\n[grid]\neccentricity = [0.0, 0.1]\n")
+    sweep.write_text("fronts = false\n[solver]\nnodes = 11\n[grid]\neccentricity = [0.0]\n")
     code, _, err = run_cli(capsys, "run", str(sweep), "--record")
     assert code == 2
     one_line_error(err, "--record", "[record] table", str(sweep))
+    # plot of a one-member sweep's file without recorded fields points to the same table
+    code, _, err = run_cli(capsys, "run", str(sweep), "--quiet", "--device", DEVICE)
+    assert code == 0, err
+    code, lines, _ = run_cli(capsys, "plot", tmp_path / "s.nc")
+    assert lines[-1] == ("(one member without recorded fields: a [record] table in its sweep file records them "
+                         "(docs/sweeps.md), and plot then draws its space-time map and mu(t))")
+
+
+def test_run_record_alone_with_a_member_offset(tmp_path, capsys):
+    out = tmp_path / "five.nc"
+    code, _, err = run_cli(capsys, "run", "--device", DEVICE, "--nodes", "21", "--quiet", "-o", out, "--record",
+                           "--member-offset", "5")
+    assert code == 0, err
+    ds = open_ensemble(out)
+    assert list(ds.recorded_member.values) == [5] and list(ds.member.values) == [5]
+    assert abs(float(ds.friction_coefficient_history[0, -1]) / float(ds.mu_final[0]) - 1) < 1e-12
+
+
+def test_files_of_an_earlier_version_get_mu_t_on_reading(recorded, tmp_path):
+    """A recorded file written before friction_coefficient_history: open_ensemble computes it (the
+    same values), so it combines with a new file and a selection of it plots."""
+    from warpfric.io import open_ensembles, write_ensemble
+
+    old = write_ensemble(recorded.drop_vars("friction_coefficient_history"), tmp_path / "old.nc")
+    back = open_ensemble(old)
+    np.testing.assert_array_equal(back.friction_coefficient_history.values,
+                                  recorded.friction_coefficient_history.values)
+    def later_run(record):  # members 2 and 3: numbers of their own beside the first run's
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", "Record: recording times after a member's end")
+            return wf.simulate({"disc_velocity": [1e-4, -1e-4]}, solver=wf.Solver(nodes=41, rtol=1e-6),
+                               fronts=wf.Fronts(), device=DEVICE, progress=False, member_offset=2, record=record)
+
+    new = write_ensemble(later_run(wf.Record(members=(0,), times=tuple(recorded.time.values[1:-1]))), tmp_path / "new.nc")
+    for files in ((old, new), (new, old)):  # the recording times differ: refused in one line, either order
+        with pytest.raises(ValueError, match="recorded their fields at different times"):
+            open_ensembles(list(files))
+    same_times = write_ensemble(later_run(wf.Record(members=(1,), times=tuple(recorded.time.values))),
+                                tmp_path / "same.nc")
+    for files in ((old, same_times), (same_times, old)):
+        both = open_ensembles(list(files))
+        assert both.friction_coefficient_history.shape == (3, recorded.time.size)
+    names = {p.name for p in plots.quick_look(back.sel(member=[1]), tmp_path / "sel")}
+    assert names >= {"friction_member1.png", "space_time_member1.png"} and "friction_member0.png" not in names

@@ -229,10 +229,11 @@ def _run_default(args) -> int:
             if args.record is not None and record is None:  # --record alone: find the detachment first
                 found = simulate(fronts=None if fronts is None else dataclasses.replace(fronts, grid_check=False),
                                  **run)
-                record = Record.detachment(found)
+                record = Record.detachment(found, member_offset=offset)
                 marks = [found[name].values[0] for name in ("front_start_time", "mu_s_time") if name in found]
                 what = ("the detachment found by a first run" if np.isfinite(marks).any() else
-                        f"the whole run: a first run found no detachment (status {_status_name(found, found.status[0])})")
+                        "the disc's start to the end: a first run found no detachment (status "
+                        f"{_status_name(found, found.status[0])})")
                 print(f"recording the fields at {len(record.times)} times from {record.times[0]:.6g} to "
                       f"{record.times[-1]:.6g} s, {what} (a second run records; its outputs are the first's)")
             ds = simulate(fronts=fronts, record=record, **run)
@@ -251,8 +252,12 @@ def _record_option(values: list | None) -> Record | None:
     detachment's window, found by a first run)."""
     if not values:
         return None
-    usage = ("--record takes no values (the detachment) or START STOP [COUNT]: times in s, START <= STOP, COUNT an "
+    usage = ("--record takes no values (the detachment) or START STOP [COUNT]: times in s, START < STOP, COUNT an "
              f"integer in [2, {MAX_RECORD_TIMES:,}] (default {RECORD_COUNT})")
+    sweep = next((v for v in values if v.endswith(".toml")), None)
+    if sweep is not None:  # `warpfric run --record SWEEP.toml`: the file taken as a value
+        raise UsageError(f"--record {' '.join(values)}: {sweep!r} is a sweep file, not a time: --record is for the "
+                         "default scene; a sweep file records with its own [record] table (docs/sweeps.md)")
     if len(values) not in (2, 3):
         raise UsageError(f"--record {' '.join(values)}: {usage}")
     try:
@@ -260,8 +265,8 @@ def _record_option(values: list | None) -> Record | None:
         count = int(values[2]) if len(values) == 3 else RECORD_COUNT
     except ValueError:
         raise UsageError(f"--record {' '.join(values)}: {usage}") from None
-    if not (np.isfinite(start) and np.isfinite(stop) and 0.0 <= start):
-        raise UsageError(f"--record {' '.join(values)}: START and STOP must be finite times >= 0 s")
+    if not (np.isfinite(start) and np.isfinite(stop) and 0.0 <= start < stop):
+        raise UsageError(f"--record {' '.join(values)}: START and STOP must be finite times, 0 <= START < STOP (s)")
     try:
         return Record.window(start, stop, count)
     except ValueError as err:
@@ -450,8 +455,9 @@ def _plot(args) -> int:
         for path in quick_look(ds, outdir):
             print(f"wrote {path}")
         if ds.sizes["member"] == 1 and "velocity_history" not in ds:
-            print("(one member without recorded fields: warpfric run -o OUT.nc --record records them, and plot then "
-                  "draws its space-time map and mu(t))")
+            how = ("a [record] table in its sweep file records them (docs/sweeps.md)" if ds.attrs.get("sweep_file")
+                   else "warpfric run -o OUT.nc --record records them")
+            print(f"(one member without recorded fields: {how}, and plot then draws its space-time map and mu(t))")
     except OSError as err:
         raise UsageError(f"figure folder {str(outdir)!r}: cannot write in it ({os_error_reason(err)}); give another "
                          "with --outdir DIR") from None

@@ -705,8 +705,12 @@ def _read(path) -> xr.Dataset:
         if _has_group(path, RECORDED_GROUP):
             with xr.open_dataset(path, engine="netcdf4", group=RECORDED_GROUP) as rec:
                 recorded = rec.load()
-        ds = _from_file_layout(ds, recorded)
-        return collapse_constants(ds, set(ds.attrs.get("varying_parameters", "").split()))
+        ds = collapse_constants(_from_file_layout(ds, recorded), set(ds.attrs.get("varying_parameters", "").split()))
+        if "friction_stress_history" in ds and "friction_coefficient_history" not in ds:
+            from .simulate import friction_coefficient_history  # a file of an earlier version: the same as a new one
+
+            ds["friction_coefficient_history"] = friction_coefficient_history(ds)
+        return ds
     except (OSError, ValueError, RuntimeError) as err:
         reason = " ".join(str(err).split())
         raise ValueError(f"{path}: not a readable netCDF file ({reason})") from None

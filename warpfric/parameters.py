@@ -593,25 +593,48 @@ class Record:
         return Record(members=tuple(members), times=tuple(np.linspace(float(start), float(stop), int(count))))
 
     @staticmethod
-    def detachment(ds, members=(0,), count: int = RECORD_COUNT) -> "Record":
-        """``count`` evenly spaced times over the detachment of ``members`` (0-based positions along
-        ``ds.member``) in ``ds``, the outputs of a run without recording: for each member, from the
-        earlier of its first front's start and its mu_s peak, less half the time from there to its
-        end (final_time), to that end (the whole run where it has neither); the window spans every
-        member's. Run the same members again with it: recording changes no output."""
+    def detachment(ds, members=None, count: int = RECORD_COUNT, member_offset: int = 0) -> "Record":
+        """``count`` evenly spaced times over the detachment of ``members`` in ``ds``, the outputs of a
+        run without recording, for running the same members again (recording changes no output).
+
+        members:       member numbers (``ds.member``, as simulate numbers them) to record; default
+                       every member of ``ds``.
+        member_offset: that of the run to repeat (simulate's ``member_offset``): a member's index
+                       there (``Record.members``) is its number less the offset.
+
+        The window: for each member with a detachment (its first front's start or its mu_s peak
+        before its end), from the earlier of the two, less half the time from there to its end
+        (final_time), to that end; the window spans those members'. Members without one (not ok, or
+        ended before it) are recorded over that window too; where none has one, from the disc's start
+        (rest_until) to the latest end."""
+        numbers_there = np.asarray(ds.member.values).reshape(-1)
+        numbers = numbers_there if members is None else np.asarray(members).reshape(-1)
+        if isinstance(member_offset, bool) or not isinstance(member_offset, (int, np.integer)) or member_offset < 0:
+            raise ValueError(f"Record.detachment: member_offset = {member_offset!r} is invalid; valid: an integer >= 0, "
+                             "that of the run to repeat")
+        shown = ", ".join(map(str, numbers_there[:8])) + (", ..." if numbers_there.size > 8 else "")
+        if numbers.size == 0 or numbers.dtype.kind not in "iu" or not np.isin(numbers, numbers_there).all():
+            raise ValueError(f"Record.detachment: members = {members!r} is invalid; valid: member numbers of ds "
+                             f"({shown})")
+        if (numbers < member_offset).any():
+            raise ValueError(f"Record.detachment: member {int(numbers.min())} lies before member_offset = "
+                             f"{member_offset}; valid: the offset of the run to repeat, at most its first member's number")
+        positions = [int(np.flatnonzero(numbers_there == m)[0]) for m in numbers]
         n = ds.sizes["member"]
-        positions = np.asarray(members).reshape(-1)
-        if positions.size == 0 or positions.dtype.kind not in "iu" or (positions < 0).any() or (positions >= n).any():
-            raise ValueError(f"Record.detachment: members = {members!r} is invalid; valid: positions 0..{n - 1} "
-                             "along ds.member")
+        rest_until = np.broadcast_to(np.asarray(ds["rest_until"].values, dtype=float), (n,)) if "rest_until" in ds \
+            else np.zeros(n)
         starts, ends = [], []
         for m in positions:
             end = float(ds.final_time.values[m])
             marks = [float(ds[name].values[m]) for name in ("front_start_time", "mu_s_time") if name in ds]
             marks = [t for t in marks if np.isfinite(t) and t < end]
-            starts.append(max(0.0, min(marks) - 0.5 * (end - min(marks))) if marks else 0.0)
+            if marks:
+                starts.append(max(0.0, min(marks) - 0.5 * (end - min(marks))))
             ends.append(end)
-        return Record.window(min(starts), max(ends), count, members=tuple(int(m) for m in positions))
+        end = max(ends)
+        if not starts:  # no detachment: from the disc's start (or 0 where a run ended before it)
+            starts = [t if t < end else 0.0 for t in rest_until[positions]]
+        return Record.window(min(starts), end, count, members=tuple(int(m) - member_offset for m in numbers))
 
     def __post_init__(self):
         members = np.asarray(self.members).reshape(-1)

@@ -516,7 +516,8 @@ def friction_history_figure(ds, recorded_index: int):
     for name, when, marker, colour, text in marks:
         value, at = float(_per_member(ds, name)[position]), float(_per_member(ds, when)[position])
         if np.isfinite(value) and window[0] <= at <= window[1]:
-            ax.plot([at], [value], marker, color=colour, mfc="none", ms=8, ls="none", label=text.format(value))
+            ax.plot([at], [value], marker, color=colour, mfc="none", ms=8, ls="none", label=text.format(value),
+                    clip_on=False)  # the end's marker sits on the window's edge
         elif name == "mu_s":
             why = ("not given (status " + _status_name(ds, status) + ")" if not np.isfinite(value) else
                    f"{value:.6f} at t = {at:.6g} s, outside the recorded times")

@@ -504,10 +504,12 @@ def friction_coefficient_history(ds: xr.Dataset) -> xr.DataArray:
     fields. NaN where the normal force is zero (mu undefined; the engine counts 0 there) and where a
     time lies after the member's end. Between accepted steps the fields are interpolated linearly, so
     there mu(t) is the ratio of interpolated integrals, and its maximum over the recording times lies
-    below mu_s by the sampling (the engine refines its peak between steps)."""
-    positions = [int(np.flatnonzero(ds.member.values == m)[0]) for m in ds.recorded_member.values]
+    below mu_s by the sampling (the engine refines its peak between steps). NaN too for a recorded
+    member that is not among ``ds.member`` (a selection), whose disc direction is unknown."""
     disc_velocity = np.broadcast_to(np.asarray(ds["disc_velocity"].values, dtype=float), (ds.sizes["member"],))
-    sign = np.where(disc_velocity[positions] < 0.0, -1.0, 1.0)
+    # a recorded member that a selection of members left out: its disc's direction is not at hand
+    sign = np.array([(-1.0 if disc_velocity[ds.member.values == m][0] < 0.0 else 1.0)
+                     if (ds.member.values == m).any() else np.nan for m in ds.recorded_member.values])
     # the grid is uniform, so dx cancels in the ratio: trapezoid sums in node spacings, the same
     # whether x is in m or in units of L (a split run's chunks may differ there from the ensemble)
     friction, normal = (np.trapezoid(np.asarray(ds[name].values, dtype=float), axis=-1)
