@@ -221,10 +221,11 @@ chunk = 10
 CUDA_BANNER = "Warp CUDA warning"  # Warp's own line on a host without a GPU, in a run to its end too
 
 
-def _interrupt(argv, sig, cwd):
+def _interrupt(argv, sig, cwd, again_after: float | None = None):
     """`warpfric run ARGV` in a session of its own, sent ``sig`` (to its whole process group, its local
     cluster's workers too, as a terminal's Ctrl-C or a batch system's SIGTERM) once its first chunk is
-    reported done: (exit code, stderr lines, worker pids named in the progress lines)."""
+    reported done, and once more ``again_after`` s later if it still runs (an impatient user): (exit
+    code, stderr lines, worker pids named in the progress lines)."""
     proc = subprocess.Popen([sys.executable, "-m", "warpfric", "run", *map(str, argv)], cwd=cwd, text=True,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
                             env={**os.environ, "CUDA_VISIBLE_DEVICES": ""})
@@ -241,6 +242,10 @@ def _interrupt(argv, sig, cwd):
     started = first_chunk.wait(timeout=180)
     if proc.poll() is None:
         os.killpg(proc.pid, sig)
+    if again_after is not None:
+        time.sleep(again_after)
+        if proc.poll() is None:
+            os.kill(proc.pid, sig)  # the command only: its workers ignore it anyway
     code = proc.wait(timeout=120)
     reader.join(timeout=30)
     assert started, lines
@@ -314,6 +319,17 @@ def test_an_interrupted_local_cluster_keeps_the_chunks_it_counts(interrupted_loc
     assert "; the local cluster is stopped, so no chunk is written after this; " in run["err"][-1]
     assert _kept(run["err"][-1]) == len(run["chunks"]) >= 1
     assert run["pids"] and not any(_alive(pid) for pid in run["pids"])
+
+
+def test_a_second_ctrl_c_while_the_cluster_closes_keeps_the_interrupt_line(tmp_path):
+    """The local cluster takes up to ~4 s to close; a second Ctrl-C then ended the run in a bare
+    'warpfric: interrupted', without the kept chunks and the resume command. The line is said."""
+    sweep = tmp_path / "slow.toml"
+    sweep.write_text(INTERRUPTED_SWEEP)
+    code, err, _ = _interrupt([sweep, "-o", tmp_path / "i.nc", "--local-cluster", "--workers", 2], signal.SIGINT,
+                              tmp_path, again_after=0.3)
+    assert code == 130, err
+    assert err[-1].startswith("warpfric: interrupted; ") and "--resume" in err[-1], "\n".join(err)
 
 
 def test_an_interrupted_scheduler_run_says_that_running_chunks_may_still_be_written(client, tmp_path):
