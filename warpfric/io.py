@@ -825,15 +825,20 @@ class ChunkStore:
             return False
         sl = self.members(index)
         run_id = self.manifest.get("run_id")
-        try:
-            with xr.open_dataset(path, engine="netcdf4") as ds:
-                numbers = ds[MEMBER_NUMBER] if MEMBER_NUMBER in ds else ds.member
+        try:  # netCDF4 directly: xarray's open takes ~2.5x as long, and info, --resume and an interrupt
+            # ask every chunk (400 chunks: 4.0 -> 1.6 s on this project's CPU)
+            import netCDF4
+
+            with netCDF4.Dataset(path) as nc:
+                if int(getattr(nc, COMPLETE_ATTR, 0)) != 1:
+                    return False
+                labelled = MEMBER_NUMBER in nc.variables
+                numbers = np.asarray(nc[MEMBER_NUMBER if labelled else "member"][:])
                 # a chunk of this run (its id in the member labels), not one that a cluster's worker of
                 # an earlier, interrupted run wrote after that run had ended
-                own = run_id is None or MEMBER_NUMBER not in ds or np.array_equal(
-                    ds.member.values.astype(str), member_labels(run_id, numbers.values))
-                return own and int(ds.attrs.get(COMPLETE_ATTR, 0)) == 1 and np.array_equal(
-                    numbers.values, np.arange(sl.start, sl.stop) + self.member_offset)
+                own = run_id is None or not labelled or np.array_equal(
+                    np.asarray(nc["member"][:]).astype(str), member_labels(run_id, numbers))
+                return own and np.array_equal(numbers, np.arange(sl.start, sl.stop) + self.member_offset)
         except Exception:  # noqa: BLE001 - a damaged chunk is simply redone
             return False
 
