@@ -1,22 +1,27 @@
 """Studies: the paper's Figures 3-14, the open model choices, and ensembles beyond the paper.
 
-    python studies/figures.py NAME [--quick] [--device cpu|cuda:0] [--outdir studies/figures]
+    python studies/figures.py NAME [--quick] [--device cpu|cuda:0] [--outdir DIR]
                               [--relaxation-gate stress|none|velocity] [--front-event contact|strength|velocity]
-    python studies/figures.py all --quick
+    python studies/figures.py all --quick --device cpu --outdir /tmp/figures
 
 NAME: fig3 fig4 fig5 fig10 fig11 fig12 choices map uncertainty (Figs. 6, 7 come with fig4, Figs.
 8, 9 with fig5, Figs. 13, 14 with fig10). Each writes NAME[_quick].nc (the ensemble, warpfric.io format),
 NAME[_quick].png and NAME[_quick].json (the numbers studies/README.md quotes, and that
-tests/test_studies.py checks). --quick: sizes for a 2-core CPU (seconds to a minute each); the full
-size is for the GPU. --relaxation-gate: the friction law's yield gate (wf.Model(relaxation_gate=...),
-SPEC section 5; default "stress", the GRL 2012 law); "none" (SPEC v1, the law of the earlier results)
-writes NAME_nogate[_quick].*, "velocity" NAME_velgate[_quick].*.
+tests/test_studies.py checks) into --outdir (default ./warpfric_studies; the committed outputs that
+studies/README.md quotes are in studies/figures: --outdir studies/figures remakes them). --quick:
+sizes for a 2-core CPU (seconds to a minute each); the full size is for the GPU. --relaxation-gate:
+the friction law's yield gate (wf.Model(relaxation_gate=...), SPEC section 5; default "stress", the
+GRL 2012 law); "none" (SPEC v1) writes NAME_nogate[_quick].*, "velocity" NAME_velgate[_quick].*;
+--front-event other than the law's default adds _velocityfront, _strengthfront or _contactfront.
+Figure by study: fig3 Fig. 3; fig4 Figs. 4, 6, 7; fig5 Figs. 5, 8, 9; fig10 Figs. 10, 13, 14; fig11
+Fig. 11; fig12 Fig. 12. Units: SI in the .json and .nc files (positions m, speeds m/s, times s).
 
 End of a run: every study uses the engine's automatic end (wf.Parameters(end_time=None), docs/model.md
 "End of a run": a member stops once mu has passed its peak by 1 % and the front is over, at 80 s at
 the latest), so every member that ends ok has reached its mu_s peak by construction, at every disc
 velocity. Only fig3 and fig11 keep an explicit end_time, because they record the pad velocity on a
-fixed time grid (Record.window) that must lie inside every recorded run. peak_check() counts the
+fixed time grid (Record.window) that must lie inside every recorded run; fig3's grid spans the
+contact front (20.126-20.136 s at e = 0), the mu_s peak and the velocity rule's event. peak_check() counts the
 members per status (no_peak, stalled, ... ) and the ok members whose mu_s_time is not before their
 final_time (0 by construction) in claims["peak_check"].
 
@@ -129,8 +134,19 @@ def left_edge_front_speed(ds) -> np.ndarray:
 
 
 # ------------------------------------------------------------------------------------------------
+def _space_time_png(ds, path) -> None:
+    """warpfric's space-time map of the first recorded member, its x axis naming the pad's edges."""
+    from warpfric.plots import space_time_figure
+
+    fig = space_time_figure(ds, 0)
+    fig.axes[0].set_xlabel("x (mm): leading edge -100, trailing edge +100 (disc towards +x)")
+    fig.savefig(path, dpi=130)
+    _plt().close(fig)
+
+
 def fig3(quick, device, model=None):
-    record = wf.Record.window(20.2, 20.36, 161 if quick else 321, members=(0,))
+    # 1 ms apart (quick; 0.5 ms full size) from before the contact front to past the velocity rule's event
+    record = wf.Record.window(20.05, 20.36, 311 if quick else 621, members=(0,))
     # explicit end: the recorded window must lie inside the run (the automatic end may come before 20.36 s)
     ds = simulate(None, quick, device, scene=wf.Parameters(end_time=20.6), record=record, model=model)
     m = ds.isel(member=0)
@@ -140,9 +156,7 @@ def fig3(quick, device, model=None):
                                         "v_second", "second_nucleation_position", "second_front_start_time",
                                         "collision_position", "collision_time")}
     claims["nucleation_edge"] = int(m.nucleation_edge)
-    from warpfric.plots import space_time_map
-
-    return ds, claims, lambda path: space_time_map(ds, 0, path)
+    return ds, claims, lambda path: _space_time_png(ds, path)
 
 
 def fig4(quick, device, model=None):
@@ -167,9 +181,11 @@ def fig4(quick, device, model=None):
         ax[0].set_title("Fig. 4: F = 1000 N, v = 0.1 mm/s")
         ax[1].plot(ds.v_left, mu, "o", ms=3)
         ax[1].set_xlabel("left precursor speed (m/s)")
+        ax[1].set_ylabel("mu_s")
         ax[1].set_title("Fig. 6")
         ax[2].plot(ds.left_front_length * 1e3, mu, "o", ms=3)
         ax[2].set_xlabel("left precursor length (mm)")
+        ax[2].set_ylabel("mu_s")
         ax[2].set_title("Fig. 7")
         fig.tight_layout()
         fig.savefig(path, dpi=110)
@@ -288,9 +304,7 @@ def fig11(quick, device, model=None):
                   max_velocity_after_5ms=float(np.abs(v[t > stop + 0.005]).max()),
                   node_quiet_delay_min=float(np.nanmin(stop_times)), node_quiet_delay_max=float(np.nanmax(stop_times)),
                   status=[int(s) for s in ds.status.values])
-    from warpfric.plots import space_time_map
-
-    return ds, claims, lambda path: space_time_map(ds, 0, path)
+    return ds, claims, lambda path: _space_time_png(ds, path)
 
 
 def fig12(quick, device, model=None):
@@ -406,17 +420,27 @@ def ensemble_map(quick, device, model=None):
                   mu_s_range_over_eccentricity=float(np.nanmax(mu.max(axis=0) - mu.min(axis=0))),
                   mu_s_range_over_force=float(np.nanmax(mu.max(axis=1) - mu.min(axis=1))))
 
+    def edges(values, log=False):
+        """Cell edges around sorted values: midpoints (geometric on a log axis), ends mirrored."""
+        c = np.log(values) if log else np.asarray(values, float)
+        mid = 0.5 * (c[1:] + c[:-1])
+        out = np.concatenate([[2 * c[0] - mid[0]], mid, [2 * c[-1] - mid[-1]]])
+        return np.exp(out) if log else out
+
     def draw(path):
         plt = _plt()
         k = v.size // 2
         fig, ax = plt.subplots(1, 2, figsize=(11, 4))
-        im = ax[0].pcolormesh(F, e, mu[:, :, k], shading="nearest")
+        # cells centred on the forces on the log axis (shading="nearest" centres them linearly: the
+        # 100 N column was a sliver)
+        F_edges, e_edges = edges(F, log=True), edges(e)
+        im = ax[0].pcolormesh(F_edges, e_edges, mu[:, :, k], shading="flat")
         ax[0].set_xscale("log")
         ax[0].set_xlabel("normal force (N)")
         ax[0].set_ylabel("eccentricity")
         ax[0].set_title(f"mu_s at v = {v[k]:.1e} m/s")
         fig.colorbar(im, ax=ax[0])
-        im = ax[1].pcolormesh(F, e, left[:, :, k], shading="nearest", cmap="Greys", vmin=0, vmax=1)
+        im = ax[1].pcolormesh(F_edges, e_edges, left[:, :, k], shading="flat", cmap="Greys", vmin=0, vmax=1)
         ax[1].set_xscale("log")
         ax[1].set_xlabel("normal force (N)")
         ax[1].set_title("left precursor present (black)")
@@ -462,8 +486,13 @@ def uncertainty(quick, device, model=None):
         fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
         ax[0].hist(mu[np.isfinite(mu)], bins=40)
         ax[0].set_xlabel("mu_s")
-        ax[1].hist(ds.v_middle.values[np.isfinite(ds.v_middle.values)], bins=40)
+        speeds = ds.v_middle.values[np.isfinite(ds.v_middle.values) & (ds.v_middle.values > 0)]
+        # a few members read 1000+ m/s (a meeting point's flat top) beside a bulk near 10-30 m/s: log bins
+        ax[1].hist(speeds, bins=np.geomspace(speeds.min(), speeds.max(), 41) if speeds.size > 1 else 10)
+        ax[1].set_xscale("log")
         ax[1].set_xlabel("v_middle (m/s)")
+        ax[1].set_ylabel("members")
+        ax[0].set_ylabel("members")
         fig.suptitle(f"{n} members, friction parameters drawn around Table 1")
         fig.tight_layout()
         fig.savefig(path, dpi=110)
@@ -524,10 +553,11 @@ def run_study(name, quick, device, outdir, relaxation_gate="stress", front_event
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("name", choices=sorted(STUDIES) + ["all"])
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--device", default=None)
-    ap.add_argument("--outdir", default=str(Path(__file__).with_name("figures")))
+    ap.add_argument("name", choices=sorted(STUDIES) + ["all"], help="the study (see above), or all of them")
+    ap.add_argument("--quick", action="store_true", help="sizes for a 2-core CPU (every study in ~15 s)")
+    ap.add_argument("--device", default=None, help="Warp device: cpu, cuda:0 (default: the first GPU, else cpu)")
+    ap.add_argument("--outdir", default="warpfric_studies",
+                    help="folder of the outputs (default ./warpfric_studies; studies/figures holds the committed ones)")
     ap.add_argument("--relaxation-gate", choices=sorted(GATE_SUFFIX), default="stress",
                     help="the friction law's yield gate (default stress; none = SPEC v1)")
     ap.add_argument("--front-event", choices=("contact", "strength", "velocity"), default=None,

@@ -13,9 +13,6 @@ new cluster). Adapt the resources (memory, walltime, account) to your site.
 import argparse
 from pathlib import Path
 
-from dask_jobqueue import SLURMCluster
-from distributed import Client
-
 import warpfric.sweep
 
 
@@ -29,6 +26,9 @@ def main():
     ap.add_argument("--memory", default="32GB")
     ap.add_argument("--chunk", type=int, default=20000)
     args = ap.parse_args()
+    from dask_jobqueue import SLURMCluster  # here, so that --help works without them
+    from distributed import Client
+
     # one worker with one thread per job (cores=1); the chunk files must be on a filesystem every node sees
     cluster = SLURMCluster(queue=args.queue, cores=1, processes=1, memory=args.memory, walltime=args.walltime,
                            job_extra_directives=["--gres=gpu:1"])

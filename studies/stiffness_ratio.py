@@ -1,7 +1,8 @@
 """Beyond the paper: how the eccentricity effect on mu_s depends on the stiffness ratio Lambda.
 
     python studies/stiffness_ratio.py [--nodes 200] [--lambdas 25] [--eccentricities 13] [--device cuda:0]
-                                      [--out studies/results/stiffness_ratio_DEVICE.json]
+                                      [--out FILE.json]  (default ./stiffness_ratio_DEVICE.json; the committed
+                                      results: studies/results/stiffness_ratio_DEVICE.json)
 
 Lambda = (interface stiffness x real-contact fraction) / (pad shear stiffness)
        = (mu0/h) * A * H / (2 G),   A = (sigma_n / sigma_H) * (1 + b ln(1 + phi/phi0)),
@@ -42,7 +43,8 @@ def main(argv=None):
     ap.add_argument("--eccentricities", type=int, default=13, help="number of e values over -0.3..0.3 (odd: e = 0 included)")
     ap.add_argument("--rtol", type=float, default=1e-5)
     ap.add_argument("--device", default=None)
-    ap.add_argument("--out", default=None)
+    ap.add_argument("--out", default=None, help="result file (default ./stiffness_ratio_DEVICE.json; a PNG is written "
+                    "beside it; the committed results: studies/results/stiffness_ratio_DEVICE.json)")
     args = ap.parse_args(argv)
     scene = wf.Parameters()
     unit = float(stiffness_ratio(scene, 1.0))  # Lambda per newton
@@ -80,7 +82,7 @@ def main(argv=None):
             status=[int(x) for x in ds.status.values.reshape(shape)[k]],
         ))
     device = ds.attrs["device"]
-    out = Path(args.out or Path(__file__).with_name("results") / f"stiffness_ratio_{device.replace(':', '')}.json")
+    out = Path(args.out or f"stiffness_ratio_{device.replace(':', '')}.json")
     meta = dict(command="python studies/stiffness_ratio.py " + " ".join(argv if argv is not None else []),
                 device=device, nodes=args.nodes, rtol=args.rtol, eccentricities=ecc.tolist(), wall_s=wall,
                 members=int(ds.sizes["member"]), lambda_per_newton=unit)

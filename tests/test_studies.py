@@ -170,9 +170,9 @@ def test_readings_two_reading_subset():
 
 
 def test_committed_factorial_holds_the_readme_score_table():
-    """studies/readings_quick.json (python studies/readings.py --design factorial --device cpu) holds
-    the pass counts studies/README.md quotes (physical readings: without the -H counterfactual); no
-    claim is left unscored."""
+    """studies/readings_quick.json (python studies/readings.py --design factorial --device cpu --out
+    studies/readings_quick.json) holds the pass counts studies/README.md quotes (physical readings:
+    without the -H counterfactual); no claim is left unscored."""
     import json
 
     res = json.loads((Path(readings.__file__).with_name("readings_quick.json")).read_text())
