@@ -842,3 +842,39 @@ def test_a_figure_folder_that_is_a_file_is_refused(tmp_path, capsys):
     assert code == 2
     _error_line(err, "ensemble' is a file")
     assert taken.read_bytes() == b"not a folder"
+
+
+def test_the_interrupt_warning_reads_kept_chunks_with_a_parameter_missing(tmp_path):
+    """An interrupted sweep warns of the members not ok in its kept chunks, read from the chunk files;
+    a chunk without disc_velocity (an edited file) turned Ctrl-C into an AttributeError traceback:
+    it reads as unknown, and the warning counts every chunk's members."""
+    import warnings
+    from types import SimpleNamespace
+
+    import netCDF4
+
+    from warpfric.kernels.types import STATUS_MEANINGS
+    from warpfric.parameters import Solver
+    from warpfric.runner import _warn_members_not_ok_kept
+
+    meanings = " ".join(STATUS_MEANINGS)
+    no_peak = STATUS_MEANINGS.index("no_peak")
+    paths = []
+    for i, (status, velocity) in enumerate((([0, no_peak], [1e-4, 0.0]), ([no_peak, no_peak], None))):
+        path = tmp_path / f"chunk-{i}.nc"
+        with netCDF4.Dataset(path, "w") as nc:
+            nc.createDimension("member", 2)
+            var = nc.createVariable("status", "i4", ("member",))
+            var[:] = status
+            var.flag_meanings = meanings
+            if velocity is not None:
+                nc.createVariable("disc_velocity", "f8", ("member",))[:] = velocity
+        paths.append(path)
+    store = SimpleNamespace(chunk_path=lambda i: paths[i])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        _warn_members_not_ok_kept(store, [0, 1], Solver(), tmp_path / "out.nc")
+    assert len(caught) == 1
+    text = str(caught[0].message)
+    assert "3 of 4 members in the 2 finished chunks: 3 no_peak" in text, text
+    assert "; 1 of them: disc_velocity = 0: the disc never moves" in text, text  # the one that is known

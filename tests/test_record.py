@@ -114,11 +114,13 @@ def test_run_record_alone_records_the_default_scenes_detachment(tmp_path, capsys
 
 
 def test_record_detachment_spans_every_chosen_members_detachment(tmp_path):
-    members = {"eccentricity": [0.0, 0.3, 0.0], "stop_time": [np.inf, np.inf, 20.03]}  # the last: no_peak
+    # the last two: no_peak, their discs stopped early; the last runs on to 25 s
+    members = {"eccentricity": [0.0, 0.3, 0.0, 0.0], "stop_time": [np.inf, np.inf, 20.03, 20.03],
+               "end_time": [np.inf, np.inf, np.inf, 25.0]}
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", "members that did not end ok")
         ds = run(members, nodes=21, rtol=1e-5, fronts=wf.Fronts())
-    assert list(ds.status.values != 0) == [False, False, True]
+    assert list(ds.status.values != 0) == [False, False, True, True] and float(ds.final_time[3]) == 25.0
     record = wf.Record.detachment(ds, members=(0, 1), count=11)
     starts = [float(ds.front_start_time[m]) for m in (0, 1)]
     ends = [float(ds.final_time[m]) for m in (0, 1)]
@@ -126,9 +128,10 @@ def test_record_detachment_spans_every_chosen_members_detachment(tmp_path):
     first = [min(s, p) - 0.5 * (e - min(s, p)) for s, p, e in zip(starts, peaks, ends)]
     assert record.members == (0, 1) and len(record.times) == 11
     assert record.times[0] == pytest.approx(min(first), abs=1e-12) and record.times[-1] == max(ends)
-    # a member without a detachment (its disc stopped early) does not widen the window to t = 0
+    # members without a detachment (their discs stopped early) widen the window neither to t = 0 nor
+    # to 25 s
     assert wf.Record.detachment(ds, count=11).times == record.times
-    assert wf.Record.detachment(ds, count=11).members == (0, 1, 2)
+    assert wf.Record.detachment(ds, count=11).members == (0, 1, 2, 3)
     # alone, it is recorded from the disc's start to its end
     alone = wf.Record.detachment(ds, members=(2,), count=11)
     assert alone.times[0] == wf.Parameters().rest_until and alone.times[-1] == float(ds.final_time[2])
@@ -136,8 +139,8 @@ def test_record_detachment_spans_every_chosen_members_detachment(tmp_path):
     assert wf.Record.detachment(ds.sel(member=[1]), count=11).members == (1,)
     shifted = ds.assign_coords(member=ds.member + 7)  # the run of member_offset=7
     assert wf.Record.detachment(shifted, members=(8,), member_offset=7, count=11).members == (1,)
-    with pytest.raises(ValueError, match=r"members = \(3,\) is invalid; valid: member numbers of ds \(0, 1, 2\)"):
-        wf.Record.detachment(ds, members=(3,))
+    with pytest.raises(ValueError, match=r"members = \(4,\) is invalid; valid: member numbers of ds \(0, 1, 2, 3\)"):
+        wf.Record.detachment(ds, members=(4,))
     with pytest.raises(ValueError, match="member 8 lies before member_offset = 9"):
         wf.Record.detachment(shifted, members=(8,), member_offset=9)
 

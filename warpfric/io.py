@@ -833,11 +833,15 @@ class ChunkStore:
                 if int(getattr(nc, COMPLETE_ATTR, 0)) != 1:
                     return False
                 labelled = MEMBER_NUMBER in nc.variables
-                numbers = np.asarray(nc[MEMBER_NUMBER if labelled else "member"][:])
+                numbers = np.ma.filled(np.ma.asarray(nc[MEMBER_NUMBER if labelled else "member"][:], dtype=float),
+                                       np.nan)  # a fill value is no member number
+                labels = np.asarray(nc["member"][:]) if labelled else None
+                if labels is not None and labels.dtype.kind == "S" and labels.ndim == 2:  # chars without _Encoding
+                    labels = netCDF4.chartostring(labels)
                 # a chunk of this run (its id in the member labels), not one that a cluster's worker of
                 # an earlier, interrupted run wrote after that run had ended
                 own = run_id is None or not labelled or np.array_equal(
-                    np.asarray(nc["member"][:]).astype(str), member_labels(run_id, numbers))
+                    labels.astype(str), member_labels(run_id, numbers.astype(np.int64)))
                 return own and np.array_equal(numbers, np.arange(sl.start, sl.stop) + self.member_offset)
         except Exception:  # noqa: BLE001 - a damaged chunk is simply redone
             return False

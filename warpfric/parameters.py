@@ -605,8 +605,8 @@ class Record:
         The window: for each member with a detachment (its first front's start or its mu_s peak
         before its end), from the earlier of the two, less half the time from there to its end
         (final_time), to that end; the window spans those members'. Members without one (not ok, or
-        ended before it) are recorded over that window too; where none has one, from the disc's start
-        (rest_until) to the latest end."""
+        ended before it) are recorded over that window too (times after their end are NaN); where
+        none has one, from the disc's start (rest_until) to the latest end."""
         numbers_there = np.asarray(ds.member.values).reshape(-1)
         numbers = numbers_there if members is None else np.asarray(members).reshape(-1)
         if isinstance(member_offset, bool) or not isinstance(member_offset, (int, np.integer)) or member_offset < 0:
@@ -623,15 +623,16 @@ class Record:
         n = ds.sizes["member"]
         rest_until = np.broadcast_to(np.asarray(ds["rest_until"].values, dtype=float), (n,)) if "rest_until" in ds \
             else np.zeros(n)
-        starts, ends = [], []
+        starts, ends, all_ends = [], [], []
         for m in positions:
             end = float(ds.final_time.values[m])
             marks = [float(ds[name].values[m]) for name in ("front_start_time", "mu_s_time") if name in ds]
             marks = [t for t in marks if np.isfinite(t) and t < end]
             if marks:
                 starts.append(max(0.0, min(marks) - 0.5 * (end - min(marks))))
-            ends.append(end)
-        end = max(ends)
+                ends.append(end)
+            all_ends.append(end)
+        end = max(ends) if ends else max(all_ends)  # a member without a detachment widens neither end
         if not starts:  # no detachment: from the disc's start (or 0 where a run ended before it)
             starts = [t if t < end else 0.0 for t in rest_until[positions]]
         return Record.window(min(starts), end, count, members=tuple(int(m) - member_offset for m in numbers))

@@ -630,11 +630,10 @@ def _warn_members_not_ok_kept(store, kept: list, solver, out: Path) -> None:
     """The warning of members not ok of an interrupted run, for its finished chunks (``kept``, their
     indices): a run to its end gives it once, from its combined file, which an interrupted run
     lacks; the kept chunks are not run again by --resume, whose combined file warns of them again."""
+    import netCDF4
     import xarray as xr
 
     from .simulate import members_not_ok_text
-
-    import netCDF4
 
     names = ("status", "disc_velocity", "lift_off")
     columns: dict = {name: [] for name in names}
@@ -643,11 +642,11 @@ def _warn_members_not_ok_kept(store, kept: list, solver, out: Path) -> None:
         with netCDF4.Dataset(store.chunk_path(i)) as nc:
             meanings = nc["status"].getncattr("flag_meanings")
             n = nc["status"].shape[0]
-            for name in names:
-                if name in nc.variables:
-                    columns[name].append(np.broadcast_to(np.asarray(nc[name][:]).reshape(-1), (n,)))
-    ds = xr.Dataset({name: ("member", np.concatenate(parts)) for name, parts in columns.items()
-                     if parts and len(parts) == len(kept)})
+            columns["status"].append(np.asarray(nc["status"][:], dtype=np.int64).reshape(-1))
+            for name in names[1:]:  # a parameter missing from a chunk (an edited file) reads as unknown
+                values = np.asarray(nc[name][:], dtype=float).reshape(-1) if name in nc.variables else np.nan
+                columns[name].append(np.broadcast_to(values, (n,)))
+    ds = xr.Dataset({name: ("member", np.concatenate(parts)) for name, parts in columns.items()})
     ds["status"].attrs["flag_meanings"] = meanings
     text = members_not_ok_text(ds, solver, where=f" in the {plural(len(kept), 'finished chunk')}")
     if text is not None:
