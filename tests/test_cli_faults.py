@@ -718,12 +718,17 @@ def test_a_ctrl_c_during_a_write_waits_for_the_write_and_then_stops_it(tmp_path)
         Path(tmp).write_text("the new result")
         finished.append(True)
 
-    with pytest.raises(KeyboardInterrupt):
-        replace_atomically(out, write)
-    assert finished and out.read_text() == "the old result" and _files(tmp_path) == ["out.nc"]
-    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # Python's own handler again
-    replace_atomically(out, lambda tmp: Path(tmp).write_text("written"))  # and a write without one
-    assert out.read_text() == "written" and _files(tmp_path) == ["out.nc"]
+    # Python's own Ctrl-C, also where the tests run with SIGINT ignored (started with & from a script)
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            replace_atomically(out, write)
+        assert finished and out.read_text() == "the old result" and _files(tmp_path) == ["out.nc"]
+        assert signal.getsignal(signal.SIGINT) is signal.default_int_handler  # Python's own handler again
+        replace_atomically(out, lambda tmp: Path(tmp).write_text("written"))  # and a write without one
+        assert out.read_text() == "written" and _files(tmp_path) == ["out.nc"]
+    finally:
+        signal.signal(signal.SIGINT, inherited)
 
 
 def test_a_write_holds_the_command_lines_sigterm_and_leaves_a_users_own_handler_alone(tmp_path):

@@ -226,8 +226,11 @@ def _interrupt(argv, sig, cwd, again_after: float | None = None):
     cluster's workers too, as a terminal's Ctrl-C or a batch system's SIGTERM) once its first chunk is
     reported done, and once more ``again_after`` s later if it still runs (an impatient user): (exit
     code, stderr lines, worker pids named in the progress lines)."""
+    # Python's own Ctrl-C in the command even where this test runs with SIGINT ignored (a job started
+    # with & from a script), which the command would inherit and keep, as a background job should
     proc = subprocess.Popen([sys.executable, "-m", "warpfric", "run", *map(str, argv)], cwd=cwd, text=True,
                             stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
                             env={**os.environ, "CUDA_VISIBLE_DEVICES": ""})
     lines, first_chunk = [], threading.Event()
 
