@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import logging
 import os
 import re
 import shlex
@@ -323,8 +324,6 @@ def _distributed_logs_quiet():
     """distributed's loggers in this process (those with a level of their own: dask's logging
     configuration gives "distributed" and "distributed.client" one, each with its handler) at
     CRITICAL while the block runs."""
-    import logging
-
     loggers = [logging.getLogger(name) for name in list(logging.root.manager.loggerDict)
                if name == "distributed" or name.startswith("distributed.")]
     levels = {lg: lg.level for lg in loggers if lg.level != logging.NOTSET}
@@ -335,6 +334,22 @@ def _distributed_logs_quiet():
     finally:
         for lg, level in levels.items():
             lg.setLevel(level)
+
+
+def drop_sync_cancel_error(record) -> bool:
+    """A logging filter (False: drop) for one record of distributed's own: a Ctrl-C that lands in
+    ``distributed.utils.sync`` before its coroutine has started schedules a ``cancel`` callback that
+    fails with NameError (its ``future`` is not yet bound), which tornado logs as a 13-line traceback
+    before warpfric's interrupt line. Harmless: the run is being interrupted anyway. Every other
+    record passes."""
+    exc = record.exc_info[1] if record.exc_info else None
+    if not isinstance(exc, NameError) or exc.__traceback__ is None:
+        return True
+    last = exc.__traceback__
+    while last.tb_next is not None:
+        last = last.tb_next
+    code = last.tb_frame.f_code
+    return not (code.co_name == "cancel" and code.co_filename.replace("\\", "/").endswith("distributed/utils.py"))
 
 
 CONNECT_TIMEOUT_S = 30.0  # the whole of connecting, the scheduler's handshake included
@@ -541,6 +556,9 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
     if use_cluster and client is None:  # before any file: an unreachable scheduler leaves nothing behind
         own_client = local_cluster(workers) if new_local_cluster else connect(where)
         client = own_client
+    tornado_log = logging.getLogger("tornado.application")
+    if use_cluster:
+        tornado_log.addFilter(drop_sync_cancel_error)
     resume_command = f"warpfric run {sweep_file} -o {out} --resume" + (f" --device {device}" if device else "")
     store = previous
     try:
@@ -606,6 +624,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
                 close_local_cluster(own_client)
             else:
                 own_client.close()
+        tornado_log.removeFilter(drop_sync_cancel_error)
     report = RunReport(chunks=reports, errors=[], output=out, wall_s=wall, file_failed_members=in_file[0])
     resumed = f", {report.file_failed_members} in the file" if previous is not None else ""
     _say(f"wrote {out} ({plural(sweep.n_members, 'member')}, {seconds_text(wall)} s this run, "
