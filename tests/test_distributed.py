@@ -381,3 +381,33 @@ def test_distributeds_sync_cancel_error_is_dropped_and_nothing_else():
     assert drop_sync_cancel_error(record_of("/site-packages/distributed/utils.py", "other"))
     assert drop_sync_cancel_error(record_of("/site-packages/mypackage/utils.py", "cancel"))
     assert drop_sync_cancel_error(logging.LogRecord("tornado.application", logging.ERROR, "f", 1, "m", None, None))
+
+
+def test_a_ctrl_c_while_the_cluster_closes_after_the_file_is_written_keeps_the_run(reference, tmp_path,
+                                                                                   monkeypatch):
+    """The local cluster takes seconds to close after the file is written; a Ctrl-C then ended the
+    command in 'interrupted' (exit 130) although its output was complete: the run's report stands."""
+    import warpfric.runner as runner
+
+    sweep, single = reference
+    made = []
+
+    def in_process_cluster(workers=None):
+        made.append(distributed.Client(distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                                                dashboard_address=None)))
+        return made[-1]
+
+    def interrupted_close(client, interrupted=False):
+        cluster = client.cluster
+        client.close()
+        cluster.close()
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(runner, "local_cluster", in_process_cluster)
+    monkeypatch.setattr(runner, "close_local_cluster", interrupted_close)
+    try:
+        report = run_sweep(sweep, tmp_path / "local.nc", local=True, device="cpu", quiet=True)
+    except KeyboardInterrupt:  # (not raised on: it would stop the whole test session)
+        pytest.fail("a Ctrl-C while the cluster closed ended a run whose file was written")
+    assert made and report.output == tmp_path / "local.nc" and report.failed_members == 0
+    _assert_same_outputs(single, tmp_path / "local.nc")

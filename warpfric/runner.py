@@ -619,11 +619,14 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
             raise RunInterrupted(f"interrupted; {stopped}{what}") from None
         raise OutputWriteError(f"{err}; {what}", err.disk_full) from None
     finally:
-        if own_client is not None:
-            if new_local_cluster:
-                close_local_cluster(own_client)
-            else:
-                own_client.close()
+        if own_client is not None:  # the run is written here (the except block closes and forgets it first)
+            try:
+                if new_local_cluster:
+                    close_local_cluster(own_client)
+                else:
+                    own_client.close()
+            except KeyboardInterrupt:  # a Ctrl-C while the cluster closes stops the close, not the written run
+                pass
         tornado_log.removeFilter(drop_sync_cancel_error)
     report = RunReport(chunks=reports, errors=[], output=out, wall_s=wall, file_failed_members=in_file[0])
     resumed = f", {report.file_failed_members} in the file" if previous is not None else ""
