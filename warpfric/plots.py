@@ -494,6 +494,14 @@ def _recorded_member(ds, recorded_index: int, what: str) -> tuple[int, int]:
     return member, int(np.flatnonzero(ds.member.values == member)[0])  # member numbers may start past 0
 
 
+def _member_title(ds, member: int, position: int, what: str) -> str:
+    """'member 3: WHAT (2e/L = 0.1, F = 500 N)': one member's figure title with its first three swept
+    values."""
+    swept = [name for name in ds.attrs.get("varying_parameters", "").split() if name in ds]
+    values = ", ".join(_value(ds, name, _per_member(ds, name)[position]) for name in swept[:3])
+    return f"member {member}: {what}" + (f" ({values})" if values else "")
+
+
 def friction_history_figure(ds, recorded_index: int):
     """The friction coefficient mu(t) of one recorded member over its recording times
     (``friction_coefficient_history``, or computed from the recorded fields of a file written
@@ -536,9 +544,7 @@ def friction_history_figure(ds, recorded_index: int):
     ax.ticklabel_format(axis="x", useOffset=False)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=7, loc="best", framealpha=0.8)
-    swept = [name for name in ds.attrs.get("varying_parameters", "").split() if name in ds]
-    values = ", ".join(_value(ds, name, _per_member(ds, name)[position]) for name in swept[:3])
-    ax.set_title(f"member {member}: friction coefficient" + (f" ({values})" if values else ""), fontsize=10)
+    ax.set_title(_member_title(ds, member, position, "friction coefficient"), fontsize=10)
     fig.tight_layout()
     return fig
 
@@ -624,8 +630,6 @@ def space_time_figure(ds, recorded_index: int):
         ax.legend(handles=handles, fontsize=7, loc="upper right", framealpha=0.8)
     ax.set_xlabel("x (mm)" if metres else "x / L")
     ax.set_ylabel("t (s)")
-    swept = [name for name in ds.attrs.get("varying_parameters", "").split() if name in ds]
-    values = ", ".join(_value(ds, name, _per_member(ds, name)[position]) for name in swept[:3])
-    ax.set_title(f"member {member}: pad velocity" + (f" ({values})" if values else ""), fontsize=10)
+    ax.set_title(_member_title(ds, member, position, "pad velocity"), fontsize=10)
     fig.tight_layout()
     return fig

@@ -319,6 +319,15 @@ def close_local_cluster(client, interrupted: bool = False) -> None:
             cluster.close()
 
 
+def _close_own_client(client, local: bool, interrupted: bool = False) -> None:
+    """Close the client that the sweep opened itself: with its local cluster (close_local_cluster),
+    or, connected to a scheduler (--scheduler), the client alone."""
+    if local:
+        close_local_cluster(client, interrupted=interrupted)
+    else:
+        client.close()
+
+
 @contextlib.contextmanager
 def _distributed_logs_quiet():
     """distributed's loggers in this process (those with a level of their own: dask's logging
@@ -596,11 +605,8 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         if own_client is not None:
             closing, own_client = own_client, None
             try:
-                if new_local_cluster:
-                    close_local_cluster(closing, interrupted=interrupted)
-                    cluster_stopped = True
-                else:
-                    closing.close()
+                _close_own_client(closing, new_local_cluster, interrupted)
+                cluster_stopped = new_local_cluster
             except BaseException:  # noqa: BLE001 - a cluster that did not stop (a second Ctrl-C while it closed:
                 pass  # the line is still said) may still write chunks: said below
         late_writes = interrupted and client is not None and not cluster_stopped
@@ -621,10 +627,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
     finally:
         if own_client is not None:  # the run is written here (the except block closes and forgets it first)
             try:
-                if new_local_cluster:
-                    close_local_cluster(own_client)
-                else:
-                    own_client.close()
+                _close_own_client(own_client, new_local_cluster)
             except KeyboardInterrupt:  # a Ctrl-C while the cluster closes stops the close, not the written run
                 pass
         tornado_log.removeFilter(drop_sync_cancel_error)
