@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from .parameters import (MAX_RECORD_TIMES, MEMBERS_NOT_OK_HINT, RECORD_COUNT, RELAXATION_GATES, Fronts, Model,
-                         Parameters, Record, Solver, units_text)
+                         Parameters, Record, Solver, detachment_start, units_text)
 from .progress import member_range, plural as _plural, seconds_text as _seconds
 
 
@@ -230,8 +230,7 @@ def _run_default(args) -> int:
                 found = simulate(fronts=None if fronts is None else dataclasses.replace(fronts, grid_check=False),
                                  **run)
                 record = Record.detachment(found, member_offset=offset)
-                marks = [found[name].values[0] for name in ("front_start_time", "mu_s_time") if name in found]
-                what = ("the detachment found by a first run" if np.isfinite(marks).any() else
+                what = ("the detachment found by a first run" if detachment_start(found, 0) is not None else
                         "the disc's start to the end: a first run found no detachment (status "
                         f"{_status_name(found, found.status[0])})")
                 print(f"recording the fields at {len(record.times)} times from {record.times[0]:.6g} to "
@@ -329,14 +328,20 @@ def _run(args) -> int:
 def _info(args) -> int:
     from .io import ChunkStore, open_ensemble, open_ensembles, parts_dir, resume_command, running_writer
 
+    def chunks_done(store, path: Path, sizes: bool) -> tuple[str, str | None]:
+        """How far the parts of ``path`` are ('3/8 chunks finished in ...', with the chunk and member
+        counts where ``sizes``) and the running writer's description, None where it was interrupted."""
+        of = f" of <= {_plural(store.chunk, 'member')}" if sizes else ""
+        total = f" ({_plural(store.n_members, 'member')} in all)" if sizes else ""
+        return (f"{store.done_count()}/{_plural(store.n_chunks, 'chunk')}{of} finished{total} in {parts_dir(path)}",
+                running_writer(path))
+
     def unfinished(path: Path) -> str | None:
         """The line of a sweep that is still running or was interrupted (no file yet, its parts), or None."""
         if path.exists() or not parts_dir(path).exists():
             return None
         store = ChunkStore.load(parts_dir(path))
-        done = (f"{store.done_count()}/{_plural(store.n_chunks, 'chunk')} of <= {_plural(store.chunk, 'member')} "
-                f"finished ({_plural(store.n_members, 'member')} in all) in {parts_dir(path)}")
-        writer = running_writer(path)
+        done, writer = chunks_done(store, path, sizes=True)
         if writer is not None:  # not interrupted: still being written
             return f"{path}: RUNNING: being written by warpfric run ({writer}); {done} so far"
         return f"{path}: INCOMPLETE run: {done}; finish it with `{resume_command(store, path)}`"
@@ -357,8 +362,7 @@ def _info(args) -> int:
     except ValueError:
         store = None
     if store is not None:
-        done = f"{store.done_count()}/{_plural(store.n_chunks, 'chunk')} finished in {parts_dir(path)}"
-        writer = running_writer(path)
+        done, writer = chunks_done(store, path, sizes=False)
         if writer is not None:
             print(f"  being replaced by a running warpfric run ({writer}): {done} so far")
         else:

@@ -626,10 +626,9 @@ class Record:
         starts, ends, all_ends = [], [], []
         for m in positions:
             end = float(ds.final_time.values[m])
-            marks = [float(ds[name].values[m]) for name in ("front_start_time", "mu_s_time") if name in ds]
-            marks = [t for t in marks if np.isfinite(t) and t < end]
-            if marks:
-                starts.append(max(0.0, min(marks) - 0.5 * (end - min(marks))))
+            start = detachment_start(ds, m)
+            if start is not None:
+                starts.append(max(0.0, start - 0.5 * (end - start)))
                 ends.append(end)
             all_ends.append(end)
         end = max(ends) if ends else max(all_ends)  # a member without a detachment widens neither end
@@ -657,6 +656,17 @@ class Record:
                              "non-decreasing times >= 0 (s)")
         object.__setattr__(self, "members", tuple(int(i) for i in members))
         object.__setattr__(self, "times", tuple(float(t) for t in times))
+
+
+def detachment_start(ds, position: int) -> float | None:
+    """The detachment's start of the member at ``position`` (an index along ``ds.member``) in the
+    outputs ``ds`` of a run: the earlier of its first front's start and its mu_s peak (s), where
+    either lies before its end (final_time); None where neither does (not ok, or ended before it).
+    Record.detachment's window and `warpfric run --record` read a detachment by this one rule."""
+    end = float(ds.final_time.values[position])
+    marks = [float(ds[name].values[position]) for name in ("front_start_time", "mu_s_time") if name in ds]
+    marks = [t for t in marks if np.isfinite(t) and t < end]
+    return min(marks) if marks else None
 
 
 # how simulate's warning of recording times after a member's end begins (warpfric/pool.py drops the

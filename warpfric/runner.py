@@ -101,14 +101,6 @@ def worker_device(worker=None) -> str:
     return device
 
 
-def _warn_members_not_ok(ds, solver) -> None:
-    """The sweep's one warning of its members not ok, from the combined file (each chunk's own is
-    dropped: a run of many chunks printed one per chunk)."""
-    from .simulate import _warn_members_not_ok as warn
-
-    warn(ds, solver)
-
-
 def run_chunk(job: ChunkJob) -> dict:
     """Simulate the members of one chunk and write its file atomically; return a report (chunk
     index, members, failed members, device, wall time, process id)."""
@@ -592,6 +584,10 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         in_file = []
 
         def on_combined(ds):
+            """The sweep's one warning of its members not ok, from the combined file (each chunk's own
+            is dropped: a run of many chunks printed one per chunk)."""
+            from .simulate import _warn_members_not_ok
+
             in_file.append(int((ds.status.values != 0).sum()))
             _warn_members_not_ok(ds, sweep.solver)
 
