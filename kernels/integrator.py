@@ -22,7 +22,7 @@ from .esdirk import make_esdirk
 from .gates import make_gates
 from .model_terms import disc_velocity_at, make_model_terms
 from .newton import make_newton
-from .observers import ObserverSet, make_observers, run_finished
+from .observers import ObserverSet, latch_detachment_end, make_observers, run_finished
 from .team import (EXCHANGES, MAX_TEAM_LANES, TEAM_BUFFER_BYTES, WARP_SIZE, exchanges_by_value, make_team, node_range,
                    warps_team)
 from .types import C_PHI, N_WORK, IntegratorState, MemberParams, OutputSettings, SolverSettings, stage_slots
@@ -533,6 +533,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
         for _attempt in range(launch_steps):
             if wp.static(blocked):
                 block_barrier()
+            st = latch_detachment_end(p, st, outputs)
             if run_finished(p, st, outputs):
                 st.done = 1
                 break

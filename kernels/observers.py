@@ -101,12 +101,25 @@ def detachment_over(p: MemberParams, st: IntegratorState, outputs: OutputSetting
 
 
 @wp.func
+def latch_detachment_end(p: MemberParams, st: IntegratorState, outputs: OutputSettings):
+    """st with detachment_end set to the state's time where detachment_over holds for the first
+    time (asked at every attempt until then, whatever the run's end): the time the automatic end
+    would stop at, which tells a run cut off by an explicit end_time from one that saw its fronts
+    through."""
+    if st.detachment_end > st.t:  # not yet (inf), or set in a state ahead of this one: never
+        if detachment_over(p, st, outputs):
+            st.detachment_end = st.t
+    return st
+
+
+@wp.func
 def run_finished(p: MemberParams, st: IntegratorState, outputs: OutputSettings):
     """True when the member has reached its end: end_time, the end of the arrival pass (front_until)
-    or, with end_time None, the end of the detachment."""
+    or, with end_time None, the end of the detachment (st.detachment_end, latched by
+    latch_detachment_end just before)."""
     if st.t >= p.end_time or st.t >= st.front_until:
         return True
-    if p.auto_end > wp.float64(0.0) and detachment_over(p, st, outputs):
+    if p.auto_end > wp.float64(0.0) and st.detachment_end <= st.t:
         return True
     return False
 

@@ -210,6 +210,7 @@ class IntegratorState:
     rejected_switch: wp.int32  # rejected to locate a gate switch (retried up to just past it; stress gate)
     missed_predictions: wp.int32  # accepted steps that ended at a predicted gate switch that did not happen
     newton_curvature: wp.float64  # the last TR-BDF2 step's Newton curvature (kernels/newton.py newton_solve; 0: not known)
+    detachment_end: wp.float64  # s, the first state time at which the detachment was over (observers.py detachment_over); inf: not yet
 
 
 @dataclasses.dataclass

@@ -158,12 +158,13 @@ def test_quick_look_writes_every_figure(grid, tmp_path):
     assert [p.name for p in plots.quick_look(one, tmp_path / "none")] == ["mu_s_histogram.png", "arrival_times.png"]
 
 
-def recorded_run(path, fronts):
+def recorded_run(path, fronts, end_time=20.3):
     """Two recorded members through a file: member 0 detaches at t ~ 20.13 s; member 1's disc stops
     at 20.03 s, 30 ms after it started and long before a node yields, so it has no front (status
-    no_peak, every arrival time NaN)."""
-    ds = run({"stop_time": [np.inf, 20.03]}, scene=wf.Parameters(end_time=20.3), nodes=21, fronts=fronts,
-             record=wf.Record.window(20.05, 20.3, 51, members=(0, 1)))
+    no_peak, every arrival time NaN). The run ends at ``end_time``, after the detachment of the
+    contact and strength fronts (20.27-20.28 s); the velocity front's ends at 20.48 s."""
+    ds = run({"stop_time": [np.inf, 20.03]}, scene=wf.Parameters(end_time=end_time), nodes=21, fronts=fronts,
+             record=wf.Record.window(20.05, end_time, int(round((end_time - 20.05) / 0.005)) + 1, members=(0, 1)))
     write_ensemble(ds, path)
     return open_ensemble(path)
 
@@ -270,7 +271,7 @@ def test_a_member_without_a_front_gets_no_curve(contact_run, tmp_path):
 def test_the_velocity_event_adds_its_threshold_contour(tmp_path):
     """Velocity first (its outputs unprefixed), contact second (``contact_arrival_time``): both curves,
     and the contour of threshold x event_max_velocity on the recorded field."""
-    ds = recorded_run(tmp_path / "rec.nc", wf.Fronts(event=("velocity", "contact")))
+    ds = recorded_run(tmp_path / "rec.nc", wf.Fronts(event=("velocity", "contact")), end_time=20.5)
     assert np.isfinite(ds.event_max_velocity.values[0]) and np.isfinite(ds.contact_arrival_time.values[0]).all()
     ax = plots.space_time_figure(ds, 0).axes[0]
     lines = arrival_lines(ax)

@@ -5,6 +5,8 @@ import warnings
 import numpy as np
 import pytest
 import warp as wp
+
+import warpfric as wf
 from conftest import DEVICE, run
 
 
@@ -264,3 +266,62 @@ def test_the_straggler_limit_is_the_ensembles_median_at_any_launch_once_half_hav
     st = np.zeros(6, dtype=IntegratorState.numpy_dtype())
     st["done"], st["status"], st["steps_accepted"] = [1, 1, 1, 1, 1, 0], [5, 5, 0, 0, 0, 0], [3, 4, 300, 320, 340, 700]
     assert straggler_limit(st, solver) == 3200  # ok or running: 300, 320, 340, 700 (not the failed 3, 4)
+
+
+def _front_outputs(ds):
+    """The names of ds's front outputs (those whose long name speaks of a front event, and the
+    nucleation edge), every one of which a cut-off run must leave NaN."""
+    names = [name for name, var in ds.data_vars.items()
+             if "front" in var.attrs.get("long_name", "") and name not in ("detachment_end_time",)]
+    assert {"v_main", "v_first", "detached_fraction", "arrival_time", "front_end_time"} <= set(names)
+    return names
+
+
+@pytest.mark.parametrize("event", ["contact", "strength", "velocity"])
+def test_a_front_cut_off_by_end_time_is_nan_not_a_part_of_it(event):
+    """The default scene's front starts at ~20.22 s and the detachment is over at ~20.27 s (the
+    automatic end). A run ended at 20.245 s by an explicit end_time sees part of the front (a strength
+    front's speeds measured on 7 % of the nodes came out 7x too slow): its status stays ok, its mu_s
+    is the automatic run's, detachment_end_time is NaN, every front output is NaN, and one warning
+    names the member. A run past the end (end_time 40 s) sees the detachment through: the same
+    detachment_end_time as the automatic end, which is that run's final time, and the same fronts."""
+    auto = run({"eccentricity": [0.0]}, nodes=30, rtol=1e-5, fronts=wf.Fronts(event=event))
+    assert auto.detachment_end_time.values[0] == auto.final_time.values[0]
+    with pytest.warns(UserWarning, match="runs ended before the detachment was over") as caught:
+        cut = run({"eccentricity": [0.0]}, nodes=30, rtol=1e-5, fronts=wf.Fronts(event=event),
+                  scene=wf.Parameters(end_time=20.245))
+    said = [str(w.message) for w in caught if "detachment was over" in str(w.message)]
+    assert len(said) == 1 and "1 at end_time" in said[0] and "member 0" in said[0], said
+    assert cut.status.values[0] == 0 and cut.final_time.values[0] == 20.245
+    assert abs(cut.mu_s.values[0] - auto.mu_s.values[0]) < 1e-8 * auto.mu_s.values[0]
+    assert np.isnan(cut.detachment_end_time.values[0])
+    for name in _front_outputs(cut):
+        values = cut[name].values
+        if name.endswith("nucleation_edge"):
+            assert (values == -2).all(), name  # none
+        else:
+            assert np.isnan(values).all(), (name, values)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        late = run({"eccentricity": [0.0]}, nodes=30, rtol=1e-5, fronts=wf.Fronts(event=event),
+                   scene=wf.Parameters(end_time=40.0))
+    assert late.final_time.values[0] == 40.0
+    np.testing.assert_allclose(late.detachment_end_time.values, auto.detachment_end_time.values, rtol=1e-9)
+    np.testing.assert_allclose(late.v_first.values, auto.v_first.values, rtol=1e-6)
+
+
+def test_a_run_capped_at_max_end_time_says_its_detachment_was_not_over():
+    """aging_coefficient 5e-3: mu barely exceeds its sliding level, never falls 1 % below its maximum,
+    and the automatic end never comes: the run stops at max_end_time. Its mu_s stands (it fell by
+    more than rtol: docs/model.md, "Statuses"), but detachment_end_time is NaN, its fronts are NaN,
+    and the warning says that the cap ended it and mu_s may be a plateau's; the member beside it with
+    the default aging ends at its detachment, with fronts."""
+    with pytest.warns(UserWarning, match="runs ended before the detachment was over") as caught:
+        ds = run({"aging_coefficient": [5e-3, 0.075]}, nodes=30, rtol=1e-5, fronts=wf.Fronts(),
+                 scene=wf.Parameters(max_end_time=24.0))
+    said = [str(w.message) for w in caught if "detachment was over" in str(w.message)]
+    assert len(said) == 1 and "1 at max_end_time" in said[0] and "plateau" in said[0] and "member 0" in said[0]
+    assert (ds.status.values == 0).all()
+    assert ds.final_time.values[0] == 24.0 and np.isnan(ds.detachment_end_time.values[0])
+    assert np.isnan(ds.v_first.values[0]) and np.isfinite(ds.v_first.values[1])
+    assert ds.detachment_end_time.values[1] == ds.final_time.values[1] < 24.0

@@ -416,6 +416,7 @@ def initial_states(n_members: int, solver: Solver, record_slots: np.ndarray) -> 
     st["front_now"] = -np.inf
     st["front_level"] = np.inf
     st["front_until"] = np.inf
+    st["detachment_end"] = np.inf
     st["switch_limit"] = 1e300
     st["record_slot"] = record_slots
     return st

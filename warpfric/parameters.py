@@ -684,7 +684,9 @@ PARAMETERS_UNUSED = "parameters without effect under these model switches"
 CONTACT_WITHOUT_GATE = "fronts event 'contact' with relaxation_gate="
 # the warnings simulate raises once for the whole ensemble: the runs inside it (worker processes'
 # chunks, the float32 fallback, the grid check) drop their own
-ENSEMBLE_WARNINGS = (RECORD_PAST_END, MEMBERS_NOT_OK, FRONTS_SETTINGS_UNUSED, PARAMETERS_UNUSED, CONTACT_WITHOUT_GATE)
+# how simulate's warning of members whose run ended before their detachment was over begins (the same)
+DETACHMENT_NOT_OVER = "runs ended before the detachment was over"
+ENSEMBLE_WARNINGS = (RECORD_PAST_END, MEMBERS_NOT_OK, DETACHMENT_NOT_OVER, FRONTS_SETTINGS_UNUSED, PARAMETERS_UNUSED, CONTACT_WITHOUT_GATE)
 
 
 def _with_named_keywords(cls):

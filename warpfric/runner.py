@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .parameters import MEMBERS_NOT_OK
+from .parameters import DETACHMENT_NOT_OVER, MEMBERS_NOT_OK
 from .pool import cpu_cores, warn_once, warning_pairs
 from .progress import (SizeWarning, check_memory, front_passes, member_range, plural, seconds_text,
                        size_warning)
@@ -126,6 +126,7 @@ def run_chunk(job: ChunkJob) -> dict:
         with warnings.catch_warnings():  # the size warning and the members not ok are the whole sweep's,
             warnings.filterwarnings("ignore", category=SizeWarning)  # said once by run_sweep
             warnings.filterwarnings("ignore", message=re.escape(MEMBERS_NOT_OK))
+            warnings.filterwarnings("ignore", message=re.escape(DETACHMENT_NOT_OVER))
             ds = simulate(sweep.member_slice(sl) or None, scene=sweep.scene, model=sweep.model, solver=sweep.solver,
                           fronts=sweep.fronts, record=record, device=device, progress=label,
                           member_offset=job.member_offset + job.start, workers=job.cpu_workers)
@@ -584,11 +585,13 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         in_file = []
 
         def on_combined(ds):
-            """The sweep's one warning of its members not ok, from the combined file (each chunk's own
-            is dropped: a run of many chunks printed one per chunk)."""
-            from .simulate import _warn_members_not_ok
+            """The sweep's one warning of its runs ended before the detachment was over and of its
+            members not ok, from the combined file (each chunk's own is dropped: a run of many chunks
+            printed one per chunk)."""
+            from .simulate import _warn_members_not_ok, warn_detachment_not_over
 
             in_file.append(int((ds.status.values != 0).sum()))
+            warn_detachment_not_over(ds, stacklevel=2)
             _warn_members_not_ok(ds, sweep.solver)
 
         store.combine(out, command=command, on_combined=on_combined)

@@ -17,7 +17,7 @@ from . import __version__
 from .device import check_device, init_warp
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
-from .parameters import (CONTACT_WITHOUT_GATE, ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, MEMBERS_NOT_OK,
+from .parameters import (CONTACT_WITHOUT_GATE, DETACHMENT_NOT_OVER, ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, MEMBERS_NOT_OK,
                          MEMBERS_NOT_OK_HINT, PARAMETERS_UNUSED, RECORD_PAST_END, Fronts, Model, Parameters, Record,
                          Solver, check_precision, parameter_long_name, parameter_units)
 
@@ -134,6 +134,7 @@ def simulate(
                       varying_parameters=_varying_parameters(values, varying))
         if record is not None:  # once for the ensemble (the workers' own are dropped)
             _warn_record_past_end(ds, record, member_offset)
+        warn_detachment_not_over(ds)
         _warn_members_not_ok(ds, solver)
         return ds
     from warpfric.kernels.types import STATUS_MEANINGS
@@ -163,7 +164,9 @@ def simulate(
     if result.yield_time is not None:
         extra.update(_yield_variables(status, result.yield_time, result.yield_gate, STATUS_MEANINGS))
     if front is not None:
-        extra.update(_front_variables(front, fronts, status != 0))
+        # a front is measured only where the run saw the detachment through (an explicit end_time
+        # may cut it off: a part of the front, or for the velocity and strength fronts another event)
+        extra.update(_front_variables(front, fronts, (status != 0) | ~np.isfinite(st["detachment_end"])))
     ds = _to_dataset(values, varying, st, status, result.fields, result.normal_stress, result.friction_stress, model,
                      solver, device, wall, STATUS_MEANINGS, member_offset, extra)
     ds.attrs["kernel_build_time_s"] = result.kernel_build_s
@@ -184,6 +187,7 @@ def simulate(
         _warn_record_past_end(ds, record, member_offset)
     if fronts is not None and fronts.grid_check:
         _add_grid_check(ds, values, scene, model, solver, fronts, device, progress)
+    warn_detachment_not_over(ds)
     _warn_members_not_ok(ds, solver)
     return ds
 
@@ -202,6 +206,33 @@ _STATUS_ADVICE = {
 _STILL_DISC_ADVICE = "disc_velocity = 0: the disc never moves, so there is no friction peak to find"
 _LIFTED_OFF_ADVICE = ("part of the pad lifted off, where nothing damps its shear vibration (a sudden stop excites "
                       "it): a small damping, e.g. 1e6 Pa s/m, lets the steps grow again (docs/model.md, \"Open choices\": lift-off)")
+
+
+def warn_detachment_not_over(ds: xr.Dataset, stacklevel: int = 3) -> None:
+    """One warning, once per simulate call, of the members ok whose run ended before their detachment
+    was over (detachment_end_time NaN): at max_end_time, the automatic end's cap (mu never fell
+    AUTO_END_PEAK_DROP below its maximum: mu_s may be a plateau's), or at an explicit end_time with
+    fronts on (their front outputs are NaN)."""
+    if "detachment_end_time" not in ds:
+        return
+    from warpfric.kernels.observers import AUTO_END_PEAK_DROP
+
+    not_over = (ds.status.values == 0) & ~np.isfinite(ds.detachment_end_time.values)
+    n = ds.sizes["member"]
+    capped = not_over & (ds.final_time.values >= np.broadcast_to(ds.max_end_time.values, (n,)))
+    cut = not_over & ~capped if "fronts_event" in ds.attrs else np.zeros(n, bool)
+    if not (capped.any() or cut.any()):
+        return
+    parts = []
+    for which, text in ((capped, f"at max_end_time, the automatic end's cap, with mu never {AUTO_END_PEAK_DROP:.0%} "
+                                 "below its maximum (mu_s may be a plateau's, not a static peak: a later max_end_time)"),
+                        (cut, "at end_time (a later end_time, or end_time=None: the automatic end)")):
+        if which.any():
+            numbers = ", ".join(map(str, ds.member.values[which][:8])) + (", ..." if which.sum() > 8 else "")
+            parts.append(f"{int(which.sum())} {text}: member{'' if which.sum() == 1 else 's'} {numbers}")
+    fronts = "; their front outputs are NaN" if "fronts_event" in ds.attrs else ""
+    warnings.warn(f"{DETACHMENT_NOT_OVER} (detachment_end_time NaN) in {int((capped | cut).sum())} of {n:,} "
+                  f"member{'' if n == 1 else 's'}: {'; '.join(parts)}{fronts}", stacklevel=stacklevel)
 
 
 def _warn_members_not_ok(ds: xr.Dataset, solver: Solver) -> None:
@@ -544,6 +575,9 @@ _OUTPUT_ATTRS = {
     "gate_switches": ("1", "accepted switches of the nodes' yield gates (relaxation_gate='stress')"),
     "unlocated_switches": ("1", "steps accepted with a gate switch the retries could not place within its tolerance"),
     "final_time": ("s", "time reached"),
+    "detachment_end_time": ("s", "time at which the detachment was over (the automatic end's criterion: mu fallen "
+                            "below its peak, the fronts passed); NaN where the run ended before it, whose front "
+                            "outputs are then NaN"),
     "plate_compression": ("m", "mean compression delta0 of the pad at the final time"),
     "plate_tilt": ("rad", "tilt a of the backing plate at the final time"),
     "displacement": ("m", "height-averaged x-displacement u of the pad at the final time"),
@@ -640,13 +674,14 @@ def _to_dataset(values, varying, st, status, fields, sigma, tau, model, solver, 
         "gate_switches": st["gate_switches"],
         "unlocated_switches": st["unlocated_switches"],
         "final_time": st["t"],
+        "detachment_end_time": np.where(np.isfinite(st["detachment_end"]), st["detachment_end"], np.nan),
         "plate_compression": st["delta0"],
         "plate_tilt": st["tilt"],
     }
     failed = status != 0
     for name, arr in scalars.items():
         arr = np.asarray(arr)
-        if name in ("mu_s", "mu_s_time", "mu_final") and failed.any():
+        if name in ("mu_s", "mu_s_time", "mu_final", "detachment_end_time") and failed.any():
             # a failed member is never returned as a number; no_peak keeps mu_final (a real value)
             bad = failed if name != "mu_final" else failed & (status != meanings.index("no_peak"))
             arr = np.where(bad, np.nan, arr)
