@@ -195,7 +195,7 @@ class SegmentSettings:
     min_nodes: wp.int32  # fewest node intervals of a segment
     fast_fraction: wp.float64  # v_fast: the plateau speed among this fastest fraction of the intervals
     speed_ratio: wp.float64  # slow: local speed below v_fast / speed_ratio
-    edge_zone: wp.float64  # m; nucleation within this distance of an edge counts as that edge
+    edge_zone_fraction: wp.float64  # nucleation within this fraction of its own L of an edge is at that edge
 
 
 @wp.func
@@ -516,9 +516,10 @@ def segment_fronts(
     for i in range(lo, hi + 1):
         t_last = wp.max(t_last, arrival[i, m])
     out[FM_NUCLEATION_POSITION, m] = node_position(wp.float64(i_first), L, dx)
-    # in node spacings from each edge, with a relative slack of 1e-9: a node on the zone's boundary
-    # counts as the edge on either side (its position from -L/2 + i*dx rounds either way)
-    zone_nodes = settings.edge_zone / dx * (wp.float64(1.0) + wp.float64(1.0e-9))
+    # the member's own edge zone (edge_zone_fraction * its L, not another member's), in node spacings
+    # from each edge, with a relative slack of 1e-9: a node on the zone's boundary counts as the edge
+    # on either side (its position from -L/2 + i*dx rounds either way)
+    zone_nodes = settings.edge_zone_fraction * L / dx * (wp.float64(1.0) + wp.float64(1.0e-9))
     edge = wp.float64(0.0)
     if wp.float64(i_first) <= zone_nodes:
         edge = wp.float64(-1.0)

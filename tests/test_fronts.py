@@ -6,7 +6,7 @@ import pytest
 from conftest import DEVICE, run, trapezoid_weights
 
 import warpfric as wf
-from warpfric.fronts import arrival_times_from_history, front_collisions, segment
+from warpfric.fronts import START_SEGMENTS, arrival_times_from_history, front_collisions, segment
 
 L = 0.2
 N = 101  # dx = 2 mm
@@ -508,3 +508,50 @@ def test_a_nucleation_on_the_edge_zones_boundary_counts_as_that_edge_on_either_s
     rows = [20.0 + np.abs(x - x[k]) / 30.0 for k in (4, 36, 5, 35)]
     m = segment(np.stack(rows), 0.2)
     np.testing.assert_array_equal(m["nucleation_edge"], [-1, 1, 0, 0])
+
+
+def test_the_edge_zone_is_each_members_own_fraction_of_its_length():
+    """nucleation_edge is left/right within edge_zone_fraction * the member's own L of that edge
+    (docs/model.md, "Nucleation"), whatever the other members' lengths: a nucleation 53 node
+    spacings (5.3 % of L, N = 1001) from the right edge, with a slow segment at either end, is a
+    right-edge nucleation whose precursor is the right segment, alone and beside the same arrival
+    times on a pad of half the length (whose 10 % would be 0.01 m, 50 spacings of the longer pad)."""
+    n, length = 1001, 0.2
+    x = np.linspace(-length / 2, length / 2, n)
+    breaks, speeds = np.array([-0.1, -0.05, 0.07, 0.1]), np.array([5.0, 30.0, 2.0])  # breaks on nodes
+    cum = np.interp(x, breaks, np.concatenate([[0.0], np.cumsum(np.diff(breaks) / speeds)]))
+    right = 20.0 + np.abs(cum - cum[n - 1 - 53])  # exact: the slowness is constant between breaks
+    rows = np.stack([right, right[::-1]])
+    alone = segment(rows, length, device=DEVICE)
+    beside = segment(np.concatenate([rows, rows]), [length, length, length / 2, length / 2], device=DEVICE)
+    assert alone["nucleation_position"][0] == pytest.approx(length / 2 - 0.053 * length, abs=1e-12)
+    np.testing.assert_array_equal(alone["nucleation_edge"], [1, -1])
+    np.testing.assert_array_equal(beside["nucleation_edge"], [1, -1, 1, -1])
+    for k in (0, 1):
+        np.testing.assert_allclose([alone[f"v_{seg}"][k] for seg in START_SEGMENTS], [2.0, 30.0, 5.0], rtol=1e-9)
+    for name, value in alone.items():
+        np.testing.assert_array_equal(beside[name][:2], value, err_msg=name)
+
+
+def test_a_members_fronts_do_not_depend_on_the_other_members_lengths():
+    """The same member (L = 0.2 m; its contact front nucleates 10.3 mm, 5.1 % of L, from the right
+    edge at N = 40) run alone and beside a member of L = 0.1 m: its nucleation edge, precursor and
+    far outputs are equal bit for bit, and so is the host re-segmentation of the stored arrival
+    times (one process: what the pool's workers, running members apart, must equal). This member
+    has no slow end segment (precursor and far NaN); the test above has both."""
+    def sim(members):
+        return wf.simulate(members, solver=wf.Solver(nodes=40, rtol=1e-5), fronts=wf.Fronts(), device=DEVICE,
+                           progress=False, workers=1)
+
+    alone = sim({"length": [0.2], "eccentricity": [0.09]})
+    beside = sim({"length": [0.2, 0.1], "eccentricity": [0.09, 0.09]})
+    assert 0.05 < (0.1 - float(alone.nucleation_position[0])) / 0.2 < 0.1
+    assert int(alone.nucleation_edge[0]) == int(beside.nucleation_edge[0]) == 1
+    names = ["nucleation_edge"] + [n for n in alone.data_vars if "precursor" in n or "far" in n]
+    assert len(names) >= 11
+    for name in names:
+        np.testing.assert_array_equal(beside[name].values[0], alone[name].values[0], err_msg=name)
+    again = segment(beside.arrival_time.values, beside.length.values, device=DEVICE)
+    for name in ("nucleation_edge", "v_precursor", "precursor_front_start", "v_far", "far_front_end"):
+        np.testing.assert_array_equal(again[name][0], float(alone[name].values[0]), err_msg=name)
+        np.testing.assert_array_equal(again[name], beside[name].values.astype(float), err_msg=name)

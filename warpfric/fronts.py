@@ -89,7 +89,7 @@ def segment_nodes_first(arrival_nodes_first, length, fronts: Fronts = Fronts(), 
     seg.min_nodes = min_segment_intervals(fronts, n)
     seg.fast_fraction = fronts.fast_fraction
     seg.speed_ratio = fronts.speed_ratio
-    seg.edge_zone = float(fronts.edge_zone_fraction * np.min(length))
+    seg.edge_zone_fraction = float(fronts.edge_zone_fraction)  # the kernel takes each member's own L
     with wp.ScopedDevice(check_device(device)):
         arrival = wp.array(nodes_first, dtype=wp.float64)
         sums = wp.zeros((5, n, n_members), dtype=wp.float64)
