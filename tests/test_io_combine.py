@@ -173,3 +173,126 @@ def test_different_solver_settings_are_named_as_plain_values(tmp_path):
     b = write_ensemble(run({"eccentricity": [0.1]}, nodes=13, rtol=1e-4).assign_coords(member=[1]), tmp_path / "b.nc")
     with pytest.raises(ValueError, match=r"differ in solver_nodes \(11, 13\): not one ensemble"):
         open_ensembles([a, b])
+
+
+# --- members of different lengths: one x axis, the one simulate() gives them run together ---------
+
+LENGTHS = [0.2, 0.25]
+LENGTH_SWEEP = "fronts = false\n[solver]\nnodes = 11\n[grid]\nlength = [0.2, 0.25]\n"
+LENGTH_RECORD = "[record]\nmembers = [0, 1]\nstart = 20.2\nstop = 20.25\ncount = 3\n"
+
+
+def _alone(length, number, nodes=11, record=False):
+    """One member simulated by itself, as the sweep file's chunk of it (numbered as in the sweep)."""
+    return wf.simulate({"length": [length]}, solver=wf.Solver(nodes=nodes), fronts=None, device=DEVICE,
+                       progress=False, member_offset=number,
+                       record=wf.Record.window(20.2, 20.25, 3, members=(0,)) if record else None)
+
+
+@pytest.mark.parametrize("recorded", [False, True])
+def test_a_sweep_over_length_in_chunks_keeps_one_x_axis(tmp_path, capsys, recorded):
+    """Each chunk built its own x (m of its one length) and the combine joined them outer: 22 nodes,
+    each member's fields NaN on the other's half; with recorded fields the combine failed
+    ('cannot align objects with join='exact''), exit 2, and --resume failed the same way forever."""
+    sweep = tmp_path / "len.toml"
+    sweep.write_text(LENGTH_SWEEP + (LENGTH_RECORD if recorded else ""))
+    out = tmp_path / "len.nc"
+    code = main(["run", str(sweep), "-o", str(out), "--chunk", "1", "--device", DEVICE, "--quiet"])
+    assert code == 0, capsys.readouterr().err
+    ds = open_ensemble(out)
+    together = wf.simulate({"length": LENGTHS}, solver=wf.Solver(nodes=11), fronts=None, device=DEVICE,
+                           progress=False)
+    assert dict(ds.sizes)["x"] == 11
+    np.testing.assert_array_equal(ds.x.values, together.x.values)  # x / L: the members differ in length
+    assert ds.x.attrs["units"] == together.x.attrs["units"] == "1"
+    for i, length in enumerate(LENGTHS):
+        alone = _alone(length, i, record=recorded)
+        np.testing.assert_allclose(ds.velocity.values[i], alone.velocity.values[0], rtol=1e-12, atol=0)
+        assert not np.isnan(ds.velocity.values[i]).any()
+        if recorded:
+            assert ds.velocity_history.dims == ("recorded", "time", "x")
+            np.testing.assert_allclose(ds.velocity_history.values[i], alone.velocity_history.values[0], rtol=1e-12,
+                                       atol=0)
+
+
+def test_concat_members_of_two_single_length_runs_gives_simulates_x():
+    from warpfric.io import concat_members
+
+    parts = [_alone(length, i) for i, length in enumerate(LENGTHS)]
+    assert [p.x.attrs["units"] for p in parts] == ["m", "m"]  # each its own axis, in metres
+    both = concat_members(parts, names=["short", "long"])
+    together = wf.simulate({"length": LENGTHS}, solver=wf.Solver(nodes=11), fronts=None, device=DEVICE,
+                           progress=False)
+    assert both.sizes["x"] == 11 and both.sizes["member"] == 2
+    np.testing.assert_array_equal(both.x.values, together.x.values)
+    assert both.x.attrs == together.x.attrs
+    for i, part in enumerate(parts):
+        np.testing.assert_allclose(both.velocity.values[i], part.velocity.values[0], rtol=1e-12, atol=0)
+    # one length in all: x stays in metres, the parts' own axis
+    same = concat_members([_alone(0.2, 0), _alone(0.2, 1)])
+    np.testing.assert_array_equal(same.x.values, parts[0].x.values)
+    assert same.x.attrs["units"] == "m"
+
+
+def test_concat_members_refuses_different_node_counts_naming_both():
+    from warpfric.io import concat_members
+
+    a, b = _alone(0.2, 0, nodes=11), _alone(0.2, 1, nodes=13)
+    for part in (a, b):  # the settings check would name solver_nodes first: the node count's own check
+        part.attrs.pop("solver_nodes")
+    with pytest.raises(ValueError, match=r"^first and second have different node counts \(11 and 13 nodes"):
+        concat_members([a, b], names=["first", "second"])
+
+
+# --- parts with different outputs: refused by name, never dropped ----------------------------------
+
+def _final_fields_and_not(tmp_path):
+    from warpfric.runner import FINAL_FIELDS
+
+    a = write_ensemble(_alone(0.2, 0), tmp_path / "a.nc")
+    b = write_ensemble(_alone(0.2, 1).drop_vars(list(FINAL_FIELDS)), tmp_path / "b.nc")  # [run] final_fields = false
+    return a, b
+
+
+def test_files_with_and_without_final_fields_are_refused_naming_the_fields(tmp_path, capsys):
+    """Before: KeyError 'displacement' (info: a traceback, exit 1) in one order, the fields silently
+    dropped in the other."""
+    a, b = _final_fields_and_not(tmp_path)
+    for files in ((a, b), (b, a)):
+        with pytest.raises(ValueError) as err:
+            open_ensembles(list(files))
+        message = str(err.value)
+        assert str(a) in message and str(b) in message and "\n" not in message
+        assert f"{a} has displacement, velocity, elastic_stress, contact_age, normal_stress, friction_stress, " \
+               f"which {b} lacks" in message
+    code = main(["info", str(a), str(b)])
+    out, err = capsys.readouterr()
+    lines = err.strip().splitlines()
+    assert code == 2 and out == ""
+    assert len(lines) == 1 and lines[0].startswith("warpfric: error:") and "displacement" in lines[0], lines
+
+
+def test_a_file_without_fronts_and_one_with_them_are_refused_in_either_order(tmp_path):
+    """Before: the settings check read the first file's attributes only, so a first file without
+    fronts dropped the other's front outputs (v_main, arrival_time, ...) silently."""
+    plain = write_ensemble(_alone(0.2, 0), tmp_path / "plain.nc")
+    fronted = write_ensemble(wf.simulate({"length": [0.2]}, solver=wf.Solver(nodes=11), fronts=wf.Fronts(),
+                                         device=DEVICE, progress=False, member_offset=1), tmp_path / "fronts.nc")
+    assert "v_main" in open_ensemble(fronted)
+    for files in ((plain, fronted), (fronted, plain)):
+        with pytest.raises(ValueError, match=r"differ in fronts_\w+ \(.*not set.*\): not one ensemble \(a run "
+                                             r"without fronts"):
+            open_ensembles(list(files))
+
+
+def test_recorded_fields_in_one_part_only_still_combine_but_different_ones_are_refused():
+    from warpfric.io import concat_members
+
+    recorded, plain = _alone(0.2, 0, record=True), _alone(0.2, 1)
+    both = concat_members([plain, recorded])  # recorded members in some parts only: as before
+    assert both.recorded_member.values.tolist() == [0] and both.sizes["member"] == 2
+    np.testing.assert_array_equal(both.velocity_history.values, recorded.velocity_history.values)
+    other = _alone(0.2, 2, record=True).drop_vars("slip_rate_history")
+    with pytest.raises(ValueError, match=r"^dataset 0 and dataset 1 hold different recorded fields \(dataset 0 has "
+                                         r"slip_rate_history, which dataset 1 lacks\)"):
+        concat_members([recorded, other])

@@ -754,7 +754,8 @@ def open_ensemble(path) -> xr.Dataset:
 def open_ensembles(paths) -> xr.Dataset:
     """Open several complete warpfric files and concatenate them along ``member`` (recorded fields
     along ``recorded``). Raises ValueError when member numbers repeat (runs made without distinct
-    ``--member-offset``), naming the files and the numbers, instead of mixing them up."""
+    ``--member-offset``), naming the files and the numbers, instead of mixing them up, and when the
+    files are not one ensemble (:func:`concat_members`: settings, node counts or outputs differ)."""
     paths = [Path(p) for p in paths]
     if not paths:
         raise ValueError("open_ensembles: no files given")
@@ -889,25 +890,96 @@ def duplicate_members(datasets, names=None) -> str:
             "or open these files with xr.open_mfdataset(files), which keeps them apart by their member labels")
 
 
+def _plain(value):
+    """A netCDF attribute's value as a reader writes it: 24, not np.int32(24)."""
+    return value.item() if isinstance(value, np.generic) else value
+
+
+def _check_settings(datasets, names) -> None:
+    """ValueError unless every dataset has the first's model, solver and front settings: the union
+    of their model_/solver_/fronts_ attributes, so that a setting one lacks (a run without fronts has
+    no fronts_* attributes) is a difference too."""
+    prefixes = ("model_", "solver_", "fronts_")
+    keys = list(dict.fromkeys(k for ds in datasets for k in ds.attrs if k.startswith(prefixes)))
+    first = datasets[0]
+    missing = object()
+    for key in keys:
+        value = first.attrs.get(key, missing)
+        for name, ds in zip(names[1:], datasets[1:]):
+            other = ds.attrs.get(key, missing)
+            if (value is missing) != (other is missing) or (value is not missing and not _same_attr(value, other)):
+                def shown(v):
+                    return "not set" if v is missing else repr(_plain(v))
+                why = (" (a run without fronts, fronts = false, has no fronts_* settings and no front outputs)"
+                       if key.startswith("fronts_") and (value is missing or other is missing) else "")
+                raise ValueError(f"{names[0]} and {name} differ in {key} ({shown(value)}, {shown(other)}): "
+                                 f"not one ensemble{why}")
+
+
+def _same_attr(a, b) -> bool:
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        return np.array_equal(np.asarray(a), np.asarray(b))
+    return bool(a == b)
+
+
+def _check_variables(parts, what: str) -> None:
+    """ValueError unless every dataset of ``parts`` (name, variable names) holds the first's
+    variables: one that lacks some (written with [run] final_fields = false, another version)
+    would otherwise lose them from the combined ensemble or fail inside xarray."""
+    (first_name, first_vars), rest = parts[0], parts[1:]
+    for name, variables in rest:
+        only_first = [v for v in first_vars if v not in variables]
+        only_other = [v for v in variables if v not in first_vars]
+        if only_first or only_other:
+            def listed(vs):
+                return ", ".join(vs[:6]) + (f", ... ({len(vs)} in all)" if len(vs) > 6 else "")
+            said = [f"{a} has {listed(vs)}, which {b} lacks" for a, b, vs in
+                    ((first_name, name, only_first), (name, first_name, only_other)) if vs]
+            raise ValueError(f"{first_name} and {name} hold different {what} ({'; '.join(said)}): not one "
+                             "ensemble (runs with other outputs, e.g. [run] final_fields = false); drop them "
+                             "from the one that has them (ds.drop_vars) to combine the rest")
+
+
+def ensemble_x(datasets, names) -> xr.DataArray | None:
+    """The x coordinate of ``datasets`` combined, as simulate() gives it for all their members run
+    together (:func:`warpfric.simulate._x_coordinate` of their lengths: positions in m where every
+    member has the same length, else positions / length); None where no dataset has an x dim.
+    ValueError where their node counts differ (naming two of them)."""
+    with_x = [(name, ds) for name, ds in zip(names, datasets) if "x" in ds.dims]
+    if not with_x:
+        return None
+    first_name, first = with_x[0]
+    for name, ds in with_x[1:]:
+        if ds.sizes["x"] != first.sizes["x"]:
+            raise ValueError(f"{first_name} and {name} have different node counts ({first.sizes['x']} and "
+                             f"{ds.sizes['x']} nodes along x): not one ensemble")
+    if all("length" in ds for ds in datasets):
+        from .simulate import _x_coordinate
+
+        length = np.concatenate([np.broadcast_to(np.asarray(ds["length"].values, dtype=float), (ds.sizes["member"],))
+                                 for ds in datasets])
+        return _x_coordinate(length, first.sizes["x"])
+    for name, ds in with_x[1:]:  # no lengths to build it from: every part must have the same x
+        if not np.array_equal(ds.x.values, first.x.values) or ds.x.attrs.get("units") != first.x.attrs.get("units"):
+            raise ValueError(f"{first_name} and {name} have different x coordinates and no parameter length to "
+                             "build the combined one from: not one ensemble")
+    return xr.DataArray(first.x.values, dims=("x",), attrs=dict(first.x.attrs))
+
+
 def concat_members(datasets, names=None) -> xr.Dataset:
     """Concatenate ensembles (in-memory layout) along member: variables with a member dim are
     concatenated, recorded fields along ``recorded``; a parameter that is a scalar in one and
-    differs or varies in another becomes a variable along member. Refuses repeated member numbers
-    and different model/solver/front settings (ValueError). Global attributes of the first;
+    differs or varies in another becomes a variable along member. The x coordinate is the one
+    simulate() gives all the members run together (:func:`ensemble_x`: m where they share one
+    length, else x / length), never the parts' own axes joined. Refuses repeated member numbers,
+    different model/solver/front settings (a setting that one has and another lacks too), different
+    node counts and different sets of output variables (ValueError). Global attributes of the first;
     wall_time_s and kernel_build_time_s summed."""
     names = names or [f"dataset {i}" for i in range(len(datasets))]
     message = duplicate_members(datasets, names)
     if message:
         raise ValueError(message)
-    first = datasets[0]
-    for key, value in first.attrs.items():
-        if key.startswith(("model_", "solver_", "fronts_")):
-            for name, ds in zip(names[1:], datasets[1:]):
-                if ds.attrs.get(key) != value:
-                    def plain(v):  # 24, not np.int32(24)
-                        return v.item() if isinstance(v, np.generic) else v
-                    raise ValueError(f"{names[0]} and {name} differ in {key} ({plain(value)!r}, "
-                                     f"{plain(ds.attrs.get(key))!r}): not one ensemble")
+    _check_settings(datasets, names)
     varying = set()
     for ds in datasets:
         varying |= set(ds.attrs.get("varying_parameters", "").split())
@@ -922,10 +994,16 @@ def concat_members(datasets, names=None) -> xr.Dataset:
                            if p in ds and "member" not in ds[p].dims}) for ds in datasets]
     if not all(MEMBER_ID in ds.coords for ds in datasets):  # labels only where every part has them
         datasets = [ds.drop_vars(MEMBER_ID, errors="ignore") for ds in datasets]
+    # every part holds the same outputs (the recorded fields: where a part has recorded members)
+    _check_variables([(name, [v for v in ds.data_vars if "recorded" not in ds[v].dims])
+                      for name, ds in zip(names, datasets)], "outputs")
+    x = ensemble_x(datasets, names)
+    if x is not None:  # each part's own x (m of its one length, or x / L) gives way to the ensemble's
+        datasets = [ds.assign_coords(x=x) for ds in datasets]
     first = datasets[0]
     member_vars = [v for v in first.data_vars if "member" in first[v].dims]
     parts = [ds[member_vars] for ds in datasets]
-    out = xr.concat(parts, dim="member", data_vars="all", coords="minimal", compat="override", join="outer")
+    out = xr.concat(parts, dim="member", data_vars="all", coords="minimal", compat="override", join="exact")
     for name, var in first.data_vars.items():
         if "member" in var.dims or "recorded" in var.dims:
             continue
@@ -941,6 +1019,9 @@ def concat_members(datasets, names=None) -> xr.Dataset:
                              f"and {times.size} times in [{first_times.min():g}, {first_times.max():g}] and "
                              f"[{times.min():g}, {times.max():g}] s): open_ensembles needs one recording grid; open "
                              "the recorded groups with xr.open_mfdataset(files, group='recorded') (times joined)")
+    if recorded:
+        _check_variables([(name, [v for v in ds.data_vars if "recorded" in ds[v].dims]) for name, ds in recorded],
+                         "recorded fields")
     recorded = [ds for _, ds in recorded]
     if recorded:
         rec_vars = [v for v in recorded[0].data_vars if "recorded" in recorded[0][v].dims]
