@@ -883,3 +883,35 @@ def test_the_interrupt_warning_reads_kept_chunks_with_a_parameter_missing(tmp_pa
     text = str(caught[0].message)
     assert "3 of 4 members in the 2 finished chunks: 3 no_peak" in text, text
     assert "; 1 of them: disc_velocity = 0: the disc never moves" in text, text  # the one that is known
+
+
+def test_slips_a_new_user_makes_are_one_line_errors_that_name_them(tmp_path, capsys, monkeypatch):
+    """-o "" (an unset shell variable) ran and wrote nothing without a word; an ensemble file given as
+    the sweep file gave "'utf-8' codec can't decode byte 0x89"; [run] workers = 0 was reported as the
+    flag --workers, which the user never gave. Each is one line naming what was given (exit 2)."""
+    from conftest import one_line_error
+
+    monkeypatch.chdir(tmp_path)
+    code, out, err = run_cli(capsys, "run", "--nodes", "11", "-o", "")
+    assert code == 2 and not out
+    one_line_error(err, "-o ''", "empty file name", ".nc")
+    (tmp_path / "tiny.toml").write_text(TINY_SWEEP)
+    assert run_cli(capsys, "run", "tiny.toml", "-o", "tiny.nc", "--quiet")[0] == 0
+    code, out, err = run_cli(capsys, "run", "tiny.nc")
+    assert code == 2
+    one_line_error(err, "'tiny.nc' is not text", "a netCDF file", "warpfric info")
+    (tmp_path / "w.toml").write_text(TINY_SWEEP + "[run]\nworkers = 0\n")
+    code, out, err = run_cli(capsys, "run", "w.toml", "-o", "w.nc")
+    assert code == 2 and not (tmp_path / "w.nc").exists()
+    one_line_error(err, "[run] workers = 0", "expected an integer >= 1")
+
+
+def test_a_sweep_file_sets_the_team_size(tmp_path):
+    """[solver] lanes had no value a sweep file could give (its default None made every value "expected a
+    string", and "4" failed Solver's own check): an integer is taken, a string is named."""
+    from warpfric.sweep_file import SweepError, parse_sweep
+
+    assert parse_sweep(TINY_SWEEP.replace("nodes = 11", "nodes = 11\nlanes = 4")).solver.lanes == 4
+    assert parse_sweep(TINY_SWEEP).solver.lanes is None
+    with pytest.raises(SweepError, match=r"\[solver\] lanes = '4': expected an integer"):
+        parse_sweep(TINY_SWEEP.replace("nodes = 11", 'nodes = 11\nlanes = "4"'))

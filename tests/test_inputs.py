@@ -58,6 +58,7 @@ def test_bad_parameters(members, words):
         (dict(max_steps=2**32 + 5), ["max_steps", "4294967301", "[1, 2147483647]"]),
         (dict(stall_min_steps=2**31), ["stall_min_steps", "[1, 2147483647]"]),
         (dict(min_step=1.0, initial_step=1e-6), ["initial_step"]),
+        (dict(min_step=2.0), ["'min_step' = 2.0", "<= max_step (1 s)"]),  # not the initial_step left at its default
         (dict(step_safety=1.5), ["step_safety", "1.5", "(0, 1)"]),
         (dict(failure_factor=0.0), ["failure_factor", "0.0"]),
     ],
@@ -74,6 +75,9 @@ def test_bad_model_switch_and_device():
         wf.Model(inertia="yes")
     with pytest.raises(ValueError, match="cuda:7"):
         simulate(device="cuda:7")
+    with pytest.raises(ValueError) as err:  # the name's case, not a missing GPU
+        simulate(device="CPU")
+    assert "device names are lower case: 'cpu'" in str(err.value) and "no CUDA GPU" not in str(err.value)
 
 
 def test_members_from_xarray_dataset_and_broadcasting():

@@ -284,6 +284,8 @@ def _run_sweep(args) -> int:
 
 
 def _run(args) -> int:
+    if args.output is not None and not args.output.strip():  # -o "$OUT" with OUT unset wrote nothing, silently
+        raise UsageError(f"-o {args.output!r}: an empty file name; expected a file name ending in .nc")
     if args.chunk is not None and args.chunk < 1:
         raise UsageError(f"--chunk {args.chunk}: expected an integer >= 1 (members per chunk file)")
     if args.workers is not None and args.workers < 1:

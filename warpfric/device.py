@@ -41,7 +41,10 @@ def check_device(device: str | None, n_members: int | None = None) -> str:
     if str(device) == "cuda" and wp.get_cuda_device_count() > 0:
         return "cuda:0"
     if str(device) not in names:
-        gpus = "" if wp.get_cuda_device_count() > 0 else " (no CUDA GPU or driver found on this machine)"
+        asked_gpu = str(device).startswith("cuda")
+        gpus = "" if wp.get_cuda_device_count() > 0 or not asked_gpu else " (no CUDA GPU or driver found on this machine)"
+        if str(device).lower() in names and str(device).lower() != str(device):
+            gpus = f" (device names are lower case: {str(device).lower()!r})"
         raise ValueError(f"device {device!r} is not available{gpus}; valid: {', '.join(names)}, or None (Python; on "
                          "the command line, leave --device out): a GPU where there is one and the ensemble is large "
                          "enough, else the CPU")

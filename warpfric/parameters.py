@@ -405,6 +405,8 @@ class Solver:
         for name in ("initial_step", "min_step", "max_step"):
             v = getattr(self, name)
             need(is_real(v) and v > 0, name, v, "a number > 0 (s)")
+        need(self.min_step <= self.max_step, "min_step", self.min_step,
+             f"a number <= max_step ({self.max_step:g} s): the step size lies in [min_step, max_step]")
         need(self.min_step <= self.initial_step <= self.max_step, "initial_step", self.initial_step,
              f"min_step ({self.min_step:g}) <= initial_step <= max_step ({self.max_step:g})")
         need(is_int(self.max_steps) and 1 <= self.max_steps <= INT32_MAX, "max_steps", self.max_steps,

@@ -108,7 +108,8 @@ def _dataclass_kwargs(table: dict, cls, where: str, parameters: bool = False) ->
             if not isinstance(value, bool):
                 raise SweepError(f"{_where(where, key)} = {value!r}: expected true or false")
             out[key] = value
-        elif isinstance(default, int) and not isinstance(default, bool):
+        elif (isinstance(default, int) and not isinstance(default, bool)) or (
+                default is None and str(names[key].type).startswith("int")):  # lanes: int | None
             if isinstance(value, bool) or not isinstance(value, int):
                 raise SweepError(f"{_where(where, key)} = {value!r}: expected an integer")
             out[key] = value
@@ -199,6 +200,10 @@ def load_sweep(path) -> Sweep:
         text = path.read_text()
     except OSError as err:
         raise SweepError(f"sweep file {str(path)!r}: {err.strerror}") from None
+    except UnicodeDecodeError:  # e.g. an ensemble file (`warpfric run out.nc`, meant for info or plot)
+        what = " (a netCDF file: warpfric info or warpfric plot read those)" if path.suffix == ".nc" else ""
+        raise SweepError(f"sweep file {str(path)!r} is not text{what}; expected a TOML sweep file "
+                         "(docs/sweeps.md)") from None
     return parse_sweep(text, str(path))
 
 
@@ -327,6 +332,8 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
     run = _dataclass_like(doc.get("run", {}), RUN_KEYS, "run")
     if run.get("chunk", 1) < 1:
         raise SweepError(f"[run] chunk = {run['chunk']}: expected an integer >= 1 (members per chunk file)")
+    if run.get("workers", 1) < 1:
+        raise SweepError(f"[run] workers = {run['workers']}: expected an integer >= 1 (Dask workers of a local cluster)")
     n_members = next(iter(members.values())).shape[0] if members else 1
     check_member_offset(run.get("member_offset", 0), n_members, "[run] member_offset")
     # validate every member now (ranges, protocol), before anything runs or is written
