@@ -296,3 +296,20 @@ def test_recorded_fields_in_one_part_only_still_combine_but_different_ones_are_r
     with pytest.raises(ValueError, match=r"^dataset 0 and dataset 1 hold different recorded fields \(dataset 0 has "
                                          r"slip_rate_history, which dataset 1 lacks\)"):
         concat_members([recorded, other])
+
+
+def test_a_file_of_an_earlier_version_without_detachment_end_time_combines_with_a_new_one(tmp_path):
+    """Files written before detachment_end_time was an output lack it: reading one gives it NaN,
+    named as unknown (not as a cut-off run), and such a file combines with a new one (the check of
+    the parts' variables would refuse it otherwise); the new file's values are kept."""
+    new = run({"eccentricity": [0.1]}, nodes=11, fronts=wf.Fronts())
+    old = wf.simulate({"eccentricity": [0.2]}, solver=wf.Solver(nodes=11, rtol=1e-6), fronts=wf.Fronts(),
+                      device=DEVICE, progress=False, member_offset=1)
+    write_ensemble(new, tmp_path / "new.nc")
+    write_ensemble(old.drop_vars("detachment_end_time"), tmp_path / "old.nc")
+    read = open_ensemble(tmp_path / "old.nc")
+    assert np.isnan(read.detachment_end_time.values).all()
+    assert "unknown" in read.detachment_end_time.attrs["long_name"]
+    both = open_ensembles([tmp_path / "new.nc", tmp_path / "old.nc"])
+    assert both.detachment_end_time.values[0] == new.detachment_end_time.values[0] == new.final_time.values[0]
+    assert np.isnan(both.detachment_end_time.values[1])

@@ -710,6 +710,10 @@ def _read(path) -> xr.Dataset:
             from .simulate import friction_coefficient_history  # a file of an earlier version: the same as a new one
 
             ds["friction_coefficient_history"] = friction_coefficient_history(ds)
+        if "final_time" in ds and "detachment_end_time" not in ds:  # a file of an earlier version
+            ds["detachment_end_time"] = xr.full_like(ds.final_time, np.nan, dtype=np.float64).assign_attrs(
+                units="s", long_name="time at which the detachment was over: unknown (the file was written by a "
+                "warpfric without this output, whose front outputs were given whatever ended the run)")
         return ds
     except (OSError, ValueError, RuntimeError) as err:
         reason = " ".join(str(err).split())
