@@ -243,3 +243,18 @@ def test_a_run_beyond_the_machines_memory_is_refused(monkeypatch):
     with pytest.raises(ValueError, match=r"this run \(1 member x 100000000 nodes at once\) needs about 53.0 GB of "
                                          r"memory, more than this machine's 25.0 GB"):
         simulate(None, device="cpu", solver=wf.Solver(nodes=10**8))
+
+
+def test_a_disc_that_starts_before_the_full_load_is_run_with_a_warning():
+    """rest_until = 0 starts the disc at t = 0, while the normal force ramps over 10 s: the default
+    scene peaks at ~0.16 s under ~16 N, a mu_s under a force still rising, while the output's
+    normal_force says 1000 N. It runs (a user may want it), and one warning says so; the default
+    protocol (rest 20 s, ramp 10 s) gives none."""
+    import warnings
+
+    with pytest.warns(UserWarning, match=r"before the normal force is fully applied \(force_ramp_time\)"):
+        ds = run({"rest_until": [0.0, 20.0]}, nodes=11)
+    assert ds.mu_s_time.values[0] < ds.force_ramp_time.values.min() and ds.mu_s_time.values[1] > 20.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        run({"rest_until": [10.0]}, nodes=11)

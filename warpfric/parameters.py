@@ -686,6 +686,11 @@ PARAMETERS_UNUSED = "parameters without effect under these model switches"
 CONTACT_WITHOUT_GATE = "fronts event 'contact' with relaxation_gate="
 # the warnings simulate raises once for the whole ensemble: the runs inside it (worker processes'
 # chunks, the float32 fallback, the grid check) drop their own
+# simulate's warning where a disc starts to move before the normal force is fully applied (one text
+# for every chunk and worker, so that Python shows it once)
+DISC_BEFORE_FULL_LOAD = ("the disc starts to move (rest_until) before the normal force is fully applied "
+                         "(force_ramp_time) in some members: their mu_s is measured under a normal force still "
+                         "rising, below normal_force (docs/model.md, \"Equations\": protocol)")
 # how simulate's warning of members whose run ended before their detachment was over begins (the same)
 DETACHMENT_NOT_OVER = "runs ended before the detachment was over"
 ENSEMBLE_WARNINGS = (RECORD_PAST_END, MEMBERS_NOT_OK, DETACHMENT_NOT_OVER, FRONTS_SETTINGS_UNUSED, PARAMETERS_UNUSED, CONTACT_WITHOUT_GATE)

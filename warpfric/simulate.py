@@ -17,7 +17,7 @@ from . import __version__
 from .device import check_device, init_warp
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
-from .parameters import (CONTACT_WITHOUT_GATE, DETACHMENT_NOT_OVER, ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, MEMBERS_NOT_OK,
+from .parameters import (CONTACT_WITHOUT_GATE, DETACHMENT_NOT_OVER, DISC_BEFORE_FULL_LOAD, ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, MEMBERS_NOT_OK,
                          MEMBERS_NOT_OK_HINT, PARAMETERS_UNUSED, RECORD_PAST_END, Fronts, Model, Parameters, Record,
                          Solver, check_precision, parameter_long_name, parameter_units)
 
@@ -123,6 +123,8 @@ def simulate(
     if unused:  # set, and silently without effect
         warnings.warn(f"{PARAMETERS_UNUSED}: {', '.join(unused)}; they differ from the default scene but change "
                       "nothing in this model", stacklevel=2)
+    if np.any(values["rest_until"] < values["force_ramp_time"]):  # allowed, but rarely meant
+        warnings.warn(DISC_BEFORE_FULL_LOAD, stacklevel=2)
     device = check_device(device, values["normal_force"].shape[0])
     from . import pool  # a CPU ensemble large enough to pay: its members split over worker processes
 
