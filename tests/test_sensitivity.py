@@ -160,6 +160,10 @@ def test_results_are_not_replaced_without_overwrite_and_the_ensemble_never(tmp_p
     code, err = run()
     assert code == 2 and len(err) == 1 and "ish_sensitivity.nc' exists; pass --overwrite" in err[0], err
     assert (result.stat().st_mtime_ns, figure.read_bytes()) == first
+    # a wrong output name is said first, not "exists" (which sent a user to --overwrite to learn it)
+    code = main(["sensitivity", str(path), "--output", "v_sideways"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "'v_sideways' is not a per-member variable" in err[0], err
     figure.unlink()  # the figure alone, left from an earlier run, is refused the same
     result.rename(tmp_path / "kept.nc")
     figure.write_bytes(b"an older figure")

@@ -473,7 +473,9 @@ def _plot(args) -> int:
 def _sensitivity(args) -> int:
     from .io import open_ensemble, replace_atomically
     from .runner import check_output_name
-    from .sensitivity import analyse, bar_plot
+    import json
+
+    from .sensitivity import DESIGN_ATTR, analyse, bar_plot, check_outputs
 
     source = Path(args.file)
     out = Path(args.out) if args.out else source.with_name(source.stem + "_sensitivity.nc")
@@ -481,11 +483,14 @@ def _sensitivity(args) -> int:
     check_output_name(out)
     if out.exists() and source.exists() and out.samefile(source):
         raise UsageError(f"output {str(out)!r} is the ensemble being analysed; give another -o OUT.nc")
+    ds = open_ensemble(source)
+    outputs = tuple(args.output or ["mu_s"])
+    design = json.loads(ds.attrs[DESIGN_ATTR]) if DESIGN_ATTR in ds.attrs else {}
+    check_outputs(ds, outputs, design.get("names", ()))  # a wrong name before "exists" (and --overwrite to learn it)
     for path in (out, figure):
         if path.exists() and not args.overwrite:
             raise UsageError(f"output {str(path)!r} exists; pass --overwrite to replace it")
-    ds = open_ensemble(source)
-    res = analyse(ds, outputs=tuple(args.output or ["mu_s"]), on_failure=args.on_failure, log=args.log)
+    res = analyse(ds, outputs=outputs, on_failure=args.on_failure, log=args.log)
     replace_atomically(out, res.to_netcdf)
     replace_atomically(figure, lambda tmp: bar_plot(res, tmp), suffix=".png")
     for o in res.output.values:

@@ -131,6 +131,28 @@ def design_rows(design: dict) -> int:
     return design["n"]
 
 
+def check_outputs(ds, outputs, design_names=()) -> None:
+    """ValueError (one line) unless every name of ``outputs`` is once a per-member result of ``ds``:
+    not an input parameter (nor one of ``design_names``), not a flag variable."""
+    repeated = sorted({o for o in outputs if list(outputs).count(o) > 1})
+    if repeated:
+        raise ValueError(f"output {repeated[0]!r} is given more than once; give each output once")
+    inputs = set(PARAMETER_NAMES) | set(design_names)
+
+    def is_flag(v):  # status, the edge codes: categories, not quantities
+        return v == "status" or "flag_meanings" in ds[v].attrs
+
+    def is_output(v):  # a per-member result: not an input parameter, not a flag
+        return ds[v].dims == ("member",) and v not in inputs and not is_flag(v)
+
+    for out in outputs:
+        if out not in ds or not is_output(out):
+            candidates = [v for v in ds.data_vars if is_output(v)]
+            what = ("an input parameter" if out in inputs else "a flag variable" if out in ds and is_flag(out)
+                    else "not a per-member variable of the file")
+            raise ValueError(f"output {out!r} is {what}; available: {', '.join(candidates)}")
+
+
 def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: int = 100, conf_level: float = 0.95,
             log: bool = False):
     """Sensitivity indices of ``outputs`` (variables along member) for the design stored in ``ds``.
@@ -167,24 +189,8 @@ def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: in
     d = len(names)
     result = {}
     filled = {}
-    repeated = sorted({o for o in outputs if list(outputs).count(o) > 1})
-    if repeated:
-        raise ValueError(f"output {repeated[0]!r} is given more than once; give each output once")
-
-    inputs = set(PARAMETER_NAMES) | set(names)
-
-    def is_flag(v):  # status, the edge codes: categories, not quantities
-        return v == "status" or "flag_meanings" in ds[v].attrs
-
-    def is_output(v):  # a per-member result: not an input parameter, not a flag
-        return ds[v].dims == ("member",) and v not in inputs and not is_flag(v)
-
+    check_outputs(ds, outputs, names)
     for out in outputs:
-        if out not in ds or not is_output(out):
-            candidates = [v for v in ds.data_vars if is_output(v)]
-            what = ("an input parameter" if out in inputs else "a flag variable" if out in ds and is_flag(out)
-                    else "not a per-member variable of the file")
-            raise ValueError(f"output {out!r} is {what}; available: {', '.join(candidates)}")
         Y = ds[out].values.astype(np.float64)
         if log:
             with np.errstate(divide="ignore", invalid="ignore"):
