@@ -915,3 +915,13 @@ def test_a_sweep_file_sets_the_team_size(tmp_path):
     assert parse_sweep(TINY_SWEEP).solver.lanes is None
     with pytest.raises(SweepError, match=r"\[solver\] lanes = '4': expected an integer"):
         parse_sweep(TINY_SWEEP.replace("nodes = 11", 'nodes = 11\nlanes = "4"'))
+
+
+def test_the_command_line_says_why_a_cut_off_runs_front_is_not_given(capsys):
+    """--end-time inside the front: the front line said "absent: no node reached the front's event",
+    which a cut-off run's NaN fronts now are not; it says the run ended before the detachment was over."""
+    code, out, err = run_cli(capsys, "run", "--nodes", "30", "--end-time", "20.245", "--quiet")
+    assert code == 0
+    front = [line for line in out if line.startswith("front")]
+    assert front == ["front     : not given: the run ended at t = 20.245 s, before the detachment was over (a later "
+                     "--end-time, or none: the automatic end), so its front outputs are NaN"], out

@@ -146,6 +146,9 @@ def _print_member(ds, solver: Solver) -> None:
     elif int(m.status) != 0:
         print(f"front     : not given: the member did not end ok ({_status_name(ds, m.status)}), so its front outputs "
               "are NaN")
+    elif "detachment_end_time" in m and not np.isfinite(float(m.detachment_end_time)):
+        print(f"front     : not given: the run ended at t = {float(m.final_time):g} s, before the detachment was over "
+              "(a later --end-time, or none: the automatic end), so its front outputs are NaN")
     elif not np.isfinite(float(m.nucleation_position)):
         print(f"front     : absent: no node reached the {event[0] + ' ' if event else ''}front's event in the run")
     else:
