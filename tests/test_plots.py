@@ -251,9 +251,16 @@ def test_a_member_without_a_front_gets_no_curve(contact_run, tmp_path):
     # no_peak: its front outputs are NaN whether or not a front ran (fig11's stopped member shows one
     # on the map), so not "no contact front"
     assert [text.get_text() for text in ax.get_legend().get_texts()] == ["contact front: not given (status no_peak)"]
-    ok = ds.assign(status=ds.status.copy(data=np.zeros(ds.sizes["member"], np.int32)))
+    # an ok member whose run saw its detachment through (detachment_end_time given) reached no node
+    ok = ds.assign(status=ds.status.copy(data=np.zeros(ds.sizes["member"], np.int32)),
+                   detachment_end_time=ds.final_time.copy())
     ax = plots.space_time_figure(ok, 1).axes[0]
     assert [text.get_text() for text in ax.get_legend().get_texts()] == ["no contact front"]
+    # one whose run ended before it (an explicit end_time inside the front) has its fronts NaN: not "no front"
+    cut = ok.assign(detachment_end_time=ok.detachment_end_time.copy(data=np.full(ok.sizes["member"], np.nan)))
+    ax = plots.space_time_figure(cut, 1).axes[0]
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == [
+        "contact front: not given (the run ended before the detachment was over)"]
     failed = ds.copy()
     failed["status"] = failed.status.copy(data=np.where(np.arange(failed.sizes["member"]) == 1,
                                                           failed.status.attrs["flag_meanings"].split().index("stalled"),

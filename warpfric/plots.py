@@ -609,6 +609,10 @@ def space_time_figure(ds, recorded_index: int):
             # a member that is not ok has NaN front outputs whether or not a front ran (no_peak: the
             # map may show one): not "no front"
             text = f"no {front}" if status == 0 else f"{front}: not given (status {_status_name(ds, status)})"
+            known = "detachment_end_time" in ds and "unknown" not in ds.detachment_end_time.attrs.get("long_name", "")
+            if status == 0 and known and not np.isfinite(float(_per_member(ds, "detachment_end_time")[position])):
+                # a run cut off inside the front (a file of an earlier version does not know)
+                text = f"{front}: not given (the run ended before the detachment was over)"
             handles.append(Line2D([], [], ls="none", label=text))
             continue
         gaps = np.flatnonzero(np.diff(reached) > 1) + 1  # no line across nodes the front did not reach
