@@ -571,7 +571,8 @@ def _integer_outputs_restored(ds: xr.Dataset) -> xr.Dataset:
 
 def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, command: str | None = None,
                    run_id: str | None = None) -> Path:
-    """Write ``ds`` (from :func:`warpfric.simulate`) to netCDF4 at ``path``, atomically.
+    """Write ``ds`` (from :func:`warpfric.simulate`) to netCDF4 at ``path``, atomically; an existing
+    file there is replaced (the command line asks for --overwrite first).
 
     varying:   names of the swept parameters (default: those that vary in ds,
                ``ds.attrs['varying_parameters']``), the file's ``varying_parameters``. Every
