@@ -925,3 +925,22 @@ def test_the_command_line_says_why_a_cut_off_runs_front_is_not_given(capsys):
     front = [line for line in out if line.startswith("front")]
     assert front == ["front     : not given: the run ended at t = 20.245 s, before the detachment was over (a later "
                      "--end-time, or none: the automatic end), so its front outputs are NaN"], out
+
+
+def test_chunks_that_do_not_combine_are_kept_and_said_so(tmp_path, capsys, monkeypatch):
+    """A combine that refuses its chunks (parts written by another warpfric version for --resume)
+    raised its ValueError as bad input (exit 2), with no word of the finished chunks it left behind:
+    it is a failed write now (exit 3), naming the parts folder and the kept chunks."""
+    from warpfric.io import ChunkStore
+
+    def refuse(self, *args, **kwargs):
+        raise ValueError("chunk_0.nc and chunk_1.nc differ in displacement: not one ensemble")
+
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(ChunkStore, "combine", refuse)
+    (tmp_path / "tiny.toml").write_text(TINY_SWEEP)
+    code, out, err = run_cli(capsys, "run", "tiny.toml", "-o", "out.nc", "--chunk", "1", "--quiet")
+    assert code == 3 and not (tmp_path / "out.nc").exists()
+    _error_line(err, "do not combine into one file", "differ in displacement", "the 3 finished chunks are kept",
+                "out.nc.parts")
+    assert len(list((tmp_path / "out.nc.parts").glob("*.nc"))) == 3

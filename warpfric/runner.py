@@ -594,7 +594,12 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
             warn_detachment_not_over(ds, stacklevel=2)
             _warn_members_not_ok(ds, sweep.solver)
 
-        store.combine(out, command=command, on_combined=on_combined)
+        try:
+            store.combine(out, command=command, on_combined=on_combined)
+        except ValueError as err:  # no bad input (that is refused before any chunk runs): chunks that differ
+            # (written by another warpfric version for --resume) leave the finished chunks where they are
+            raise OutputWriteError(f"the chunks in {str(parts)!r} do not combine into one file ({err})",
+                                   False) from None
     except BaseException as err:  # noqa: BLE001 - cleaned up, then raised again
         interrupted = isinstance(err, KeyboardInterrupt)
         # the command's own local cluster is stopped before the finished chunks are counted: the chunks
