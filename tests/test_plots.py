@@ -84,7 +84,12 @@ def test_one_member_is_one_member_in_legends_and_titles():
                                                           "flag_meanings": "ok max_steps_reached"})
     ds.attrs["varying_parameters"] = "normal_force"
     ax = plots.mu_s_figure(ds, "normal_force").axes[0]
-    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["1 ok member"]
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["1 ok member",
+                                                                   "1 member not ok (no mu_s), on the axis"]
+    # the member not ok is marked at its x on the axis (a figure of the ok members' x alone hid its value)
+    marks = [line for line in ax.get_lines() if line.get_marker() == "x"]
+    assert len(marks) == 1 and list(marks[0].get_xdata()) == [2000.0] and list(marks[0].get_ydata()) == [0.0]
+    assert ax.get_xlim()[0] < 1000.0 and ax.get_xlim()[1] > 2000.0
     speeds = plots.front_speeds_figure(ds, "normal_force").axes[0]
     assert speeds.get_title().endswith("(1 ok member; 1 max_steps_reached)") and "v_middle (1 member)" in [
         t.get_text() for t in speeds.get_legend().get_texts()]

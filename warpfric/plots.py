@@ -321,7 +321,14 @@ def mu_s_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
         _nothing_to_plot(ax, "no member has a mu_s to show")
         return fig
     _plot_by(ax, x, mu, ok, colours, ds, label=plural(int(ok.sum()), "ok member"), colour="C0")
-    _scale(ax, "x", x[shown])
+    # the members not ok have no mu_s: marked on the axis at their x, so that their values are seen
+    # (an axis of the ok members' values alone hid them; the title only counted them)
+    failed = ~ok & np.isfinite(x)
+    scale = _scale(ax, "x", x[shown | failed] if _axis_scale(x[shown | failed]) == _axis_scale(x[shown]) else x[shown])
+    if failed.any():
+        on_axis = failed & ((x > 0) if scale == "log" else failed)
+        ax.plot(x[on_axis], np.zeros(int(on_axis.sum())), "x", color="0.45", transform=ax.get_xaxis_transform(),
+                clip_on=False, ls="none", label=f"{plural(int(failed.sum()), 'member')} not ok (no mu_s), on the axis")
     _scale(ax, "y", mu[shown])
     ax.set_xlabel(xlabel)
     ax.set_ylabel("static friction coefficient mu_s")
