@@ -313,3 +313,20 @@ def test_a_file_of_an_earlier_version_without_detachment_end_time_combines_with_
     both = open_ensembles([tmp_path / "new.nc", tmp_path / "old.nc"])
     assert both.detachment_end_time.values[0] == new.detachment_end_time.values[0] == new.final_time.values[0]
     assert np.isnan(both.detachment_end_time.values[1])
+
+
+def test_parts_run_on_different_devices_say_so_in_the_combination(tmp_path):
+    """A --resume on another device (or another team size) gave the combined file the first chunk's
+    device and lanes only: where the parts differ the attribute lists them all; where they agree it
+    stays as it was."""
+    from warpfric.io import concat_members
+
+    a = run({"eccentricity": [0.1]}, nodes=11)
+    b = wf.simulate({"eccentricity": [0.2]}, solver=wf.Solver(nodes=11, rtol=1e-6), device=DEVICE, progress=False,
+                    member_offset=1, fronts=None)
+    same = concat_members([a, b])
+    assert same.attrs["device"] == a.attrs["device"] and same.attrs["lanes"] == a.attrs["lanes"]
+    b.attrs["device"], b.attrs["lanes"] = "cuda:0", 32
+    mixed = concat_members([a, b])
+    assert mixed.attrs["device"] == f"mixed: {a.attrs['device']}, cuda:0"
+    assert mixed.attrs["lanes"] == f"mixed: {a.attrs['lanes']}, 32"

@@ -971,6 +971,11 @@ def ensemble_x(datasets, names) -> xr.DataArray | None:
     return xr.DataArray(first.x.values, dims=("x",), attrs=dict(first.x.attrs))
 
 
+# how a part was run (simulate's attributes): a combination of parts that differ in one gives all
+HOW_RUN_ATTRS = ("device", "lanes", "team_exchange", "block_members", "work_memory", "member_order",
+                 "integration_passes", "device_bytes_per_member")
+
+
 def concat_members(datasets, names=None) -> xr.Dataset:
     """Concatenate ensembles (in-memory layout) along member: variables with a member dim are
     concatenated, recorded fields along ``recorded``; a parameter that is a scalar in one and
@@ -978,8 +983,9 @@ def concat_members(datasets, names=None) -> xr.Dataset:
     simulate() gives all the members run together (:func:`ensemble_x`: m where they share one
     length, else x / length), never the parts' own axes joined. Refuses repeated member numbers,
     different model/solver/front settings (a setting that one has and another lacks too), different
-    node counts and different sets of output variables (ValueError). Global attributes of the first;
-    wall_time_s and kernel_build_time_s summed."""
+    node counts and different sets of output variables (ValueError). Global attributes of the first,
+    but those of HOW_RUN_ATTRS where the parts differ ("mixed: cpu, cuda:0"); wall_time_s and
+    kernel_build_time_s summed."""
     names = names or [f"dataset {i}" for i in range(len(datasets))]
     message = duplicate_members(datasets, names)
     if message:
@@ -1034,6 +1040,10 @@ def concat_members(datasets, names=None) -> xr.Dataset:
                         compat="equals", join="exact")
         out = out.merge(rec)
     out.attrs = dict(first.attrs)
+    for key in HOW_RUN_ATTRS:  # where the parts ran differently (a --resume on another device): all of them
+        values = list(dict.fromkeys(str(ds.attrs[key]) for ds in datasets if key in ds.attrs))
+        if len(values) > 1:
+            out.attrs[key] = "mixed: " + ", ".join(values)
     out.attrs["varying_parameters"] = " ".join(p for p in PARAMETER_NAMES if p in varying)
     for key in ("wall_time_s", "kernel_build_time_s"):
         out.attrs[key] = float(sum(float(ds.attrs.get(key, 0.0)) for ds in datasets))
