@@ -21,7 +21,7 @@ import warnings
 import numpy as np
 
 from .parameters import Fronts, Model, Record, Solver
-from .progress import Progress, launch_steps
+from .progress import Progress, end_time_attempts, launch_steps
 
 
 @dataclasses.dataclass
@@ -772,7 +772,8 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
             else:
                 wp.launch(kern["integrate"], dim=n_members, inputs=inputs, outputs=outputs_)
 
-        bar = Progress(show_progress, n_members, label, n_passes, solver)  # warpfric/progress.py
+        bar = Progress(show_progress, n_members, label, n_passes, solver,  # warpfric/progress.py
+                       extra=end_time_attempts(values["end_time"], values["rest_until"]))
         for pass_index in range(n_passes):
             if pass_index == 0:
                 member_states = device_member_states(n_members, solver, slots, kern["layout"])

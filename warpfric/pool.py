@@ -80,9 +80,10 @@ def _top_level() -> bool:
     return not _IN_WORKER and mp.parent_process() is None and threading.current_thread() is threading.main_thread()
 
 
-def plan(workers, device, n_members: int, solver, fronts, record, model=None) -> int:
+def plan(workers, device, n_members: int, solver, fronts, record, model=None, extra: float = 0.0) -> int:
     """How many worker processes run the ensemble (1: this process). Validates ``workers`` and
-    ``record``'s members, and warns (progress.SizeWarning) before a run far beyond the usual size."""
+    ``record``'s members, and warns (progress.SizeWarning) before a run far beyond the usual size;
+    ``extra``: the attempts a member needs beyond the automatic end (progress.end_time_attempts)."""
     from .engine import record_slots
 
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or workers < 1):
@@ -95,7 +96,7 @@ def plan(workers, device, n_members: int, solver, fronts, record, model=None) ->
     record_slots(record, n_members)  # a recorded member beyond the ensemble: the same error as in one process
     passes = progress_module.front_passes(fronts)
     if workers is None:
-        pays = progress_module.cpu_seconds(n_members, solver, passes, model) >= MIN_CPU_SECONDS
+        pays = progress_module.cpu_seconds(n_members, solver, passes, model, extra) >= MIN_CPU_SECONDS
         n = min(cpu_cores(), n_members) if cpu and n_members > 1 and pays and _top_level() else 1
     else:
         n = min(int(workers), n_members)
@@ -104,7 +105,7 @@ def plan(workers, device, n_members: int, solver, fronts, record, model=None) ->
                           f"faster than {cpu_cores()} would (Warp runs a CPU launch on one core)", stacklevel=3)
     if not _IN_WORKER:
         progress_module.check_memory(n_members, solver, device)
-        progress_module.size_warning(n_members, solver, passes, device, n)
+        progress_module.size_warning(n_members, solver, passes, device, n, extra)
     return n
 
 

@@ -48,11 +48,34 @@ def front_passes(fronts) -> float:
     return max(FRONT_PASSES[event] for event in fronts.events) * (1.5 if fronts.grid_check else 1.0)
 
 
-def expected_attempts(nodes: int, rtol: float = 1e-5, method: str = "tr_bdf2") -> float:
-    """Attempted steps one member is expected to need for one pass of the protocol (automatic
-    end): ~330 on a coarse grid, ~0.95 N on a fine one, times (1e-5/rtol)^(1/order)."""
+def expected_attempts(nodes: int, rtol: float = 1e-5, method: str = "tr_bdf2", extra: float = 0.0) -> float:
+    """Attempted steps one member is expected to need for one pass of the protocol: with the
+    automatic end ~330 on a coarse grid, ~0.95 N on a fine one; ``extra`` more for an explicit
+    end_time past the detachment (:func:`end_time_attempts`); all times (1e-5/rtol)^(1/order)."""
     order = 4 if method == "esdirk4" else 2
-    return math.hypot(FEW_NODES_ATTEMPTS, 0.95 * nodes) * (1e-5 / rtol) ** (1.0 / order)
+    return (math.hypot(FEW_NODES_ATTEMPTS, 0.95 * nodes) + extra) * (1e-5 / rtol) ** (1.0 / order)
+
+
+# an explicit end_time past the detachment: the pad's transient after it (~165 attempts within
+# ~4.7 s), then ~1 attempt per second of steady sliding (default scene, two members, CPU, rtol 1e-5,
+# automatic end -> end_time 25 / 40 / 80 s: N = 40 334 -> 500 / 515 / 555 attempts, N = 100 327 ->
+# 493 / 508 / 548, N = 200 336 -> 502 / 517 / 557; without it the estimate was 1.7x low at 80 s)
+AFTER_DETACHMENT_ATTEMPTS = 165.0
+AFTER_DETACHMENT_SECONDS = 4.7
+SLIDING_ATTEMPTS_PER_SECOND = 1.0
+DETACHMENT_AFTER_START_S = 0.3  # the default scene's detachment is over ~0.27 s after the disc starts
+
+
+def end_time_attempts(end_time, rest_until) -> float:
+    """Extra attempts a member is expected to need, on average over the members, for its explicit
+    end_time (s; inf or NaN: the automatic end, none) past its detachment (rest_until + ~0.3 s)."""
+    end = np.asarray(end_time, dtype=float)
+    after = end - (np.asarray(rest_until, dtype=float) + DETACHMENT_AFTER_START_S)
+    with np.errstate(invalid="ignore"):
+        extra = np.where(np.isfinite(end) & (after > 0),
+                         AFTER_DETACHMENT_ATTEMPTS * np.minimum(1.0, after / AFTER_DETACHMENT_SECONDS)
+                         + SLIDING_ATTEMPTS_PER_SECOND * np.maximum(0.0, after - AFTER_DETACHMENT_SECONDS), 0.0)
+    return float(np.mean(extra)) if extra.size else 0.0
 
 
 # attempts of a law without the yield gate against the stress gate's: it takes no steps at the gate
@@ -60,11 +83,11 @@ def expected_attempts(nodes: int, rtol: float = 1e-5, method: str = "tr_bdf2") -
 LAW_ATTEMPTS = {"stress": 1.0, "none": 0.39, "velocity": 0.39}
 
 
-def cpu_seconds(n_members: int, solver, passes: float = 1.0, model=None) -> float:
+def cpu_seconds(n_members: int, solver, passes: float = 1.0, model=None, extra: float = 0.0) -> float:
     """Rough time of an ensemble on one CPU core (s): members x passes x expected attempts x nodes x
     CPU_SECONDS_PER_NODE_ATTEMPT (passes: front_passes; ``model``: its law's LAW_ATTEMPTS, else the
-    stress gate's)."""
-    attempts = expected_attempts(solver.nodes, solver.rtol, solver.method)
+    stress gate's; ``extra``: end_time_attempts)."""
+    attempts = expected_attempts(solver.nodes, solver.rtol, solver.method, extra)
     if model is not None:
         attempts *= LAW_ATTEMPTS.get(model.relaxation_gate, 1.0)
     return n_members * passes * attempts * solver.nodes * CPU_SECONDS_PER_NODE_ATTEMPT
@@ -170,9 +193,10 @@ def check_memory(n_members: int, solver, device, what: str = "this run") -> None
                          "members at once (a sweep's chunk, --chunk)")
 
 
-def size_warning(n_members: int, solver, passes: float, device, workers: int = 1) -> str | None:
+def size_warning(n_members: int, solver, passes: float, device, workers: int = 1, extra: float = 0.0) -> str | None:
     """Warn (SizeWarning) before a run of more than USUAL_NODES nodes or USUAL_NODE_MEMBERS
-    node-members, with its rough time (on the CPU) and memory; return the message, or None."""
+    node-members, with its rough time (on the CPU; ``extra``: end_time_attempts) and memory; return
+    the message, or None."""
     nodes = solver.nodes
     if nodes <= USUAL_NODES and n_members * nodes <= USUAL_NODE_MEMBERS:
         return None
@@ -180,9 +204,9 @@ def size_warning(n_members: int, solver, passes: float, device, workers: int = 1
     what = f"{n_members} member{'s' if n_members != 1 else ''} x {nodes} nodes"
     usual = f"usual: up to {USUAL_NODES} nodes and {USUAL_NODE_MEMBERS:.0e} node-members"
     if str(device).startswith("cpu"):
-        seconds = cpu_seconds(n_members, solver, passes) / max(1, workers)
+        seconds = cpu_seconds(n_members, solver, passes, extra=extra) / max(1, workers)
         cores = f"{workers} CPU core{'s' if workers != 1 else ''}"
-        when = (f"roughly {_duration(seconds)} on {cores} (~{expected_attempts(nodes, solver.rtol, solver.method):.0f} "
+        when = (f"roughly {_duration(seconds)} on {cores} (~{expected_attempts(nodes, solver.rtol, solver.method, extra):.0f} "
                 f"steps per member and pass, {CPU_SECONDS_PER_NODE_ATTEMPT * 1e6:.2f} us per node and step on this "
                 f"project's CPU) and {_size(device_bytes + host_bytes)} of memory")
     else:
@@ -377,13 +401,13 @@ class Progress:
     worker: the parent draws one line for all)."""
 
     def __init__(self, enabled: bool, n_members: int, label: str = "", n_passes: int = 1, solver=None,
-                 stream=None, clock=time.monotonic):
+                 stream=None, clock=time.monotonic, extra: float = 0.0):
         self.enabled = bool(enabled)
         self.n = n_members
         self.label = label
         self.n_passes = n_passes
-        self.prior = (expected_attempts(solver.nodes, solver.rtol, solver.method) if solver is not None
-                      else expected_attempts(100))
+        self.prior = (expected_attempts(solver.nodes, solver.rtol, solver.method, extra) if solver is not None
+                      else expected_attempts(100, extra=extra))
         self.expected = self.prior
         self.pass_index = 0
         self.sink = SINK if self.enabled else None

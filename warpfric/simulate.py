@@ -128,7 +128,10 @@ def simulate(
     device = check_device(device, values["normal_force"].shape[0])
     from . import pool  # a CPU ensemble large enough to pay: its members split over worker processes
 
-    n_workers = pool.plan(workers, device, values["normal_force"].shape[0], solver, fronts, record, model)
+    from .progress import end_time_attempts
+
+    n_workers = pool.plan(workers, device, values["normal_force"].shape[0], solver, fronts, record, model,
+                          end_time_attempts(values["end_time"], values["rest_until"]))
     if n_workers > 1:
         ds = pool.run(n_workers, values, scene=scene, model=model, solver=solver, fronts=fronts,
                       record=record, device=device, progress=progress, member_offset=member_offset,
