@@ -309,7 +309,7 @@ def test_info_prints_a_resume_command_that_works(tmp_path, capsys, monkeypatch):
     one_line_error(err, "chunk size (1, now 2)", "--overwrite")
     code, _, err = run_cli(capsys, *command[1:], "--quiet")
     assert code == 0, err
-    assert "(numbers 10..12) in 3 chunks of <= 1, 2 to run" in err[0]
+    assert "(numbers 10..12) in 3 chunks of <= 1 member, 2 of them to run" in err[0]
     ds = open_ensemble(out)
     assert ds.member.values.tolist() == [10, 11, 12] and ds.recorded_member.values.tolist() == [11, 12]
     assert ds.attrs["chunks"] == 3 and "--resume" in ds.attrs["history"]

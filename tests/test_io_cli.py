@@ -176,7 +176,7 @@ def test_resume_after_kill_gives_the_uninterrupted_result(tmp_path):
     assert res.returncode == 2 and "--resume" in res.stderr
     res = _cli("run", str(sweep), "-o", str(out), "--chunk", "1", "--device", DEVICE, "--resume")
     assert res.returncode == 0, res.stderr
-    assert f"{12 - len(finished)} to run" in res.stderr or f"{13 - len(finished)} to run" in res.stderr
+    assert f"{12 - len(finished)} of them to run" in res.stderr or f"{13 - len(finished)} of them to run" in res.stderr
     resumed = open_ensemble(out)
     # its history names the interrupted command and the --resume (it named the --resume alone)
     history = resumed.attrs["history"].splitlines()
@@ -362,7 +362,7 @@ def test_info_and_run_speak_plainly(tmp_path, capsys):
                      "normal_force = [500.0, 600.0]\n")  # the gate-less law: no contact front, 0 of 4 present
     assert main(["run", str(sweep), "-o", str(tmp_path / "s.nc"), "--device", DEVICE, "--quiet"]) == 0
     err = capsys.readouterr().err
-    assert "4 members (numbers 0..3) in 1 chunk of <= 4," in err and "swept: eccentricity, normal_force" in err
+    assert "4 members (numbers 0..3) in 1 chunk of <= 4 members," in err and "swept: eccentricity, normal_force" in err
     assert main(["info", str(tmp_path / "s.nc")]) == 0
     lines = capsys.readouterr().out.splitlines()
     swept = lines.index("  swept parameters:")
@@ -374,7 +374,7 @@ def test_info_and_run_speak_plainly(tmp_path, capsys):
     assert main(["run", str(one), "-o", str(tmp_path / "one.nc"), "--member-offset", "7", "--device", DEVICE,
                  "--quiet"]) == 0
     err = capsys.readouterr().err
-    assert "1 member (number 7) in 1 chunk of <= 1," in err and "(1 member, " in err, err
+    assert "1 member (number 7) in 1 chunk of <= 1 member," in err and "(1 member, " in err, err
     ds = open_ensemble(tmp_path / "one.nc")
     ds.attrs["wall_time_s"] = 0.0432
     text = summary(ds, "one.nc")

@@ -692,7 +692,7 @@ def _run_chunks(sweep, sweep_file, store, chunk, offset, device, client, quiet, 
         place = f"Dask cluster {client.scheduler.address} ({n_workers} workers, dashboard {client.dashboard_link})"
     swept = [name for name in sweep.members if name in sweep.varying]  # the sweep file's order
     _say(f"{member_range(sweep.n_members, offset, offset + sweep.n_members - 1)} in {plural(store.n_chunks, 'chunk')} "
-         f"of <= {chunk}, {len(todo)} to run on {place}; swept: {', '.join(swept) or 'nothing'}", False)
+         f"of <= {plural(chunk, 'member')}, {len(todo)} of them to run on {place}; swept: {', '.join(swept) or 'nothing'}", False)
     if client is not None and todo:
         t_ready = time.perf_counter()
         try:  # every worker loads its kernels once, outside the timed run (a task each: heartbeats go on)
