@@ -258,3 +258,12 @@ def test_a_disc_that_starts_before_the_full_load_is_run_with_a_warning():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         run({"rest_until": [10.0]}, nodes=11)
+
+
+def test_a_numpy_scalar_in_a_scene_is_kept_as_its_value():
+    """Parameters(normal_force=np.array(1000.0)) kept the 0-d array: its repr read
+    normal_force=array(1000.), and it compared as an array. The scene holds the float."""
+    scene = wf.Parameters(normal_force=np.array(1000.0), eccentricity=np.float64(0.1))
+    assert type(scene.normal_force) is float and scene.normal_force == 1000.0
+    assert type(scene.eccentricity) is float and "normal_force=1000.0" in repr(scene)
+    assert scene == wf.Parameters(normal_force=1000.0, eccentricity=0.1)

@@ -117,6 +117,9 @@ class Parameters:
                         f"(Parameters) holds one value a parameter: give values per member in simulate's members, "
                         f"e.g. simulate({{{f.name!r}: [...]}}, scene=...)")
                 validate_value(f.name, value)
+                raw = getattr(self, f.name)
+                if isinstance(raw, (np.ndarray, np.generic)):  # array(1000.) as 1000.0: the value, not its box
+                    object.__setattr__(self, f.name, float(value))
 
 
 PARAMETER_NAMES: tuple[str, ...] = tuple(f.name for f in dataclasses.fields(Parameters))
