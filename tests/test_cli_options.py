@@ -259,3 +259,18 @@ def test_a_failed_member_says_its_front_outputs_are_nan(capsys):
     assert code == 1
     front = [line for line in out if line.startswith("front")]
     assert front == ["front     : not given: the member did not end ok (no_peak), so its front outputs are NaN"], out
+
+
+def test_the_front_lines_give_the_front_whole_then_its_segments(capsys, tmp_path):
+    """One front (2e/L = 0.3, an interior nucleation) printed its segments only, so a front of two slow
+    ends and a fast middle read as if v_middle were the front; both one front and two (the default
+    scene) now give the first front whole, its extent and the file's v_first, before the segments."""
+    for eccentricity, first in ((0.3, "  the front x = "), (0.0, "  first front x = ")):
+        path = tmp_path / f"e{eccentricity}.nc"
+        code, out, _ = run_cli(capsys, "run", "--nodes", 60, "--eccentricity", eccentricity, "--device", DEVICE,
+                               "--quiet", "-o", path)
+        assert code == 0
+        lines = [line for line in out if line.startswith(first)]
+        assert len(lines) == 1 and lines[0].endswith("; its segments:"), out
+        assert f"v_first = {float(open_ensemble(path).v_first[0]):.3g} m/s" in lines[0]
+        assert out[out.index(lines[0]) + 1].startswith("  v_left ")

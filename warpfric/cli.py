@@ -157,9 +157,10 @@ def _print_member(ds, solver: Solver) -> None:
         print(f"front     : {what}nucleates at x = {_fmt(float(m.nucleation_position) * 1e3, 'mm', '.1f')} ({edge}), "
               f"t = {_fmt(m.front_start_time, 's', '.5f')} .. {_fmt(m.front_end_time, 's', '.5f')}")
         two = "front_count" in m and float(m.front_count) > 1 and np.isfinite(float(m.second_nucleation_position))
-        if two:
-            print(f"  first front x = {float(m.first_front_start) * 1e3:.1f} .. {float(m.first_front_end) * 1e3:.1f} mm, "
-                  f"v_first = {_fmt(m.v_first, 'm/s', '.3g')} {_grid_error(m, 'v_first')}".rstrip() + "; its segments:")
+        if "v_first" in m and np.isfinite(float(m.first_front_start)):  # the front whole, then its segments
+            print(f"  {'first' if two else 'the'} front x = {float(m.first_front_start) * 1e3:.1f} .. "
+                  f"{float(m.first_front_end) * 1e3:.1f} mm, v_first = {_fmt(m.v_first, 'm/s', '.3g')} "
+                  f"{_grid_error(m, 'v_first')}".rstrip() + "; its segments:")
         width = 14 if "v_middle_grid_error" in m else 10  # the '+- 0.69 m/s' column
         for seg in ("left", "middle", "right"):
             start, end = float(m[f"{seg}_front_start"]), float(m[f"{seg}_front_end"])
