@@ -70,7 +70,7 @@ def kernel_key(solver, device: str, m: int) -> tuple:
 def tree_commit() -> str:
     """The commit of the timed tree for a result row: WARPFRIC_COMMIT, which names the tree where
     there is no git (a GPU host that got a copy of it), else git's short HEAD, with "+modified" where
-    the tracked files of warpfric/, kernels/ or studies/ differ from it (a copy of a newer tree over
+    the tracked files of warpfric/, kernels/ or studies/ (but its results) differ from it (a copy of a newer tree over
     an older git folder named the older commit), else "unknown"."""
     if os.environ.get("WARPFRIC_COMMIT"):
         return os.environ["WARPFRIC_COMMIT"]
@@ -79,7 +79,8 @@ def tree_commit() -> str:
         head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True,
                               cwd=root).stdout.strip()
         changed = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--", "warpfric", "kernels",
-                                  "studies"], capture_output=True, text=True, cwd=root).stdout.strip()
+                                  "studies", ":(exclude)studies/results"], capture_output=True, text=True,
+                                 cwd=root).stdout.strip()
     except OSError:  # no git on this host
         return "unknown"
     return (head + ("+modified" if changed else "")) if head else "unknown"

@@ -931,16 +931,16 @@ def test_chunks_that_do_not_combine_are_kept_and_said_so(tmp_path, capsys, monke
     """A combine that refuses its chunks (parts written by another warpfric version for --resume)
     raised its ValueError as bad input (exit 2), with no word of the finished chunks it left behind:
     it is a failed write now (exit 3), naming the parts folder and the kept chunks."""
-    from warpfric.io import ChunkStore
+    import warpfric.io
 
-    def refuse(self, *args, **kwargs):
-        raise ValueError("chunk_0.nc and chunk_1.nc differ in displacement: not one ensemble")
+    def refuse(datasets, names=None):
+        raise ValueError(f"{names[0]} and {names[1]} differ in displacement: not one ensemble")
 
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setattr(ChunkStore, "combine", refuse)
+    monkeypatch.setattr(warpfric.io, "concat_members", refuse)
     (tmp_path / "tiny.toml").write_text(TINY_SWEEP)
     code, out, err = run_cli(capsys, "run", "tiny.toml", "-o", "out.nc", "--chunk", "1", "--quiet")
     assert code == 3 and not (tmp_path / "out.nc").exists()
-    _error_line(err, "do not combine into one file", "differ in displacement", "the 3 finished chunks are kept",
-                "out.nc.parts")
+    _error_line(err, "do not combine into one file", "differ in displacement", "remove the chunk files it names",
+                "the 3 finished chunks are kept", "out.nc.parts")
     assert len(list((tmp_path / "out.nc.parts").glob("*.nc"))) == 3

@@ -58,7 +58,8 @@ def test_bad_parameters(members, words):
         (dict(max_steps=2**32 + 5), ["max_steps", "4294967301", "[1, 2147483647]"]),
         (dict(stall_min_steps=2**31), ["stall_min_steps", "[1, 2147483647]"]),
         (dict(min_step=1.0, initial_step=1e-6), ["initial_step"]),
-        (dict(min_step=2.0), ["'min_step' = 2.0", "<= max_step (1 s)"]),  # not the initial_step left at its default
+        (dict(min_step=2.0), ["'min_step' = 2.0", "'max_step' = 1.0", "min_step <= max_step"]),  # not initial_step
+        (dict(max_step=1e-15), ["'min_step' = 1e-14", "'max_step' = 1e-15", "min_step <= max_step"]),
         (dict(step_safety=1.5), ["step_safety", "1.5", "(0, 1)"]),
         (dict(failure_factor=0.0), ["failure_factor", "0.0"]),
     ],

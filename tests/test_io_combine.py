@@ -313,6 +313,16 @@ def test_a_file_of_an_earlier_version_without_detachment_end_time_combines_with_
     both = open_ensembles([tmp_path / "new.nc", tmp_path / "old.nc"])
     assert both.detachment_end_time.values[0] == new.detachment_end_time.values[0] == new.final_time.values[0]
     assert np.isnan(both.detachment_end_time.values[1])
+    # the old member saw its front through (finite detached_fraction): not taken for a run cut off (a
+    # resume over old chunks warned of every old member, and the map's legend said "not given")
+    from warpfric.simulate import detachment_not_over, warn_detachment_not_over
+
+    assert np.isfinite(both.detached_fraction.values).all()
+    capped, cut = detachment_not_over(both)
+    assert not capped.any() and not cut.any()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        warn_detachment_not_over(both)
 
 
 def test_parts_run_on_different_devices_say_so_in_the_combination(tmp_path):

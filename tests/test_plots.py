@@ -396,3 +396,19 @@ def test_members_at_inf_beside_a_colour_bar_are_counted():
     assert ax.get_title().endswith("; 4 members at stop_time = inf not shown (no colour for inf))")
     fig = plots.front_speeds_figure(ds, "normal_force", "stop_time")
     assert "4 members at stop_time = inf not shown" in fig._suptitle.get_text()
+
+
+def test_members_not_ok_are_in_the_legend_of_a_coloured_mu_s_figure(grid):
+    """With a colour per eccentricity (two swept parameters: quick_look's case) the legend listed the
+    colour levels only, so the grey marks of the members not ok on the axis were not explained."""
+    failed = grid.copy()
+    status = np.zeros(failed.sizes["member"], np.int32)
+    status[[2, 7]] = 1
+    failed["status"] = ("member", status, {"flag_values": np.array([0, 1], np.int32),
+                                           "flag_meanings": "ok max_steps_reached"})
+    fig = plots.mu_s_figure(failed, "normal_force", colour_by="eccentricity")
+    ax = fig.axes[0]
+    texts = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert texts[-1] == "2 members not ok (no mu_s), on the axis" and len(texts) == 4  # 3 eccentricities + it
+    marks = [line for line in ax.get_lines() if line.get_marker() == "x"]
+    assert len(marks) == 1 and sorted(marks[0].get_xdata()) == sorted(failed.normal_force.values[[2, 7]])

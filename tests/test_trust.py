@@ -325,3 +325,16 @@ def test_a_run_capped_at_max_end_time_says_its_detachment_was_not_over():
     assert ds.final_time.values[0] == 24.0 and np.isnan(ds.detachment_end_time.values[0])
     assert np.isnan(ds.v_first.values[0]) and np.isfinite(ds.v_first.values[1])
     assert ds.detachment_end_time.values[1] == ds.final_time.values[1] < 24.0
+
+
+def test_an_explicit_end_past_max_end_time_is_a_cut_not_the_cap():
+    """max_end_time caps the automatic end only (docs/model.md): a member whose explicit end_time lies
+    past it, inside its front, was said to be stopped 'at max_end_time' with the advice of a later
+    max_end_time, which changes nothing. It is a cut at end_time; without fronts nothing is said."""
+    with pytest.warns(UserWarning, match="detachment was over") as caught:
+        run({"end_time": [20.245]}, nodes=30, rtol=1e-5, fronts=wf.Fronts(), scene=wf.Parameters(max_end_time=20.1))
+    said = [str(w.message) for w in caught if "detachment was over" in str(w.message)]
+    assert len(said) == 1 and "1 at end_time" in said[0] and "max_end_time" not in said[0], said
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        run({"end_time": [20.245]}, nodes=30, rtol=1e-5, scene=wf.Parameters(max_end_time=20.1))

@@ -128,6 +128,8 @@ def _grid_error(m, name: str) -> str:
 
 
 def _print_member(ds, solver: Solver) -> None:
+    from .simulate import detachment_not_over
+
     m = ds.isel(member=0)
     print(f"scene: F = {float(m.normal_force):g} N, 2e/L = {float(m.eccentricity):g}, "
           f"v_d = {float(m.disc_velocity):g} m/s, relaxation gate {ds.attrs['model_relaxation_gate']}, "
@@ -146,9 +148,12 @@ def _print_member(ds, solver: Solver) -> None:
     elif int(m.status) != 0:
         print(f"front     : not given: the member did not end ok ({_status_name(ds, m.status)}), so its front outputs "
               "are NaN")
-    elif "detachment_end_time" in m and not np.isfinite(float(m.detachment_end_time)):
+    elif any(which[0] for which in detachment_not_over(ds.isel(member=[0]))):
+        capped = detachment_not_over(ds.isel(member=[0]))[0][0]
+        advice = ("at max_end_time, the automatic end's cap: mu never fell 1 % below its maximum" if capped else
+                  "(a later --end-time, or none: the automatic end)")
         print(f"front     : not given: the run ended at t = {float(m.final_time):g} s, before the detachment was over "
-              "(a later --end-time, or none: the automatic end), so its front outputs are NaN")
+              f"{advice}, so its front outputs are NaN")
     elif not np.isfinite(float(m.nucleation_position)):
         print(f"front     : absent: no node reached the {event[0] + ' ' if event else ''}front's event in the run")
     else:

@@ -41,7 +41,7 @@ def check_device(device: str | None, n_members: int | None = None) -> str:
     if str(device) == "cuda" and wp.get_cuda_device_count() > 0:
         return "cuda:0"
     if str(device) not in names:
-        asked_gpu = str(device).startswith("cuda")
+        asked_gpu = str(device).lower().startswith("cuda")
         gpus = "" if wp.get_cuda_device_count() > 0 or not asked_gpu else " (no CUDA GPU or driver found on this machine)"
         if str(device).lower() in names and str(device).lower() != str(device):
             gpus = f" (device names are lower case: {str(device).lower()!r})"

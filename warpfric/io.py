@@ -83,8 +83,9 @@ RECORDED_GROUP = "recorded"  # netCDF4 group of the recorded fields
 MEMBER_NUMBER = "member_number"  # on disk: the member numbers, beside the member labels
 MEMBER_ID = "member_id"  # in memory: the member labels, beside the member numbers
 RECORDED_NUMBER = "recorded_member_number"
-MEMBER_LABEL_ATTRS = {"long_name": "member label: the id of the run that simulated the member (its UTC start time "
-                      "and a random suffix) and its member number; unique across runs", "units": "1"}
+MEMBER_LABEL_ATTRS = {"long_name": "member label: run id and member number", "units": "1",
+                      "comment": "the id of the run that simulated the member (its UTC start time and a random "
+                      "suffix) and its member number; unique across runs"}
 RECORDED_MEMBER_ATTRS = {"long_name": "member label (value of coordinate member of the root group) of each recorded "
                          "member", "units": "1"}
 RECORDED_NUMBER_ATTRS = {"long_name": "member number of each recorded member", "units": "1"}
@@ -102,6 +103,11 @@ NO_SPACE_ERRNOS = (errno.ENOSPC, errno.EDQUOT)
 
 class OutputUnwritable(ValueError):
     """The output's folder cannot be written (checked before anything runs; exit code 2)."""
+
+
+class ChunksDoNotCombine(ValueError):
+    """The finished chunks of a sweep refuse to combine into one file (concat_members' message, which
+    names the chunk files); nothing was written and the chunks are where they were."""
 
 
 class OutputWriteError(Exception):
@@ -859,7 +865,10 @@ class ChunkStore:
         """Concatenate the chunks along member into ``path`` (atomically) and remove the parts;
         ``on_combined(ds)`` is called with the combined Dataset once it is written (the run's warnings)."""
         datasets = [_read(self.chunk_path(i)) for i in range(self.n_chunks)]
-        combined = concat_members(datasets, names=[self.chunk_path(i).name for i in range(self.n_chunks)])
+        try:
+            combined = concat_members(datasets, names=[self.chunk_path(i).name for i in range(self.n_chunks)])
+        except ValueError as err:  # nothing written or removed yet
+            raise ChunksDoNotCombine(str(err)) from None
         combined.attrs.pop("chunk_index", None)
         # the commands that wrote the chunks (an interrupted run's and its --resume), latest first,
         # under the line of the command that combines them (write_ensemble)

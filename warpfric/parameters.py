@@ -408,8 +408,9 @@ class Solver:
         for name in ("initial_step", "min_step", "max_step"):
             v = getattr(self, name)
             need(is_real(v) and v > 0, name, v, "a number > 0 (s)")
-        need(self.min_step <= self.max_step, "min_step", self.min_step,
-             f"a number <= max_step ({self.max_step:g} s): the step size lies in [min_step, max_step]")
+        if not self.min_step <= self.max_step:  # either may be the one set: both named
+            raise ValueError(f"solver settings 'min_step' = {self.min_step!r} and 'max_step' = {self.max_step!r} (s) "
+                             "are invalid; valid: min_step <= max_step (the step size lies in [min_step, max_step])")
         need(self.min_step <= self.initial_step <= self.max_step, "initial_step", self.initial_step,
              f"min_step ({self.min_step:g}) <= initial_step <= max_step ({self.max_step:g})")
         need(is_int(self.max_steps) and 1 <= self.max_steps <= INT32_MAX, "max_steps", self.max_steps,
@@ -689,14 +690,15 @@ PARAMETERS_UNUSED = "parameters without effect under these model switches"
 CONTACT_WITHOUT_GATE = "fronts event 'contact' with relaxation_gate="
 # the warnings simulate raises once for the whole ensemble: the runs inside it (worker processes'
 # chunks, the float32 fallback, the grid check) drop their own
-# simulate's warning where a disc starts to move before the normal force is fully applied (one text
-# for every chunk and worker, so that Python shows it once)
+# simulate's warning where a disc starts to move before the normal force is fully applied (said by the
+# outer call only: the runs inside it, worker processes, the grid check, drop it)
 DISC_BEFORE_FULL_LOAD = ("the disc starts to move (rest_until) before the normal force is fully applied "
                          "(force_ramp_time) in some members: their mu_s is measured under a normal force still "
                          "rising, below normal_force (docs/model.md, \"Equations\": protocol)")
 # how simulate's warning of members whose run ended before their detachment was over begins (the same)
 DETACHMENT_NOT_OVER = "runs ended before the detachment was over"
-ENSEMBLE_WARNINGS = (RECORD_PAST_END, MEMBERS_NOT_OK, DETACHMENT_NOT_OVER, FRONTS_SETTINGS_UNUSED, PARAMETERS_UNUSED, CONTACT_WITHOUT_GATE)
+ENSEMBLE_WARNINGS = (RECORD_PAST_END, MEMBERS_NOT_OK, DETACHMENT_NOT_OVER, DISC_BEFORE_FULL_LOAD, FRONTS_SETTINGS_UNUSED,
+                     PARAMETERS_UNUSED, CONTACT_WITHOUT_GATE)
 
 
 def _with_named_keywords(cls):

@@ -250,21 +250,24 @@ class _Colours:
         for value in self.levels:
             yield value, sel & (self.values == value)
 
-    def explain(self, fig, axes) -> None:
-        """The legend (discrete; on the last axes, outside on the right) or the colour bar."""
+    def explain(self, fig, axes, extra=()) -> None:
+        """The legend (discrete; on the last axes, outside on the right) or the colour bar; ``extra``:
+        more legend handles (with a colour bar, a legend of their own on the last axes)."""
         from matplotlib import colors
+        from matplotlib.lines import Line2D
 
         if self.discrete:  # every value, also one that the last panel lacks
-            from matplotlib.lines import Line2D
-
             handles = [Line2D([], [], color=self.colour(value), marker="o", ms=4, lw=1.2,
                               label=_value(self.ds, self.name, value)) for value in self.levels]
-            axes[-1].legend(handles=handles, title=_label(self.ds, self.name), fontsize=8, title_fontsize=8,
-                            loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, frameon=False)
+            axes[-1].legend(handles=handles + list(extra), title=_label(self.ds, self.name), fontsize=8,
+                            title_fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0,
+                            frameon=False)
         else:
             bar = fig.colorbar(self.mappable, ax=list(axes), label=_label(self.ds, self.name), pad=0.02)
             if isinstance(self.norm, colors.LogNorm):
                 _log_ticks(bar.ax.yaxis, self.levels)
+            if extra:
+                axes[-1].legend(handles=list(extra), fontsize=8)
 
 
 def _series(ax, x: np.ndarray, y: np.ndarray, sel: np.ndarray, marker: str = "o", **kw) -> None:
@@ -325,16 +328,20 @@ def mu_s_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     # (an axis of the ok members' values alone hid them; the title only counted them)
     failed = ~ok & np.isfinite(x)
     scale = _scale(ax, "x", x[shown | failed] if _axis_scale(x[shown | failed]) == _axis_scale(x[shown]) else x[shown])
+    marks = []
     if failed.any():
-        on_axis = failed & ((x > 0) if scale == "log" else failed)
-        ax.plot(x[on_axis], np.zeros(int(on_axis.sum())), "x", color="0.45", transform=ax.get_xaxis_transform(),
-                clip_on=False, ls="none", label=f"{plural(int(failed.sum()), 'member')} not ok (no mu_s), on the axis")
+        on_axis = failed & (x > 0) if scale == "log" else failed
+        off = int(failed.sum() - on_axis.sum())
+        label = (f"{plural(int(on_axis.sum()), 'member')} not ok (no mu_s), on the axis"
+                 + (f"; {off} more at x <= 0, off the log axis" if off else ""))
+        marks = ax.plot(x[on_axis], np.zeros(int(on_axis.sum())), "x", color="0.45", ls="none", label=label,
+                        transform=ax.get_xaxis_transform(), clip_on=False)
     _scale(ax, "y", mu[shown])
     ax.set_xlabel(xlabel)
     ax.set_ylabel("static friction coefficient mu_s")
     ax.grid(alpha=0.3, which="both" if ax.get_xscale() == "log" else "major")
     if colours is not None:
-        colours.explain(fig, [ax])
+        colours.explain(fig, [ax], extra=marks)
     else:
         ax.legend(fontsize=8)
     return fig
@@ -616,9 +623,9 @@ def space_time_figure(ds, recorded_index: int):
             # a member that is not ok has NaN front outputs whether or not a front ran (no_peak: the
             # map may show one): not "no front"
             text = f"no {front}" if status == 0 else f"{front}: not given (status {_status_name(ds, status)})"
-            known = "detachment_end_time" in ds and "unknown" not in ds.detachment_end_time.attrs.get("long_name", "")
-            if status == 0 and known and not np.isfinite(float(_per_member(ds, "detachment_end_time")[position])):
-                # a run cut off inside the front (a file of an earlier version does not know)
+            from .simulate import detachment_not_over
+
+            if detachment_not_over(ds)[1][position]:  # a run cut off inside the front
                 text = f"{front}: not given (the run ended before the detachment was over)"
             handles.append(Line2D([], [], ls="none", label=text))
             continue

@@ -87,10 +87,13 @@ def cpu_seconds(n_members: int, solver, passes: float = 1.0, model=None, extra: 
     """Rough time of an ensemble on one CPU core (s): members x passes x expected attempts x nodes x
     CPU_SECONDS_PER_NODE_ATTEMPT (passes: front_passes; ``model``: its law's LAW_ATTEMPTS, else the
     stress gate's; ``extra``: end_time_attempts)."""
-    attempts = expected_attempts(solver.nodes, solver.rtol, solver.method, extra)
+    attempts = expected_attempts(solver.nodes, solver.rtol, solver.method)
     if model is not None:
         attempts *= LAW_ATTEMPTS.get(model.relaxation_gate, 1.0)
-    return n_members * passes * attempts * solver.nodes * CPU_SECONDS_PER_NODE_ATTEMPT
+    # the extra once: a second pass (the velocity front's) ends at its front, before the explicit end
+    after = expected_attempts(solver.nodes, solver.rtol, solver.method, extra) - expected_attempts(
+        solver.nodes, solver.rtol, solver.method)
+    return n_members * (passes * attempts + after) * solver.nodes * CPU_SECONDS_PER_NODE_ATTEMPT
 
 
 # member-node-attempts per launch on the CPU: ~0.1 s of one core. A launch there costs next to

@@ -492,7 +492,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
                 workers, quiet, command, check_space, cpu_workers) -> RunReport:
     import shutil
 
-    from .io import ChunkStore, OutputWriteError, free_bytes, new_run_id, parts_dir, sweep_digest, write_failure
+    from .io import ChunkStore, ChunksDoNotCombine, OutputWriteError, free_bytes, new_run_id, parts_dir, sweep_digest, write_failure
     from .device import check_device
     from .sweep_file import check_member_offset
 
@@ -596,10 +596,10 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
 
         try:
             store.combine(out, command=command, on_combined=on_combined)
-        except ValueError as err:  # no bad input (that is refused before any chunk runs): chunks that differ
-            # (written by another warpfric version for --resume) leave the finished chunks where they are
-            raise OutputWriteError(f"the chunks in {str(parts)!r} do not combine into one file ({err})",
-                                   False) from None
+        except ChunksDoNotCombine as err:  # no bad input (refused before any chunk runs): chunks that differ
+            # (written by another warpfric version for --resume) are left where they are
+            raise OutputWriteError(f"the chunks in {str(parts)!r} do not combine into one file ({err}; remove the "
+                                   "chunk files it names and --resume runs them again)", False) from None
     except BaseException as err:  # noqa: BLE001 - cleaned up, then raised again
         interrupted = isinstance(err, KeyboardInterrupt)
         # the command's own local cluster is stopped before the finished chunks are counted: the chunks

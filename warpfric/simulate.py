@@ -141,7 +141,7 @@ def simulate(
             _warn_record_past_end(ds, record, member_offset)
         warn_detachment_not_over(ds)
         _warn_members_not_ok(ds, solver)
-        return ds
+        return _short_long_names(ds)
     from warpfric.kernels.types import STATUS_MEANINGS
 
     from . import engine
@@ -194,6 +194,24 @@ def simulate(
         _add_grid_check(ds, values, scene, model, solver, fronts, device, progress)
     warn_detachment_not_over(ds)
     _warn_members_not_ok(ds, solver)
+    return _short_long_names(ds)
+
+
+LONG_NAME_MAX = 80  # characters: xarray labels a plot's axis with long_name [units]
+
+
+def _short_long_names(ds: xr.Dataset) -> xr.Dataset:
+    """``ds`` (in place) with every long_name of more than LONG_NAME_MAX characters cut at its first
+    ' (', ': ' or '; ' after 15 characters, the whole text kept as the variable's CF ``comment`` (a
+    plot's axis label read 'time at which the detachment was over (the automatic end's criterion:
+    ...' for 183 characters). Names that are short already, or that have a comment, stay."""
+    for var in [*ds.data_vars.values(), *ds.coords.values()]:
+        text = var.attrs.get("long_name", "")
+        if len(text) <= LONG_NAME_MAX or "comment" in var.attrs:
+            continue
+        cuts = [i for i in (text.find(mark, 15) for mark in (" (", ": ", "; ")) if i > 0]
+        if cuts:
+            var.attrs["long_name"], var.attrs["comment"] = text[:min(cuts)], text
     return ds
 
 
@@ -213,21 +231,38 @@ _LIFTED_OFF_ADVICE = ("part of the pad lifted off, where nothing damps its shear
                       "it): a small damping, e.g. 1e6 Pa s/m, lets the steps grow again (docs/model.md, \"Open choices\": lift-off)")
 
 
+def detachment_not_over(ds: xr.Dataset) -> tuple[np.ndarray, np.ndarray]:
+    """(capped, cut), (member,) bool each: the members ok whose run ended before their detachment was
+    over, at max_end_time, the automatic end's cap (end_time None; mu never fell AUTO_END_PEAK_DROP
+    below its maximum), or, with fronts, at an explicit end_time (detachment_end_time NaN and their
+    front outputs NaN; detached_fraction is 0, not NaN, for a member that saw its detachment through
+    without a front). Neither rule needs detachment_end_time of a file of an earlier version, which
+    is unknown (NaN) for every member."""
+    n = ds.sizes["member"]
+    ok = ds.status.values == 0
+
+    def per_member(name):
+        return np.broadcast_to(np.asarray(ds[name].values, dtype=float), (n,))
+
+    automatic = ~np.isfinite(per_member("end_time")) if "end_time" in ds else np.ones(n, bool)
+    capped = ok & automatic & (per_member("final_time") >= per_member("max_end_time")) if "max_end_time" in ds \
+        else np.zeros(n, bool)
+    cut = np.zeros(n, bool)
+    if "fronts_event" in ds.attrs and "detachment_end_time" in ds and "detached_fraction" in ds:
+        cut = ok & ~capped & ~np.isfinite(per_member("detachment_end_time")) & np.isnan(per_member("detached_fraction"))
+    return capped, cut
+
+
 def warn_detachment_not_over(ds: xr.Dataset, stacklevel: int = 3) -> None:
-    """One warning, once per simulate call, of the members ok whose run ended before their detachment
-    was over (detachment_end_time NaN): at max_end_time, the automatic end's cap (mu never fell
-    AUTO_END_PEAK_DROP below its maximum: mu_s may be a plateau's), or at an explicit end_time with
-    fronts on (their front outputs are NaN)."""
-    if "detachment_end_time" not in ds:
-        return
+    """One warning, once per simulate call, of the members of :func:`detachment_not_over`: at
+    max_end_time (mu_s may be a plateau's), or at an explicit end_time with fronts on (their front
+    outputs are NaN)."""
     from warpfric.kernels.observers import AUTO_END_PEAK_DROP
 
-    not_over = (ds.status.values == 0) & ~np.isfinite(ds.detachment_end_time.values)
-    n = ds.sizes["member"]
-    capped = not_over & (ds.final_time.values >= np.broadcast_to(ds.max_end_time.values, (n,)))
-    cut = not_over & ~capped if "fronts_event" in ds.attrs else np.zeros(n, bool)
+    capped, cut = detachment_not_over(ds)
     if not (capped.any() or cut.any()):
         return
+    n = ds.sizes["member"]
     parts = []
     for which, text in ((capped, f"at max_end_time, the automatic end's cap, with mu never {AUTO_END_PEAK_DROP:.0%} "
                                  "below its maximum (mu_s may be a plateau's, not a static peak: a later max_end_time)"),
@@ -424,41 +459,51 @@ _EVENT_WORDS = {
     "strength": "strength front (each node's peak of tau_f/sigma_n)",
     "velocity": "velocity front (the pad velocity against the disc reaches threshold times its event maximum)",
 }
+# each front output: (units, long_name, comment or None). The long_name is short (xarray labels plots
+# with it); the comment says exactly what the value is. {front}: the event's name ("contact front"),
+# {words}: its description (_EVENT_WORDS)
 _FRONT_ATTRS = {
-    "arrival_time": ("s", "arrival time t_a of the {front} at each node (NaN: never reached)"),
-    "arrival_time_error": ("s", "interpolation error of t_a inside its step (a lower bound: the trajectory's "
-                           "error at rtol and the grid's move t_a further)"),
-    "event_max_velocity": ("m s-1", "maximum of the detachment velocity w over the pad and the event window"),
-    "strength_peak": ("1", "peak of tau_f/sigma_n at each node: its own static friction coefficient (NaN: no "
-                           "confirmed peak in the run)"),
-    "nucleation_position": ("m", "position of the node that the {front} reaches first"),
-    "front_start_time": ("s", "first arrival time of the {front}"),
-    "front_end_time": ("s", "last arrival time of the {front} (over the nodes it reached)"),
-    "detached_fraction": ("1", "fraction of the nodes the {front} reached"),
-    "front_count": ("1", "separate fronts of the {front}: local minima of t_a(x) over the run of nodes it reached "
+    "arrival_time": ("s", "arrival time t_a of the {front} at each node", "{words}; NaN: never reached"),
+    "arrival_time_error": ("s", "interpolation error of t_a", "the error of t_a inside its step: a lower bound, the "
+                           "trajectory's error at rtol and the grid's move t_a further"),
+    "event_max_velocity": ("m s-1", "maximum of the detachment velocity w over the pad and the event window", None),
+    "strength_peak": ("1", "peak of tau_f/sigma_n at each node", "each node's own static friction coefficient; NaN: "
+                      "no confirmed peak in the run"),
+    "nucleation_position": ("m", "position of the node that the {front} reaches first", "{words}"),
+    "front_start_time": ("s", "first arrival time of the {front}", "{words}"),
+    "front_end_time": ("s", "last arrival time of the {front}", "over the nodes it reached; {words}"),
+    "detached_fraction": ("1", "fraction of the nodes the {front} reached", "{words}"),
+    "front_count": ("1", "separate fronts of the {front}", "local minima of t_a(x) over the run of nodes it reached "
                     "(a flat run of equal times once), each a nucleation (2: a second front, e.g. from the other "
-                    "edge, meets the first)"),
-    "collision_position": ("m", "where the first front of the {front} meets another (the maximum of t_a(x) at an end "
-                           "of the first front, the middle of a flat top; the earlier end where both are meetings); "
-                           "NaN: the first front meets none"),
-    "collision_time": ("s", "when the first front of the {front} meets another; NaN: it meets none"),
-    "second_nucleation_position": ("m", "position of the node where the second front of the {front} starts (the "
-                                   "earliest arrival outside the nodes the first front reaches first); NaN: one front"),
-    "second_front_start_time": ("s", "time the second front of the {front} starts; NaN: one front"),
+                    "edge, meets the first); {words}"),
+    "collision_position": ("m", "where the first front of the {front} meets another", "the maximum of t_a(x) at an "
+                           "end of the first front, the middle of a flat top; the earlier end where both are "
+                           "meetings; NaN: the first front meets none; {words}"),
+    "collision_time": ("s", "when the first front of the {front} meets another", "NaN: it meets none; {words}"),
+    "second_nucleation_position": ("m", "position where the second front of the {front} starts", "the earliest "
+                                   "arrival outside the nodes the first front reaches first; NaN: one front; {words}"),
+    "second_front_start_time": ("s", "time the second front of the {front} starts", "NaN: one front; {words}"),
 }
-_SEGMENT_WORDS = {"left": "the first front's left (smaller x) segment", "middle": "the first front's middle segment",
-                  "right": "the first front's right (larger x) segment",
-                  "precursor": "the first front's precursor (its slow segment at the nucleation edge)",
-                  "main": "the first front's main (middle) segment",
-                  "far": "the first front's far segment (slow, at its end opposite the nucleation edge)",
-                  "first": "the first front (whole: the nodes it reaches before any other front)",
-                  "second": "the second front (whole: from where it starts to where it meets another front)"}
-for _seg, _words in _SEGMENT_WORDS.items():
-    _FRONT_ATTRS[f"{_seg}_front_start"] = ("m", f"start (smaller x) of {_words} of the {{front}}")
-    _FRONT_ATTRS[f"{_seg}_front_end"] = ("m", f"end (larger x) of {_words} of the {{front}}")
-    _FRONT_ATTRS[f"{_seg}_front_length"] = ("m", f"length of {_words} of the {{front}}")
-    _FRONT_ATTRS[f"v_{_seg}"] = ("m s-1", f"mean speed of {_words} of the {{front}} (1/|slope| of t_a(x))")
-    _FRONT_ATTRS[f"v_{_seg}_error"] = ("m s-1", f"interpolation error of v_{_seg}, from the arrival_time_error of "
+# each segment and whole front: (short words, its definition)
+_SEGMENT_WORDS = {"left": ("the first front's left segment", "the segment at smaller x"),
+                  "middle": ("the first front's middle segment", "between its left and right segments"),
+                  "right": ("the first front's right segment", "the segment at larger x"),
+                  "precursor": ("the first front's precursor", "its slow segment at the nucleation edge"),
+                  "main": ("the first front's main segment", "its middle segment"),
+                  "far": ("the first front's far segment", "its slow segment at the end opposite the nucleation "
+                          "edge"),
+                  "first": ("the first front", "whole: the nodes it reaches before any other front"),
+                  "second": ("the second front", "whole: from where it starts to where it meets another front")}
+for _seg, (_short, _definition) in _SEGMENT_WORDS.items():
+    _FRONT_ATTRS[f"{_seg}_front_start"] = ("m", f"start of {_short} of the {{front}}",
+                                           f"its smaller x; {_short[4:]}: {_definition}; {{words}}")
+    _FRONT_ATTRS[f"{_seg}_front_end"] = ("m", f"end of {_short} of the {{front}}",
+                                         f"its larger x; {_short[4:]}: {_definition}; {{words}}")
+    _FRONT_ATTRS[f"{_seg}_front_length"] = ("m", f"length of {_short} of the {{front}}",
+                                            f"{_short[4:]}: {_definition}; {{words}}")
+    _FRONT_ATTRS[f"v_{_seg}"] = ("m s-1", f"speed of {_short} of the {{front}}",
+                                 f"mean speed, 1/|slope| of t_a(x); {_short[4:]}: {_definition}; {{words}}")
+    _FRONT_ATTRS[f"v_{_seg}_error"] = ("m s-1", f"interpolation error of v_{_seg}", "from the arrival_time_error of "
                                        "its end (and nucleation) nodes: a lower bound, not the speed's error "
                                        "(v_*_grid_error from Fronts(grid_check=True) is usually far larger); inf: "
                                        "not resolved")
@@ -505,14 +550,18 @@ def _front_variables(front: dict, fronts: Fronts, failed: np.ndarray) -> dict:
         if base == "nucleation_edge":
             edge = np.where(np.isfinite(arr), arr, -2).astype(np.int8)
             new[name] = (("member",), edge, {
-                "long_name": f"edge where the {words} nucleates",
+                "long_name": f"edge where the {event} front nucleates",
+                "comment": words,
                 "flag_values": np.array([-2, -1, 0, 1], dtype=np.int8),
                 "flag_meanings": "none left interior right",
             })
             continue
-        units, long_name = _FRONT_ATTRS[base]
+        units, long_name, comment = _FRONT_ATTRS[base]
         dims = ("member", "x") if arr.ndim == 2 else ("member",)
-        new[name] = (dims, arr, {"units": units, "long_name": long_name.format(front=words)})
+        attrs = {"units": units, "long_name": long_name.format(front=f"{event} front")}
+        if comment:
+            attrs["comment"] = comment.format(words=words)
+        new[name] = (dims, arr, attrs)
     return new
 
 
