@@ -944,3 +944,16 @@ def test_chunks_that_do_not_combine_are_kept_and_said_so(tmp_path, capsys, monke
     _error_line(err, "do not combine into one file", "differ in displacement", "remove the chunk files it names",
                 "the 3 finished chunks are kept", "out.nc.parts")
     assert len(list((tmp_path / "out.nc.parts").glob("*.nc"))) == 3
+
+
+def test_info_names_the_members_cut_off_before_their_detachment_was_over(tmp_path, capsys, monkeypatch):
+    """The warning names at most 8 members and a file keeps no trace of it but NaN: `warpfric info`
+    said only 'present in 0/2 members'. It lists the ok members whose run ended before the detachment
+    was over, and why."""
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "cut.toml").write_text("[solver]\nnodes = 20\n[scene]\nend_time = 20.245\n[grid]\n"
+                                       "eccentricity = [0.0, 0.1]\n")
+    assert run_cli(capsys, "run", "cut.toml", "-o", "cut.nc", "--quiet")[0] == 0
+    code, out, _ = run_cli(capsys, "info", "cut.nc")
+    assert code == 0
+    assert "    ok, but ended before the detachment was over at end_time (their fronts are NaN): members 0, 1" in out, out

@@ -425,6 +425,15 @@ def summary(ds, name: str) -> str:
             more = f" and {which.size - NOT_OK_SHOWN:,} more" if which.size > NOT_OK_SHOWN else ""
             lines.append(f"    {meanings[int(code)]}: member{'s' if which.size > 1 else ''} "
                          f"{', '.join(str(k) for k in which[:NOT_OK_SHOWN])}{more}")
+    from .simulate import detachment_not_over
+
+    for which, why in zip(detachment_not_over(ds), ("at max_end_time (mu never fell 1 % below its maximum; mu_s "
+                                                    "may be a plateau's)", "at end_time (their fronts are NaN)")):
+        if which.any():  # ok members whose run ended before their detachment was over, by number
+            shown = numbers[which]
+            more = f" and {shown.size - NOT_OK_SHOWN:,} more" if shown.size > NOT_OK_SHOWN else ""
+            lines.append(f"    ok, but ended before the detachment was over {why}: member{'s' if shown.size > 1 else ''} "
+                         f"{', '.join(str(k) for k in shown[:NOT_OK_SHOWN])}{more}")
     mu = ds.mu_s.values
     good = np.isfinite(mu)
     if good.any():
