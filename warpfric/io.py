@@ -782,6 +782,19 @@ def sweep_digest(text: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 
 
+def _summary_columns(nc) -> dict:
+    """Of an open chunk (netCDF4): ``status`` (int64), its ``flag_meanings``, and ``disc_velocity`` and
+    ``lift_off`` per member (float; NaN where a file lacks them: an edited one), for the warning of
+    an interrupted run's members not ok (runner._warn_members_not_ok_kept)."""
+    n = nc["status"].shape[0]
+    columns = {"status": np.asarray(nc["status"][:], dtype=np.int64).reshape(-1),
+               "flag_meanings": nc["status"].getncattr("flag_meanings")}
+    for name in ("disc_velocity", "lift_off"):
+        values = np.asarray(nc[name][:], dtype=float).reshape(-1) if name in nc.variables else np.nan
+        columns[name] = np.broadcast_to(values, (n,))
+    return columns
+
+
 class ChunkStore:
     """Finished chunks of a chunked run: ``OUT.nc.parts/chunk-NNNNNN.nc`` and a manifest with the
     run's digest (sweep text, chunk size, member offset), the number of members and what
@@ -796,6 +809,9 @@ class ChunkStore:
         self.n_chunks = -(-self.n_members // self.chunk)
         self.manifest = dict(manifest or {})
         self.member_offset = int(self.manifest.get("member_offset", 0))
+        # chunks found done: {index: ((inode, size, mtime_ns) of the file then, its summary columns)}, so
+        # that asking again (an interrupt counts, then keeps, then warns) does not open the file again
+        self._done: dict = {}
 
     @classmethod
     def create(cls, directory, digest, n_members, chunk, **extra) -> "ChunkStore":
@@ -833,8 +849,15 @@ class ChunkStore:
 
     def is_done(self, index: int) -> bool:
         path = self.chunk_path(index)
-        if not path.exists():
+        try:
+            stat = path.stat()
+        except OSError:
+            self._done.pop(index, None)
             return False
+        signature = (stat.st_ino, stat.st_size, stat.st_mtime_ns)
+        if index in self._done and self._done[index][0] == signature:
+            return True
+        self._done.pop(index, None)
         sl = self.members(index)
         run_id = self.manifest.get("run_id")
         try:  # netCDF4 directly: xarray's open takes ~2.5x as long, and info, --resume and an interrupt
@@ -854,9 +877,19 @@ class ChunkStore:
                 # an earlier, interrupted run wrote after that run had ended
                 own = run_id is None or not labelled or np.array_equal(
                     labels.astype(str), member_labels(run_id, numbers.astype(np.int64)))
-                return own and np.array_equal(numbers, np.arange(sl.start, sl.stop) + self.member_offset)
+                done = own and np.array_equal(numbers, np.arange(sl.start, sl.stop) + self.member_offset)
+                if done:
+                    self._done[index] = (signature, _summary_columns(nc))
+                return done
         except Exception:  # noqa: BLE001 - a damaged chunk is simply redone
             return False
+
+    def summary_columns(self, index: int) -> dict:
+        """A finished chunk's status (with its flag meanings), disc_velocity and lift_off per member
+        (:func:`_summary_columns`), from the reading of ``is_done`` where the file is unchanged."""
+        if not self.is_done(index):
+            raise ValueError(f"{self.chunk_path(index)}: not a finished chunk of this run")
+        return self._done[index][1]
 
     def done_count(self) -> int:
         return sum(self.is_done(i) for i in range(self.n_chunks))

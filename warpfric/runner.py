@@ -659,7 +659,6 @@ def _warn_members_not_ok_kept(store, kept: list, solver, out: Path) -> None:
     """The warning of members not ok of an interrupted run, for its finished chunks (``kept``, their
     indices): a run to its end gives it once, from its combined file, which an interrupted run
     lacks; the kept chunks are not run again by --resume, whose combined file warns of them again."""
-    import netCDF4
     import xarray as xr
 
     from .simulate import members_not_ok_text
@@ -667,14 +666,11 @@ def _warn_members_not_ok_kept(store, kept: list, solver, out: Path) -> None:
     names = ("status", "disc_velocity", "lift_off")
     columns: dict = {name: [] for name in names}
     meanings = ""
-    for i in kept:  # netCDF4 directly: xarray's open takes ~10x as long a file, and a sweep may keep thousands
-        with netCDF4.Dataset(store.chunk_path(i)) as nc:
-            meanings = nc["status"].getncattr("flag_meanings")
-            n = nc["status"].shape[0]
-            columns["status"].append(np.asarray(nc["status"][:], dtype=np.int64).reshape(-1))
-            for name in names[1:]:  # a parameter missing from a chunk (an edited file) reads as unknown
-                values = np.asarray(nc[name][:], dtype=float).reshape(-1) if name in nc.variables else np.nan
-                columns[name].append(np.broadcast_to(values, (n,)))
+    for i in kept:  # read when is_done counted them (netCDF4: xarray's open takes ~10x as long a file)
+        summary = store.summary_columns(i)
+        meanings = summary["flag_meanings"]
+        for name in names:
+            columns[name].append(summary[name])
     ds = xr.Dataset({name: ("member", np.concatenate(parts)) for name, parts in columns.items()})
     ds["status"].attrs["flag_meanings"] = meanings
     text = members_not_ok_text(ds, solver, where=f" in the {plural(len(kept), 'finished chunk')}")
