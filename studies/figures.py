@@ -235,10 +235,17 @@ def fig5_8(quick, device, model=None):
         ax[1].set_ylabel("front speed (m/s)")
         ax[1].set_title("Fig. 8")
         ax[1].legend(fontsize=7)
-        ax[2].plot(F[present], 1 / vl[present], "o", ms=3)
+        ax[2].plot(F[present], 1 / vl[present], "o", ms=3, label=f"1 / v_left (first front; {present.sum()} of "
+                   f"{F.size} forces)")
+        ax[2].plot(F[edge_present], 1 / v_edge[edge_present], "s", ms=4, mfc="none", color="k",
+                   label="1 / speed of the front from the left edge")
+        if present.sum() < 2:  # the quick set: a line needs two points; said on the panel, not left blank
+            ax[2].text(0.03, 0.95, f"v_left present at {present.sum()} force{'s' if present.sum() != 1 else ''} "
+                       "only: no line to read", transform=ax[2].transAxes, fontsize=7, va="top")
         ax[2].set_xlabel("normal force (N)")
-        ax[2].set_ylabel("1 / v_left (s/m)")
+        ax[2].set_ylabel("1 / speed (s/m)")
         ax[2].set_title("Fig. 9")
+        ax[2].legend(fontsize=7, loc="lower right")
         fig.tight_layout()
         fig.savefig(path, dpi=110)
         plt.close(fig)
