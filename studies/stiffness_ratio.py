@@ -73,7 +73,7 @@ def main(argv=None):
             stiffness_ratio=float(lam), normal_force=float(force[k]), pressure=float(force[k] / (scene.length * scene.depth)),
             mu_s=[None if not np.isfinite(x) else float(x) for x in mu[k]], members_ok=int(good.sum()),
             relative_slope=slope, relative_spread=spread,
-            nucleation_edge_e0={-2: "none", -1: "left", 0: "interior", 1: "right"}[edge],
+            nucleation_edge_e0={-3: "unknown", -2: "none", -1: "left", 0: "interior", 1: "right"}[edge],
             precursor_length_e0=float(ds.precursor_front_length.values[at]),
             v_main_e0=float(ds.v_main.values[at]),
             front_count_e0=float(ds.front_count.values[at]), v_first_e0=float(ds.v_first.values[at]),

@@ -6,6 +6,7 @@ import pytest
 from conftest import DEVICE, run
 
 import warpfric as wf
+from warpfric.members import resolve_members
 
 
 def simulate(members=None, device=DEVICE, **kw):
@@ -268,3 +269,21 @@ def test_a_numpy_scalar_in_a_scene_is_kept_as_its_value():
     assert type(scene.normal_force) is float and scene.normal_force == 1000.0
     assert type(scene.eccentricity) is float and "normal_force=1000.0" in repr(scene)
     assert scene == wf.Parameters(normal_force=1000.0, eccentricity=0.1)
+
+
+def test_parameters_held_as_coordinates_of_a_members_dataset_are_used():
+    """A grid built the xarray way, coordinates stacked into member (as by_parameters gives a run
+    back), ran one member of the default scene without a word; a parameter as a coordinate beside a
+    data variable was ignored (4 members at 1000 N). They are used, and a Dataset of several members
+    with no parameter along member is refused."""
+    import xarray as xr
+
+    grid = xr.Dataset(coords={"normal_force": [500.0, 1000.0], "eccentricity": [-0.1, 0.1]})
+    values, varying = resolve_members(grid.stack(member=["normal_force", "eccentricity"]), wf.Parameters())
+    np.testing.assert_array_equal(values["normal_force"], [500.0, 500.0, 1000.0, 1000.0])
+    np.testing.assert_array_equal(values["eccentricity"], [-0.1, 0.1, -0.1, 0.1])
+    assert set(varying) == {"normal_force", "eccentricity"}
+    mixed = xr.Dataset({"eccentricity": ("member", [0.0, 0.1])}, coords={"normal_force": ("member", [500.0, 2000.0])})
+    np.testing.assert_array_equal(resolve_members(mixed, wf.Parameters())[0]["normal_force"], [500.0, 2000.0])
+    with pytest.raises(ValueError, match="has 3 members along 'member' but no parameter along it"):
+        resolve_members(xr.Dataset(coords={"member": [0, 1, 2]}), wf.Parameters())

@@ -111,7 +111,8 @@ def test_a_disc_that_never_moves_has_no_peak_and_no_front():
     meanings = ds.status.attrs["flag_meanings"].split()
     assert meanings[ds.status.values[0]] == "no_peak" and np.isnan(ds.mu_s.values[0])
     assert np.isnan(ds.event_max_velocity.values[0]) and np.isnan(ds.v_middle.values[0])
-    assert np.isnan(ds.nucleation_position.values[0]) and ds.nucleation_edge.values[0] == -2
+    # its front is not given (status no_peak): unknown, -3, not "none" (-2), which claims no front ran
+    assert np.isnan(ds.nucleation_position.values[0]) and ds.nucleation_edge.values[0] == -3
     assert ds.status.values[1] == 0 and np.isfinite(ds.v_middle.values[1])
     # the moving member's event is orders above the floor of min_event_fraction * |v_max|
     assert ds.event_max_velocity.values[1] > 100 * wf.Fronts().min_event_fraction * 1e-4
@@ -298,7 +299,7 @@ def test_a_front_cut_off_by_end_time_is_nan_not_a_part_of_it(event):
     for name in _front_outputs(cut):
         values = cut[name].values
         if name.endswith("nucleation_edge"):
-            assert (values == -2).all(), name  # none
+            assert (values == -3).all(), name  # unknown (not "none": a front was under way)
         else:
             assert np.isnan(values).all(), (name, values)
     with warnings.catch_warnings():

@@ -157,7 +157,7 @@ def _print_member(ds, solver: Solver) -> None:
     elif not np.isfinite(float(m.nucleation_position)):
         print(f"front     : absent: no node reached the {event[0] + ' ' if event else ''}front's event in the run")
     else:
-        edge = {-1: "left edge", 0: "interior", 1: "right edge", -2: "none"}[int(m.nucleation_edge)]
+        edge = {-1: "left edge", 0: "interior", 1: "right edge", -2: "none", -3: "unknown"}[int(m.nucleation_edge)]
         what = f"{event[0]} front " if event else ""
         print(f"front     : {what}nucleates at x = {_fmt(float(m.nucleation_position) * 1e3, 'mm', '.1f')} ({edge}), "
               f"t = {_fmt(m.front_start_time, 's', '.5f')} .. {_fmt(m.front_end_time, 's', '.5f')}")

@@ -598,15 +598,27 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
         found = type(ds).__name__ if not isinstance(ds, xr.Dataset) else f"a Dataset with dimensions {tuple(ds.dims)}"
         raise ValueError(f"write_ensemble: expects the ensemble's Dataset along the dimension member (from simulate or "
                          f"open_ensemble), got {found}")
+    if np.asarray(ds.member.values).dtype.kind in "USO":  # xr.open_dataset / open_mfdataset of a file
+        raise ValueError("write_ensemble: the members are labels (the file's layout, as xr.open_dataset or "
+                         "xr.open_mfdataset read it); read the files with warpfric.io.open_ensemble or open_ensembles "
+                         "to write them again")
     path = Path(path)
     _require_folder(path)
     refuse_if_locked(path)
     ds = _integer_outputs_restored(ds)
     if varying is None:
         varying = ds.attrs.get("varying_parameters", "").split()
+    broadcast = [name for name, var in ds.data_vars.items() if "recorded" in var.dims and "member" in var.dims]
+    if broadcast:  # ds.where(...) does that: a file of them would hold each recorded field once per member
+        raise ValueError(f"write_ensemble: {', '.join(broadcast[:3])}{', ...' if len(broadcast) > 3 else ''} lie along "
+                         "both recorded and member: the recorded fields were broadcast over the members (ds.where(...) "
+                         "does that); select members with ds.sel(member=ds.member[ds.status == 0]) instead")
     if "recorded_member" in ds.coords and not np.isin(ds.recorded_member.values, ds.member.values).all():
+        kept = np.isin(ds.recorded_member.values, ds.member.values)
         raise ValueError(f"recorded_member {ds.recorded_member.values.tolist()}: not among the member numbers "
-                         f"{ds.member.values.min()}..{ds.member.values.max()} of the ensemble")
+                         f"{ds.member.values.min()}..{ds.member.values.max()} of the ensemble; keep the recorded "
+                         f"members with the others, ds.isel(recorded={np.flatnonzero(kept).tolist()}), or drop the "
+                         "recorded fields (ds.drop_dims(['recorded', 'time']))")
     out = parameters_along_member(ds)
     out.attrs["varying_parameters"] = " ".join(v for v in PARAMETER_NAMES if v in set(varying))
     out.attrs[COMPLETE_ATTR] = np.int8(1)
@@ -932,6 +944,12 @@ def duplicate_members(datasets, names=None) -> str:
         return ""
     where = [n for n, ds in zip(names, datasets) if np.isin(ds.member.values, repeated).any()]
     shown = ", ".join(map(str, repeated[:5].tolist())) + (f", ... ({repeated.size} in all)" if repeated.size > 5 else "")
+    labelled = all(MEMBER_ID in ds.coords for ds in datasets)
+    labels = np.concatenate([np.asarray(ds[MEMBER_ID].values).astype(str) for ds in datasets]) if labelled else None
+    if labels is not None and np.unique(labels).size < labels.size:  # e.g. a selection written from the same run
+        return (f"member numbers {shown} occur more than once (in {', '.join(where)}), with the same member labels: "
+                "the same members of one run (a selection of it written to a file of its own?); combine files of "
+                "different members")
     return (f"member numbers {shown} occur more than once (in {', '.join(where)}); give separate runs distinct "
             "numbers with `warpfric run --member-offset K` (or [run] member_offset, or simulate(member_offset=K)), "
             "or open these files with xr.open_mfdataset(files), which keeps them apart by their member labels")

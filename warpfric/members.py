@@ -22,12 +22,19 @@ def _member_arrays(members: Any) -> dict[str, np.ndarray]:
         xr = None
     if xr is not None and isinstance(members, xr.Dataset):
         out = {}
-        for name, var in members.data_vars.items():
+        # the parameters among its coordinates too (a grid built with .stack(member=[...]) holds them
+        # there, as by_parameters gives them back): they were ignored, and the default scene ran
+        coords = {name: var for name, var in members.coords.items() if str(name) in PARAMETER_NAMES}
+        for name, var in {**coords, **members.data_vars}.items():
             if var.dims not in ((), ("member",)):
                 raise ValueError(
                     f"members: variable {name!r} has dims {var.dims}; expected () or ('member',)"
                 )
             out[str(name)] = var.values
+        n = members.sizes.get("member", 1)
+        if n > 1 and not any(np.ndim(v) == 1 for v in out.values()):
+            raise ValueError(f"members: the Dataset has {n} members along 'member' but no parameter along it (its "
+                             f"variables or coordinates named as parameters: {', '.join(PARAMETER_NAMES[:4])}, ...)")
         return out
     if isinstance(members, Mapping):
         return {str(k): v for k, v in members.items()}

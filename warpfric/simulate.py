@@ -548,12 +548,15 @@ def _front_variables(front: dict, fronts: Fronts, failed: np.ndarray) -> dict:
         base = name[len(event) + 1:] if event != fronts.events[0] else name
         words = _EVENT_WORDS[event]
         if base == "nucleation_edge":
-            edge = np.where(np.isfinite(arr), arr, -2).astype(np.int8)
+            # -3 where the front is not known (a member not ok, or cut off before its detachment was over),
+            # -2 where the member saw its detachment through and no node was reached: "none" only there (a
+            # failed member read as "none" made a category of its own in a groupby)
+            edge = np.where(np.isfinite(arr), arr, np.where(failed, -3, -2)).astype(np.int8)
             new[name] = (("member",), edge, {
                 "long_name": f"edge where the {event} front nucleates",
-                "comment": words,
-                "flag_values": np.array([-2, -1, 0, 1], dtype=np.int8),
-                "flag_meanings": "none left interior right",
+                "comment": f"{words}; unknown: the member did not end ok or ended before its detachment was over",
+                "flag_values": np.array([-3, -2, -1, 0, 1], dtype=np.int8),
+                "flag_meanings": "unknown none left interior right",
             })
             continue
         units, long_name, comment = _FRONT_ATTRS[base]
