@@ -72,7 +72,7 @@ def test_written_files_pass_the_cf_checker(tmp_path, capsys):
                 assert var.dtype not in (np.int64, np.uint64), (name, vname)
                 assert "long_name" in var.ncattrs(), (name, vname)
                 # short enough for a plot's axis label (xarray's long_name [units]); the rest in comment
-                assert len(var.long_name) <= 90, (name, vname, var.long_name)
+                assert len(var.long_name) <= 85, (name, vname, var.long_name)
                 assert "units" in var.ncattrs() or "flag_values" in var.ncattrs(), (name, vname)
                 if "flag_values" in var.ncattrs():
                     assert np.asarray(var.flag_values).dtype == var.dtype, (name, vname)

@@ -340,3 +340,30 @@ def test_parts_run_on_different_devices_say_so_in_the_combination(tmp_path):
     mixed = concat_members([a, b])
     assert mixed.attrs["device"] == f"mixed: {a.attrs['device']}, cuda:0"
     assert mixed.attrs["lanes"] == f"mixed: {a.attrs['lanes']}, 32"
+
+
+def test_write_ensemble_says_what_to_use_for_datasets_it_cannot_write(tmp_path):
+    """Three ways an xarray user reached a traceback or a bloated file: a file read with
+    xr.open_dataset (its members are labels: "invalid literal for int()"), ds.where(status == 0)
+    (the recorded fields broadcast over member: written, each field once per member) and a selection
+    that drops a recorded member. Each is refused in one line that says what to use; the selection
+    the message names writes. Two files of the same run's members are told so, not sent to
+    open_mfdataset (whose index they would break)."""
+    from warpfric.io import open_ensemble, open_ensembles
+
+    ds = run({"eccentricity": [0.0, 0.1, 0.2]}, nodes=11, record=wf.Record.window(20.1, 20.2, 5, members=(0, 2)))
+    write_ensemble(ds, tmp_path / "a.nc")
+    with pytest.raises(ValueError, match=r"the members are labels .* warpfric.io.open_ensemble or open_ensembles"):
+        write_ensemble(xr.open_dataset(tmp_path / "a.nc"), tmp_path / "b.nc")
+    with pytest.raises(ValueError, match=r"lie along both recorded and member.*ds.sel\(member="):
+        write_ensemble(ds.where(ds.status == 0), tmp_path / "b.nc")
+    with pytest.raises(ValueError, match=r"ds.isel\(recorded=\[1\]\), or drop the recorded fields"):
+        write_ensemble(ds.sel(member=[1, 2]), tmp_path / "b.nc")
+    write_ensemble(ds.sel(member=[1, 2]).isel(recorded=[1]), tmp_path / "b.nc")
+    assert open_ensemble(tmp_path / "b.nc").recorded_member.values.tolist() == [2]
+    # a selection of a file read back keeps that file's labels (open_ensemble): the same members
+    write_ensemble(open_ensemble(tmp_path / "a.nc").sel(member=[1, 2]).isel(recorded=[1]), tmp_path / "c.nc")
+    with pytest.raises(ValueError, match="with the same member labels: the same members of one run"):
+        open_ensembles([tmp_path / "a.nc", tmp_path / "c.nc"])
+    with pytest.raises(ValueError, match="xr.open_mfdataset"):  # b.nc's members were labelled anew: another run
+        open_ensembles([tmp_path / "a.nc", tmp_path / "b.nc"])

@@ -197,7 +197,7 @@ def simulate(
     return _short_long_names(ds)
 
 
-LONG_NAME_MAX = 80  # characters: xarray labels a plot's axis with long_name [units]
+LONG_NAME_MAX = 60  # characters: xarray labels a plot's axis with long_name [units], in lines of 30
 
 
 def _short_long_names(ds: xr.Dataset) -> xr.Dataset:
@@ -605,8 +605,8 @@ def friction_coefficient_history(ds: xr.Dataset) -> xr.DataArray:
     with np.errstate(divide="ignore", invalid="ignore"):
         mu = np.where(normal > 0.0, sign[:, None] * friction / normal, np.nan)
     return xr.DataArray(mu, dims=("recorded", "time"), attrs={
-        "units": "1", "long_name": "friction coefficient sign(v_d) int tau_f dx / int sigma_n dx of the recorded "
-        "fields (NaN without normal force)"})
+        "units": "1", "long_name": "friction coefficient mu(t) of the recorded fields",
+        "comment": "sign(v_d) int tau_f dx / int sigma_n dx of the recorded fields (NaN without normal force)"})
 
 
 _RECORD_ATTRS = {
@@ -618,7 +618,7 @@ _RECORD_ATTRS = {
 
 
 _OUTPUT_ATTRS = {
-    "mu_s": ("1", "static friction coefficient: max over time of int tau_f dx / int sigma_n dx"),
+    "mu_s": ("1", "static friction coefficient mu_s (max over time of int tau_f dx / int sigma_n dx)"),
     "mu_s_time": ("s", "time of the maximum of the friction coefficient"),
     "mu_final": ("1", "friction coefficient at the end of the run"),
     "lift_off": ("1", "1 where the interface lifted off somewhere (sigma_n < 0) while loaded"),
