@@ -367,3 +367,21 @@ def test_write_ensemble_says_what_to_use_for_datasets_it_cannot_write(tmp_path):
         open_ensembles([tmp_path / "a.nc", tmp_path / "c.nc"])
     with pytest.raises(ValueError, match="xr.open_mfdataset"):  # b.nc's members were labelled anew: another run
         open_ensembles([tmp_path / "a.nc", tmp_path / "b.nc"])
+
+
+def test_open_ensembles_orders_the_members_and_keeps_every_files_history(tmp_path):
+    """Files given out of order (["b.nc", "a.nc"]) gave members 3 4 5 0 1 2, an index that is not
+    monotonic, and the first file's history only: the members come in order, with their values,
+    and the history has each file's command."""
+    from warpfric.io import open_ensembles
+
+    a = run({"eccentricity": [0.0, 0.1, 0.2]}, nodes=11)
+    b = wf.simulate({"eccentricity": [0.3, 0.4]}, solver=wf.Solver(nodes=11, rtol=1e-6), device=DEVICE,
+                    progress=False, member_offset=3, fronts=None)
+    write_ensemble(a, tmp_path / "a.nc", command="run A")
+    write_ensemble(b, tmp_path / "b.nc", command="run B")
+    both = open_ensembles([tmp_path / "b.nc", tmp_path / "a.nc"])
+    assert both.member.values.tolist() == [0, 1, 2, 3, 4]
+    np.testing.assert_array_equal(both.eccentricity.values, [0.0, 0.1, 0.2, 0.3, 0.4])
+    np.testing.assert_array_equal(both.mu_s.values[3:], b.mu_s.values)
+    assert "run A" in both.attrs["history"] and "run B" in both.attrs["history"]

@@ -782,7 +782,26 @@ def open_ensembles(paths) -> xr.Dataset:
     paths = [Path(p) for p in paths]
     if not paths:
         raise ValueError("open_ensembles: no files given")
-    return concat_members([open_ensemble(p) for p in paths], names=[str(p) for p in paths])
+    datasets = [open_ensemble(p) for p in paths]
+    # in member order whatever order the files came in (["b.nc", "a.nc"] gave members 3 4 5 0 1 2: an
+    # index that is not monotonic), with every file's history
+    order = sorted(range(len(paths)), key=lambda i: int(np.min(datasets[i].member.values)))
+    out = concat_members([datasets[i] for i in order], names=[str(paths[i]) for i in order])
+    if not np.all(np.diff(out.member.values) > 0):  # files whose members interleave
+        out = out.sortby("member")
+    history = merged_history(datasets)
+    if history:
+        out.attrs["history"] = history
+    return out
+
+
+def merged_history(datasets) -> str:
+    """The ``history`` lines of ``datasets`` ("<time>: <command>"), the latest line of each command,
+    latest first (the commands that wrote the parts of a combined file)."""
+    latest = {}  # command -> its latest "<time>: <command>" line (parts written at other seconds)
+    for line in sorted(line for ds in datasets for line in str(ds.attrs.get("history", "")).splitlines() if line):
+        latest[line.partition(": ")[2]] = line
+    return "\n".join(sorted(latest.values(), reverse=True))
 
 
 def parts_dir(path) -> Path:
@@ -917,10 +936,7 @@ class ChunkStore:
         combined.attrs.pop("chunk_index", None)
         # the commands that wrote the chunks (an interrupted run's and its --resume), latest first,
         # under the line of the command that combines them (write_ensemble)
-        latest = {}  # command -> its latest "<time>: <command>" line (chunks written at other seconds)
-        for line in sorted(line for ds in datasets for line in str(ds.attrs.get("history", "")).splitlines() if line):
-            latest[line.partition(": ")[2]] = line
-        history = "\n".join(sorted(latest.values(), reverse=True))
+        history = merged_history(datasets)
         if history:
             combined.attrs["history"] = history
         else:
