@@ -963,6 +963,8 @@ def test_info_names_the_members_cut_off_before_their_detachment_was_over(tmp_pat
     code, out, _ = run_cli(capsys, "info", "cut.nc")
     assert code == 0
     assert "    ok, but ended before the detachment was over at end_time (their fronts are NaN): members 0, 1" in out, out
+    # the front lines count over the members whose fronts were read ("present in 0/2" read as absent)
+    assert "  first front's middle segment: no member's front was read (2 not ok or cut off)" in out, out
 
 
 def test_a_finished_chunk_is_read_once_while_it_is_unchanged(tmp_path, capsys, monkeypatch):

@@ -443,12 +443,18 @@ def summary(ds, name: str) -> str:
         rows = [(f"first front's {seg} segment", f"v_{seg}") for seg in ("left", "middle", "right")]
         if "v_second" in ds:
             rows.append(("second front", "v_second"))
+        # over the members whose fronts were read: not those not ok or cut off, whose fronts are unknown
+        read = (ds.status.values == 0) & ~detachment_not_over(ds)[1]
+        unread = f" ({int((~read).sum())} more not read: not ok or cut off)" if not read.all() else ""
         for what, var in rows:
             v = ds[var].values
             ok = np.isfinite(v)
             text = (f": median {np.median(v[ok]):.3g} m/s, range [{v[ok].min():.3g}, {v[ok].max():.3g}]"
                     if ok.any() else "")
-            lines.append(f"  {what} present in {ok.sum()}/{_plural(v.size, 'member')}{text}")
+            if read.any():
+                lines.append(f"  {what} present in {ok.sum()}/{_plural(int(read.sum()), 'member')}{text}{unread}")
+            else:
+                lines.append(f"  {what}: no member's front was read ({int((~read).sum())} not ok or cut off)")
     if "sensitivity_design" in ds.attrs:
         import json
 
