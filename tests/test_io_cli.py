@@ -67,6 +67,7 @@ def test_by_parameters_puts_every_member_at_its_swept_values(tmp_path):
     for source in (ds, open_ensemble(write_ensemble(ds, tmp_path / "grid.nc"))):
         grid = by_parameters(source)
         assert grid.mu_s.dims == ("normal_force", "eccentricity") and grid.arrival_time.dims[:2] == grid.mu_s.dims
+        assert grid.member_number.dtype == np.int32  # in memory as from the file (int64 there before)
         for m in range(6):
             at = dict(normal_force=float(ds.normal_force[m]), eccentricity=float(ds.eccentricity[m]))
             assert float(grid.mu_s.sel(at)) == float(ds.mu_s[m]) and int(grid.member_number.sel(at)) == m

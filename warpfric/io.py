@@ -524,7 +524,8 @@ def by_parameters(ds: xr.Dataset, names=None) -> xr.Dataset:
         raise ValueError(f"by_parameters: the {ds.sizes['member']} members are not a grid of {', '.join(names)}: "
                          f"as dimensions they would fill {ds.sizes['member']} of {cells:.3g} combinations; valid: a "
                          "grid sweep (random samples stay along member: select them with ds.where(...))")
-    numbered = ds if "member_number" in ds else ds.assign(member_number=ds.member.astype(np.int64))
+    # int32, as a file holds it (int64 in memory made the two differ)
+    numbered = ds if "member_number" in ds else ds.assign(member_number=ds.member.astype(np.int32))
     if len(names) == 1:  # one name: a plain index, which unstack does not take
         return numbered.set_coords(names).swap_dims(member=names[0]).transpose(*names, ...)
     return numbered.set_coords(names).set_index(member=names).unstack("member").transpose(*names, ...)
@@ -596,8 +597,10 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
     """
     if not isinstance(ds, xr.Dataset) or "member" not in ds.dims:
         found = type(ds).__name__ if not isinstance(ds, xr.Dataset) else f"a Dataset with dimensions {tuple(ds.dims)}"
+        back = (" (a by_parameters grid: write the ensemble it was made from)"
+                if isinstance(ds, xr.Dataset) and "member_number" in ds else "")
         raise ValueError(f"write_ensemble: expects the ensemble's Dataset along the dimension member (from simulate or "
-                         f"open_ensemble), got {found}")
+                         f"open_ensemble), got {found}{back}")
     if np.asarray(ds.member.values).dtype.kind in "USO":  # xr.open_dataset / open_mfdataset of a file
         raise ValueError("write_ensemble: the members are labels (the file's layout, as xr.open_dataset or "
                          "xr.open_mfdataset read it); read the files with warpfric.io.open_ensemble or open_ensembles "
