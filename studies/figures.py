@@ -240,8 +240,9 @@ def fig5_8(quick, device, model=None):
         ax[2].plot(F[edge_present], 1 / v_edge[edge_present], "s", ms=4, mfc="none", color="k",
                    label="1 / speed of the front from the left edge")
         if present.sum() < 2:  # the quick set: a line needs two points; said on the panel, not left blank
-            ax[2].text(0.03, 0.95, f"v_left present at {present.sum()} force{'s' if present.sum() != 1 else ''} "
-                       "only: no line to read", transform=ax[2].transAxes, fontsize=7, va="top")
+            where = f"at {present.sum()} force only" if present.any() else "at no force"
+            ax[2].text(0.03, 0.95, f"v_left present {where}: no line to read", transform=ax[2].transAxes,
+                       fontsize=7, va="top")
         ax[2].set_xlabel("normal force (N)")
         ax[2].set_ylabel("1 / speed (s/m)")
         ax[2].set_title("Fig. 9")

@@ -993,3 +993,19 @@ def test_a_finished_chunk_is_read_once_while_it_is_unchanged(tmp_path, capsys, m
     assert store.is_done(2) and len(opened) == 4
     path.unlink()
     assert not store.is_done(2) and len(opened) == 4
+
+
+def test_info_counts_members_stopped_by_max_end_time_as_not_read(capsys, tmp_path):
+    """Members stopped by max_end_time have NaN fronts too (nucleation_edge -3): info counted them
+    among the members whose fronts were read ('present in 1/3')."""
+    import warpfric as wf
+    from warpfric.io import write_ensemble
+
+    with pytest.warns(UserWarning, match="detachment was over"):
+        ds = run({"aging_coefficient": [5e-3, 0.075]}, nodes=20, rtol=1e-5, fronts=wf.Fronts(),
+                 scene=wf.Parameters(max_end_time=24.0))
+    write_ensemble(ds, tmp_path / "cap.nc")
+    code, out, _ = run_cli(capsys, "info", tmp_path / "cap.nc")
+    assert code == 0 and int(ds.nucleation_edge.values[0]) == -3
+    line = next(line for line in out if line.startswith("  first front's middle segment"))
+    assert "present in 1/1 member" in line and "(1 more not read: not ok or cut off)" in line, out

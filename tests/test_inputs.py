@@ -287,3 +287,14 @@ def test_parameters_held_as_coordinates_of_a_members_dataset_are_used():
     np.testing.assert_array_equal(resolve_members(mixed, wf.Parameters())[0]["normal_force"], [500.0, 2000.0])
     with pytest.raises(ValueError, match="has 3 members along 'member' but no parameter along it"):
         resolve_members(xr.Dataset(coords={"member": [0, 1, 2]}), wf.Parameters())
+
+
+def test_a_misspelt_parameter_as_a_coordinate_is_named():
+    """A coordinate along member that is no parameter was dropped without a word (the stacked grid
+    of 'eccentricty' ran 4 members at eccentricity 0); as a data variable it was refused."""
+    import xarray as xr
+
+    grid = xr.Dataset(coords={"normal_force": [500.0, 1000.0], "eccentricty": [-0.1, 0.1]})
+    with pytest.raises(ValueError, match="coordinate 'eccentricty' along member is no parameter \\(did you mean "
+                                         "'eccentricity'\\?\\)"):
+        resolve_members(grid.stack(member=["normal_force", "eccentricty"]), wf.Parameters())

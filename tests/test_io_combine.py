@@ -385,3 +385,23 @@ def test_open_ensembles_orders_the_members_and_keeps_every_files_history(tmp_pat
     np.testing.assert_array_equal(both.eccentricity.values, [0.0, 0.1, 0.2, 0.3, 0.4])
     np.testing.assert_array_equal(both.mu_s.values[3:], b.mu_s.values)
     assert "run A" in both.attrs["history"] and "run B" in both.attrs["history"]
+
+
+def test_a_multiindex_member_and_the_flags_of_older_parts(tmp_path):
+    """write_ensemble of a Dataset whose member is a MultiIndex said 'the members are labels (the file's
+    layout)', which it never was: it names the MultiIndex. A combination of a part without -3
+    (unknown) among its nucleation_edge flags and one with it declares -3."""
+    from warpfric.io import concat_members
+
+    ds = run({"eccentricity": [0.0, 0.1]}, nodes=11, fronts=wf.Fronts())
+    multi = ds.set_coords("eccentricity").set_index(member=["eccentricity"], append=True)
+    with pytest.raises(ValueError, match="member is a MultiIndex .* .reset_index\\('member'\\)"):
+        write_ensemble(multi, tmp_path / "m.nc")
+    other = wf.simulate({"eccentricity": [0.2]}, solver=wf.Solver(nodes=11, rtol=1e-6), fronts=wf.Fronts(),
+                        device=DEVICE, progress=False, member_offset=2)
+    older = ds.copy()
+    older["nucleation_edge"] = older.nucleation_edge.copy()
+    older["nucleation_edge"].attrs.update(flag_values=np.array([-2, -1, 0, 1], np.int8),
+                                          flag_meanings="none left interior right")
+    both = concat_members([older, other])
+    assert both.nucleation_edge.attrs["flag_meanings"] == "unknown none left interior right"

@@ -444,7 +444,8 @@ def summary(ds, name: str) -> str:
         if "v_second" in ds:
             rows.append(("second front", "v_second"))
         # over the members whose fronts were read: not those not ok or cut off, whose fronts are unknown
-        read = (ds.status.values == 0) & ~detachment_not_over(ds)[1]
+        capped, cut = detachment_not_over(ds)
+        read = (ds.status.values == 0) & ~capped & ~cut
         unread = f" ({int((~read).sum())} more not read: not ok or cut off)" if not read.all() else ""
         for what, var in rows:
             v = ds[var].values

@@ -601,6 +601,11 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
                 if isinstance(ds, xr.Dataset) and "member_number" in ds else "")
         raise ValueError(f"write_ensemble: expects the ensemble's Dataset along the dimension member (from simulate or "
                          f"open_ensemble), got {found}{back}")
+    import pandas as pd
+
+    if isinstance(ds.indexes.get("member"), pd.MultiIndex):
+        raise ValueError("write_ensemble: member is a MultiIndex (set_index or stack); write the ensemble with member "
+                         "numbers: .reset_index('member')")
     if np.asarray(ds.member.values).dtype.kind in "USO":  # xr.open_dataset / open_mfdataset of a file
         raise ValueError("write_ensemble: the members are labels (the file's layout, as xr.open_dataset or "
                          "xr.open_mfdataset read it); read the files with warpfric.io.open_ensemble or open_ensembles "
@@ -618,9 +623,10 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
                          "does that); select members with ds.sel(member=ds.member[ds.status == 0]) instead")
     if "recorded_member" in ds.coords and not np.isin(ds.recorded_member.values, ds.member.values).all():
         kept = np.isin(ds.recorded_member.values, ds.member.values)
-        raise ValueError(f"recorded_member {ds.recorded_member.values.tolist()}: not among the member numbers "
-                         f"{ds.member.values.min()}..{ds.member.values.max()} of the ensemble; keep the recorded "
-                         f"members with the others, ds.isel(recorded={np.flatnonzero(kept).tolist()}), or drop the "
+        keep = (f"keep the recorded members with the others, ds.isel(recorded={np.flatnonzero(kept).tolist()}), or "
+                if kept.any() else "")
+        raise ValueError(f"write_ensemble: recorded_member {ds.recorded_member.values.tolist()}: not among the member "
+                         f"numbers {ds.member.values.min()}..{ds.member.values.max()} of the ensemble; {keep}drop the "
                          "recorded fields (ds.drop_dims(['recorded', 'time']))")
     out = parameters_along_member(ds)
     out.attrs["varying_parameters"] = " ".join(v for v in PARAMETER_NAMES if v in set(varying))
@@ -888,7 +894,7 @@ class ChunkStore:
         except OSError:
             self._done.pop(index, None)
             return False
-        signature = (stat.st_ino, stat.st_size, stat.st_mtime_ns)
+        signature = (stat.st_ino, stat.st_size, stat.st_mtime_ns, stat.st_ctime_ns)  # ctime: not settable
         if index in self._done and self._done[index][0] == signature:
             return True
         self._done.pop(index, None)
@@ -1118,6 +1124,10 @@ def concat_members(datasets, names=None) -> xr.Dataset:
         rec = xr.concat([ds[rec_vars] for ds in recorded], dim="recorded", data_vars="all", coords="different",
                         compat="equals", join="exact")
         out = out.merge(rec)
+    for name in [v for v in out.data_vars if v.endswith("nucleation_edge")]:  # the widest flags of the parts: a
+        # file of an earlier version has no -3 (unknown), which a newer part may hold
+        widest = max((ds[name].attrs for ds in datasets if name in ds), key=lambda a: len(a.get("flag_values", ())))
+        out[name].attrs = dict(widest)
     out.attrs = dict(first.attrs)
     for key in HOW_RUN_ATTRS:  # where the parts ran differently (a --resume on another device): all of them
         values = list(dict.fromkeys(str(ds.attrs[key]) for ds in datasets if key in ds.attrs))

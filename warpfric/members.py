@@ -9,7 +9,11 @@ from typing import Any
 
 import numpy as np
 
-from .parameters import PARAMETER_NAMES, Parameters, resolve_value, unknown_parameter, validate_value
+from .parameters import PARAMETER_NAMES, Parameters, did_you_mean, resolve_value, unknown_parameter, validate_value
+
+
+# coordinates along member that are no parameter: the member index and the labels of a file
+MEMBER_COORDS = ("member", "member_id", "member_number")
 
 
 def _member_arrays(members: Any) -> dict[str, np.ndarray]:
@@ -25,6 +29,11 @@ def _member_arrays(members: Any) -> dict[str, np.ndarray]:
         # the parameters among its coordinates too (a grid built with .stack(member=[...]) holds them
         # there, as by_parameters gives them back): they were ignored, and the default scene ran
         coords = {name: var for name, var in members.coords.items() if str(name) in PARAMETER_NAMES}
+        for name, var in members.coords.items():  # a misspelt parameter as a coordinate: as a variable, refused
+            if var.dims == ("member",) and str(name) not in PARAMETER_NAMES and str(name) not in MEMBER_COORDS:
+                raise ValueError(f"members: coordinate {str(name)!r} along member is no parameter"
+                                 f"{did_you_mean(str(name), PARAMETER_NAMES)}; coordinates along member other than "
+                                 f"{', '.join(MEMBER_COORDS)} are taken as parameters")
         for name, var in {**coords, **members.data_vars}.items():
             if var.dims not in ((), ("member",)):
                 raise ValueError(

@@ -667,10 +667,15 @@ def _warn_members_not_ok_kept(store, kept: list, solver, out: Path) -> None:
     columns: dict = {name: [] for name in names}
     meanings = ""
     for i in kept:  # read when is_done counted them (netCDF4: xarray's open takes ~10x as long a file)
-        summary = store.summary_columns(i)
+        try:
+            summary = store.summary_columns(i)
+        except ValueError:  # changed or gone since it was counted: not worth a traceback in place of the line
+            continue
         meanings = summary["flag_meanings"]
         for name in names:
             columns[name].append(summary[name])
+    if not columns["status"]:
+        return
     ds = xr.Dataset({name: ("member", np.concatenate(parts)) for name, parts in columns.items()})
     ds["status"].attrs["flag_meanings"] = meanings
     text = members_not_ok_text(ds, solver, where=f" in the {plural(len(kept), 'finished chunk')}")
