@@ -339,3 +339,18 @@ def test_an_explicit_end_past_max_end_time_is_a_cut_not_the_cap():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         run({"end_time": [20.245]}, nodes=30, rtol=1e-5, scene=wf.Parameters(max_end_time=20.1))
+
+
+def test_a_velocity_front_that_never_ends_is_told_apart_from_a_plateau():
+    """A sudden stop inside the velocity front leaves the pad ringing above half the arrival level,
+    so the automatic end never comes and max_end_time stops the run, with mu 9 % below its maximum:
+    the warning said 'mu never fell 1 % below its maximum' (a plateau), which was false. It says the
+    front event was not over; the member stopped later ends by itself."""
+    with pytest.warns(UserWarning, match="detachment was over") as caught:
+        ds = run({"stop_time": [20.2722, 20.5]}, nodes=30, rtol=1e-5, fronts=wf.Fronts(event="velocity"),
+                 scene=wf.Parameters(max_end_time=22.0))
+    said = [str(w.message) for w in caught if "detachment was over" in str(w.message)]
+    assert len(said) == 1 and "with mu 1% below its maximum but the front event not over" in said[0], said
+    assert "plateau" not in said[0] and ds.mu_final.values[0] < 0.99 * ds.mu_s.values[0]
+    assert ds.final_time.values[0] == 22.0 and int(ds.nucleation_edge.values[0]) == -3
+    assert ds.final_time.values[1] < 22.0 and np.isfinite(ds.detachment_end_time.values[1])

@@ -128,7 +128,7 @@ def _grid_error(m, name: str) -> str:
 
 
 def _print_member(ds, solver: Solver) -> None:
-    from .simulate import detachment_not_over
+    from .simulate import capped_reason, detachment_not_over
 
     m = ds.isel(member=0)
     print(f"scene: F = {float(m.normal_force):g} N, 2e/L = {float(m.eccentricity):g}, "
@@ -150,8 +150,10 @@ def _print_member(ds, solver: Solver) -> None:
               "are NaN")
     elif any(which[0] for which in detachment_not_over(ds.isel(member=[0]))):
         capped = detachment_not_over(ds.isel(member=[0]))[0][0]
-        advice = ("at max_end_time, the automatic end's cap: mu never fell 1 % below its maximum" if capped else
-                  "(a later --end-time, or none: the automatic end)")
+        why = ("mu never fell 1 % below its maximum" if capped_reason(ds.isel(member=[0]), np.array([True]))[0] else
+               "mu fell, but the front event was not over")
+        advice = f"at max_end_time, the automatic end's cap: {why}" if capped else \
+            "(a later --end-time, or none: the automatic end)"
         print(f"front     : not given: the run ended at t = {float(m.final_time):g} s, before the detachment was over "
               f"{advice}, so its front outputs are NaN")
     elif not np.isfinite(float(m.nucleation_position)):
@@ -425,10 +427,14 @@ def summary(ds, name: str) -> str:
             more = f" and {which.size - NOT_OK_SHOWN:,} more" if which.size > NOT_OK_SHOWN else ""
             lines.append(f"    {meanings[int(code)]}: member{'s' if which.size > 1 else ''} "
                          f"{', '.join(str(k) for k in which[:NOT_OK_SHOWN])}{more}")
-    from .simulate import detachment_not_over
+    from .simulate import capped_reason, detachment_not_over
 
-    for which, why in zip(detachment_not_over(ds), ("at max_end_time (mu never fell 1 % below its maximum; mu_s "
-                                                    "may be a plateau's)", "at end_time (their fronts are NaN)")):
+    capped, cut = detachment_not_over(ds)
+    plateau = capped_reason(ds, capped)
+    for which, why in ((plateau, "at max_end_time (mu never fell 1 % below its maximum; mu_s may be a plateau's)"),
+                       (capped & ~plateau, "at max_end_time (mu fell, but the front event was not over; their fronts "
+                                           "are NaN)"),
+                       (cut, "at end_time (their fronts are NaN)")):
         if which.any():  # ok members whose run ended before their detachment was over, by number
             shown = numbers[which]
             more = f" and {shown.size - NOT_OK_SHOWN:,} more" if shown.size > NOT_OK_SHOWN else ""

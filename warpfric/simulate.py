@@ -233,8 +233,8 @@ _LIFTED_OFF_ADVICE = ("part of the pad lifted off, where nothing damps its shear
 
 def detachment_not_over(ds: xr.Dataset) -> tuple[np.ndarray, np.ndarray]:
     """(capped, cut), (member,) bool each: the members ok whose run ended before their detachment was
-    over, at max_end_time, the automatic end's cap (end_time None; mu never fell AUTO_END_PEAK_DROP
-    below its maximum), or, with fronts, at an explicit end_time (detachment_end_time NaN and their
+    over, at max_end_time, the automatic end's cap (end_time None: its conditions never all held;
+    :func:`capped_reason` tells which), or, with fronts, at an explicit end_time (detachment_end_time NaN and their
     front outputs NaN; detached_fraction is 0, not NaN, for a member that saw its detachment through
     without a front). Neither rule needs detachment_end_time of a file of an earlier version, which
     is unknown (NaN) for every member."""
@@ -253,6 +253,25 @@ def detachment_not_over(ds: xr.Dataset) -> tuple[np.ndarray, np.ndarray]:
     return capped, cut
 
 
+def capped_reason(ds: xr.Dataset, capped: np.ndarray) -> np.ndarray:
+    """Of the ``capped`` members (detachment_not_over), True where mu never fell AUTO_END_PEAK_DROP
+    below its maximum (mu_s may be a plateau's), False where it did and a front event's condition
+    never held (a velocity front's pad still above half its arrival level, e.g. ringing after a
+    sudden stop; a strength front's node not past its peak)."""
+    from warpfric.kernels.observers import AUTO_END_PEAK_DROP
+
+    with np.errstate(invalid="ignore"):
+        fell = np.asarray(ds.mu_final.values) < (1.0 - AUTO_END_PEAK_DROP) * np.asarray(ds.mu_s.values)
+    return capped & ~fell
+
+
+CAPPED_TEXTS = ("at max_end_time, the automatic end's cap, with mu never {drop:.0%} below its maximum (mu_s may be a "
+                "plateau's, not a static peak: a later max_end_time)",
+                "at max_end_time, the automatic end's cap, with mu {drop:.0%} below its maximum but the front event not "
+                "over (a velocity front's pad above half its arrival level, e.g. ringing after a sudden stop; a "
+                "strength front's node not past its peak)")
+
+
 def warn_detachment_not_over(ds: xr.Dataset, stacklevel: int = 3) -> None:
     """One warning, once per simulate call, of the members of :func:`detachment_not_over`: at
     max_end_time (mu_s may be a plateau's), or at an explicit end_time with fronts on (their front
@@ -264,8 +283,9 @@ def warn_detachment_not_over(ds: xr.Dataset, stacklevel: int = 3) -> None:
         return
     n = ds.sizes["member"]
     parts = []
-    for which, text in ((capped, f"at max_end_time, the automatic end's cap, with mu never {AUTO_END_PEAK_DROP:.0%} "
-                                 "below its maximum (mu_s may be a plateau's, not a static peak: a later max_end_time)"),
+    plateau = capped_reason(ds, capped)
+    for which, text in ((plateau, CAPPED_TEXTS[0].format(drop=AUTO_END_PEAK_DROP)),
+                        (capped & ~plateau, CAPPED_TEXTS[1].format(drop=AUTO_END_PEAK_DROP)),
                         (cut, "at end_time (a later end_time, or end_time=None: the automatic end)")):
         if which.any():
             numbers = ", ".join(map(str, ds.member.values[which][:8])) + (", ..." if which.sum() > 8 else "")
