@@ -194,7 +194,10 @@ def reader(ds, i: int, event: str, naming: str):
         front = name in front_names or name.startswith(("v_", "left_", "right_", "middle_"))
         if naming == "spec" or not front:
             return ds[(prefix if front else "") + name].values[i * M:(i + 1) * M]
-        if name in ("nucleation_edge", "nucleation_position"):
+        if name == "nucleation_edge":  # the edges swap (-1 <-> 1); the flags -2 none, -3 unknown stay
+            values = ds[prefix + name].values[i * M:(i + 1) * M]
+            return np.where(values >= -1, -values, values)
+        if name == "nucleation_position":
             return -ds[prefix + name].values[i * M:(i + 1) * M]
         if name.startswith("v_"):
             return ds[prefix + "v_" + _SWAP[name[2:]]].values[i * M:(i + 1) * M]
