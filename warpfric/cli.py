@@ -128,9 +128,10 @@ def _grid_error(m, name: str) -> str:
 
 
 def _print_member(ds, solver: Solver) -> None:
-    from .simulate import capped_reason, detachment_not_over
+    from .simulate import not_over_groups
 
     m = ds.isel(member=0)
+    not_over = {key: bool(which[0]) for key, which in not_over_groups(ds.isel(member=[0])).items()}
     print(f"scene: F = {float(m.normal_force):g} N, 2e/L = {float(m.eccentricity):g}, "
           f"v_d = {float(m.disc_velocity):g} m/s, relaxation gate {ds.attrs['model_relaxation_gate']}, "
           f"N = {solver.nodes}, {solver.dtype}, rtol = {solver.rtol:g}, device {ds.attrs['device']}")
@@ -148,12 +149,10 @@ def _print_member(ds, solver: Solver) -> None:
     elif int(m.status) != 0:
         print(f"front     : not given: the member did not end ok ({_status_name(ds, m.status)}), so its front outputs "
               "are NaN")
-    elif any(which[0] for which in detachment_not_over(ds.isel(member=[0]))):
-        capped = detachment_not_over(ds.isel(member=[0]))[0][0]
-        why = ("mu never fell 1 % below its maximum" if capped_reason(ds.isel(member=[0]), np.array([True]))[0] else
-               "mu fell, but the front event was not over")
-        advice = f"at max_end_time, the automatic end's cap: {why}" if capped else \
-            "(a later --end-time, or none: the automatic end)"
+    elif any(not_over.values()):
+        advice = {"plateau": "at max_end_time, the automatic end's cap: mu never fell 1 % below its maximum",
+                  "front": "at max_end_time, the automatic end's cap: mu fell, but the front event was not over",
+                  "cut": "(a later --end-time, or none: the automatic end)"}[next(k for k, v in not_over.items() if v)]
         print(f"front     : not given: the run ended at t = {float(m.final_time):g} s, before the detachment was over "
               f"{advice}, so its front outputs are NaN")
     elif not np.isfinite(float(m.nucleation_position)):
@@ -421,25 +420,24 @@ def summary(ds, name: str) -> str:
     codes = np.unique(ds.status.values)
     counts = {meanings[int(k)]: int((ds.status.values == k).sum()) for k in codes}
     lines.append("  status: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
-    for code in codes:
-        if int(code) != 0:  # the members not ok, by number (the first NOT_OK_SHOWN of each status)
-            which = numbers[ds.status.values == code]
-            more = f" and {which.size - NOT_OK_SHOWN:,} more" if which.size > NOT_OK_SHOWN else ""
-            lines.append(f"    {meanings[int(code)]}: member{'s' if which.size > 1 else ''} "
-                         f"{', '.join(str(k) for k in which[:NOT_OK_SHOWN])}{more}")
-    from .simulate import capped_reason, detachment_not_over
+    def members_line(what: str, which: np.ndarray) -> str:
+        """'    <what>: members 3, 7 and 12 more': the first NOT_OK_SHOWN numbers of ``which``."""
+        more = f" and {which.size - NOT_OK_SHOWN:,} more" if which.size > NOT_OK_SHOWN else ""
+        return (f"    {what}: member{'s' if which.size > 1 else ''} "
+                f"{', '.join(str(k) for k in which[:NOT_OK_SHOWN])}{more}")
 
-    capped, cut = detachment_not_over(ds)
-    plateau = capped_reason(ds, capped)
-    for which, why in ((plateau, "at max_end_time (mu never fell 1 % below its maximum; mu_s may be a plateau's)"),
-                       (capped & ~plateau, "at max_end_time (mu fell, but the front event was not over; their fronts "
-                                           "are NaN)"),
-                       (cut, "at end_time (their fronts are NaN)")):
+    for code in codes:
+        if int(code) != 0:  # the members not ok, by number
+            lines.append(members_line(meanings[int(code)], numbers[ds.status.values == code]))
+    from .simulate import not_over_groups
+
+    groups = not_over_groups(ds)
+    whys = {"plateau": "at max_end_time (mu never fell 1 % below its maximum; mu_s may be a plateau's)",
+            "front": "at max_end_time (mu fell, but the front event was not over; their fronts are NaN)",
+            "cut": "at end_time (their fronts are NaN)"}
+    for key, which in groups.items():
         if which.any():  # ok members whose run ended before their detachment was over, by number
-            shown = numbers[which]
-            more = f" and {shown.size - NOT_OK_SHOWN:,} more" if shown.size > NOT_OK_SHOWN else ""
-            lines.append(f"    ok, but ended before the detachment was over {why}: member{'s' if shown.size > 1 else ''} "
-                         f"{', '.join(str(k) for k in shown[:NOT_OK_SHOWN])}{more}")
+            lines.append(members_line(f"ok, but ended before the detachment was over {whys[key]}", numbers[which]))
     mu = ds.mu_s.values
     good = np.isfinite(mu)
     if good.any():
@@ -450,8 +448,7 @@ def summary(ds, name: str) -> str:
         if "v_second" in ds:
             rows.append(("second front", "v_second"))
         # over the members whose fronts were read: not those not ok or cut off, whose fronts are unknown
-        capped, cut = detachment_not_over(ds)
-        read = (ds.status.values == 0) & ~capped & ~cut
+        read = (ds.status.values == 0) & ~np.logical_or.reduce(list(groups.values()))
         unread = f" ({int((~read).sum())} more not read: not ok or cut off)" if not read.all() else ""
         for what, var in rows:
             v = ds[var].values
@@ -504,9 +501,7 @@ def _plot(args) -> int:
 def _sensitivity(args) -> int:
     from .io import open_ensemble, replace_atomically
     from .runner import check_output_name
-    import json
-
-    from .sensitivity import DESIGN_ATTR, analyse, bar_plot, check_outputs
+    from .sensitivity import analyse, bar_plot, check_outputs
 
     source = Path(args.file)
     out = Path(args.out) if args.out else source.with_name(source.stem + "_sensitivity.nc")
@@ -516,8 +511,7 @@ def _sensitivity(args) -> int:
         raise UsageError(f"output {str(out)!r} is the ensemble being analysed; give another -o OUT.nc")
     ds = open_ensemble(source)
     outputs = tuple(args.output or ["mu_s"])
-    design = json.loads(ds.attrs[DESIGN_ATTR]) if DESIGN_ATTR in ds.attrs else {}
-    check_outputs(ds, outputs, design.get("names", ()))  # a wrong name before "exists" (and --overwrite to learn it)
+    check_outputs(ds, outputs)  # a wrong name before "exists" (and --overwrite to learn it)
     for path in (out, figure):
         if path.exists() and not args.overwrite:
             raise UsageError(f"output {str(path)!r} exists; pass --overwrite to replace it")

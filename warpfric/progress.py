@@ -52,8 +52,12 @@ def expected_attempts(nodes: int, rtol: float = 1e-5, method: str = "tr_bdf2", e
     """Attempted steps one member is expected to need for one pass of the protocol: with the
     automatic end ~330 on a coarse grid, ~0.95 N on a fine one; ``extra`` more for an explicit
     end_time past the detachment (:func:`end_time_attempts`); all times (1e-5/rtol)^(1/order)."""
-    order = 4 if method == "esdirk4" else 2
-    return (math.hypot(FEW_NODES_ATTEMPTS, 0.95 * nodes) + extra) * (1e-5 / rtol) ** (1.0 / order)
+    return (math.hypot(FEW_NODES_ATTEMPTS, 0.95 * nodes) + extra) * _rtol_factor(rtol, method)
+
+
+def _rtol_factor(rtol: float, method: str) -> float:
+    """How many more attempts than at rtol 1e-5: (1e-5/rtol)^(1/order)."""
+    return (1e-5 / rtol) ** (1.0 / (4 if method == "esdirk4" else 2))
 
 
 # an explicit end_time past the detachment: the pad's transient after it (~165 attempts within
@@ -91,8 +95,7 @@ def cpu_seconds(n_members: int, solver, passes: float = 1.0, model=None, extra: 
     if model is not None:
         attempts *= LAW_ATTEMPTS.get(model.relaxation_gate, 1.0)
     # the extra once: a second pass (the velocity front's) ends at its front, before the explicit end
-    after = expected_attempts(solver.nodes, solver.rtol, solver.method, extra) - expected_attempts(
-        solver.nodes, solver.rtol, solver.method)
+    after = extra * _rtol_factor(solver.rtol, solver.method)
     return n_members * (passes * attempts + after) * solver.nodes * CPU_SECONDS_PER_NODE_ATTEMPT
 
 

@@ -131,12 +131,13 @@ def design_rows(design: dict) -> int:
     return design["n"]
 
 
-def check_outputs(ds, outputs, design_names=()) -> None:
+def check_outputs(ds, outputs) -> None:
     """ValueError (one line) unless every name of ``outputs`` is once a per-member result of ``ds``:
-    not an input parameter (nor one of ``design_names``), not a flag variable."""
+    not an input parameter (nor one of its design's names), not a flag variable."""
     repeated = sorted({o for o in outputs if list(outputs).count(o) > 1})
     if repeated:
         raise ValueError(f"output {repeated[0]!r} is given more than once; give each output once")
+    design_names = json.loads(ds.attrs[DESIGN_ATTR])["names"] if DESIGN_ATTR in ds.attrs else ()
     inputs = set(PARAMETER_NAMES) | set(design_names)
 
     def is_flag(v):  # status, the edge codes: categories, not quantities
@@ -189,7 +190,7 @@ def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: in
     d = len(names)
     result = {}
     filled = {}
-    check_outputs(ds, outputs, names)
+    check_outputs(ds, outputs)
     for out in outputs:
         Y = ds[out].values.astype(np.float64)
         if log:

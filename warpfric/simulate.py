@@ -253,45 +253,45 @@ def detachment_not_over(ds: xr.Dataset) -> tuple[np.ndarray, np.ndarray]:
     return capped, cut
 
 
-def capped_reason(ds: xr.Dataset, capped: np.ndarray) -> np.ndarray:
-    """Of the ``capped`` members (detachment_not_over), True where mu never fell AUTO_END_PEAK_DROP
-    below its maximum (mu_s may be a plateau's), False where it did and a front event's condition
-    never held (a velocity front's pad still above half its arrival level, e.g. ringing after a
-    sudden stop; a strength front's node not past its peak)."""
-    from warpfric.kernels.observers import AUTO_END_PEAK_DROP
-
-    with np.errstate(invalid="ignore"):
-        fell = np.asarray(ds.mu_final.values) < (1.0 - AUTO_END_PEAK_DROP) * np.asarray(ds.mu_s.values)
-    return capped & ~fell
-
-
-CAPPED_TEXTS = ("at max_end_time, the automatic end's cap, with mu never {drop:.0%} below its maximum (mu_s may be a "
-                "plateau's, not a static peak: a later max_end_time)",
-                "at max_end_time, the automatic end's cap, with mu {drop:.0%} below its maximum but the front event not "
-                "over (a velocity front's pad above half its arrival level, e.g. ringing after a sudden stop; a "
-                "strength front's node not past its peak)")
-
-
-def warn_detachment_not_over(ds: xr.Dataset, stacklevel: int = 3) -> None:
-    """One warning, once per simulate call, of the members of :func:`detachment_not_over`: at
-    max_end_time (mu_s may be a plateau's), or at an explicit end_time with fronts on (their front
-    outputs are NaN)."""
+def not_over_groups(ds: xr.Dataset) -> dict[str, np.ndarray]:
+    """The members of :func:`detachment_not_over` by why, (member,) bool each: "plateau", stopped at
+    max_end_time with mu never AUTO_END_PEAK_DROP below its maximum (mu_s may be a plateau's);
+    "front", stopped there with mu that fell but a front event not over (a velocity front's pad
+    above half its arrival level, e.g. ringing after a sudden stop; a strength front's node not past
+    its peak); "cut", at an explicit end_time with fronts on. The warning, `warpfric run` and
+    `warpfric info` say them alike."""
     from warpfric.kernels.observers import AUTO_END_PEAK_DROP
 
     capped, cut = detachment_not_over(ds)
-    if not (capped.any() or cut.any()):
+    with np.errstate(invalid="ignore"):
+        fell = np.asarray(ds.mu_final.values) < (1.0 - AUTO_END_PEAK_DROP) * np.asarray(ds.mu_s.values)
+    return {"plateau": capped & ~fell, "front": capped & fell, "cut": cut}
+
+
+def warn_detachment_not_over(ds: xr.Dataset, stacklevel: int = 3) -> None:
+    """One warning, once per simulate call, of the members of :func:`not_over_groups`: at
+    max_end_time (mu_s may be a plateau's, or a front event was not over), or at an explicit
+    end_time with fronts on (their front outputs are NaN)."""
+    from warpfric.kernels.observers import AUTO_END_PEAK_DROP
+
+    groups = not_over_groups(ds)
+    if not any(which.any() for which in groups.values()):
         return
+    texts = {"plateau": f"at max_end_time, the automatic end's cap, with mu never {AUTO_END_PEAK_DROP:.0%} below its "
+                        "maximum (mu_s may be a plateau's, not a static peak: a later max_end_time)",
+             "front": f"at max_end_time, the automatic end's cap, with mu {AUTO_END_PEAK_DROP:.0%} below its maximum "
+                      "but the front event not over (a velocity front's pad above half its arrival level, e.g. ringing "
+                      "after a sudden stop; a strength front's node not past its peak)",
+             "cut": "at end_time (a later end_time, or end_time=None: the automatic end)"}
     n = ds.sizes["member"]
     parts = []
-    plateau = capped_reason(ds, capped)
-    for which, text in ((plateau, CAPPED_TEXTS[0].format(drop=AUTO_END_PEAK_DROP)),
-                        (capped & ~plateau, CAPPED_TEXTS[1].format(drop=AUTO_END_PEAK_DROP)),
-                        (cut, "at end_time (a later end_time, or end_time=None: the automatic end)")):
+    for key, which in groups.items():
         if which.any():
             numbers = ", ".join(map(str, ds.member.values[which][:8])) + (", ..." if which.sum() > 8 else "")
-            parts.append(f"{int(which.sum())} {text}: member{'' if which.sum() == 1 else 's'} {numbers}")
+            parts.append(f"{int(which.sum())} {texts[key]}: member{'' if which.sum() == 1 else 's'} {numbers}")
     fronts = "; their front outputs are NaN" if "fronts_event" in ds.attrs else ""
-    warnings.warn(f"{DETACHMENT_NOT_OVER} (detachment_end_time NaN) in {int((capped | cut).sum())} of {n:,} "
+    total = int(sum(which.sum() for which in groups.values()))
+    warnings.warn(f"{DETACHMENT_NOT_OVER} (detachment_end_time NaN) in {total} of {n:,} "
                   f"member{'' if n == 1 else 's'}: {'; '.join(parts)}{fronts}", stacklevel=stacklevel)
 
 
