@@ -266,6 +266,12 @@ def test_a_member_without_a_front_gets_no_curve(contact_run, tmp_path):
     ax = plots.space_time_figure(cut, 1).axes[0]
     assert [text.get_text() for text in ax.get_legend().get_texts()] == [
         "contact front: not given (the run ended before the detachment was over)"]
+    # so is one stopped by max_end_time under the automatic end (it said "no contact front")
+    n = ok.sizes["member"]
+    capped = ok.assign(end_time=("member", np.full(n, np.inf)), max_end_time=ok.final_time.copy())
+    ax = plots.space_time_figure(capped, 1).axes[0]
+    assert [text.get_text() for text in ax.get_legend().get_texts()] == [
+        "contact front: not given (the run ended before the detachment was over)"]
     failed = ds.copy()
     failed["status"] = failed.status.copy(data=np.where(np.arange(failed.sizes["member"]) == 1,
                                                           failed.status.attrs["flag_meanings"].split().index("stalled"),

@@ -623,9 +623,11 @@ def space_time_figure(ds, recorded_index: int):
             # a member that is not ok has NaN front outputs whether or not a front ran (no_peak: the
             # map may show one): not "no front"
             text = f"no {front}" if status == 0 else f"{front}: not given (status {_status_name(ds, status)})"
-            from .simulate import detachment_not_over
+            from .simulate import not_over_groups
 
-            if detachment_not_over(ds)[1][position]:  # a run cut off inside the front
+            # a run that ended before its detachment was over (cut off by end_time, or stopped by
+            # max_end_time): its fronts are not known
+            if any(which[position] for which in not_over_groups(ds).values()):
                 text = f"{front}: not given (the run ended before the detachment was over)"
             handles.append(Line2D([], [], ls="none", label=text))
             continue
