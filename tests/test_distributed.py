@@ -170,12 +170,61 @@ def test_a_chunk_that_fails_is_reported_by_member_range(reference, client, tmp_p
     assert all("has no CUDA device" in e["error"] for e in report.errors)
 
 
+def test_the_command_s_workers_leave_warpfric_s_own_faults_to_its_one_line(reference, tmp_path):
+    """A worker of the command's local cluster logged each chunk's RunError as distributed's 6-line
+    "Compute Failed" record with its traceback (~500 lines for the 63 chunks of sweeps.md's example
+    on a host without a GPU), beside warpfric's line naming the chunk; those records are dropped, and
+    an exception that is not warpfric's own keeps its record (its traceback tells where it came from).
+    In a process of its own: the workers' stderr is the terminal's, which pytest does not capture."""
+    import logging
+
+    from warpfric.cluster_worker import own_fault
+
+    sweep, _ = reference
+    script = f"""
+import distributed
+from warpfric.cluster_worker import LocalClusterWorker
+from warpfric.runner import run_sweep
+if __name__ == "__main__":
+    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+                                       env={{"CUDA_VISIBLE_DEVICES": ""}})
+    client = distributed.Client(cluster)
+    if {{plugin}}:
+        client.register_plugin(LocalClusterWorker(), name="warpfric-local-cluster-worker")
+    report = run_sweep({str(sweep)!r}, {str(tmp_path / "gpu.nc")!r}, client=client, device="cuda:0", quiet=True)
+    assert len(report.errors) == 5
+    client.close()
+    cluster.close()
+"""
+    errs = []
+    for plugin in (True, False):
+        path = tmp_path / f"run_{plugin}.py"
+        path.write_text(script.replace("{plugin}", str(plugin)))
+        run = subprocess.run([sys.executable, str(path)], capture_output=True, text=True, timeout=240)
+        assert run.returncode == 0, run.stderr
+        errs.append(run.stderr)
+    assert errs[0].count("FAILED: RunError") == 5 and "Compute Failed" not in errs[0], errs[0]
+    assert errs[1].count("Compute Failed") == 6  # without the plugin: the records it drops (5 chunks, 1 warm-up)
+
+    def record(exception_text: str) -> logging.LogRecord:  # as distributed.worker logs a failed task
+        return logging.LogRecord("distributed.worker", logging.ERROR, "worker.py", 1,
+                                 "Compute Failed\nKey:       %s\nState:     %s\nTask:  %s\nException: %r\nTraceback: %r\n",
+                                 ("k", "executing", "task", exception_text, "tb"), None)
+
+    assert own_fault(record("RunError('chunk 1/63 (members 0..999): device cuda:0 asked for')"))
+    assert own_fault(record("OutputWriteError(\"chunk 2: no space left\")"))
+    assert not own_fault(record("TypeError('a bug')"))
+    assert not own_fault(logging.LogRecord("distributed.scheduler", logging.ERROR, "s.py", 1, "Compute Failed", (), None))
+
+
 @pytest.mark.parametrize("argv, words", [
     (["run", "--local-cluster"], ["--local-cluster", "sweep file"]),
     (["run", "--scheduler", "tcp://127.0.0.1:1"], ["--scheduler", "sweep file"]),
     (["run", "SWEEP", "--scheduler", "tcp://127.0.0.1:1", "--local-cluster"], ["exclude"]),
     (["run", "SWEEP", "--local-cluster", "--workers", "0"], ["--workers 0", ">= 1"]),
     (["run", "SWEEP", "--grid-check"], ["--grid-check", "grid_check = true"]),
+    # a device this host lacks failed every chunk of a new local cluster on it, after it started
+    (["run", "SWEEP", "--local-cluster", "--device", "cuda:7"], ["device 'cuda:7' is not available"]),
 ])
 def test_cluster_options_that_cannot_work_are_refused(reference, tmp_path, capsys, argv, words):
     from warpfric.cli import main

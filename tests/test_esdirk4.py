@@ -27,7 +27,7 @@ def test_method_validation():
         wf.Solver(method="rk4")
     assert wf.Solver(method="esdirk4", lanes=1).method == "esdirk4"
     assert wf.Solver().method == "tr_bdf2"
-    with pytest.raises(NotImplementedError, match="velocity front"):
+    with pytest.raises(ValueError, match="'event' = 'velocity' is invalid with solver setting 'method' = 'esdirk4'"):
         wf.simulate(solver=wf.Solver(nodes=N, method="esdirk4"), fronts=wf.Fronts(event="velocity"), device=DEVICE,
                     progress=False)
 

@@ -217,6 +217,9 @@ BAD = [
     # refused at load, not after the run's first line (inside its first chunk)
     ("[solver]\ndtype = 'float32'\n[grid]\neccentricity = [0.0]\n", ["'float32' is invalid with relaxation_gate='stress'"]),
     ("[fronts]\nevent = ['contact', 'strenght']\n", ["strenght"]),
+    # the velocity front reads TR-BDF2's second stage: a traceback inside the first chunk (exit 1) before
+    ("[solver]\nmethod = 'esdirk4'\n[fronts]\nevent = ['contact', 'velocity']\n[grid]\neccentricity = [0.0]\n",
+     ["'event' = ('contact', 'velocity') is invalid with solver setting 'method' = 'esdirk4'", "method='tr_bdf2'"]),
 ]
 
 

@@ -299,6 +299,17 @@ def check_precision(model: "Model", solver: "Solver") -> None:
         )
 
 
+def check_fronts_method(fronts: "Fronts | None", solver: "Solver") -> None:
+    """ValueError for the velocity front with a method other than TR-BDF2 (docs/model.md, "ESDIRK4":
+    its arrival times read TR-BDF2's second stage), before anything runs or is written."""
+    if fronts is not None and "velocity" in fronts.events and solver.method != "tr_bdf2":
+        raise ValueError(
+            f"fronts setting 'event' = {fronts.event!r} is invalid with solver setting 'method' = {solver.method!r}; "
+            "valid: the contact or strength front with that method, or method='tr_bdf2' for the velocity front "
+            "(its arrival times read TR-BDF2's second stage)"
+        )
+
+
 _DTYPES = ("float32", "float64")
 _METHODS = ("tr_bdf2", "esdirk4")
 FLOAT32_MIN_RTOL = 1e-5  # docs/performance.md: float32 stalls below this

@@ -110,14 +110,7 @@ def run_chunk(job: ChunkJob) -> dict:
 
     t0 = time.perf_counter()
     sweep = parse_sweep(job.sweep_text, job.sweep_name)
-    device = job.device or worker_device()
-    if device.startswith("cuda"):
-        import warp as wp
-
-        wp.init()
-        if wp.get_cuda_device_count() == 0:
-            raise RunError(f"{_chunk_label(job)}: device {device} asked for, "
-                           f"but this worker (pid {os.getpid()}) has no CUDA device")
+    device = _worker_device_for(job.device, _chunk_label(job))
     sl = slice(job.start, job.stop)
     record = chunk_record(sweep.record, sl)
     label = _chunk_label(job) if job.progress else False
@@ -151,6 +144,19 @@ def run_chunk(job: ChunkJob) -> dict:
                 warnings=warning_pairs(caught) if collect else [])
 
 
+def _worker_device_for(device: str | None, what: str) -> str:
+    """The device this worker runs ``what`` on: ``device``, or its own (worker_device); RunError where a
+    GPU is asked for and this worker has none (one line, told by the command for each chunk)."""
+    device = device or worker_device()
+    if device.startswith("cuda"):
+        import warp as wp
+
+        wp.init()
+        if wp.get_cuda_device_count() == 0:
+            raise RunError(f"{what}: device {device} asked for, but this worker (pid {os.getpid()}) has no CUDA device")
+    return device
+
+
 def prepare_worker(sweep_text: str, sweep_name: str, device: str | None) -> dict:
     """Load this worker's kernels before the timed run (compile or read Warp's cache, load the
     modules on its device): one member, two steps, no fallback or grid check. Returns its device,
@@ -162,7 +168,7 @@ def prepare_worker(sweep_text: str, sweep_name: str, device: str | None) -> dict
 
     t0 = time.perf_counter()
     sweep = parse_sweep(sweep_text, sweep_name)
-    device = device or worker_device()
+    device = _worker_device_for(device, "loading the kernels")
     fronts = dc.replace(sweep.fronts, grid_check=False) if sweep.fronts is not None else None
     with warnings.catch_warnings():  # the chunks give the run's warnings; the warm-up would repeat them
         warnings.simplefilter("ignore")
@@ -530,6 +536,8 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
                  "leave it out to let each worker use its own GPU)", False)
     if not use_cluster:  # on a cluster, each worker checks its own device
         device = check_device(device)
+    elif new_local_cluster and device is not None:
+        check_device(device)  # its workers run on this host: a device it lacks fails every chunk, so say it here
     digest = sweep_digest(f"{sweep.text}\nchunk={chunk}" + (f"\nmember_offset={offset}" if offset else ""))
     if previous is not None and previous.digest != digest:
         differ = ([f"chunk size ({previous.chunk}, now {chunk})"] if chunk != previous.chunk else []) + (
@@ -690,7 +698,7 @@ def _run_chunks(sweep, sweep_file, store, chunk, offset, device, client, quiet, 
     place = "this process, device " + str(device)
     if client is not None:
         n_workers = len(client.scheduler_info().get("workers", {}))
-        place = f"Dask cluster {client.scheduler.address} ({n_workers} workers, dashboard {client.dashboard_link})"
+        place = f"Dask cluster {client.scheduler.address} ({plural(n_workers, 'worker')}, dashboard {client.dashboard_link})"
     swept = [name for name in sweep.members if name in sweep.varying]  # the sweep file's order
     _say(f"{member_range(sweep.n_members, offset, offset + sweep.n_members - 1)} in {plural(store.n_chunks, 'chunk')} "
          f"of <= {plural(chunk, 'member')}, {len(todo)} of them to run on {place}; swept: {', '.join(swept) or 'nothing'}", False)

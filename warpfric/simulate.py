@@ -19,7 +19,7 @@ from .members import resolve_members
 from .fronts import SEGMENT_NAMES
 from .parameters import (CONTACT_WITHOUT_GATE, DETACHMENT_NOT_OVER, DISC_BEFORE_FULL_LOAD, ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, MEMBERS_NOT_OK,
                          MEMBERS_NOT_OK_HINT, PARAMETERS_UNUSED, RECORD_PAST_END, Fronts, Model, Parameters, Record,
-                         Solver, check_precision, parameter_long_name, parameter_units)
+                         Solver, check_fronts_method, check_precision, parameter_long_name, parameter_units)
 
 
 def simulate(
@@ -102,10 +102,7 @@ def simulate(
         0 <= member_offset < 2**31 - 2**24
     ):
         raise ValueError(f"member_offset = {member_offset!r} is invalid; valid: an integer in [0, {2**31 - 2**24})")
-    if fronts is not None and "velocity" in fronts.events and solver.method != "tr_bdf2":
-        raise NotImplementedError(f"the velocity front with solver setting 'method' = {solver.method!r} is not implemented "
-                                  "(its arrival times read TR-BDF2's second stage); use the contact or strength front, "
-                                  "or method='tr_bdf2'")
+    check_fronts_method(fronts, solver)
     if fronts is not None and "contact" in fronts.events and model.relaxation_gate != "stress":
         warnings.warn(f"{CONTACT_WITHOUT_GATE}{model.relaxation_gate!r}: this law has no yield threshold, so the "
                       "contact area falls everywhere as soon as the disc moves and there is no stick-to-slip front; "

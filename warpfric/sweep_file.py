@@ -35,8 +35,8 @@ from pathlib import Path
 import numpy as np
 
 from .members import resolve_members
-from .parameters import (PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solver, check_precision, did_you_mean,
-                         parameter_range_text, parameter_units, units_text, validate_value)
+from .parameters import (PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solver, check_fronts_method, check_precision,
+                         did_you_mean, parameter_range_text, parameter_units, units_text, validate_value)
 from .progress import machine_memory_bytes, plural
 
 TOP_KEYS = ("title", "description", "scene", "model", "solver", "fronts", "record", "grid", "zip", "sample", "design",
@@ -233,6 +233,7 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
             fronts = Fronts(**_dataclass_kwargs(fronts_spec, Fronts, "fronts"))
         else:
             raise SweepError(f"fronts = {fronts_spec!r}: expected a table [fronts] or false")
+        check_fronts_method(fronts, solver)
     except TypeError as err:  # pragma: no cover - unknown keys are caught above
         raise SweepError(str(err)) from None
 
