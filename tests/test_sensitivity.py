@@ -206,3 +206,41 @@ def test_an_output_filled_into_a_constant_is_refused():
     ds["status"].values[1:] = 1
     with pytest.raises(ValueError, match=r"'y' is the same in every member once the 159 of 160 that failed are filled"):
         analyse(ds, ("y",), on_failure="fill-mean")
+
+
+def test_the_command_says_a_design_s_faults_and_an_unwritable_folder_before_the_analysis(tmp_path, capsys,
+                                                                                         monkeypatch):
+    """Members lacking an output were told only after "exists" and --overwrite, and a folder that
+    cannot be written only after the analysis (exit 3, "could not write"), where `warpfric run` and
+    `plot` say both first: exit 2, one line, nothing analysed."""
+    import os
+    from pathlib import Path
+
+    import warpfric.sensitivity as sensitivity
+
+    ds = ishigami_dataset(n=16)
+    ds.attrs["warpfric_complete"] = 1
+    ds["y"].values[[3, 5]] = np.nan  # two members lack the output
+    path = tmp_path / "ish.nc"
+    ds.to_netcdf(path)
+    (tmp_path / "ish_sensitivity.nc").write_bytes(b"an earlier result")
+    assert main(["sensitivity", str(path), "--output", "y"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "output 'y': 2 of 160 members failed or lack it (members 3, 5)" in err[0], err
+
+    folder = (tmp_path / "ro").resolve()
+    folder.mkdir()
+    real_open = os.open
+
+    def denied(p, flags, *args, **kwargs):  # the folder refuses new files, as a read-only one does
+        if flags & os.O_CREAT and Path(p).resolve().parent == folder:
+            raise PermissionError(13, "Permission denied", str(p))
+        return real_open(p, flags, *args, **kwargs)
+
+    analysed = []
+    monkeypatch.setattr(os, "open", denied)
+    monkeypatch.setattr(sensitivity, "analyse", lambda *a, **k: analysed.append(1))
+    code = main(["sensitivity", str(path), "--output", "y", "--on-failure", "fill-mean", "-o", str(folder / "s.nc")])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and f"cannot write in folder '{folder}' (permission denied)" in err[0], err
+    assert analysed == [] and list(folder.iterdir()) == []

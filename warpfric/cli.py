@@ -499,9 +499,9 @@ def _plot(args) -> int:
 
 
 def _sensitivity(args) -> int:
-    from .io import open_ensemble, replace_atomically
+    from .io import open_ensemble, probe_writable, replace_atomically
     from .runner import check_output_name
-    from .sensitivity import analyse, bar_plot, check_outputs
+    from .sensitivity import analyse, bar_plot, design_outputs
 
     source = Path(args.file)
     out = Path(args.out) if args.out else source.with_name(source.stem + "_sensitivity.nc")
@@ -511,10 +511,13 @@ def _sensitivity(args) -> int:
         raise UsageError(f"output {str(out)!r} is the ensemble being analysed; give another -o OUT.nc")
     ds = open_ensemble(source)
     outputs = tuple(args.output or ["mu_s"])
-    check_outputs(ds, outputs)  # a wrong name before "exists" (and --overwrite to learn it)
+    # the design's own faults (a wrong name, members that lack an output) before "exists" (and
+    # --overwrite to learn them), and an unwritable folder before the analysis
+    design_outputs(ds, outputs, args.on_failure, args.log)
     for path in (out, figure):
         if path.exists() and not args.overwrite:
             raise UsageError(f"output {str(path)!r} exists; pass --overwrite to replace it")
+    probe_writable(out.parent, out)
     res = analyse(ds, outputs=outputs, on_failure=args.on_failure, log=args.log)
     replace_atomically(out, res.to_netcdf)
     replace_atomically(figure, lambda tmp: bar_plot(res, tmp), suffix=".png")

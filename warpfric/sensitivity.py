@@ -154,23 +154,11 @@ def check_outputs(ds, outputs) -> None:
             raise ValueError(f"output {out!r} is {what}; available: {', '.join(candidates)}")
 
 
-def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: int = 100, conf_level: float = 0.95,
-            log: bool = False):
-    """Sensitivity indices of ``outputs`` (variables along member) for the design stored in ``ds``.
-
-    Returns an xarray Dataset: for Saltelli designs S1, S1_conf, ST, ST_conf (output, parameter)
-    and S2, S2_conf (output, parameter, parameter_2) when second order; for Morris mu_star,
-    mu_star_conf, sigma, mu (output, parameter); Latin designs have no index of their own and are
-    refused. on_failure: 'refuse' (default) raises ValueError naming the members that failed or
-    lack the output; 'fill-mean' replaces their values by the mean of the others (counted in the
-    result's ``filled_members``). log: analyse the natural log of each output (for heavy-tailed
-    outputs such as front speeds; a non-positive value counts as lacking)."""
-    import xarray as xr
-
-    _salib()
-    from SALib.analyze import morris as morris_analyze
-    from SALib.analyze import sobol as sobol_analyze
-
+def design_outputs(ds, outputs=("mu_s",), on_failure: str = "refuse", log: bool = False):
+    """What analyse checks before it computes (ValueError, one line, for each fault): the file's
+    design, its rows against the members, each output's name, the members that failed or lack it
+    (refused, or with on_failure='fill-mean' replaced by the mean of the others) and its variance.
+    Returns (design, {output: the values analysed, (member,) float64}, {output: members filled})."""
     if DESIGN_ATTR not in ds.attrs:
         raise ValueError(f"the file has no sensitivity design (global attribute {DESIGN_ATTR!r}); "
                          "run a sweep with a [design] table")
@@ -182,15 +170,9 @@ def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: in
     rows = design_rows(design)
     if ds.sizes["member"] != rows:
         raise ValueError(f"the file has {ds.sizes['member']} members but the design has {rows} rows")
-    problem = _problem(design)
-    X = np.column_stack([np.log(ds[n].values) if sc == "log" else ds[n].values
-                         for n, sc in zip(design["names"], design["scales"])])
     status = ds["status"].values if "status" in ds else np.zeros(rows, dtype=int)
-    names = design["names"]
-    d = len(names)
-    result = {}
-    filled = {}
     check_outputs(ds, outputs)
+    values, filled = {}, {}
     for out in outputs:
         Y = ds[out].values.astype(np.float64)
         if log:
@@ -208,7 +190,37 @@ def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: in
             filled_text = f" once the {bad.sum()} of {rows} that failed are filled with the mean" if bad.any() else ""
             raise ValueError(f"output {out!r} is the same in every member{filled_text}: its variance is 0 and its "
                              "indices are undefined")
-        filled[out] = int(bad.sum())
+        values[out], filled[out] = Y, int(bad.sum())
+    return design, values, filled
+
+
+def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: int = 100, conf_level: float = 0.95,
+            log: bool = False):
+    """Sensitivity indices of ``outputs`` (variables along member) for the design stored in ``ds``.
+
+    Returns an xarray Dataset: for Saltelli designs S1, S1_conf, ST, ST_conf (output, parameter)
+    and S2, S2_conf (output, parameter, parameter_2) when second order; for Morris mu_star,
+    mu_star_conf, sigma, mu (output, parameter); Latin designs have no index of their own and are
+    refused. on_failure: 'refuse' (default) raises ValueError naming the members that failed or
+    lack the output; 'fill-mean' replaces their values by the mean of the others (counted in the
+    result's ``filled_members``). log: analyse the natural log of each output (for heavy-tailed
+    outputs such as front speeds; a non-positive value counts as lacking)."""
+    import xarray as xr
+
+    design, values, filled = design_outputs(ds, outputs, on_failure, log)
+    _salib()
+    from SALib.analyze import morris as morris_analyze
+    from SALib.analyze import sobol as sobol_analyze
+
+    rows = design_rows(design)
+    problem = _problem(design)
+    X = np.column_stack([np.log(ds[n].values) if sc == "log" else ds[n].values
+                         for n, sc in zip(design["names"], design["scales"])])
+    names = design["names"]
+    d = len(names)
+    result = {}
+    for out in outputs:
+        Y = values[out]
         if design["method"] == "saltelli":
             r = sobol_analyze.analyze(problem, Y, calc_second_order=design["second_order"],
                                       num_resamples=num_resamples, conf_level=conf_level, seed=design["seed"])
