@@ -90,7 +90,7 @@ def test_by_parameters_puts_every_member_at_its_swept_values(tmp_path):
         by_parameters(holed)
     # random samples are no grid: 6 members would fill 6 of 36 combinations
     sampled = ds.assign(eccentricity=ds.eccentricity + 0.01 * ds.member, normal_force=ds.normal_force + ds.member)
-    with pytest.raises(ValueError, match="not a grid of normal_force, eccentricity: .* fill 6 of 36 combinations"):
+    with pytest.raises(ValueError, match=r"not a grid of normal_force, eccentricity: .* fill 6 of 36 combinations.*select them with ds.sel\(member=ds.member\[...\]\)"):
         by_parameters(sampled)
 
 

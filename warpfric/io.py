@@ -523,7 +523,7 @@ def by_parameters(ds: xr.Dataset, names=None) -> xr.Dataset:
     if 1.0 - ds.sizes["member"] / cells > MAX_EMPTY_FRACTION:
         raise ValueError(f"by_parameters: the {ds.sizes['member']} members are not a grid of {', '.join(names)}: "
                          f"as dimensions they would fill {ds.sizes['member']} of {cells:.3g} combinations; valid: a "
-                         "grid sweep (random samples stay along member: select them with ds.where(...))")
+                         "grid sweep (random samples stay along member: select them with ds.sel(member=ds.member[...]))")
     # int32, as a file holds it (int64 in memory made the two differ)
     numbered = ds if "member_number" in ds else ds.assign(member_number=ds.member.astype(np.int32))
     if len(names) == 1:  # one name: a plain index, which unstack does not take
