@@ -121,6 +121,93 @@ def test_model_term_derivatives_match_central_differences(gate_law):
             np.testing.assert_allclose(base["tau_f_slip"][0], fd, rtol=1e-5)
 
 
+_ROW_OUTPUTS = ("residual", "jac_left", "jac_center", "jac_right", "col_delta0", "col_tilt", "e1", "e2",
+                "d11", "d12", "d21", "d22", "c1_left", "c1_center", "c1_right", "c2_left", "c2_center", "c2_right")
+# each assembled entry: the value it differentiates and the variable (column of _row_variables)
+_ROW_JACOBIAN = {"jac_left": ("residual", 0), "jac_center": ("residual", 1), "jac_right": ("residual", 2),
+                 "col_delta0": ("residual", 3), "col_tilt": ("residual", 4),
+                 "c1_left": ("e1", 0), "c1_center": ("e1", 1), "c1_right": ("e1", 2), "d11": ("e1", 3), "d12": ("e1", 4),
+                 "c2_left": ("e2", 0), "c2_center": ("e2", 1), "c2_right": ("e2", 2), "d21": ("e2", 3), "d22": ("e2", 4)}
+
+
+def _rows_kernel(model):
+    from warpfric.kernels.newton import make_stage_equations
+
+    stages = make_stages(f64, model)
+    make_coeffs = stages["terms"]["make_coeffs"]
+    equations = make_stage_equations(f64, model, stages["terms"], stages["gates"])
+    node_row, stage_displacement = equations["node_row"], equations["stage_displacement"]
+
+    @wp.kernel(module="unique")
+    def rows(params: wp.array(dtype=types.MemberParams), settings: types.SolverSettings, nodes: int, node: int,
+             g: f64, v_disc: f64, plate: wp.array2d(dtype=f64), work: wp.array3d(dtype=f64),
+             gates: wp.array3d(dtype=f64), out: wp.array2d(dtype=f64)):
+        m = wp.tid()  # one evaluation a member slot: work[:, :, m], gates[:, :, m], plate[m] = (delta0, tilt)
+        c = make_coeffs(params[0], nodes)
+        u_l = f64(0.0)
+        if node > 0:
+            u_l = stage_displacement(work, node - 1, nodes, m, g)
+        u_c = stage_displacement(work, node, nodes, m, g)
+        u_r = stage_displacement(work, node + 1, nodes, m, g)
+        r = node_row(c, settings, m, nodes, work, gates, node, u_l, u_c, u_r, plate[m, 0], plate[m, 1], v_disc, g)
+        row = wp.vector(r.residual, r.jac_left, r.jac_center, r.jac_right, r.col_delta0, r.col_tilt, r.e1, r.e2,
+                        r.d11, r.d12, r.d21, r.d22, r.c1_left, r.c1_center, r.c1_right, r.c2_left, r.c2_center,
+                        r.c2_right, length=18, dtype=f64)
+        for j in range(18):
+            out[m, j] = row[j]
+
+    return rows
+
+
+@pytest.mark.parametrize("gate_law", ["stress", "none", "velocity"])
+def test_newton_system_rows_match_central_differences(gate_law):
+    """Every entry of a node's row of the Newton system as kernels/newton.py assembles it (node_row:
+    the pad's row J, the border columns, the plate balance rows' D block and C entries), against
+    central differences of the residuals it differentiates, with respect to V_{i-1}, V_i, V_{i+1}
+    (through the stage displacements u = z_u + g V), delta0 and tilt: a term dropped from the
+    assembly (the normal stress's response in J's diagonal was, unseen by the iteration counts of
+    the stress gate) fails here. Random stage states of a loaded pad, edge and interior nodes,
+    open, closed and (stress gate) sliding gates."""
+    model = wf.Model(relaxation_gate=gate_law)
+    kernel = _rows_kernel(model)
+    nodes, g, v_disc = 11, 2e-5, 1e-4
+    params = _coeffs_params()
+    settings = solver_settings(wf.Solver())
+    rng = np.random.default_rng(5)
+    steps = np.array([1e-9, 1e-9, 1e-9, 1e-12, 1e-12])  # V (m/s), delta0 (m), tilt (rad)
+    for node in (0, 5, nodes - 1):
+        for gate, sliding in ((1.0, 0.0), (0.0, 0.0)) + (((0.5, 1.0),) if gate_law == "stress" else ()):
+            work = np.zeros((types.N_WORK, nodes, 11))
+            work[types.W_ZU] = rng.normal(0, 1e-6, nodes)[:, None]
+            work[types.W_V] = rng.normal(0, 5e-5, nodes)[:, None]
+            work[types.W_ZV] = work[types.W_V] + rng.normal(0, 1e-6, nodes)[:, None]
+            work[types.W_ZT] = (4e4 + rng.normal(0, 1e3, nodes))[:, None]
+            work[types.W_ZP] = (0.3 + rng.uniform(0, 0.1, nodes))[:, None]
+            gates = np.zeros((7, nodes, 11))
+            gates[types.G_GATE], gates[types.G_SLIDE] = gate, sliding
+            plate = np.tile([6e-6 + rng.normal(0, 1e-7), rng.normal(0, 1e-6)], (11, 1))
+            # member slot 0: the state; 1 + 2j and 2 + 2j: variable j stepped up and down
+            for j, step in enumerate(steps):
+                for slot, sign in ((1 + 2 * j, 1.0), (2 + 2 * j, -1.0)):
+                    if j < 3:
+                        if 0 <= node - 1 + j < nodes:
+                            work[types.W_V, node - 1 + j, slot] += sign * step
+                    else:
+                        plate[slot, j - 3] += sign * step
+            out = wp.zeros((11, len(_ROW_OUTPUTS)), dtype=f64, device=DEVICE)
+            wp.launch(kernel, dim=11, device=DEVICE, inputs=[
+                params, settings, nodes, node, g, v_disc, wp.array(plate, dtype=f64, device=DEVICE),
+                wp.array(work, dtype=f64, device=DEVICE), wp.array(gates, dtype=f64, device=DEVICE), out])
+            rows = dict(zip(_ROW_OUTPUTS, out.numpy().T))
+            for entry, (value, j) in _ROW_JACOBIAN.items():
+                if (j == 0 and node == 0) or (j == 2 and node == nodes - 1):
+                    continue  # no neighbour there
+                fd = (rows[value][1 + 2 * j] - rows[value][2 + 2 * j]) / (2 * steps[j])
+                exact = rows[entry][0]
+                roundoff = 10 * np.finfo(float).eps * abs(rows[value][0]) / steps[j]  # the difference's own
+                assert abs(fd - exact) <= 1e-6 * abs(exact) + roundoff, (gate_law, node, gate, sliding, entry, fd, exact)
+
+
 # ------------------------------------------------------------------------------------------------
 # bordered tridiagonal solve
 # ------------------------------------------------------------------------------------------------
