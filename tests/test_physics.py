@@ -137,10 +137,29 @@ def test_viscous_switch_equals_zero_coefficient():
 
 def test_lift_off_where_the_loaded_pressure_goes_negative():
     """With the friction torque the effective eccentricity is e - 2*h_arm*mu/L; the pressure law
-    lifts the edge off when it passes 1/3. e = -0.3 -> about -0.37 (lifts); +0.3 -> +0.23 (does not)."""
+    lifts the edge off when it passes 1/3. e = -0.3 -> about -0.37 (lifts); +0.3 -> +0.23 (does not).
+    And the lifted member's physics at its final state, not only its flag (a mutation that let
+    tension carry contact area passed the flag): where sigma_n <= 0 no load and no contact area, so
+    the friction stress is the asperity stress tau_el alone, without a viscous part (docs/model.md,
+    "Lift-off"); the plate is in force and moment balance with sigma_n^+; and mu_final is the
+    pad's friction over its load."""
     ds = run({"eccentricity": [-0.3, 0.3, 0.0]}, rtol=1e-5)
     assert list(ds.lift_off.values) == [1, 0, 0]
     assert (ds.status.values == 0).all()
+    p, x = wf.Parameters(), ds.x.values
+    sigma, tau = ds.normal_stress.values[0], ds.friction_stress.values[0]
+    lifted = sigma <= 0
+    assert 3 <= lifted.sum() < x.size // 2 and np.all(x[lifted] > 0)  # the trailing edge (+x) is off
+    assert np.all(sigma >= 0) and np.all(sigma[~lifted] > 0)
+    np.testing.assert_array_equal(tau[lifted], ds.elastic_stress.values[0][lifted])
+    assert np.all(np.abs(tau[lifted]) < 1e-2 * np.abs(tau[~lifted]).max())  # a relaxing remnant
+    force = p.depth * sigma @ trapezoid_weights(x)
+    friction = p.depth * tau @ trapezoid_weights(x)
+    np.testing.assert_allclose(force, p.normal_force, rtol=1e-8)
+    moment = p.depth * sigma @ moment_weights(x)
+    expected = p.normal_force * -0.3 * p.length / 2 - p.height * friction
+    np.testing.assert_allclose(moment, expected, rtol=0, atol=1e-8 * p.normal_force * p.length)
+    np.testing.assert_allclose(float(ds.mu_final[0]), friction / force, rtol=1e-10)
 
 
 def test_a_loose_rtol_keeps_the_peak():
