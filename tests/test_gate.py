@@ -20,7 +20,9 @@ def yield_margin(ds, p=P):
 
 
 def test_gateless_law_reproduces_the_v1_default_scene():
-    """relaxation_gate='none' is the SPEC v1 law: the earlier default-scene mu_s (N = 100, rtol 1e-5)."""
+    """relaxation_gate='none' is the SPEC v1 law: the earlier default-scene mu_s (N = 100, rtol 1e-5).
+    A regression pin (the v1 engine's value, to 6 digits): that the law itself is right is checked
+    independently against scipy's BDF on the same equations (test_reference.py, gate 'none')."""
     ds = run(model=wf.Model(relaxation_gate="none"), nodes=100, rtol=1e-5)
     assert ds.status.values[0] == 0
     assert round(float(ds.mu_s.values[0]), 6) == 0.478933

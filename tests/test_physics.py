@@ -7,11 +7,14 @@ from conftest import moment_weights, run, trapezoid_weights
 import warpfric as wf
 
 
-def steady_mu(p: wf.Parameters, slip_rate: float, viscous: bool = True) -> float:
-    """Closed form of SPEC section 5: steady sliding at constant slip rate s."""
+def steady_mu(p: wf.Parameters, slip_rate: float, viscous: bool = True, gate_velocity: float = 0.0) -> float:
+    """Closed form of SPEC section 5: steady sliding at constant slip rate s. With the velocity gate
+    (gate_velocity = v0) the relaxation runs at r = sqrt(s^2 + v0^2): phi = D/r and
+    tau_el = (mu0/h)*A*D*s/r (v0 = 0: r = s, the gate-less law and the open stress gate)."""
     s = abs(slip_rate)
-    area = 1 + p.aging_coefficient * np.log(1 + p.memory_length / (s * p.aging_time))
-    elastic = p.interface_stiffness * p.memory_length / p.hardness
+    r = np.hypot(s, gate_velocity)
+    area = 1 + p.aging_coefficient * np.log(1 + p.memory_length / (r * p.aging_time))
+    elastic = p.interface_stiffness * p.memory_length * (s / r) / p.hardness
     visc = p.viscous_coefficient * p.reference_velocity * np.log(1 + s / p.reference_velocity) / p.hardness
     return area * (elastic + (visc if viscous else 0.0))
 
@@ -52,6 +55,8 @@ def test_contact_age_grows_with_time_while_stuck():
         # too slow for the suite; the gate-less and velocity-gate laws give the same steady state
         ({"viscous_coefficient": 0.0}, "none"),
         ({"viscous_coefficient": 0.0}, "velocity"),
+        # v0 = s/2: the velocity gate's own steady state, r = 1.12 s (v0 = s leaves no static peak: no_peak)
+        ({"gate_velocity": 5e-5}, "velocity"),
     ],
 )
 def test_steady_sliding_matches_closed_form(members):
@@ -60,7 +65,7 @@ def test_steady_sliding_matches_closed_form(members):
     scene = wf.Parameters(end_time=24.0)
     ds = run({k: [v] for k, v in members.items()} or None, scene=scene, model=wf.Model(relaxation_gate=gate))
     p = wf.Parameters(**{**scene.__dict__, **members})
-    expected = steady_mu(p, p.disc_velocity)
+    expected = steady_mu(p, p.disc_velocity, gate_velocity=p.gate_velocity if gate == "velocity" else 0.0)
     assert ds.status.values[0] == 0
     assert abs(ds.mu_final.values[0] / expected - 1) < 1e-3
 
@@ -168,4 +173,7 @@ def test_a_loose_rtol_keeps_the_peak():
     mu_s (no_peak). The fall asked for is at most the automatic end's own."""
     ds = run({"eccentricity": [0.0, 0.2]}, nodes=20, rtol=0.02)
     assert (ds.status.values == 0).all() and np.isfinite(ds.mu_s.values).all()
-    np.testing.assert_allclose(ds.mu_s.values, 0.5103, rtol=0.01)
+    # the peak kept is the peak: within the loose rtol of the same members' converged mu_s (a
+    # pasted 0.5103 +- 1 % stood here)
+    converged = run({"eccentricity": [0.0, 0.2]}, nodes=20, rtol=1e-9)
+    np.testing.assert_allclose(ds.mu_s.values, converged.mu_s.values, rtol=0.02)
