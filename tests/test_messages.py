@@ -81,3 +81,21 @@ def test_info_names_the_members_not_ok():
     assert "  status: ok 2, no_peak 11, stalled 1" in lines or "  status: ok 2, stalled 1, no_peak 11" in lines
     assert f"    stalled: member 101" in lines
     assert "    no_peak: members 103, 104, 105, 106, 107, 108, 109, 110, 111, 112 and 1 more" in lines
+
+
+def test_help_of_simulate_names_every_output():
+    """help(warpfric.simulate) is where docs/sweeps.md sends a reader for the outputs; it had fallen
+    behind them (detachment_end_time was missing). Every variable of a run with the default front,
+    the velocity and strength events, a recording and the grid check is named there, by name or by
+    a documented pattern (``v_*``); the input parameters are "every input parameter"."""
+    from warpfric.parameters import PARAMETER_NAMES
+
+    ds = wf.simulate(solver=wf.Solver(nodes=21, rtol=1e-4), fronts=wf.Fronts(event=("contact", "velocity", "strength"),
+                                                                             grid_check=True),
+                     record=wf.Record.window(20.1, 20.2, 3), device=DEVICE, progress=False)
+    named = re.findall(r"``([A-Za-z0-9_*]+)``", wf.simulate.__doc__)
+    patterns = [re.compile("^" + name.replace("*", "[a-z0-9]+") + "$") for name in named]
+    prefixes = ("velocity_", "strength_")  # an event other than the first: its outputs prefixed
+    missing = [v for v in list(ds.data_vars) + list(ds.coords) if v not in PARAMETER_NAMES and not any(
+        p.match(v) or (v.startswith(prefixes) and p.match(v.split("_", 1)[1])) for p in patterns)]
+    assert missing == [], missing

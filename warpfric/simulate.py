@@ -54,7 +54,7 @@ def simulate(
     member_offset: number of the first member (coordinate ``member`` = offset, offset + 1, ...), so
               that the files of separate runs combine without repeated member numbers.
     workers:  worker processes on the CPU (Warp runs a CPU launch on one core). None: all cores for
-              an ensemble large enough to pay (one core: >= 2 s), else this process; 1: this process;
+              an ensemble large enough to pay (one core: >= ~2.5 s, pool.MIN_CPU_SECONDS), else this process; 1: this process;
               an integer: that many (more than the cores: started, with a warning that they share
               the cores). Outputs equal one process's bit for bit, except which members the
               straggler rule stops (warpfric/pool.py).
@@ -63,7 +63,8 @@ def simulate(
     parameter along ``member``; ``mu_s``, ``mu_s_time`` (s), ``status`` (flag values, see its
     attrs), ``lift_off``, ``steps_accepted``, ``steps_rejected`` (by cause: ``rejected_error_test``,
     ``rejected_newton``, ``rejected_switch``; and ``missed_predictions``), ``newton_iterations``,
-    ``final_time`` (s), ``plate_compression`` (m), ``plate_tilt`` (rad), ``mu_final``,
+    ``final_time`` (s), ``detachment_end_time`` (s: when the automatic end's conditions first held,
+    NaN where the run ended before them), ``plate_compression`` (m), ``plate_tilt`` (rad), ``mu_final``,
     ``working_precision`` (bits), ``gate_switches`` and ``unlocated_switches``, and the final
     state along (member, x): ``displacement`` (m), ``velocity`` (m/s), ``elastic_stress`` (Pa),
     ``contact_age`` (s), ``normal_stress`` (Pa), ``friction_stress`` (Pa); the stress gate adds
@@ -77,8 +78,9 @@ def simulate(
     ... ``v_second_error``), ``front_count``, where and when the first meets another
     (``collision_position`` (m), ``collision_time`` (s)) and where and when a second starts
     (``second_nucleation_position`` (m), ``second_front_start_time`` (s)); each output's
-    ``long_name`` says what it is, and every output of a member whose status is not ok is NaN (a
-    front output also where the member has no such front or segment). The velocity event adds
+    ``long_name`` says what it is, and every output of a member whose status is not ok is NaN but
+    for ``no_peak``'s real ``mu_final`` and final state (a front output also where the member has
+    no such front or segment, or its run ended before its detachment was over). The velocity event adds
     ``event_max_velocity`` (m/s), the strength event ``strength_peak`` (member, x) (``strength_``
     prefixed again where it is not the first event: ``strength_strength_peak``); ``grid_check``
     adds ``mu_s_grid_error`` and ``v_*_grid_error``. With record:
