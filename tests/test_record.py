@@ -187,6 +187,11 @@ def test_record_with_a_sweep_file_points_to_its_record_table(tmp_path, capsys):
     code, _, err = run_cli(capsys, "run", str(sweep), "--record")
     assert code == 2
     one_line_error(err, "--record", "[record] table", str(sweep))
+    # beside other default-scene options, all in one line (--record alone was said, and the user
+    # refused again for the next)
+    code, _, err = run_cli(capsys, "run", str(sweep), "--nodes", "21", "--record")
+    assert code == 2
+    one_line_error(err, "--nodes, --record:", "[solver] nodes = 21, a [record] table of members and times", str(sweep))
     # plot of a one-member sweep's file without recorded fields points to the same table
     code, _, err = run_cli(capsys, "run", str(sweep), "--quiet", "--device", DEVICE)
     assert code == 0, err

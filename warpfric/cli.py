@@ -306,9 +306,6 @@ def _run(args) -> int:
         raise UsageError("--scheduler and --local-cluster exclude each other (an existing cluster, or a new one)")
     if args.resume and args.overwrite:
         raise UsageError("--resume and --overwrite exclude each other")
-    if args.sweep is not None and args.record is not None:
-        raise UsageError(f"--record: for the default scene only; a sweep file records with its own [record] table "
-                         f"(members, times or start, stop, count: docs/sweeps.md) in {args.sweep}")
     if args.sweep is None:
         for flag, given in (("--scheduler", args.scheduler), ("--local-cluster", args.local_cluster),
                             ("--workers", args.workers is not None), ("--chunk", args.chunk is not None),
@@ -321,12 +318,14 @@ def _run(args) -> int:
         return _run_default(args)
     given = [(flag, key, getattr(args, name)) for name, (flag, key) in SCENE_OPTIONS.items()
              if getattr(args, name) not in (None, False)]
-    if given:
-        flags = ", ".join(flag for flag, _, _ in given)
+    if given or args.record is not None:  # every such option in one line, --record among them
+        flags = ", ".join([flag for flag, _, _ in given] + (["--record"] if args.record is not None else []))
         if ("--front-event", "off") in [(flag, value) for flag, _, value in given]:
             given = [g for g in given if g[0] != "--grid-check"]  # no fronts: nothing to check on a grid
-        keys = ", ".join("fronts = false (top level)" if (flag, value) == ("--front-event", "off") else
-                         f"{key} = {_toml_value(value)}" for flag, key, value in given)
+        keys = ", ".join(["fronts = false (top level)" if (flag, value) == ("--front-event", "off") else
+                          f"{key} = {_toml_value(value)}" for flag, key, value in given]
+                         + (["a [record] table of members and times (or start, stop, count)"]
+                            if args.record is not None else []))
         swept = any(key.startswith("[scene]") for _, key, _ in given)
         where = ", or change the values where the file sweeps the parameter" if swept else ""
         raise UsageError(f"{flags}: for the default scene only; a sweep file sets its own (write {keys} in "
