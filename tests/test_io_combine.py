@@ -405,3 +405,27 @@ def test_a_multiindex_member_and_the_flags_of_older_parts(tmp_path):
                                           flag_meanings="none left interior right")
     both = concat_members([older, other])
     assert both.nucleation_edge.attrs["flag_meanings"] == "unknown none left interior right"
+
+
+def test_history_has_a_line_per_run_not_per_command_text(tmp_path):
+    """A run's chunks and the file that combines them carry the line of the run that wrote them, its
+    start time included: the finishing --resume was listed twice, and an interrupted --resume merged
+    into a later one of the same command text (a helper's run of sweeps.md's steps)."""
+    from warpfric.io import merged_history
+
+    def part(*lines):
+        return xr.Dataset(attrs={"history": "\n".join(lines)})
+
+    version = f"(warpfric {wf.__version__})"
+    first = f"2026-11-27T06:40:45Z: warpfric run mid.toml -o mid.nc --chunk 200 {version}"
+    resume1 = f"2026-11-27T06:40:55Z: warpfric run mid.toml -o mid.nc --resume {version}"
+    resume2 = f"2026-11-27T06:41:14Z: warpfric run mid.toml -o mid.nc --resume {version}"
+    merged = merged_history([part(first), part(first), part(resume1), part(resume2), part(resume2)])
+    assert merged.splitlines() == [resume2, resume1, first]
+    ds = run({"eccentricity": [0.0]}, nodes=11)
+    ds.attrs["history"] = merged
+    # the finishing run writes its own line, the one its chunks carry: once
+    write_ensemble(ds, tmp_path / "c.nc", command="warpfric run mid.toml -o mid.nc --resume",
+                   started="2026-11-27T06:41:14Z")
+    with xr.open_dataset(tmp_path / "c.nc") as back:
+        assert back.attrs["history"].splitlines() == [resume2, resume1, first]

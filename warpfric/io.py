@@ -440,11 +440,17 @@ def _from_file_layout(ds: xr.Dataset, recorded: xr.Dataset | None = None) -> xr.
     return ds
 
 
-def _history_line(command: str | None) -> str:
+def history_time() -> str:
+    """Now, as a ``history`` line gives it (UTC, to the second)."""
+    return datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+
+
+def _history_line(command: str | None, started: str | None = None) -> str:
+    """One ``history`` line: when the command started (``started``, from history_time; None: now),
+    the command, and the version."""
     from . import __version__
 
-    now = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
-    return f"{now}: {command or 'warpfric.io.write_ensemble (Python)'} (warpfric {__version__})"
+    return f"{started or history_time()}: {command or 'warpfric.io.write_ensemble (Python)'} (warpfric {__version__})"
 
 
 def parameters_along_member(ds: xr.Dataset) -> xr.Dataset:
@@ -577,7 +583,7 @@ def _integer_outputs_restored(ds: xr.Dataset) -> xr.Dataset:
 
 
 def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, command: str | None = None,
-                   run_id: str | None = None) -> Path:
+                   run_id: str | None = None, started: str | None = None) -> Path:
     """Write ``ds`` (from :func:`warpfric.simulate`) to netCDF4 at ``path``, atomically; an existing
     file there is replaced (the command line asks for --overwrite first).
 
@@ -631,8 +637,9 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
     out = parameters_along_member(ds)
     out.attrs["varying_parameters"] = " ".join(v for v in PARAMETER_NAMES if v in set(varying))
     out.attrs[COMPLETE_ATTR] = np.int8(1)
-    earlier = out.attrs.get("history", "")
-    out.attrs["history"] = _history_line(command) + ("\n" + earlier if earlier else "")
+    line = _history_line(command, started)  # the chunks of a sweep carry the line of the run that combines them
+    earlier = [old for old in str(out.attrs.get("history", "")).splitlines() if old and old != line]
+    out.attrs["history"] = "\n".join([line, *earlier])
     root, recorded = _to_file_layout(out, run_id)
 
     def write(tmp):
@@ -805,12 +812,12 @@ def open_ensembles(paths) -> xr.Dataset:
 
 
 def merged_history(datasets) -> str:
-    """The ``history`` lines of ``datasets`` ("<time>: <command>"), the latest line of each command,
-    latest first (the commands that wrote the parts of a combined file)."""
-    latest = {}  # command -> its latest "<time>: <command>" line (parts written at other seconds)
-    for line in sorted(line for ds in datasets for line in str(ds.attrs.get("history", "")).splitlines() if line):
-        latest[line.partition(": ")[2]] = line
-    return "\n".join(sorted(latest.values(), reverse=True))
+    """The ``history`` lines of ``datasets`` ("<time>: <command>"), each once, latest first (the
+    commands that wrote the parts of a combined file). A line's time is when its command started,
+    so the chunks of one run share one line and two runs of the same command (an interrupted
+    --resume and the one that finished) keep a line each."""
+    lines = {line for ds in datasets for line in str(ds.attrs.get("history", "")).splitlines() if line}
+    return "\n".join(sorted(lines, reverse=True))
 
 
 def parts_dir(path) -> Path:
@@ -934,7 +941,7 @@ class ChunkStore:
     def done_count(self) -> int:
         return sum(self.is_done(i) for i in range(self.n_chunks))
 
-    def combine(self, path, command: str | None = None, on_combined=None) -> Path:
+    def combine(self, path, command: str | None = None, on_combined=None, started: str | None = None) -> Path:
         """Concatenate the chunks along member into ``path`` (atomically) and remove the parts;
         ``on_combined(ds)`` is called with the combined Dataset once it is written (the run's warnings)."""
         datasets = [_read(self.chunk_path(i)) for i in range(self.n_chunks)]
@@ -951,7 +958,7 @@ class ChunkStore:
         else:
             combined.attrs.pop("history", None)
         combined.attrs["chunks"] = self.n_chunks
-        write_ensemble(combined, path, command=command, run_id=self.manifest.get("run_id"))
+        write_ensemble(combined, path, command=command, run_id=self.manifest.get("run_id"), started=started)
         shutil.rmtree(self.directory)
         if on_combined is not None:
             on_combined(combined)

@@ -59,6 +59,7 @@ class ChunkJob:
     progress: bool
     cpu_workers: int | None = None  # simulate(workers=...): CPU worker processes for this chunk
     run_id: str | None = None  # the run's id in the member labels (warpfric.io.member_labels)
+    started: str | None = None  # when the run started (warpfric.io.history_time): the chunk's history line
     # set by run_on_client: a chunk run in another process returns its warnings in the report, for
     # that process to raise each once (a worker's own would print once per worker, with its source line)
     parent_pid: int | None = None
@@ -138,7 +139,7 @@ def run_chunk(job: ChunkJob) -> dict:
     failed = int((ds.status.values != 0).sum())
     if not sweep.run.get("final_fields", True):
         ds = ds.drop_vars([v for v in FINAL_FIELDS if v in ds])
-    write_ensemble(ds, job.path, varying=sweep.varying, command=job.command, run_id=job.run_id)
+    write_ensemble(ds, job.path, varying=sweep.varying, command=job.command, run_id=job.run_id, started=job.started)
     return dict(index=job.index, members=job.stop - job.start, failed=failed, device=device,
                 wall_s=time.perf_counter() - t0, pid=os.getpid(),
                 warnings=warning_pairs(caught) if collect else [])
@@ -498,7 +499,8 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
                 workers, quiet, command, check_space, cpu_workers) -> RunReport:
     import shutil
 
-    from .io import ChunkStore, ChunksDoNotCombine, OutputWriteError, free_bytes, new_run_id, parts_dir, sweep_digest, write_failure
+    from .io import (ChunkStore, ChunksDoNotCombine, OutputWriteError, free_bytes, history_time, new_run_id, parts_dir,
+                     sweep_digest, write_failure)
     from .device import check_device
     from .sweep_file import check_member_offset
 
@@ -580,8 +582,9 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
             except OSError as err:
                 shutil.rmtree(parts, ignore_errors=True)
                 raise write_failure(parts, err, free_bytes(out.parent)) from None
+        started = history_time()  # this run's history line, in its chunks and in the file that combines them
         reports, errors, wall = _run_chunks(sweep, sweep_file, store, chunk, offset, device, client, quiet, command,
-                                            cpu_workers)
+                                            cpu_workers, started)
         missing = [i for i in range(store.n_chunks) if not store.is_done(i)]
         if errors or missing:
             ranges = ", ".join(_members(offset + store.members(i).start, offset + store.members(i).stop) for i in missing)
@@ -603,7 +606,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
             _warn_members_not_ok(ds, sweep.solver)
 
         try:
-            store.combine(out, command=command, on_combined=on_combined)
+            store.combine(out, command=command, on_combined=on_combined, started=started)
         except ChunksDoNotCombine as err:  # no bad input (refused before any chunk runs): chunks that differ
             # (written by another warpfric version for --resume) are left where they are
             raise OutputWriteError(f"the chunks in {str(parts)!r} do not combine into one file ({err}; remove the "
@@ -692,7 +695,7 @@ def _warn_members_not_ok_kept(store, kept: list, solver, out: Path) -> None:
                       "the run", stacklevel=2)
 
 
-def _run_chunks(sweep, sweep_file, store, chunk, offset, device, client, quiet, command, cpu_workers):
+def _run_chunks(sweep, sweep_file, store, chunk, offset, device, client, quiet, command, cpu_workers, started):
     """Run the chunks that ``store`` lacks (here or on ``client``): (reports, errors, wall seconds)."""
     todo = [i for i in range(store.n_chunks) if not store.is_done(i)]
     place = "this process, device " + str(device)
@@ -725,7 +728,7 @@ def _run_chunks(sweep, sweep_file, store, chunk, offset, device, client, quiet, 
                      start=store.members(i).start, stop=store.members(i).stop, member_offset=offset,
                      path=str(store.chunk_path(i).resolve()), device=device, command=command,
                      progress=not quiet and client is None, cpu_workers=cpu_workers,
-                     run_id=store.manifest.get("run_id"))
+                     run_id=store.manifest.get("run_id"), started=started)
             for i in todo]
     reports, errors = run_local(jobs) if client is None else run_on_client(jobs, client, quiet)
     return reports, errors, time.perf_counter() - t0
