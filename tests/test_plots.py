@@ -266,6 +266,11 @@ def test_a_member_without_a_front_gets_no_curve(contact_run, tmp_path):
     ax = plots.space_time_figure(cut, 1).axes[0]
     assert [text.get_text() for text in ax.get_legend().get_texts()] == [
         "contact front: not given (the run ended before the detachment was over)"]
+    # and the arrival times of a file of it alone said "no ok member has a contact front"
+    ax = plots.arrival_times_figure(cut.isel(member=[1])).axes[0]
+    assert "(no ok member with a known front" in ax.get_title()
+    assert [t.get_text() for t in ax.texts] == [
+        "no ok member's contact front is known: 1 run ended before the detachment was over"]
     # so is one stopped by max_end_time under the automatic end (it said "no contact front")
     n = ok.sizes["member"]
     capped = ok.assign(end_time=("member", np.full(n, np.inf)), max_end_time=ok.final_time.copy())

@@ -236,3 +236,20 @@ def test_files_of_an_earlier_version_get_mu_t_on_reading(recorded, tmp_path):
         assert both.friction_coefficient_history.shape == (3, recorded.time.size)
     names = {p.name for p in plots.quick_look(back.sel(member=[1]), tmp_path / "sel")}
     assert names >= {"friction_member1.png", "space_time_member1.png"} and "friction_member0.png" not in names
+
+
+def test_a_sweep_file_s_record_window_counts_as_the_command_line_does(tmp_path):
+    """[record] start and stop without count was refused ("missing key 'count'") where --record START
+    STOP takes its default; both take RECORD_COUNT, and a count or the times given are kept."""
+    from warpfric.parameters import RECORD_COUNT
+    from warpfric.sweep_file import SweepError, load_sweep
+
+    sweep = tmp_path / "s.toml"
+    sweep.write_text("[record]\nmembers = [0]\nstart = 20.1\nstop = 20.3\n[grid]\neccentricity = [0.0, 0.1]\n")
+    times = np.asarray(load_sweep(sweep).record.times)
+    assert RECORD_COUNT == 1001 and times.size == RECORD_COUNT and (times[0], times[-1]) == (20.1, 20.3)
+    sweep.write_text("[record]\nstart = 20.1\nstop = 20.3\ncount = 5\n[grid]\neccentricity = [0.0, 0.1]\n")
+    assert len(load_sweep(sweep).record.times) == 5
+    sweep.write_text("[record]\nstart = 20.1\n[grid]\neccentricity = [0.0, 0.1]\n")
+    with pytest.raises(SweepError, match="missing key 'stop'.*default 1001"):
+        load_sweep(sweep)

@@ -195,6 +195,20 @@ def _nothing_to_plot(ax, reason: str) -> None:
     ax.set_yticks([])
 
 
+def _no_front_reason(ds, ok: np.ndarray) -> str:
+    """Why a front panel of ``ds`` is empty: no ok member has the front, or the ok members' runs ended
+    before their detachment was over (an explicit end_time, or max_end_time), so that their fronts
+    are not known (simulate.not_over_groups)."""
+    from .simulate import not_over_groups
+
+    groups = not_over_groups(ds).values() if "mu_final" in ds and "mu_s" in ds else ()  # (a reduced Dataset: none)
+    not_over = ok & np.any([which for which in groups], axis=0) if groups else np.zeros_like(ok)
+    if not_over.any():
+        return (f"no ok member's {_front_name(ds)} is known: {plural(int(not_over.sum()), 'run')} ended before the "
+                "detachment was over")
+    return f"no ok member has a {_front_name(ds)}"
+
+
 def _axis_values(ds, name: str, sel: np.ndarray):
     """(x, label, note) of parameter ``name`` as an axis: its values, or their magnitude where all of
     ``sel``'s are negative and span a decade (a log axis of |v|; a linear one put -1e-4 and -1e-5
@@ -373,7 +387,7 @@ def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     if not every.size:
         fig, ax = plt.subplots(figsize=(5.6, 3.8))
         ax.set_title(title, fontsize=10)
-        _nothing_to_plot(ax, f"no ok member has a {_front_name(ds)}")
+        _nothing_to_plot(ax, _no_front_reason(ds, ok))
         return fig
     if colours is None:
         fig, ax = plt.subplots(figsize=(5.6, 3.8))
@@ -440,13 +454,14 @@ def arrival_times_figure(ds, max_curves: int = MAX_CURVES):
     ax.set_xlabel("x (mm)" if metres else "x / L")
     ax.set_ylabel("t_a - first arrival (ms)")
     with_front = int((ok & arrived).sum())
+    reason = _no_front_reason(ds, ok) if not candidates.size else ""
     shown = (f"{candidates.size} of the {plural(with_front, 'ok member')} with a front" if candidates.size
-             else "no ok member with a front")
+             else "no ok member with a known front" if "is known" in reason else "no ok member with a front")
     met = f"; \u25bd where two fronts meet: {meetings}" if meetings else ""
     ax.set_title(f"{_front_name(ds)} arrival times ({shown}{_status_text(ds, ok)}{met})", fontsize=10)
     ax.grid(alpha=0.3)
     if not candidates.size:
-        _nothing_to_plot(ax, f"no ok member has a {_front_name(ds)}")
+        _nothing_to_plot(ax, reason)
     else:
         ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0.0, frameon=False)
     return fig

@@ -35,8 +35,8 @@ from pathlib import Path
 import numpy as np
 
 from .members import resolve_members
-from .parameters import (PARAMETER_NAMES, Fronts, Model, Parameters, Record, Solver, check_fronts_method, check_precision,
-                         did_you_mean, parameter_range_text, parameter_units, units_text, validate_value)
+from .parameters import (PARAMETER_NAMES, RECORD_COUNT, Fronts, Model, Parameters, Record, Solver, check_fronts_method,
+                         check_precision, did_you_mean, parameter_range_text, parameter_units, units_text, validate_value)
 from .progress import machine_memory_bytes, plural
 
 TOP_KEYS = ("title", "description", "scene", "model", "solver", "fronts", "record", "grid", "zip", "sample", "design",
@@ -365,10 +365,11 @@ def _record(spec: dict) -> Record:
             raise SweepError("[record]: give either times or start/stop/count, not both")
         times = _values(spec["times"], "[record] times")
         return Record(members=tuple(members), times=tuple(times))
-    for key in ("start", "stop", "count"):
+    for key in ("start", "stop"):
         if key not in spec:
-            raise SweepError(f"[record]: missing key {key!r} (give times = [...] or start, stop, count)")
-    count = spec["count"]
+            raise SweepError(f"[record]: missing key {key!r} (give times = [...] or start, stop and optionally "
+                             f"count, default {RECORD_COUNT})")
+    count = spec.get("count", RECORD_COUNT)  # as --record START STOP [COUNT]
     if isinstance(count, bool) or not isinstance(count, int):
         raise SweepError(f"[record] count = {count!r}: expected an integer >= 2")
     return Record.window(_number(spec["start"], "[record] start"), _number(spec["stop"], "[record] stop"), count,
