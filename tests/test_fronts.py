@@ -297,10 +297,11 @@ def test_contact_front_is_the_first_gate_opening_in_one_pass():
 
 
 def test_contact_front_without_a_yield_threshold_is_nan_and_says_so():
-    with pytest.warns(UserWarning, match="no yield threshold"):
+    # the warning said "its outputs are NaN", but the edge reads none and nothing detached (a review)
+    with pytest.warns(UserWarning, match="no yield threshold.*NaN, nucleation_edge -2, detached_fraction 0"):
         ds = run({"eccentricity": [0.0]}, nodes=20, rtol=1e-5, model=wf.Model(relaxation_gate="none"), fronts=wf.Fronts())
     assert np.isnan(ds.arrival_time.values).all() and np.isnan(ds.v_main.values).all()
-    assert ds.nucleation_edge.values[0] == -2 and ds.status.values[0] == 0
+    assert ds.nucleation_edge.values[0] == -2 and ds.detached_fraction.values[0] == 0 and ds.status.values[0] == 0
     # once, also with the grid check's coarse run (it said so twice)
     with pytest.warns(UserWarning) as caught:
         run({"eccentricity": [0.0]}, nodes=20, rtol=1e-5, model=wf.Model(relaxation_gate="none"),
@@ -399,6 +400,11 @@ def test_speed_error_estimate_by_hand():
     np.testing.assert_array_equal(out["v_main_error"], out["v_middle_error"])
     assert np.isnan(out["v_left_error"]).all() and np.isnan(out["v_precursor_error"]).all()
     assert np.isnan(out["arrival_time_error"][2, 8]) and out["arrival_time_error"][0, 3] == e[3]
+    # every node at once: speed inf (not resolved) got a NaN error, which says "no segment"
+    metrics["v_middle"] = np.array([np.inf, 10.0, 10.0, 10.0, np.nan])
+    ta[0] = 1.0
+    out = speed_errors(metrics, ta, err, 1.0)
+    assert out["v_middle_error"][0] == np.inf and np.isnan(out["v_middle_error"][4])
 
 
 def test_front_collisions_count_the_fronts_and_place_where_they_meet():

@@ -298,3 +298,36 @@ def test_a_misspelt_parameter_as_a_coordinate_is_named():
     with pytest.raises(ValueError, match="coordinate 'eccentricty' along member is no parameter \\(did you mean "
                                          "'eccentricity'\\?\\)"):
         resolve_members(grid.stack(member=["normal_force", "eccentricty"]), wf.Parameters())
+
+
+def test_numpy_scalars_and_a_team_beyond_the_coarse_grid_run_and_write(tmp_path):
+    """Valid input that failed late (a host-code review): Solver/Fronts/Model settings given as numpy
+    scalars (np.True_) reached the attributes, where write_ensemble raised TypeError after the run; a
+    numpy member_offset overflowed its own width in the worker split (np.int8(126) named -126); and
+    Solver(lanes=10) at N = 21 with the grid check raised after the whole fine run, the coarse grid
+    (11 nodes) allowing 5 lanes at most."""
+    import warnings
+
+    ds = simulate({"eccentricity": [0.0, 0.1]}, solver=wf.Solver(nodes=np.int64(11), predict_switches=np.True_),
+                  model=wf.Model(tilt=np.True_), fronts=wf.Fronts(grid_check=np.False_))
+    assert ds.attrs["solver_predict_switches"] == 1 and type(ds.attrs["solver_nodes"]) is int
+    wf.io.write_ensemble(ds, tmp_path / "np.nc")
+    assert wf.io.open_ensemble(tmp_path / "np.nc").attrs["solver_predict_switches"] == 1
+    split = simulate({"eccentricity": np.linspace(-0.1, 0.1, 8)}, member_offset=np.int8(126), workers=2,
+                     solver=wf.Solver(nodes=11), fronts=None)
+    assert split.member.values.tolist() == list(range(126, 134))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        checked = simulate(solver=wf.Solver(nodes=21, lanes=10), fronts=wf.Fronts(grid_check=True))
+    assert checked.status.values[0] == 0 and 0 < float(checked.mu_s_grid_error[0]) < 1e-3
+    assert sum("Solver(lanes=" in str(w.message) for w in caught) == 1  # said once, of the run asked for
+
+
+def test_max_end_time_is_checked_only_where_it_can_end_the_run():
+    """max_end_time (the automatic end's cap, 80 s) was checked against rest_until for every member, so a
+    late disc start with an explicit end_time was refused for a parameter the user never set and the
+    run never used; where the automatic end applies, the cap still has to lie after the disc starts."""
+    ds = simulate({"rest_until": [100.0], "end_time": [100.05]}, solver=wf.Solver(nodes=11), fronts=None)
+    assert float(ds.final_time[0]) == 100.05 and ds.status.values[0] == 4  # no peak in 50 ms: no_peak, as asked
+    with pytest.raises(ValueError, match=r"'max_end_time' = 80.0 \(s\) ends before the disc starts to move"):
+        simulate({"rest_until": [100.0]}, solver=wf.Solver(nodes=11), fronts=None)

@@ -88,6 +88,9 @@ def test_by_parameters_puts_every_member_at_its_swept_values(tmp_path):
     holed = ds.assign(eccentricity=ds.eccentricity.where(ds.member != 3))
     with pytest.raises(ValueError, match=r"'eccentricity' is not finite in 1 member\(s\) \(numbers 3\)"):
         by_parameters(holed)
+    with pytest.raises(ValueError, match=r"expects the ensemble along the dimension member, got a Dataset with "
+                                         r"dimensions \('x',\) \(ds.isel\(member=0\) drops the dimension"):
+        by_parameters(ds.isel(member=0))  # a KeyError 'member' before
     # random samples are no grid: 6 members would fill 6 of 36 combinations
     sampled = ds.assign(eccentricity=ds.eccentricity + 0.01 * ds.member, normal_force=ds.normal_force + ds.member)
     with pytest.raises(ValueError, match=r"not a grid of normal_force, eccentricity: .* fill 6 of 36 combinations.*select them with ds.sel\(member=ds.member\[...\]\)"):

@@ -429,3 +429,26 @@ def test_history_has_a_line_per_run_not_per_command_text(tmp_path):
                    started="2026-11-27T06:41:14Z")
     with xr.open_dataset(tmp_path / "c.nc") as back:
         assert back.attrs["history"].splitlines() == [resume2, resume1, first]
+
+
+def test_write_ensemble_sorts_its_members_keeps_text_and_checks_complevel(tmp_path):
+    """From a host-code review: a selection out of order (isel([2, 0, 1]), sortby("mu_s")) was written
+    with unsorted labels, which xr.open_mfdataset's default refuses; a text variable along member
+    raised KeyError; complevel 10 failed inside netCDF naming 'shear_modulus'."""
+    ds = run({"eccentricity": [0.0, 0.1, 0.2]}, nodes=11)
+    ds["label"] = ("member", np.array(["a", "bb", "ccc"]))
+    write_ensemble(ds.isel(member=[2, 0, 1]), tmp_path / "a.nc")
+    back = open_ensemble(tmp_path / "a.nc")
+    assert back.member.values.tolist() == [0, 1, 2] and back.label.values.tolist() == ["a", "bb", "ccc"]
+    np.testing.assert_array_equal(back.mu_s.values, ds.mu_s.values)
+    later = wf.simulate({"eccentricity": [0.3]}, solver=wf.Solver(nodes=11, rtol=1e-6), fronts=None, device=DEVICE,
+                        progress=False, member_offset=3)
+    write_ensemble(later, tmp_path / "b.nc")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)  # xarray's coming change of its defaults
+        with xr.open_mfdataset([tmp_path / "a.nc", tmp_path / "b.nc"]) as both:
+            assert both.sizes["member"] == 4
+    for bad in (10, 0, 4.5, "high", True):
+        with pytest.raises(ValueError, match=re.escape(f"complevel = {bad!r} is invalid; valid: an integer in [1, 9]")):
+            write_ensemble(ds, tmp_path / "c.nc", complevel=bad)
+    assert not (tmp_path / "c.nc").exists()

@@ -24,6 +24,18 @@ def test_a_nan_among_10000_members_is_named_by_its_index():
                                              "[-0.6, 0.6] (dimensionless)")
 
 
+def test_a_masked_member_is_refused_as_a_nan_is():
+    """netCDF4 returns missing values as a masked array; np.asarray dropped the mask and the member ran
+    with the data under it (status ok), where a NaN in its place is refused."""
+    force = np.ma.masked_array([500.0, 1000.0, 800.0, 0.0], mask=[False, True, False, True])
+    assert _refusal({"normal_force": force}) == ("parameter normal_force[1] is masked (no value: a missing or fill "
+                                                 "value, as netCDF4 returns it) (2 members masked); valid range "
+                                                 "(0, inf) N; give every member a value")
+    unmasked = wf.simulate({"normal_force": np.ma.masked_array([500.0, 1000.0])}, solver=wf.Solver(nodes=11),
+                           fronts=None, device=DEVICE, progress=False)
+    assert unmasked.normal_force.values.tolist() == [500.0, 1000.0] and (unmasked.status.values == 0).all()
+
+
 def test_the_first_bad_member_is_named_with_the_unit_and_the_count():
     message = _refusal({"normal_force": [1000.0, -2.0, np.inf]})
     assert message == ("parameter normal_force[1] = -2.0 N is out of range; valid range (0, inf) N "

@@ -172,7 +172,7 @@ def speed_errors(metrics: dict, arrival_time, arrival_error, length) -> dict:
     for seg in POSITION_SEGMENTS + (WHOLE_FRONTS if "v_second" in metrics else ()):
         error = np.full(n_members, np.nan)
         start, end, v = metrics[f"{seg}_front_start"], metrics[f"{seg}_front_end"], metrics[f"v_{seg}"]
-        sel = np.flatnonzero(np.isfinite(v) & np.isfinite(start) & np.isfinite(end))
+        sel = np.flatnonzero(~np.isnan(v) & np.isfinite(start) & np.isfinite(end))  # v = inf: not resolved, error inf
         # the segment's end nodes a < b and its own front's nucleation node k (the second front's for
         # its segment), member by member (whole arrays)
         nuc = node_of(metrics["second_nucleation_position" if seg == "second" else "nucleation_position"])[sel]

@@ -345,7 +345,8 @@ def _encoding(ds: xr.Dataset, complevel: int) -> dict:
         if name in ds.coords:
             enc[name] = {"_FillValue": None}  # CF: coordinate variables have no missing values
         if var.dtype.kind == "U":  # member labels: a compressed char array (a vlen string cannot be compressed)
-            enc[name].update({"dtype": "S1", "char_dim_name": "label_length", "zlib": True, "complevel": complevel})
+            chars = "label_length" if name in ds.coords else f"{name}_strlen"  # a user's text variable: its own
+            enc.setdefault(name, {}).update({"dtype": "S1", "char_dim_name": chars, "zlib": True, "complevel": complevel})
         if var.ndim == 0 or var.dtype.kind not in "biuf":
             continue
         enc.setdefault(name, {}).update({"zlib": True, "complevel": complevel, "shuffle": True})
@@ -488,8 +489,12 @@ def by_parameters(ds: xr.Dataset, names=None) -> xr.Dataset:
     Raises ValueError, naming what to do, when two members share a combination of ``names``
     (unstacking would drop one), when a value is not finite, and when the members do not form a
     grid (random samples: more than MAX_EMPTY_FRACTION of the array would be empty; select them
-    along ``member`` instead, e.g. ``ds.where(ds.normal_force > 2000, drop=True)``).
+    along ``member`` instead, e.g. ``ds.sel(member=ds.member[ds.normal_force > 2000])``).
     """
+    if not isinstance(ds, xr.Dataset) or "member" not in ds.dims:
+        got = type(ds).__name__ if not isinstance(ds, xr.Dataset) else f"a Dataset with dimensions {tuple(ds.dims)}"
+        raise ValueError(f"by_parameters: expects the ensemble along the dimension member, got {got} (ds.isel(member=0) "
+                         "drops the dimension; ds.isel(member=[0]) keeps it)")
     swept = ds.attrs.get("varying_parameters", "").split()
     if names is None:
         names = [n for n in swept if n in ds and ds[n].dims == ("member",) and np.unique(ds[n].values).size > 1]
@@ -616,6 +621,10 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
         raise ValueError("write_ensemble: the members are labels (the file's layout, as xr.open_dataset or "
                          "xr.open_mfdataset read it); read the files with warpfric.io.open_ensemble or open_ensembles "
                          "to write them again")
+    if isinstance(complevel, bool) or not isinstance(complevel, (int, np.integer)) or not 1 <= complevel <= 9:
+        raise ValueError(f"write_ensemble: complevel = {complevel!r} is invalid; valid: an integer in [1, 9] (zlib)")
+    if np.any(np.diff(np.asarray(ds.member.values)) < 0):  # a file's labels are sorted (open_mfdataset needs it)
+        ds = ds.sortby("member")
     path = Path(path)
     _require_folder(path)
     refuse_if_locked(path)

@@ -105,6 +105,8 @@ def _check_protocol(values: dict[str, np.ndarray]) -> None:
              "stop_time": ("stops the disc before it starts to move", "]", ", inf: no stop")}
     for name, (what, bracket, note) in rules.items():
         bad = ~(values[name] > rest)
+        if name == "max_end_time":  # the automatic end's cap: unused where an explicit end_time ends the run
+            bad &= np.isposinf(values["end_time"])
         if np.any(bad):
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(

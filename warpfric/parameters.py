@@ -184,6 +184,16 @@ def resolve_value(name: str, value: Any, scene: Parameters | None = None):
         if meta["none_means"] is None:
             raise ValueError(f"parameter {name!r}: value None is not allowed; valid range {_range_text(meta)}")
         return np.asarray(meta["none_means"], dtype=np.float64)
+    if np.ma.isMaskedArray(value):  # np.asarray drops the mask: the data under it would run as a value
+        mask = np.ma.getmaskarray(value)
+        if mask.any():
+            where = f"[{int(np.flatnonzero(mask.ravel())[0])}]" if mask.ndim else ""
+            units = units_text(parameter_units(name))
+            more = f" ({int(mask.sum())} members masked)" if mask.sum() > 1 else ""
+            raise ValueError(f"parameter {name}{where} is masked (no value: a missing or fill value, as netCDF4 "
+                             f"returns it){more}; valid range {_range_text(_FIELDS[name].metadata)}"
+                             f"{' ' + units if units else ' (dimensionless)'}; give every member a value")
+        value = np.ma.getdata(value)
     try:
         arr = np.asarray(value)
     except ValueError:  # nested lists of different lengths
@@ -230,6 +240,15 @@ def validate_value(name: str, value: np.ndarray) -> None:
 RELAXATION_GATES = ("stress", "none", "velocity")
 
 
+def _plain_settings(settings) -> None:
+    """numpy scalars among a validated settings dataclass's fields (np.True_, np.int64(100)) as Python's
+    bool, int and float: they reach the Dataset's attributes, where netCDF refuses np.bool_."""
+    for f in dataclasses.fields(settings):
+        value = getattr(settings, f.name)
+        if isinstance(value, np.generic):
+            object.__setattr__(settings, f.name, value.item())
+
+
 @dataclass(frozen=True)
 class Model:
     """Model switches. Each combination compiles its own specialised kernel, so a term that is off
@@ -267,6 +286,7 @@ class Model:
                     raise ValueError(f"model switch 'relaxation_gate' = {v!r}: valid: {', '.join(map(repr, RELAXATION_GATES))}")
             elif not isinstance(v, (bool, np.bool_)):
                 raise ValueError(f"model switch {f.name!r} = {v!r}: must be True or False")
+        _plain_settings(self)
 
     def unused_parameters(self, values: dict) -> list:
         """The parameters that these switches leave without effect and that some member sets away from
@@ -456,6 +476,7 @@ class Solver:
              self.lanes, f"None, 1, or an integer in [2, {max_lanes}] (at most nodes // 2 and {MAX_LANES}: a block of 255-register threads)")
         need(self.lanes in (None, 1) or self.dtype == "float64", "lanes", self.lanes,
              "None or 1 with dtype='float32' (the cooperative kernel is float64 only)")
+        _plain_settings(self)
 
 
 _FRONT_DIRECTIONS = ("against_disc", "with_disc", "absolute")
@@ -556,6 +577,7 @@ class Fronts:
              self.edge_zone_fraction, "a number in [0, 0.5]")
         need(real(self.min_event_fraction) and 0 <= self.min_event_fraction < 1, "min_event_fraction",
              self.min_event_fraction, "a number in [0, 1)")
+        _plain_settings(self)
 
     def unused_settings(self) -> list:
         """The velocity event's settings (threshold, direction, min_event_fraction) changed from

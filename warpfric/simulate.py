@@ -18,8 +18,8 @@ from .device import check_device, init_warp
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
 from .parameters import (CONTACT_WITHOUT_GATE, DETACHMENT_NOT_OVER, DISC_BEFORE_FULL_LOAD, ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, MEMBERS_NOT_OK,
-                         MEMBERS_NOT_OK_HINT, PARAMETERS_UNUSED, RECORD_PAST_END, Fronts, Model, Parameters, Record,
-                         Solver, check_fronts_method, check_precision, parameter_long_name, parameter_units)
+                         INT32_MAX, MEMBERS_NOT_OK_HINT, PARAMETERS_UNUSED, RECORD_PAST_END, Fronts, Model, Parameters,
+                         Record, Solver, check_fronts_method, check_precision, parameter_long_name, parameter_units)
 
 
 def simulate(
@@ -78,9 +78,11 @@ def simulate(
     ... ``v_second_error``), ``front_count``, where and when the first meets another
     (``collision_position`` (m), ``collision_time`` (s)) and where and when a second starts
     (``second_nucleation_position`` (m), ``second_front_start_time`` (s)); each output's
-    ``long_name`` says what it is, and every output of a member whose status is not ok is NaN but
-    for ``no_peak``'s real ``mu_final`` and final state (a front output also where the member has
-    no such front or segment, or its run ended before its detachment was over). The velocity event adds
+    ``long_name`` says what it is. A member whose status is not ok has NaN ``mu_s`` and front
+    outputs (``mu_final`` too, but for ``no_peak``); its final fields, plate state, ``lift_off``
+    and step counts are its state where its run stopped, at ``final_time`` (docs/model.md,
+    "Statuses"). A front output is NaN also where the member has no such front or segment, or its
+    run ended before its detachment was over. The velocity event adds
     ``event_max_velocity`` (m/s), the strength event ``strength_peak`` (member, x) (``strength_``
     prefixed again where it is not the first event: ``strength_strength_peak``); ``grid_check``
     adds ``mu_s_grid_error`` and ``v_*_grid_error``. With record:
@@ -104,11 +106,13 @@ def simulate(
         0 <= member_offset < 2**31 - 2**24
     ):
         raise ValueError(f"member_offset = {member_offset!r} is invalid; valid: an integer in [0, {2**31 - 2**24})")
+    member_offset = int(member_offset)  # a numpy integer's own width overflowed in the worker split (np.int8(126) + 4)
     check_fronts_method(fronts, solver)
     if fronts is not None and "contact" in fronts.events and model.relaxation_gate != "stress":
         warnings.warn(f"{CONTACT_WITHOUT_GATE}{model.relaxation_gate!r}: this law has no yield threshold, so the "
                       "contact area falls everywhere as soon as the disc moves and there is no stick-to-slip front; "
-                      "its outputs are NaN (event='strength' exists under every law)", stacklevel=2)
+                      "its outputs say none (speeds and positions NaN, nucleation_edge -2, detached_fraction 0; "
+                      "event='strength' exists under every law)", stacklevel=2)
     unused = fronts.unused_settings() if fronts is not None else []
     if unused:  # asked for, and silently without effect
         warnings.warn(f"{FRONTS_SETTINGS_UNUSED}: {', '.join(unused)} (event={fronts.event!r}); "
@@ -118,6 +122,10 @@ def simulate(
         raise ValueError(f"fronts setting 'grid_check' needs solver setting 'nodes' >= 5 (got {solver.nodes}): the "
                          "check compares with (nodes + 1)//2 nodes")
     values, varying = resolve_members(members, scene)
+    n_members = values["normal_force"].shape[0]
+    if member_offset + n_members - 1 > INT32_MAX:  # the member numbers are int32 (as a file holds them)
+        raise ValueError(f"member_offset = {member_offset} is invalid for {n_members} members: their numbers would "
+                         f"pass {INT32_MAX} (int32); valid: an integer in [0, {INT32_MAX + 1 - n_members}]")
     unused = model.unused_parameters(values)
     if unused:  # set, and silently without effect
         warnings.warn(f"{PARAMETERS_UNUSED}: {', '.join(unused)}; they differ from the default scene but change "
@@ -381,10 +389,15 @@ def _add_grid_check(ds, values, scene, model, solver, fronts, device, progress) 
     as ``*_grid_error`` (in place). A segment present on one grid and absent on the other: inf (not
     resolved); absent on both, or a failed member: NaN."""
     coarse_nodes = max(3, (solver.nodes + 1) // 2)
+    # a team size given for N lanes may exceed the coarse grid's (at most nodes // 2 lanes): the coarse
+    # run takes the largest it allows (a team size changes outputs at round-off only)
+    lanes = solver.lanes if solver.lanes in (None, 1) else min(solver.lanes, coarse_nodes // 2)
+    lanes = 1 if lanes is not None and lanes < 2 else lanes
     label = (progress if isinstance(progress, str) else "") + " grid check"
     with _ensemble_warnings_dropped():  # its failed members leave NaN grid errors; the outer call warns of its own
+        warnings.filterwarnings("ignore", message=re.escape("Solver(lanes="))  # the outer call said it of its team
         coarse = simulate({name: values[name] for name in values}, scene=scene, model=model,
-                          solver=dataclasses.replace(solver, nodes=coarse_nodes),
+                          solver=dataclasses.replace(solver, nodes=coarse_nodes, lanes=lanes),
                           fronts=dataclasses.replace(fronts, grid_check=False), device=device,
                           progress=label.strip() if progress else progress, workers=1)
     usable = (ds.status.values == 0) & (coarse.status.values == 0)
