@@ -3,19 +3,22 @@
 # design (studies/sweeps/sensitivity_gpu.toml, the default front event: the contact front, read front
 # by front), then the indices of mu_s, mu_s_time and the front speeds. Needs warpfric and SALib
 # importable (here from /tmp/site, the repository and ./.salib, for a host without a package index:
-# a copy of SALib, multiprocess and dill from a venv with the [study] extra). Results under $OUT;
+# a copy of SALib, multiprocess and dill from a venv with the [sensitivity] extra). Results under $OUT;
 # sensitivity_members.nc keeps every member's inputs and scalar outputs (the design's rows), so that
 # `warpfric sensitivity` can be run again elsewhere without the simulation.
 #   bash studies/sensitivity_study.sh
 set -uo pipefail
-export PYTHONPATH=/tmp/site:$PWD:$PWD/.salib:/tmp/salib PYTHONUNBUFFERED=1
-OUT=${OUT:-out}; mkdir -p "$OUT"
+OUT=$(realpath -m "${OUT:-out}")  # where it was started (default ./out), before the cd
+cd "$(dirname "$0")/.."  # the repository root: the sweep file's path below is relative to it
+export PYTHONPATH=/tmp/site:$PWD:$PWD/.salib:/tmp/salib${PYTHONPATH:+:$PYTHONPATH} PYTHONUNBUFFERED=1
+PYTHON=${PYTHON:-python3}  # e.g. PYTHON=.venv/bin/python where warpfric[sensitivity] is installed
+mkdir -p "$OUT"
 start=$SECONDS
-python3 -m warpfric run studies/sweeps/sensitivity_gpu.toml -o /tmp/sens.nc --device cuda:0 --overwrite 2>&1 \
+$PYTHON -m warpfric run studies/sweeps/sensitivity_gpu.toml -o /tmp/sens.nc --device cuda:0 --overwrite 2>&1 \
   | tee "$OUT/sensitivity_run.log" | tail -4
 echo "run command: $((SECONDS - start)) s (kernel compilation and netCDF writing included)" | tee -a "$OUT/sensitivity_run.log"
-python3 -m warpfric info /tmp/sens.nc 2>&1 | tee "$OUT/sensitivity_info.log"
-python3 - "$OUT/sensitivity_members.nc" <<'PY'
+$PYTHON -m warpfric info /tmp/sens.nc 2>&1 | tee "$OUT/sensitivity_info.log"
+$PYTHON - "$OUT/sensitivity_members.nc" <<'PY'
 import json, sys
 import warpfric as wf
 ds = wf.io.open_ensemble("/tmp/sens.nc")
@@ -23,12 +26,12 @@ names = json.loads(ds.attrs["sensitivity_design"])["names"]
 outputs = ["status", "mu_s", "mu_s_time", "front_count", "v_first", "v_second", "v_middle", "v_left", "v_right"]
 wf.io.write_ensemble(ds[names + outputs].drop_vars("member_id"), sys.argv[1])
 PY
-python3 -m warpfric sensitivity /tmp/sens.nc --output mu_s --output mu_s_time -o "$OUT/sensitivity_gpu.nc" 2>&1 \
+$PYTHON -m warpfric sensitivity /tmp/sens.nc --output mu_s --output mu_s_time -o "$OUT/sensitivity_gpu.nc" 2>&1 \
   | tee "$OUT/sensitivity_indices.log"
 # front speeds are heavy-tailed (a front that detaches nearly at once has a huge speed): log; members
 # without a second front (or a segment) are filled with the mean (counted in the output)
-python3 -m warpfric sensitivity /tmp/sens.nc --output v_first --output v_second --output v_middle --log \
+$PYTHON -m warpfric sensitivity /tmp/sens.nc --output v_first --output v_second --output v_middle --log \
   --on-failure fill-mean -o "$OUT/sensitivity_gpu_fronts.nc" 2>&1 | tee -a "$OUT/sensitivity_indices.log"
 # whether a second front exists: the indices of front_count (1, 2 or 3)
-python3 -m warpfric sensitivity /tmp/sens.nc --output front_count -o "$OUT/sensitivity_gpu_front_count.nc" 2>&1 \
+$PYTHON -m warpfric sensitivity /tmp/sens.nc --output front_count -o "$OUT/sensitivity_gpu_front_count.nc" 2>&1 \
   | tee -a "$OUT/sensitivity_indices.log"

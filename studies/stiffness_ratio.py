@@ -43,9 +43,12 @@ def main(argv=None):
     ap.add_argument("--eccentricities", type=int, default=13, help="number of e values over -0.3..0.3 (odd: e = 0 included)")
     ap.add_argument("--rtol", type=float, default=1e-5)
     ap.add_argument("--device", default=None)
-    ap.add_argument("--out", default=None, help="result file (default ./stiffness_ratio_DEVICE.json; a PNG is written "
-                    "beside it; the committed results: studies/results/stiffness_ratio_DEVICE.json)")
+    ap.add_argument("--out", default=None, help="result file (default ./stiffness_ratio_DEVICE.json, DEVICE without its colon: "
+                    "stiffness_ratio_cuda0.json; a PNG is written beside it; the committed results: "
+                    "studies/results/stiffness_ratio_h100.json, made with --out)")
     args = ap.parse_args(argv)
+    if args.out:  # its folder before the simulation, not after it
+        Path(args.out).parent.mkdir(parents=True, exist_ok=True)
     scene = wf.Parameters()
     unit = float(stiffness_ratio(scene, 1.0))  # Lambda per newton
     lambdas = np.logspace(-1, 2, args.lambdas)
