@@ -1,8 +1,9 @@
 """Beyond the paper: how the eccentricity effect on mu_s depends on the stiffness ratio Lambda.
 
     python studies/stiffness_ratio.py [--nodes 200] [--lambdas 25] [--eccentricities 13] [--device cuda:0]
-                                      [--out FILE.json]  (default ./stiffness_ratio_DEVICE.json; the committed
-                                      results: studies/results/stiffness_ratio_DEVICE.json)
+                                      [--out FILE.json]  (default ./stiffness_ratio_DEVICE.json, DEVICE without
+                                      its colon; the committed results: studies/results/stiffness_ratio_h100.json,
+                                      made with --out)
 
 Lambda = (interface stiffness x real-contact fraction) / (pad shear stiffness)
        = (mu0/h) * A * H / (2 G),   A = (sigma_n / sigma_H) * (1 + b ln(1 + phi/phi0)),

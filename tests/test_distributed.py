@@ -224,7 +224,7 @@ if __name__ == "__main__":
     (["run", "SWEEP", "--local-cluster", "--workers", "0"], ["--workers 0", ">= 1"]),
     (["run", "SWEEP", "--grid-check"], ["--grid-check", "grid_check = true"]),
     # a device this host lacks failed every chunk of a new local cluster on it, after it started
-    (["run", "SWEEP", "--local-cluster", "--device", "cuda:7"], ["device 'cuda:7' is not available"]),
+    (["run", "SWEEP", "--local-cluster", "--device", "cuda:999"], ["device 'cuda:999' is not available"]),
 ])
 def test_cluster_options_that_cannot_work_are_refused(reference, tmp_path, capsys, argv, words):
     from warpfric.cli import main

@@ -316,6 +316,16 @@ def test_numpy_scalars_and_a_team_beyond_the_coarse_grid_run_and_write(tmp_path)
     split = simulate({"eccentricity": np.linspace(-0.1, 0.1, 8)}, member_offset=np.int8(126), workers=2,
                      solver=wf.Solver(nodes=11), fronts=None)
     assert split.member.values.tolist() == list(range(126, 134))
+    # member numbers past the sweep's limit (int32, with room for the labels' run): one bound for
+    # simulate and sweep files (simulate let numbers up to 2**31 - 1 through that a sweep refused)
+    from warpfric.parameters import MEMBER_NUMBER_LIMIT
+    from warpfric.sweep_file import SweepError, check_member_offset
+
+    with pytest.raises(ValueError, match=rf"member_offset = {MEMBER_NUMBER_LIMIT - 1} is invalid for 2 members; "
+                                         rf"valid: an integer in \[0, {MEMBER_NUMBER_LIMIT - 2}\]"):
+        simulate({"eccentricity": [0.0, 0.1]}, member_offset=MEMBER_NUMBER_LIMIT - 1)
+    with pytest.raises(SweepError, match=rf"expected an integer in \[0, {MEMBER_NUMBER_LIMIT - 2}\]"):
+        check_member_offset(MEMBER_NUMBER_LIMIT - 1, 2, "--member-offset")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         checked = simulate(solver=wf.Solver(nodes=21, lanes=10), fronts=wf.Fronts(grid_check=True))

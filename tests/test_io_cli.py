@@ -399,3 +399,23 @@ def test_a_chunked_sweep_warns_once_of_its_members_not_ok(tmp_path, capsys):
     warned = [line for line in err.splitlines() if "members that did not end ok" in line]
     assert code == 1 and len(warned) == 1, err
     assert "6 of 6 members: 6 max_steps_reached" in warned[0] and "warpfric info" in warned[0]
+
+
+def test_a_worker_names_the_gpus_it_has_when_a_pinned_one_is_missing(monkeypatch):
+    """A pinned cuda:3 on a worker that sees one GPU (dask-cuda shows each worker its own, as cuda:0)
+    raised check_device's ValueError inside simulate, logged by distributed with its traceback for
+    every chunk; it is warpfric's one-line fault, naming the worker's GPUs (a GPU-less worker's too)."""
+    import warp as wp
+
+    from warpfric.runner import RunError, _worker_device_for
+
+    monkeypatch.setattr(wp, "init", lambda: None)
+    monkeypatch.setattr(wp, "get_cuda_device_count", lambda: 1)
+    monkeypatch.setattr(wp, "get_cuda_devices", lambda: ["cuda:0"])
+    assert _worker_device_for("cuda:0", "chunk 1/2") == "cuda:0" and _worker_device_for("cuda", "chunk 1/2") == "cuda"
+    with pytest.raises(RunError, match=r"chunk 1/2 \(members 0..1\): device cuda:3 asked for, but this worker "
+                                       r"\(pid \d+\) has cuda:0 only"):
+        _worker_device_for("cuda:3", "chunk 1/2 (members 0..1)")
+    monkeypatch.setattr(wp, "get_cuda_device_count", lambda: 0)
+    with pytest.raises(RunError, match="has no CUDA device"):
+        _worker_device_for("cuda:0", "loading the kernels")

@@ -429,6 +429,8 @@ def test_history_has_a_line_per_run_not_per_command_text(tmp_path):
                    started="2026-11-27T06:41:14Z")
     with xr.open_dataset(tmp_path / "c.nc") as back:
         assert back.attrs["history"].splitlines() == [resume2, resume1, first]
+    with pytest.raises(ValueError, match=r"started = '27 Nov 2026' is invalid; valid: None \(now\) or a UTC time"):
+        write_ensemble(ds, tmp_path / "d.nc", command="x", started="27 Nov 2026")
 
 
 def test_write_ensemble_sorts_its_members_keeps_text_and_checks_complevel(tmp_path):
@@ -437,9 +439,11 @@ def test_write_ensemble_sorts_its_members_keeps_text_and_checks_complevel(tmp_pa
     raised KeyError; complevel 10 failed inside netCDF naming 'shear_modulus'."""
     ds = run({"eccentricity": [0.0, 0.1, 0.2]}, nodes=11)
     ds["label"] = ("member", np.array(["a", "bb", "ccc"]))
+    ds = ds.assign_coords(site=("member", ["north", "south", "east"]))  # a text coordinate too
     write_ensemble(ds.isel(member=[2, 0, 1]), tmp_path / "a.nc")
     back = open_ensemble(tmp_path / "a.nc")
     assert back.member.values.tolist() == [0, 1, 2] and back.label.values.tolist() == ["a", "bb", "ccc"]
+    assert back.site.values.tolist() == ["north", "south", "east"]
     np.testing.assert_array_equal(back.mu_s.values, ds.mu_s.values)
     later = wf.simulate({"eccentricity": [0.3]}, solver=wf.Solver(nodes=11, rtol=1e-6), fronts=None, device=DEVICE,
                         progress=False, member_offset=3)

@@ -271,6 +271,14 @@ def test_a_member_without_a_front_gets_no_curve(contact_run, tmp_path):
     assert "(no ok member with a known front" in ax.get_title()
     assert [t.get_text() for t in ax.texts] == [
         "no ok member's contact front is known: 1 run ended before the detachment was over"]
+    # beside a member that saw its detachment through without a front, that one has none
+    first = np.arange(cut.sizes["member"]) == 0
+    mixed = cut.assign(detachment_end_time=cut.detachment_end_time.where(~first, cut.final_time),
+                       arrival_time=cut.arrival_time.where(~first[:, None])).isel(member=[0, 1])
+    ax = plots.arrival_times_figure(mixed).axes[0]
+    assert "(no ok member with a known front" in ax.get_title()
+    assert [t.get_text() for t in ax.texts] == [
+        "no ok member has a known contact front: 1 of 2 ended before the detachment was over, the others have none"]
     # so is one stopped by max_end_time under the automatic end (it said "no contact front")
     n = ok.sizes["member"]
     capped = ok.assign(end_time=("member", np.full(n, np.inf)), max_end_time=ok.final_time.copy())

@@ -244,3 +244,13 @@ def test_the_command_says_a_design_s_faults_and_an_unwritable_folder_before_the_
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1 and f"cannot write in folder '{folder}' (permission denied)" in err[0], err
     assert analysed == [] and list(folder.iterdir()) == []
+
+
+def test_an_output_no_member_has_is_refused_also_when_filling():
+    """fill-mean over an output that every member lacks filled it with the mean of nothing (NaN), the
+    zero-variance check let NaN through and SALib returned S1 = 0 for every parameter: written as a
+    result. It is refused, naming the output."""
+    ds = ishigami_dataset(n=16)
+    ds["y"].values[:] = np.nan
+    with pytest.raises(ValueError, match=r"output 'y': all 160 members failed or lack it"):
+        analyse(ds, ("y",), on_failure="fill-mean")

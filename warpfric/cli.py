@@ -199,11 +199,12 @@ def _toml_value(value) -> str:
 
 
 def _run_default(args) -> int:
-    from .io import check_free_space, estimate_bytes, output_lock, remove_stale_temporaries, write_ensemble
+    from .io import check_free_space, estimate_bytes, history_time, output_lock, remove_stale_temporaries, write_ensemble
     from .runner import check_output, check_output_name
     from .simulate import simulate
     from .sweep_file import check_member_offset
 
+    started = history_time()  # the file's history line: when the command started, as a sweep's says
     given = {name: getattr(args, name) for name in SCENE_OPTIONS}
     scene = Parameters(**{k: given[k] for k in ("normal_force", "eccentricity", "disc_velocity", "end_time")
                           if given[k] is not None})
@@ -248,7 +249,7 @@ def _run_default(args) -> int:
             ds = simulate(fronts=fronts, record=record, **run)
             _print_member(ds, solver)
             if output is not None:
-                write_ensemble(ds, output, command=args.command_line)
+                write_ensemble(ds, output, command=args.command_line, started=started)
                 print(f"wrote {output}" + (f" (with the recorded fields: warpfric plot {shlex.quote(str(output))} draws "
                                            "them)" if record is not None else ""))
         except KeyboardInterrupt:  # one scene: no chunks to keep, nothing to resume

@@ -61,6 +61,7 @@ import errno
 import hashlib
 import json
 import os
+import re
 import shlex
 import shutil
 import signal
@@ -345,7 +346,8 @@ def _encoding(ds: xr.Dataset, complevel: int) -> dict:
         if name in ds.coords:
             enc[name] = {"_FillValue": None}  # CF: coordinate variables have no missing values
         if var.dtype.kind == "U":  # member labels: a compressed char array (a vlen string cannot be compressed)
-            chars = "label_length" if name in ds.coords else f"{name}_strlen"  # a user's text variable: its own
+            # the member labels share one; a user's text variable or coordinate has its own
+            chars = "label_length" if name in ("member", "recorded_member") else f"{name}_strlen"
             enc.setdefault(name, {}).update({"dtype": "S1", "char_dim_name": chars, "zlib": True, "complevel": complevel})
         if var.ndim == 0 or var.dtype.kind not in "biuf":
             continue
@@ -598,11 +600,15 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
                where constant, as scalars.
     complevel: zlib level (1..9) of every numeric variable.
     command:   what produced the file, for the ``history`` attribute (a line
-               "<UTC time>: <command> (warpfric <version>)" put before any earlier history).
+               "<UTC time>: <command> (warpfric <version>)" put before any earlier history, where
+               it is not there already).
+    started:   that line's time, when the command started (from :func:`history_time`,
+               "YYYY-MM-DDTHH:MM:SSZ"); None: now.
     run_id:    the id in the member labels (coordinate ``member`` of the file, ``<run id>:<number>``;
                the chunks of one sweep share it). None: the labels ``ds`` was read with
                (``member_id``), else a new id (:func:`new_run_id`).
-    ``recorded_member`` must hold member numbers (values of ``member``).
+    ``recorded_member`` must hold member numbers (values of ``member``). The file holds the members
+    in the order of their numbers (a selection out of order is sorted).
     Raises OutputWriteError when the file cannot be written (its temporary file removed), and
     OutputBusy when another run holds the output's lock (``OUT.nc.lock``, :func:`lock_output`).
     """
@@ -623,6 +629,9 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
                          "to write them again")
     if isinstance(complevel, bool) or not isinstance(complevel, (int, np.integer)) or not 1 <= complevel <= 9:
         raise ValueError(f"write_ensemble: complevel = {complevel!r} is invalid; valid: an integer in [1, 9] (zlib)")
+    if started is not None and not re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ", str(started)):
+        raise ValueError(f"write_ensemble: started = {started!r} is invalid; valid: None (now) or a UTC time as "
+                         "warpfric.io.history_time() gives it, 'YYYY-MM-DDTHH:MM:SSZ'")
     if np.any(np.diff(np.asarray(ds.member.values)) < 0):  # a file's labels are sorted (open_mfdataset needs it)
         ds = ds.sortby("member")
     path = Path(path)

@@ -101,7 +101,9 @@ def _check_protocol(values: dict[str, np.ndarray]) -> None:
     # each a time after the disc starts to move: what one before it does, the range's closing
     # bracket (inf: none for an end, no stop for stop_time), a note
     ends = ("ends before the disc starts to move", ")", "")
-    rules = {"end_time": ends, "max_end_time": ends,
+    rules = {"end_time": ends,
+             "max_end_time": ("ends before the disc starts to move", ")", "; the automatic end's cap, used where "
+                              "end_time is inf: a later max_end_time, or an explicit end_time"),
              "stop_time": ("stops the disc before it starts to move", "]", ", inf: no stop")}
     for name, (what, bracket, note) in rules.items():
         bad = ~(values[name] > rest)

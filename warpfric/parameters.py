@@ -334,6 +334,8 @@ _DTYPES = ("float32", "float64")
 _METHODS = ("tr_bdf2", "esdirk4")
 FLOAT32_MIN_RTOL = 1e-5  # docs/performance.md: float32 stalls below this
 INT32_MAX = 2**31 - 1  # the kernels' step counters and node indices are int32
+# member numbers are int32 (as a file holds them); below 2**31 with room for the member labels' run
+MEMBER_NUMBER_LIMIT = 2**31 - 2**24
 MAX_LANES = 256  # threads per block: the cooperative kernel takes 255 registers per thread on the H100, and a block has 65,536
 
 

@@ -195,18 +195,22 @@ def _nothing_to_plot(ax, reason: str) -> None:
     ax.set_yticks([])
 
 
-def _no_front_reason(ds, ok: np.ndarray) -> str:
-    """Why a front panel of ``ds`` is empty: no ok member has the front, or the ok members' runs ended
-    before their detachment was over (an explicit end_time, or max_end_time), so that their fronts
-    are not known (simulate.not_over_groups)."""
+def _no_front_reason(ds, ok: np.ndarray) -> tuple[str, bool]:
+    """Why a front panel of ``ds`` is empty, and whether some ok member's front is unknown: its run
+    ended before its detachment was over (an explicit end_time, or max_end_time;
+    simulate.not_over_groups), where the others saw theirs through and have none."""
     from .simulate import not_over_groups
 
-    groups = not_over_groups(ds).values() if "mu_final" in ds and "mu_s" in ds else ()  # (a reduced Dataset: none)
-    not_over = ok & np.any([which for which in groups], axis=0) if groups else np.zeros_like(ok)
-    if not_over.any():
-        return (f"no ok member's {_front_name(ds)} is known: {plural(int(not_over.sum()), 'run')} ended before the "
-                "detachment was over")
-    return f"no ok member has a {_front_name(ds)}"
+    groups = list(not_over_groups(ds).values()) if "mu_final" in ds and "mu_s" in ds else []  # (a reduced Dataset)
+    unknown = int((ok & np.any(groups, axis=0)).sum()) if groups else 0
+    front, n_ok = _front_name(ds), int(ok.sum())
+    if not unknown:
+        return f"no ok member has a {front}", False
+    if unknown == n_ok:
+        return (f"no ok member's {front} is known: {plural(unknown, 'run')} ended before the detachment was over",
+                True)
+    return (f"no ok member has a known {front}: {unknown} of {n_ok} ended before the detachment was over, the "
+            "others have none", True)
 
 
 def _axis_values(ds, name: str, sel: np.ndarray):
@@ -387,7 +391,7 @@ def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     if not every.size:
         fig, ax = plt.subplots(figsize=(5.6, 3.8))
         ax.set_title(title, fontsize=10)
-        _nothing_to_plot(ax, _no_front_reason(ds, ok))
+        _nothing_to_plot(ax, _no_front_reason(ds, ok)[0])
         return fig
     if colours is None:
         fig, ax = plt.subplots(figsize=(5.6, 3.8))
@@ -454,9 +458,9 @@ def arrival_times_figure(ds, max_curves: int = MAX_CURVES):
     ax.set_xlabel("x (mm)" if metres else "x / L")
     ax.set_ylabel("t_a - first arrival (ms)")
     with_front = int((ok & arrived).sum())
-    reason = _no_front_reason(ds, ok) if not candidates.size else ""
+    reason, unknown = _no_front_reason(ds, ok) if not candidates.size else ("", False)
     shown = (f"{candidates.size} of the {plural(with_front, 'ok member')} with a front" if candidates.size
-             else "no ok member with a known front" if "is known" in reason else "no ok member with a front")
+             else "no ok member with a known front" if unknown else "no ok member with a front")
     met = f"; \u25bd where two fronts meet: {meetings}" if meetings else ""
     ax.set_title(f"{_front_name(ds)} arrival times ({shown}{_status_text(ds, ok)}{met})", fontsize=10)
     ax.grid(alpha=0.3)

@@ -147,7 +147,8 @@ def run_chunk(job: ChunkJob) -> dict:
 
 def _worker_device_for(device: str | None, what: str) -> str:
     """The device this worker runs ``what`` on: ``device``, or its own (worker_device); RunError where a
-    GPU is asked for and this worker has none (one line, told by the command for each chunk)."""
+    GPU is asked for that this worker does not have (none at all, or not that one: a worker of
+    dask-cuda sees its own GPU only, as cuda:0), one line, told by the command for each chunk."""
     device = device or worker_device()
     if device.startswith("cuda"):
         import warp as wp
@@ -155,6 +156,10 @@ def _worker_device_for(device: str | None, what: str) -> str:
         wp.init()
         if wp.get_cuda_device_count() == 0:
             raise RunError(f"{what}: device {device} asked for, but this worker (pid {os.getpid()}) has no CUDA device")
+        names = [str(d) for d in wp.get_cuda_devices()]
+        if device != "cuda" and device not in names:
+            raise RunError(f"{what}: device {device} asked for, but this worker (pid {os.getpid()}) has "
+                           f"{', '.join(names)} only")
     return device
 
 

@@ -179,6 +179,9 @@ def design_outputs(ds, outputs=("mu_s",), on_failure: str = "refuse", log: bool 
             with np.errstate(divide="ignore", invalid="ignore"):
                 Y = np.where(Y > 0, np.log(Y), np.nan)
         bad = (status != 0) | ~np.isfinite(Y)
+        if bad.all():  # nothing to fill from: the mean of no member is NaN, and SALib gave zeros for it
+            raise ValueError(f"output {out!r}: all {rows} members failed or lack it; the design needs the output "
+                             "in its rows (--on-failure fill-mean fills from the members that have it)")
         if bad.any():
             if on_failure == "refuse":
                 idx = np.flatnonzero(bad)

@@ -18,8 +18,8 @@ from .device import check_device, init_warp
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
 from .parameters import (CONTACT_WITHOUT_GATE, DETACHMENT_NOT_OVER, DISC_BEFORE_FULL_LOAD, ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, MEMBERS_NOT_OK,
-                         INT32_MAX, MEMBERS_NOT_OK_HINT, PARAMETERS_UNUSED, RECORD_PAST_END, Fronts, Model, Parameters,
-                         Record, Solver, check_fronts_method, check_precision, parameter_long_name, parameter_units)
+                         MEMBER_NUMBER_LIMIT, MEMBERS_NOT_OK_HINT, PARAMETERS_UNUSED, RECORD_PAST_END, Fronts, Model,
+                         Parameters, Record, Solver, check_fronts_method, check_precision, parameter_long_name, parameter_units)
 
 
 def simulate(
@@ -103,9 +103,9 @@ def simulate(
     if record is not None and not isinstance(record, Record):
         raise ValueError(f"record: expected a warpfric.Record or None, got {type(record).__name__}")
     if isinstance(member_offset, bool) or not isinstance(member_offset, (int, np.integer)) or not (
-        0 <= member_offset < 2**31 - 2**24
+        0 <= member_offset < MEMBER_NUMBER_LIMIT
     ):
-        raise ValueError(f"member_offset = {member_offset!r} is invalid; valid: an integer in [0, {2**31 - 2**24})")
+        raise ValueError(f"member_offset = {member_offset!r} is invalid; valid: an integer in [0, {MEMBER_NUMBER_LIMIT})")
     member_offset = int(member_offset)  # a numpy integer's own width overflowed in the worker split (np.int8(126) + 4)
     check_fronts_method(fronts, solver)
     if fronts is not None and "contact" in fronts.events and model.relaxation_gate != "stress":
@@ -123,9 +123,9 @@ def simulate(
                          "check compares with (nodes + 1)//2 nodes")
     values, varying = resolve_members(members, scene)
     n_members = values["normal_force"].shape[0]
-    if member_offset + n_members - 1 > INT32_MAX:  # the member numbers are int32 (as a file holds them)
-        raise ValueError(f"member_offset = {member_offset} is invalid for {n_members} members: their numbers would "
-                         f"pass {INT32_MAX} (int32); valid: an integer in [0, {INT32_MAX + 1 - n_members}]")
+    if member_offset > MEMBER_NUMBER_LIMIT - n_members:  # as a sweep's check_member_offset
+        raise ValueError(f"member_offset = {member_offset} is invalid for {n_members} members; valid: an integer in "
+                         f"[0, {MEMBER_NUMBER_LIMIT - n_members}] (member numbers are int32, below {MEMBER_NUMBER_LIMIT})")
     unused = model.unused_parameters(values)
     if unused:  # set, and silently without effect
         warnings.warn(f"{PARAMETERS_UNUSED}: {', '.join(unused)}; they differ from the default scene but change "

@@ -35,15 +35,15 @@ from pathlib import Path
 import numpy as np
 
 from .members import resolve_members
-from .parameters import (PARAMETER_NAMES, RECORD_COUNT, Fronts, Model, Parameters, Record, Solver, check_fronts_method,
-                         check_precision, did_you_mean, parameter_range_text, parameter_units, units_text, validate_value)
+from .parameters import (MEMBER_NUMBER_LIMIT, PARAMETER_NAMES, RECORD_COUNT, Fronts, Model, Parameters, Record, Solver,
+                         check_fronts_method, check_precision, did_you_mean, parameter_range_text, parameter_units,
+                         units_text, validate_value)
 from .progress import machine_memory_bytes, plural
 
 TOP_KEYS = ("title", "description", "scene", "model", "solver", "fronts", "record", "grid", "zip", "sample", "design",
             "run")
 RUN_KEYS = {"chunk": int, "device": str, "final_fields": bool, "member_offset": int, "scheduler": str,
             "workers": int}
-MEMBER_NUMBER_LIMIT = 2**31 - 2**24  # member numbers are int32 (simulate's member_offset bound)
 MEMBERS_NEEDED = ("a sweep file needs members: a [grid], [zip], [sample] or [design] table, or a [scene] table "
                   "(even an empty one) to run that scene as one member")
 DISTRIBUTIONS = {"uniform": ("low", "high"), "normal": ("mean", "std"), "loguniform": ("low", "high")}
