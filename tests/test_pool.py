@@ -300,3 +300,25 @@ def test_more_workers_than_cores_are_started_with_a_warning(monkeypatch):
         warnings.simplefilter("error")
         assert pool.plan(2, "cpu", 8, solver, None, None) == 2
         assert pool.plan(3, "cpu", 2, solver, None, None) == 2  # no more workers than members
+
+
+def test_member_blocks_on_the_cpu_equal_one_launch_bit_for_bit(monkeypatch, capsys):
+    """On the CPU the thread kernel runs the members in blocks of CPU_MEMBER_BLOCK (32), one after the
+    other: arrays laid out member fastest put a member's nodes a whole ensemble apart, and 2,048
+    members at N = 41 took 20.6 s in one launch against 8.5 s in blocks (docs/performance.md, "CPU").
+    70 members (blocks of 32, 32, 6): fronts, a recording of members in three blocks in an order of
+    their own, a member offset and the grid check give one launch's outputs bit for bit, and one
+    progress line for the ensemble."""
+    simulate_module = sys.modules["warpfric.simulate"]  # (warpfric.simulate is also the function)
+    n = 70
+    members = {"eccentricity": np.linspace(-0.2, 0.2, n), "normal_force": np.geomspace(300.0, 3000.0, n)}
+    kw = dict(solver=wf.Solver(nodes=21, rtol=1e-4), fronts=wf.Fronts(grid_check=True), device="cpu", workers=1,
+              record=wf.Record.window(20.2, 20.26, 5, members=(69, 0, 40)), member_offset=7)
+    assert simulate_module.CPU_MEMBER_BLOCK == 32
+    blocked = wf.simulate(members, progress="blocks", **kw)
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("warpfric blocks: 70 members"), err  # one line, not one a block
+    monkeypatch.setattr(simulate_module, "CPU_MEMBER_BLOCK", 10**9)
+    one = wf.simulate(members, progress=False, **kw)
+    assert (one.status.values == 0).all() and list(blocked.recorded_member.values) == [76, 7, 47]
+    assert_same(one, blocked)

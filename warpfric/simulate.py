@@ -57,7 +57,8 @@ def simulate(
               an ensemble large enough to pay (one core: >= ~2.5 s, pool.MIN_CPU_SECONDS), else this process; 1: this process;
               an integer: that many (more than the cores: started, with a warning that they share
               the cores). Outputs equal one process's bit for bit, except which members the
-              straggler rule stops (warpfric/pool.py).
+              straggler rule stops (warpfric/pool.py). A process runs a CPU ensemble in blocks of
+              CPU_MEMBER_BLOCK members, one after the other (faster: the caches hold a block).
 
     Returns an ``xarray.Dataset`` with dims ``member`` and ``x`` (node position, m): every input
     parameter along ``member``; ``mu_s``, ``mu_s_time`` (s), ``status`` (flag values, see its
@@ -149,6 +150,82 @@ def simulate(
         warn_detachment_not_over(ds)
         _warn_members_not_ok(ds, solver)
         return _short_long_names(ds)
+    if _in_member_blocks(device, solver, values["normal_force"].shape[0]):
+        ds = _run_member_blocks(values, varying, scene, model, solver, fronts, record, device, progress, member_offset)
+    else:
+        ds = _run_members(values, varying, scene, model, solver, fronts, record, device, progress, member_offset)
+    if record is not None:
+        _warn_record_past_end(ds, record, member_offset)
+    warn_detachment_not_over(ds)
+    _warn_members_not_ok(ds, solver)
+    return _short_long_names(ds)
+
+
+# on the CPU the thread kernel runs its members one after the other over arrays laid out member
+# fastest (for a GPU's coalesced loads), a few attempts a member per launch where the ensemble is big
+# (progress.launch_steps): each launch goes through every member's data again, and past a few dozen
+# members it leaves the caches. Blocks of this many members, run one after the other, keep it there:
+# on this project's CPU 2,048 members at N = 41 in 8.3 s against 21.1 s in one launch, 512 at N = 100
+# 4.6 against 8.8 s, 256 at N = 200 4.8 against 7.9 s (`python studies/cpu_member_blocks.py`; blocks
+# of 16-64 alike), outputs bit for bit those of one launch but for which members the straggler rule
+# stops, as in the worker processes' chunks (docs/performance.md, "CPU")
+CPU_MEMBER_BLOCK = 32
+
+
+def _in_member_blocks(device, solver: Solver, n_members: int) -> bool:
+    """Whether this process runs the members in blocks of CPU_MEMBER_BLOCK: the CPU's thread kernel
+    (a team runs its blocks on Warp's fibers), more members than one block."""
+    return str(device).startswith("cpu") and solver.lanes in (None, 1) and n_members > CPU_MEMBER_BLOCK
+
+
+def _run_member_blocks(values, varying, scene, model, solver, fronts, record, device, progress, member_offset):
+    """_run_members on blocks of CPU_MEMBER_BLOCK members one after the other, joined as the worker
+    processes' chunks are (pool.join): one progress line for the ensemble, each block's warnings
+    once (the ensemble's own are the caller's)."""
+    from . import pool
+    from . import progress as progress_module
+
+    t0 = time.perf_counter()
+    n = values["normal_force"].shape[0]
+    bounds = [(start, min(start + CPU_MEMBER_BLOCK, n)) for start in range(0, n, CPU_MEMBER_BLOCK)]
+    show = sys.stderr.isatty() if progress is None else bool(progress)
+    line = progress_module.Line(n, progress if isinstance(progress, str) else "") if show else None
+    parts, chosen, caught_all = [], [], []
+    saved_sink = progress_module.SINK
+    try:
+        for start, stop in bounds:
+            if line is not None:  # the block's engine reports its fraction here, not on a line of its own
+                progress_module.SINK = (lambda fraction, done, final, start=start, size=stop - start:
+                                        line.show((start + fraction * size) / n, start + done))
+            block_record, block_chosen = pool._chunk_record(record, start, stop)  # noqa: SLF001 - as pool.run splits it
+            with warnings.catch_warnings(record=True) as caught:
+                warnings.simplefilter("always")
+                part = _run_members({name: v[start:stop] for name, v in values.items()}, varying, scene, model, solver,
+                                    fronts, block_record, device, show, member_offset + start)
+            parts.append(part)
+            chosen.append(block_chosen)
+            caught_all += [(m, c) for m, c in pool.warning_pairs(caught) if not m.startswith(ENSEMBLE_WARNINGS)]
+    except BaseException:
+        if line is not None:
+            line.stop()
+        raise
+    finally:
+        progress_module.SINK = saved_sink
+    ds = pool.join(parts, chosen, _x_coordinate(values["length"], solver.nodes), _varying_parameters(values, varying))
+    build = sum(float(p.attrs.get("kernel_build_time_s", 0.0)) for p in parts)
+    ds.attrs["kernel_build_time_s"] = build
+    ds.attrs["wall_time_s"] = max(time.perf_counter() - t0 - build, 0.0)
+    orders = {p.attrs.get("member_order", "given") for p in parts}
+    ds.attrs["member_order"] = orders.pop() if len(orders) == 1 else "mixed"
+    if line is not None:
+        line.close()
+    pool.warn_once(caught_all, stacklevel=4)
+    return ds
+
+
+def _run_members(values, varying, scene, model, solver, fronts, record, device, progress, member_offset):
+    """The members of ``values`` (resolved) in this process: the engine's run, its outputs as the
+    Dataset, the float32 fallback and the grid check; simulate gives the ensemble's warnings."""
     from warpfric.kernels.types import STATUS_MEANINGS
 
     from . import engine
@@ -195,13 +272,9 @@ def simulate(
         _add_record(ds, record, result.record, ds.x, member_offset)
     if solver.dtype == "float32" and solver.float32_fallback:
         _rerun_failed_in_float64(ds, values, scene, model, solver, fronts, record, device)
-    if record is not None:
-        _warn_record_past_end(ds, record, member_offset)
     if fronts is not None and fronts.grid_check:
         _add_grid_check(ds, values, scene, model, solver, fronts, device, progress)
-    warn_detachment_not_over(ds)
-    _warn_members_not_ok(ds, solver)
-    return _short_long_names(ds)
+    return ds
 
 
 LONG_NAME_MAX = 60  # characters: xarray labels a plot's axis with long_name [units], in lines of 30
