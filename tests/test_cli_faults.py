@@ -203,7 +203,8 @@ def test_a_full_disk_in_a_chunk_exits_3_and_keeps_the_finished_chunks(tmp_path, 
     assert code == 3
     _error_line(err, "disk full while writing", "chunk-000001.nc", "0 bytes free", "its partial file removed",
                 "the 1 finished chunk is kept", "free some space, then", "--resume")
-    assert _files(tmp_path) == ["s.nc.parts", "s.nc.parts/chunk-000000.nc", "s.nc.parts/manifest.json", "s.toml"]
+    assert _files(tmp_path) == ["s.nc.parts", "s.nc.parts/chunk-000000.nc", "s.nc.parts/manifest.json",
+                                "s.nc.parts/sweep.toml", "s.toml"]
     monkeypatch.undo()
     code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE, "--quiet")
     assert code == 0, err
@@ -568,9 +569,18 @@ def test_resume_with_other_settings_names_the_one_that_differs(tmp_path, sweep, 
     _error_line(err, "belongs to a run with another chunk size (1, now 2); resume with the interrupted run's settings")
     code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--member-offset", 5, "--device", DEVICE)
     _error_line(err, "another member offset (0, now 5)")
-    sweep.write_text(sweep.read_text().replace("nodes = 11", "nodes = 13"))
+    original = sweep.read_text()
+    sweep.write_text(original.replace("nodes = 11", "nodes = 13"))
     code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
-    _error_line(err, "another sweep file (its text changed)")
+    # a comment edited was enough, and the user was left with --overwrite (the finished chunks lost):
+    # the run's text is kept in the parts folder, and the message says how to put it back
+    kept = tmp_path / "s.nc.parts" / "sweep.toml"
+    _error_line(err, f"another sweep file (its text changed); resume with the interrupted run's settings (the "
+                     f"interrupted run's sweep file is kept as '{kept}': `cp {kept} {sweep}` puts it back)")
+    assert kept.read_text() == original
+    sweep.write_text(kept.read_text())
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
+    assert code == 0 and out.exists() and not kept.exists(), err
 
 
 def test_a_parts_folder_without_a_manifest(tmp_path, sweep, capsys):
@@ -790,7 +800,7 @@ def test_a_full_disk_on_a_dask_worker_exits_3_and_keeps_the_finished_chunks(tmp_
     _error_line(err, "disk full while writing", "chunk-000001.nc", "the 2 finished chunks are kept",
                 "free some space, then", "--resume")
     assert _files(tmp_path) == ["s.nc.parts", "s.nc.parts/chunk-000000.nc", "s.nc.parts/chunk-000002.nc",
-                                "s.nc.parts/manifest.json", "s.toml"]
+                                "s.nc.parts/manifest.json", "s.nc.parts/sweep.toml", "s.toml"]
     monkeypatch.undo()
     code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--resume", "--device", DEVICE, "--quiet")
     assert code == 0, err

@@ -270,7 +270,7 @@ def test_info_on_netcdf_that_is_not_an_ensemble_and_on_a_folder(tmp_path, capsys
     code, _, err = run_cli(capsys, "info", tmp_path / "other.nc")
     assert code == 2
     one_line_error(err, "not a warpfric ensemble", "another program")
-    xr.Dataset({"a": ("x", [1.0, 2.0])}, attrs={"warpfric_version": "0"}).to_netcdf(tmp_path / "cut.nc")
+    xr.Dataset({"a": ("member", [1.0, 2.0])}, attrs={"warpfric_version": "0"}).to_netcdf(tmp_path / "cut.nc")
     code, _, err = run_cli(capsys, "info", tmp_path / "cut.nc")
     assert code == 2
     one_line_error(err, "not a complete warpfric ensemble")

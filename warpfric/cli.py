@@ -168,9 +168,12 @@ def _print_member(ds, solver: Solver) -> None:
                   f"{float(m.first_front_end) * 1e3:.1f} mm, v_first = {_fmt(m.v_first, 'm/s', '.3g')} "
                   f"{_grid_error(m, 'v_first')}".rstrip() + "; its segments:")
         width = 14 if "v_middle_grid_error" in m else 10  # the '+- 0.69 m/s' column
+        nucleation = float(m.nucleation_position)
         for seg in ("left", "middle", "right"):
             start, end = float(m[f"{seg}_front_start"]), float(m[f"{seg}_front_end"])
             where = f"x = {start * 1e3:.1f} .. {end * 1e3:.1f} mm" if np.isfinite(start) else "absent"
+            if int(m.nucleation_edge) == 0 and start < nucleation < end:  # both branches, from the nucleation out
+                where += ": holds the nucleation point (its speed: the spreading from it, not a propagation speed)"
             print(f"  v_{seg:<6} = {_fmt(m[f'v_{seg}'], 'm/s', '.3g'):>10} {_grid_error(m, f'v_{seg}'):<{width}} {where}")
         if two:
             print(f"  v_second = {_fmt(m.v_second, 'm/s', '.3g'):>10} {_grid_error(m, 'v_second'):<{width}} "

@@ -754,6 +754,12 @@ def _read(path) -> xr.Dataset:
     try:
         with xr.open_dataset(path, engine="netcdf4") as ds:
             ds = ds.load()
+        if "member" not in ds.dims and ("warpfric_version" in ds.attrs or COMPLETE_ATTR in ds.attrs):
+            # e.g. a by_parameters grid saved with to_netcdf: warpfric's attributes, no members
+            dims = ", ".join(f"{name} ({size})" for name, size in ds.sizes.items()) or "none"
+            raise _NotAnEnsemble(f"{path}: no dimension member (its dimensions: {dims}), so not an ensemble file as "
+                                 "write_ensemble writes one; a by_parameters grid saved with to_netcdf opens with "
+                                 "xr.open_dataset")
         recorded = None
         if _has_group(path, RECORDED_GROUP):
             with xr.open_dataset(path, engine="netcdf4", group=RECORDED_GROUP) as rec:
@@ -768,9 +774,15 @@ def _read(path) -> xr.Dataset:
                 units="s", long_name="time at which the detachment was over: unknown (the file was written by a "
                 "warpfric without this output, whose front outputs were given whatever ended the run)")
         return ds
+    except _NotAnEnsemble:
+        raise
     except (OSError, ValueError, RuntimeError) as err:
         reason = " ".join(str(err).split())
         raise ValueError(f"{path}: not a readable netCDF file ({reason})") from None
+
+
+class _NotAnEnsemble(ValueError):
+    """A readable netCDF file that is no ensemble (_read)."""
 
 
 def resume_command(store, path) -> str:

@@ -65,6 +65,9 @@ class ChunkJob:
     parent_pid: int | None = None
 
 
+SWEEP_COPY = "sweep.toml"  # in OUT.nc.parts/: the sweep file's text the run started with
+
+
 def _members(start: int, stop: int) -> str:
     """The members of a chunk, as a person reads them: 'members 0..1199', 'member 7'."""
     return f"members {start}..{stop - 1}" if stop - start != 1 else f"member {start}"
@@ -550,8 +553,11 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         differ = ([f"chunk size ({previous.chunk}, now {chunk})"] if chunk != previous.chunk else []) + (
             [f"member offset ({previous.member_offset}, now {offset})"] if offset != previous.member_offset else [])
         what = " and ".join(differ) or "sweep file (its text changed)"
+        kept = parts / SWEEP_COPY
+        back = (f" (the interrupted run's sweep file is kept as {str(kept)!r}: `cp {shlex.quote(str(kept))} "
+                f"{shlex.quote(str(sweep_file))}` puts it back)" if not differ and kept.exists() else "")
         raise RunError(f"{str(parts)!r} belongs to a run with another {what}; resume with the interrupted run's "
-                       "settings, or run with --overwrite to start again")
+                       f"settings{back}, or run with --overwrite to start again")
     # the chunk files and the combined file exist side by side until the parts are removed; a resumed
     # run's finished chunks are on the disk already
     done = sum(previous.members(i).stop - previous.members(i).start for i in range(previous.n_chunks)
@@ -584,6 +590,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
                 store = ChunkStore.create(parts, digest, sweep.n_members, chunk, member_offset=offset,
                                           sweep_file=str(Path(sweep_file).resolve()), device=device,
                                           run_id=new_run_id())
+                (parts / SWEEP_COPY).write_text(sweep.text)  # the text --resume needs, should the file change
             except OSError as err:
                 shutil.rmtree(parts, ignore_errors=True)
                 raise write_failure(parts, err, free_bytes(out.parent)) from None
