@@ -254,3 +254,14 @@ def test_an_output_no_member_has_is_refused_also_when_filling():
     ds["y"].values[:] = np.nan
     with pytest.raises(ValueError, match=r"output 'y': all 160 members failed or lack it"):
         analyse(ds, ("y",), on_failure="fill-mean")
+
+
+def test_a_misspelt_output_and_values_the_log_cannot_take_are_named():
+    """An output typo (mu_S) listed 70 names without the closest; --log over an output with values
+    <= 0 said the ok members 'failed or lack it' (a user's study)."""
+    ds = ishigami_dataset(n=16)
+    with pytest.raises(ValueError, match=r"output 'Y' is not a per-member variable of the file \(did you mean 'y'\?\)"):
+        analyse(ds, ("Y",))
+    with pytest.raises(ValueError, match=r"output 'y': \d+ of 160 members failed or lack it \(members .*; \d+ of them "
+                                         r"ok with a value <= 0, which the log \(--log\) cannot take\)"):
+        analyse(ds, ("y",), log=True)  # the Ishigami function takes negative values

@@ -159,8 +159,10 @@ def did_you_mean(name, names) -> str:
     """" (did you mean 'x'?)" with the closest of ``names`` to ``name``, or "" where none is close."""
     import difflib
 
-    close = difflib.get_close_matches(str(name), list(names), n=1)
-    return f" (did you mean {close[0]!r}?)" if close else ""
+    names = list(names)
+    by_lower = {str(n).lower(): n for n in reversed(names)}  # a name's case alone wrong (mu_S) is close too
+    close = difflib.get_close_matches(str(name).lower(), list(by_lower), n=1)
+    return f" (did you mean {by_lower[close[0]]!r}?)" if close else ""
 
 
 def unknown_parameter(name: str) -> str:

@@ -29,7 +29,7 @@ import math
 
 import numpy as np
 
-from .parameters import PARAMETER_NAMES
+from .parameters import PARAMETER_NAMES, did_you_mean
 
 METHODS = ("saltelli", "morris", "latin")
 DESIGN_ATTR = "sensitivity_design"
@@ -151,7 +151,8 @@ def check_outputs(ds, outputs) -> None:
             candidates = [v for v in ds.data_vars if is_output(v)]
             what = ("an input parameter" if out in inputs else "a flag variable" if out in ds and is_flag(out)
                     else "not a per-member variable of the file")
-            raise ValueError(f"output {out!r} is {what}; available: {', '.join(candidates)}")
+            hint = did_you_mean(out, candidates) if out not in ds else ""  # a misspelt name: the closest output
+            raise ValueError(f"output {out!r} is {what}{hint}; available: {', '.join(candidates)}")
 
 
 def design_outputs(ds, outputs=("mu_s",), on_failure: str = "refuse", log: bool = False):
@@ -178,6 +179,7 @@ def design_outputs(ds, outputs=("mu_s",), on_failure: str = "refuse", log: bool 
         if log:
             with np.errstate(divide="ignore", invalid="ignore"):
                 Y = np.where(Y > 0, np.log(Y), np.nan)
+        not_positive = log & np.isfinite(ds[out].values) & (status == 0) & ~np.isfinite(Y)  # values <= 0 under log
         bad = (status != 0) | ~np.isfinite(Y)
         if bad.all():  # nothing to fill from: the mean of no member is NaN, and SALib gave zeros for it
             raise ValueError(f"output {out!r}: all {rows} members failed or lack it; the design needs the output "
@@ -185,9 +187,11 @@ def design_outputs(ds, outputs=("mu_s",), on_failure: str = "refuse", log: bool 
         if bad.any():
             if on_failure == "refuse":
                 idx = np.flatnonzero(bad)
+                why = (f"; {int(not_positive.sum())} of them ok with a value <= 0, which the log (--log) cannot take"
+                       if not_positive.any() else "")
                 raise ValueError(f"output {out!r}: {bad.sum()} of {rows} members failed or lack it (members "
-                                 f"{', '.join(map(str, idx[:10]))}{' ...' if idx.size > 10 else ''}); the design needs "
-                                 "every row: pass --on-failure fill-mean to replace them by the mean")
+                                 f"{', '.join(map(str, idx[:10]))}{' ...' if idx.size > 10 else ''}{why}); the design "
+                                 "needs every row: pass --on-failure fill-mean to replace them by the mean")
             Y = np.where(bad, Y[~bad].mean(), Y)
         if np.all(Y == Y[0]):  # no variance: every index would be 0/0
             filled_text = f" once the {bad.sum()} of {rows} that failed are filled with the mean" if bad.any() else ""
