@@ -111,3 +111,10 @@ def test_help_of_simulate_names_every_output():
     missing = [v for v in list(ds.data_vars) + list(ds.coords) if v not in PARAMETER_NAMES and not any(
         p.match(v) or (v.startswith(prefixes) and p.match(v.split("_", 1)[1])) for p in patterns)]
     assert missing == [], missing
+
+
+def test_a_record_of_many_times_prints_their_count_and_range():
+    """print(Record.detachment(...)) dumped 1,001 floats (a user's study)."""
+    assert repr(wf.Record.window(20.0, 20.3, 1001, members=(2,))) == \
+        "Record(members=(2,), times=<1001 times from 20 to 20.3 s>)"
+    assert repr(wf.Record(members=(0,), times=(20.1, 20.2))) == "Record(members=(0,), times=(20.1, 20.2))"

@@ -620,6 +620,11 @@ class Record:
     members: tuple = (0,)
     times: tuple = ()
 
+    def __repr__(self) -> str:  # 1,001 times are no reading: their count and range
+        times = self.times
+        shown = f"<{len(times)} times from {times[0]:g} to {times[-1]:g} s>" if len(times) > 3 else repr(times)
+        return f"Record(members={self.members!r}, times={shown})"
+
     @staticmethod
     def window(start: float, stop: float, count: int, members=(0,)) -> "Record":
         """``count`` evenly spaced times from ``start`` to ``stop`` (s), both included."""

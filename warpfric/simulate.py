@@ -74,8 +74,8 @@ def simulate(
     ``arrival_time_error`` (member, x; s), ``nucleation_position`` (m), ``nucleation_edge``,
     ``front_start_time``, ``front_end_time`` (s), ``detached_fraction``; per segment of the first
     front (left, middle, right by position; precursor, main, far from where it starts)
-    ``*_front_start``, ``*_front_end``, ``*_front_length`` (m), ``v_*`` and ``v_*_error`` (m/s; NaN
-    where a segment is absent); the fronts as wholes (``first``, ``second``: ``first_front_start``
+    ``*_front_start``, ``*_front_end`` (m: its smaller and larger x), ``*_front_length`` (m), ``v_*``
+    and ``v_*_error`` (m/s; NaN where a segment is absent); the fronts as wholes (``first``, ``second``: ``first_front_start``
     ... ``v_second_error``), ``front_count``, where and when the first meets another
     (``collision_position`` (m), ``collision_time`` (s)) and where and when a second starts
     (``second_nucleation_position`` (m), ``second_front_start_time`` (s)); each output's
@@ -600,10 +600,12 @@ _SEGMENT_WORDS = {"left": ("the first front's left segment", "the segment at sma
                   "first": ("the first front", "whole: the nodes it reaches before any other front"),
                   "second": ("the second front", "whole: from where it starts to where it meets another front")}
 for _seg, (_short, _definition) in _SEGMENT_WORDS.items():
-    _FRONT_ATTRS[f"{_seg}_front_start"] = ("m", f"start of {_short} of the {{front}}",
-                                           f"its smaller x; {_short[4:]}: {_definition}; {{words}}")
-    _FRONT_ATTRS[f"{_seg}_front_end"] = ("m", f"end of {_short} of the {{front}}",
-                                         f"its larger x; {_short[4:]}: {_definition}; {{words}}")
+    # a position, not where the front starts (nucleation_position): the name's start/end is smaller/larger x
+    _FRONT_ATTRS[f"{_seg}_front_start"] = ("m", f"smaller x of {_short} of the {{front}}",
+                                           f"the name's start: its smaller x, not where it starts; {_short[4:]}: "
+                                           f"{_definition}; {{words}}")
+    _FRONT_ATTRS[f"{_seg}_front_end"] = ("m", f"larger x of {_short} of the {{front}}",
+                                         f"the name's end: its larger x; {_short[4:]}: {_definition}; {{words}}")
     _FRONT_ATTRS[f"{_seg}_front_length"] = ("m", f"length of {_short} of the {{front}}",
                                             f"{_short[4:]}: {_definition}; {{words}}")
     _FRONT_ATTRS[f"v_{_seg}"] = ("m s-1", f"speed of {_short} of the {{front}}",
