@@ -22,6 +22,7 @@ from pathlib import Path
 import warp as wp
 
 import warpfric as wf
+from warpfric.device import init_warp
 
 sys.path.insert(0, str(Path(__file__).parent))
 from bench_engine import members, tree_commit  # noqa: E402
@@ -44,7 +45,7 @@ def timed(member, solver, device, repeat):
 def main(argv=None):
     wp.config.quiet = True
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--devices", nargs="+", default=["cpu"] + (["cuda:0"] if wp.get_cuda_device_count() else []))
+    ap.add_argument("--devices", nargs="+", default=["cpu"] + (["cuda:0"] if init_warp().get_cuda_device_count() else []))
     ap.add_argument("--repeat", type=int, default=10)
     ap.add_argument("--jsonl", default=None)
     args = ap.parse_args(argv)
