@@ -17,6 +17,7 @@ import sys
 import time
 
 import numpy as np
+import warp as wp
 
 import warpfric as wf
 from warpfric.device import init_warp
