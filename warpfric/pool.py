@@ -181,6 +181,12 @@ def warn_once(pairs, stacklevel: int = 1) -> None:
         warnings.warn(message, category, stacklevel=stacklevel + 1)
 
 
+def chunk_warnings(caught) -> list:
+    """A chunk's own warnings (warning_pairs of ``caught``), less ENSEMBLE_WARNINGS, which the caller
+    raises once for the joined ensemble: a worker's chunk, or a CPU block of simulate."""
+    return [(m, c) for m, c in warning_pairs(caught) if not m.startswith(ENSEMBLE_WARNINGS)]
+
+
 def _run_chunk(runner, run_id: int, chunk: int, members: dict, record, member_offset: int, show: bool, common: dict):
     """In a worker: one chunk's Dataset and the warnings it raised ((message, category) each, for the
     parent to raise: a worker's own would print once per worker, with its source line), ``runner``
@@ -190,7 +196,7 @@ def _run_chunk(runner, run_id: int, chunk: int, members: dict, record, member_of
     try:
         with warnings.catch_warnings(record=True) as caught:
             ds = runner(members, record=record, member_offset=member_offset, progress=show, workers=1, **common)
-        return ds, [(m, c) for m, c in warning_pairs(caught) if not m.startswith(ENSEMBLE_WARNINGS)]
+        return ds, chunk_warnings(caught)
     finally:
         progress_module.SINK = None
 
@@ -268,7 +274,7 @@ def shutdown(terminate: bool = False) -> None:
 atexit.register(shutdown)
 
 
-def _chunk_record(record, start: int, stop: int):
+def chunk_record(record, start: int, stop: int):
     """(the Record of the members of [start, stop) at their positions in the chunk, or None; their
     indices in record.members)."""
     if record is None:
@@ -296,7 +302,7 @@ def run(n_workers: int, values: dict, *, scene, model, solver, fronts, record, d
     started_here = pool.ready < n_workers
     run_id = next(_RUN_IDS)
     common = dict(scene=scene, model=model, solver=solver, fronts=fronts, device=device)
-    records = [_chunk_record(record, start, stop) for start, stop in bounds]
+    records = [chunk_record(record, start, stop) for start, stop in bounds]
     fractions, done = np.zeros(len(bounds)), np.zeros(len(bounds), dtype=np.int64)
     try:
         futures = [pool.executor.submit(_run_chunk, runner, run_id, k, {name: v[start:stop] for name, v in values.items()},
@@ -322,8 +328,6 @@ def run(n_workers: int, values: dict, *, scene, model, solver, fronts, record, d
         raise
     parts = [part for part, _ in results]
     ds = join(parts, [chosen for _, chosen in records], x, varying_parameters)
-    orders = {p.attrs.get("member_order", "given") for p in parts}  # each chunk's engine chose its own
-    ds.attrs["member_order"] = orders.pop() if len(orders) == 1 else "mixed"
     build = max(float(p.attrs.get("kernel_build_time_s", 0.0)) for p in parts)
     ds.attrs["kernel_build_time_s"] = build
     ds.attrs["wall_time_s"] = max(time.perf_counter() - t0 - build, 0.0)
@@ -360,7 +364,8 @@ def _read_inbox(pool: _Pool, run_id: int, fractions: np.ndarray, done: np.ndarra
 def join(parts: list, chosen: list, x, varying_parameters: str):
     """The chunks' Datasets as one: every variable along ``member`` concatenated in member order, the
     recorded members in the order of record.members (``chosen``: each chunk's indices there), the
-    ensemble's x coordinate ``x`` and its ``varying_parameters`` attribute."""
+    ensemble's x coordinate ``x``, its ``varying_parameters`` attribute and the chunks' member_order
+    ("mixed" where they differ)."""
     import xarray as xr
 
     recorded = [name for p in parts for name, var in p.variables.items() if "recorded" in var.dims or name == "time"]
@@ -384,4 +389,6 @@ def join(parts: list, chosen: list, x, varying_parameters: str):
                 ds[name] = var
         ds = ds[list(first.data_vars)]  # the variables in one process's order
     ds.attrs["varying_parameters"] = varying_parameters
+    orders = {p.attrs.get("member_order", "given") for p in parts}  # each chunk's engine chose its own
+    ds.attrs["member_order"] = orders.pop() if len(orders) == 1 else "mixed"
     return ds

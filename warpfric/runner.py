@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from .parameters import DETACHMENT_NOT_OVER, MEMBERS_NOT_OK
-from .pool import cpu_cores, warn_once, warning_pairs
+from .pool import chunk_record, cpu_cores, warn_once, warning_pairs
 from .progress import (SizeWarning, check_memory, front_passes, member_range, plural, seconds_text,
                        size_warning)
 
@@ -116,7 +116,7 @@ def run_chunk(job: ChunkJob) -> dict:
     sweep = parse_sweep(job.sweep_text, job.sweep_name)
     device = _worker_device_for(job.device, _chunk_label(job))
     sl = slice(job.start, job.stop)
-    record = chunk_record(sweep.record, sl)
+    record, _ = chunk_record(sweep.record, sl.start, sl.stop)
     label = _chunk_label(job) if job.progress else False
     collect = job.parent_pid is not None and job.parent_pid != os.getpid()  # not a thread of the parent
     with warnings.catch_warnings(record=True) if collect else contextlib.nullcontext() as caught:
@@ -185,16 +185,6 @@ def prepare_worker(sweep_text: str, sweep_name: str, device: str | None) -> dict
                  solver=dc.replace(sweep.solver, max_steps=2, float32_fallback=False), fronts=fronts, device=device,
                  progress=False, workers=1)
     return dict(device=device, pid=os.getpid(), seconds=time.perf_counter() - t0)
-
-
-def chunk_record(record, sl: slice):
-    """The Record of the members of ``sl`` that the sweep records (indices within the chunk), or None."""
-    from .parameters import Record
-
-    if record is None:
-        return None
-    members = tuple(i - sl.start for i in record.members if sl.start <= i < sl.stop)
-    return Record(members=members, times=record.times) if members else None
 
 
 @dataclasses.dataclass

@@ -133,27 +133,23 @@ def simulate(
                       "nothing in this model", stacklevel=2)
     if np.any(values["rest_until"] < values["force_ramp_time"]):  # allowed, but rarely meant
         warnings.warn(DISC_BEFORE_FULL_LOAD, stacklevel=2)
-    device = check_device(device, values["normal_force"].shape[0])
+    device = check_device(device, n_members)
     from . import pool  # a CPU ensemble large enough to pay: its members split over worker processes
 
     from .progress import end_time_attempts
 
-    n_workers = pool.plan(workers, device, values["normal_force"].shape[0], solver, fronts, record, model,
+    n_workers = pool.plan(workers, device, n_members, solver, fronts, record, model,
                           end_time_attempts(values["end_time"], values["rest_until"]))
     if n_workers > 1:
         ds = pool.run(n_workers, values, scene=scene, model=model, solver=solver, fronts=fronts,
                       record=record, device=device, progress=progress, member_offset=member_offset,
                       runner=simulate, x=_x_coordinate(values["length"], solver.nodes),
                       varying_parameters=_varying_parameters(values, varying))
-        if record is not None:  # once for the ensemble (the workers' own are dropped)
-            _warn_record_past_end(ds, record, member_offset)
-        warn_detachment_not_over(ds)
-        _warn_members_not_ok(ds, solver)
-        return _short_long_names(ds)
-    if _in_member_blocks(device, solver, values["normal_force"].shape[0]):
+    elif _in_member_blocks(device, solver, n_members):
         ds = _run_member_blocks(values, varying, scene, model, solver, fronts, record, device, progress, member_offset)
     else:
         ds = _run_members(values, varying, scene, model, solver, fronts, record, device, progress, member_offset)
+    # the ensemble's warnings, once (those of the workers' chunks and of the blocks are dropped)
     if record is not None:
         _warn_record_past_end(ds, record, member_offset)
     warn_detachment_not_over(ds)
@@ -197,14 +193,14 @@ def _run_member_blocks(values, varying, scene, model, solver, fronts, record, de
             if line is not None:  # the block's engine reports its fraction here, not on a line of its own
                 progress_module.SINK = (lambda fraction, done, final, start=start, size=stop - start:
                                         line.show((start + fraction * size) / n, start + done))
-            block_record, block_chosen = pool._chunk_record(record, start, stop)  # noqa: SLF001 - as pool.run splits it
+            block_record, block_chosen = pool.chunk_record(record, start, stop)
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
                 part = _run_members({name: v[start:stop] for name, v in values.items()}, varying, scene, model, solver,
                                     fronts, block_record, device, show, member_offset + start)
             parts.append(part)
             chosen.append(block_chosen)
-            caught_all += [(m, c) for m, c in pool.warning_pairs(caught) if not m.startswith(ENSEMBLE_WARNINGS)]
+            caught_all += pool.chunk_warnings(caught)
     except BaseException:
         if line is not None:
             line.stop()
@@ -215,8 +211,6 @@ def _run_member_blocks(values, varying, scene, model, solver, fronts, record, de
     build = sum(float(p.attrs.get("kernel_build_time_s", 0.0)) for p in parts)
     ds.attrs["kernel_build_time_s"] = build
     ds.attrs["wall_time_s"] = max(time.perf_counter() - t0 - build, 0.0)
-    orders = {p.attrs.get("member_order", "given") for p in parts}
-    ds.attrs["member_order"] = orders.pop() if len(orders) == 1 else "mixed"
     if line is not None:
         line.close()
     pool.warn_once(caught_all, stacklevel=4)
