@@ -253,3 +253,82 @@ def test_a_sweep_file_s_record_window_counts_as_the_command_line_does(tmp_path):
     sweep.write_text("[record]\nstart = 20.1\n[grid]\neccentricity = [0.0, 0.1]\n")
     with pytest.raises(SweepError, match="missing key 'stop'.*default 1001"):
         load_sweep(sweep)
+
+
+def test_a_sweep_file_s_detachment_window(tmp_path):
+    """[record] window = "detachment" takes the default count, keeps a count given, and is refused
+    beside times or start/stop and with another window; the times come from the run (a chunk given
+    none is refused, not run without them)."""
+    import warpfric.runner as runner
+    from warpfric.parameters import RECORD_COUNT
+    from warpfric.sweep_file import RecordDetachment, SweepError, load_sweep
+
+    sweep = tmp_path / "s.toml"
+    grid = "[grid]\neccentricity = [0.0, 0.1]\n"
+    sweep.write_text('[record]\nmembers = [1]\nwindow = "detachment"\n' + grid)
+    assert load_sweep(sweep).record == RecordDetachment(members=(1,), count=RECORD_COUNT)
+    sweep.write_text('[record]\nwindow = "detachment"\ncount = 7\n' + grid)
+    assert load_sweep(sweep).record == RecordDetachment(members=(0,), count=7)
+    for table, words in (('window = "peak"', "window = 'peak': expected \"detachment\""),
+                         ('window = "detachment"\nstart = 20.1\nstop = 20.3', "not two of them"),
+                         ('window = "detachment"\ntimes = [20.1]', "not two of them"),
+                         ('window = "detachment"\ncount = 1', "'count' = 1 is invalid"),
+                         ('window = "detachment"\nmembers = [0, 0]', "repeated indices")):
+        sweep.write_text(f"[record]\n{table}\n" + grid)
+        with pytest.raises(SweepError, match=words.replace("(", r"\(").replace("'", "'")):
+            load_sweep(sweep)
+    sweep.write_text('[record]\nwindow = "detachment"\n' + grid)
+    with pytest.raises(runner.RunError, match="found by the sweep's run"):
+        runner.sweep_record(load_sweep(sweep), None)
+
+
+@pytest.mark.filterwarnings("ignore:Record. recording times after a member's end")  # member 4 ends first
+def test_a_sweep_records_its_members_detachment_and_resumes_with_the_same_times(tmp_path, capsys, monkeypatch):
+    """A sweep file could record only at times it gave (start and stop): finding the detachment took a
+    run of its own. With window = "detachment" the run finds it by a first run of the recorded members
+    alone; the window is Record.detachment's over those members run by themselves, the fields are
+    those of a run recording at those times, and an interrupted run's --resume takes the times from
+    its manifest (no first run again, the same times in every chunk)."""
+    import importlib
+    import json
+
+    import warpfric.runner as runner
+
+    simulate_module = importlib.import_module("warpfric.simulate")  # (warpfric.simulate is also the function)
+
+    sweep = tmp_path / "s.toml"
+    sweep.write_text("[solver]\nnodes = 21\n[grid]\neccentricity = [-0.2, 0.0, 0.2]\nnormal_force = [500.0, 2000.0]\n"
+                     '[record]\nmembers = [1, 4]\nwindow = "detachment"\ncount = 11\n')
+    solver = wf.Solver(nodes=21)
+    alone = wf.simulate({"eccentricity": [-0.2, 0.2], "normal_force": [2000.0, 500.0]}, solver=solver,
+                        device=DEVICE, progress=False)  # members 1 and 4 (grid order: force fastest)
+    times = wf.Record.detachment(alone, count=11).times
+    assert times[0] < min(float(alone.mu_s_time[0]), float(alone.mu_s_time[1])) and times[-1] == max(alone.final_time)
+    real, chunks = simulate_module.simulate, []
+
+    def interrupted(*args, **kwargs):  # Ctrl-C in the second chunk
+        if "member_offset" in kwargs:
+            chunks.append(kwargs["member_offset"])
+            if len(chunks) == 2:
+                raise KeyboardInterrupt
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(simulate_module, "simulate", interrupted)
+    out = tmp_path / "s.nc"
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--chunk", 4, "--device", DEVICE)
+    monkeypatch.setattr(simulate_module, "simulate", real)
+    assert code == 130, err
+    assert [line for line in err if "recording the fields" in line] == [
+        f"warpfric: recording the fields at 11 times from {times[0]:.6g} to {times[-1]:.6g} s, the detachment found "
+        "by the first run"]
+    manifest = json.loads((tmp_path / "s.nc.parts" / "manifest.json").read_text())
+    assert manifest["record_times"] == list(times)
+    monkeypatch.setattr(runner, "find_record_times", lambda *a, **k: pytest.fail("found the times again"))
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
+    assert code == 0, err
+    ds = open_ensemble(out)
+    direct = wf.simulate({"eccentricity": [[-0.2], [0.0], [0.2]], "normal_force": [500.0, 2000.0]}, solver=solver,
+                         record=wf.Record(members=(1, 4), times=times), device=DEVICE, progress=False)
+    assert list(ds.recorded_member.values) == [1, 4] and tuple(ds.time.values) == times
+    for name in ("mu_s", "velocity_history", "friction_coefficient_history"):
+        np.testing.assert_array_equal(ds[name].values, direct[name].values, err_msg=name)

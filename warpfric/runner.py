@@ -60,6 +60,9 @@ class ChunkJob:
     cpu_workers: int | None = None  # simulate(workers=...): CPU worker processes for this chunk
     run_id: str | None = None  # the run's id in the member labels (warpfric.io.member_labels)
     started: str | None = None  # when the run started (warpfric.io.history_time): the chunk's history line
+    # [record] window = "detachment": the recording times the run found (find_record_times), the same
+    # for every chunk; None where the sweep's [record] gives its times itself
+    record_times: tuple | None = None
     # set by run_on_client: a chunk run in another process returns its warnings in the report, for
     # that process to raise each once (a worker's own would print once per worker, with its source line)
     parent_pid: int | None = None
@@ -116,7 +119,7 @@ def run_chunk(job: ChunkJob) -> dict:
     sweep = parse_sweep(job.sweep_text, job.sweep_name)
     device = _worker_device_for(job.device, _chunk_label(job))
     sl = slice(job.start, job.stop)
-    record, _ = chunk_record(sweep.record, sl.start, sl.stop)
+    record, _ = chunk_record(sweep_record(sweep, job.record_times), sl.start, sl.stop)
     label = _chunk_label(job) if job.progress else False
     collect = job.parent_pid is not None and job.parent_pid != os.getpid()  # not a thread of the parent
     with warnings.catch_warnings(record=True) if collect else contextlib.nullcontext() as caught:
@@ -164,6 +167,45 @@ def _worker_device_for(device: str | None, what: str) -> str:
             raise RunError(f"{what}: device {device} asked for, but this worker (pid {os.getpid()}) has "
                            f"{', '.join(names)} only")
     return device
+
+
+def sweep_record(sweep, record_times):
+    """The sweep's Record: its [record] table's own, or for ``window = "detachment"`` its members at
+    ``record_times`` (s; found by find_record_times). None without [record]."""
+    from .sweep_file import RecordDetachment
+
+    if not isinstance(sweep.record, RecordDetachment):
+        return sweep.record
+    if record_times is None:  # a caller that skipped find_record_times: no times to make up
+        raise RunError("[record] window = \"detachment\": the recording times are found by the sweep's run "
+                       "(warpfric run SWEEP.toml, warpfric.sweep.run), not given to this chunk")
+    return sweep.record.with_times(record_times)
+
+
+def find_record_times(sweep, device: str | None, quiet: bool) -> tuple:
+    """The recording times of ``[record] window = "detachment"``: a first run of the recorded members
+    alone (in this process, on ``device``; None: this host's choice for so few members), then
+    Record.detachment over them, as ``warpfric run --record`` does for one scene. A member's outputs
+    do not depend on the others run with it, so the window is the one a run of the whole sweep would
+    show for them."""
+    from .parameters import Record, detachment_start
+    from .simulate import simulate
+
+    chosen = list(sweep.record.members)
+    values = {name: column[chosen] for name, column in sweep.members.items()} or None
+    fronts = dataclasses.replace(sweep.fronts, grid_check=False) if sweep.fronts is not None else None
+    what = f"recorded {plural(len(chosen), 'member')} ({', '.join(map(str, chosen[:8]))}{', ...' if len(chosen) > 8 else ''})"
+    _say(f"finding the detachment of the {what}: a first run of them alone", quiet)
+    with warnings.catch_warnings():  # their chunks give these members' warnings
+        warnings.simplefilter("ignore")
+        found = simulate(values, scene=sweep.scene, model=sweep.model, solver=sweep.solver, fronts=fronts,
+                         device=device, progress=False if quiet else "first run", workers=1)
+    times = Record.detachment(found, count=sweep.record.count).times
+    seen = any(detachment_start(found, k) is not None for k in range(found.sizes["member"]))
+    _say(f"recording the fields at {len(times)} times from {times[0]:.6g} to {times[-1]:.6g} s, "
+         + ("the detachment found by the first run" if seen else
+            "the disc's start to the end: the first run found no detachment"), quiet)
+    return times
 
 
 def prepare_worker(sweep_text: str, sweep_name: str, device: str | None) -> dict:
@@ -441,10 +483,10 @@ def sweep_bytes(sweep, n_members: int, files: int = 1) -> int:
     from .io import estimate_bytes
 
     record = sweep.record
+    times = 0 if record is None else getattr(record, "count", None) or len(record.times)
     return estimate_bytes(n_members, sweep.solver.nodes, final_fields=sweep.run.get("final_fields", True),
                           front_events=len(sweep.fronts.events) if sweep.fronts is not None else 0,
-                          recorded=len(record.members) if record else 0, times=len(record.times) if record else 0,
-                          files=files)
+                          recorded=len(record.members) if record else 0, times=times, files=files)
 
 
 def run_sweep(sweep_file, output=None, *, chunk: int | None = None, member_offset: int | None = None,
@@ -500,7 +542,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
     from .io import (ChunkStore, ChunksDoNotCombine, OutputWriteError, free_bytes, history_time, new_run_id, parts_dir,
                      sweep_digest, write_failure)
     from .device import check_device
-    from .sweep_file import check_member_offset
+    from .sweep_file import RecordDetachment, check_member_offset
 
     parts = parts_dir(out)
     previous = ChunkStore.load(parts) if resume and parts.exists() else None
@@ -565,6 +607,12 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
     # cores where it runs here
     size_warning(sweep.n_members - done, sweep.solver, front_passes(sweep.fronts), device or "cuda",
                  1 if use_cluster else (cpu_workers or cpu_cores()))
+    # [record] window = "detachment": the interrupted run's times, else a first run of the recorded
+    # members, before any file (a Ctrl-C there leaves nothing) and kept in the manifest for --resume
+    record_times = None
+    if isinstance(sweep.record, RecordDetachment):
+        kept = previous.manifest.get("record_times") if previous is not None else None
+        record_times = tuple(kept) if kept else find_record_times(sweep, None if use_cluster else device, quiet)
     own_client = None
     if use_cluster and client is None:  # before any file: an unreachable scheduler leaves nothing behind
         own_client = local_cluster(workers) if new_local_cluster else connect(where)
@@ -579,14 +627,15 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
             try:
                 store = ChunkStore.create(parts, digest, sweep.n_members, chunk, member_offset=offset,
                                           sweep_file=str(Path(sweep_file).resolve()), device=device,
-                                          run_id=new_run_id())
+                                          run_id=new_run_id(),
+                                          **({"record_times": list(record_times)} if record_times else {}))
                 (parts / SWEEP_COPY).write_text(sweep.text)  # the text --resume needs, should the file change
             except OSError as err:
                 shutil.rmtree(parts, ignore_errors=True)
                 raise write_failure(parts, err, free_bytes(out.parent)) from None
         started = history_time()  # this run's history line, in its chunks and in the file that combines them
         reports, errors, wall = _run_chunks(sweep, sweep_file, store, chunk, offset, device, client, quiet, command,
-                                            cpu_workers, started)
+                                            cpu_workers, started, record_times)
         missing = [i for i in range(store.n_chunks) if not store.is_done(i)]
         if errors or missing:
             ranges = ", ".join(_members(offset + store.members(i).start, offset + store.members(i).stop) for i in missing)
@@ -697,7 +746,8 @@ def _warn_members_not_ok_kept(store, kept: list, solver, out: Path) -> None:
                       "the run", stacklevel=2)
 
 
-def _run_chunks(sweep, sweep_file, store, chunk, offset, device, client, quiet, command, cpu_workers, started):
+def _run_chunks(sweep, sweep_file, store, chunk, offset, device, client, quiet, command, cpu_workers, started,
+                record_times=None):
     """Run the chunks that ``store`` lacks (here or on ``client``): (reports, errors, wall seconds)."""
     todo = [i for i in range(store.n_chunks) if not store.is_done(i)]
     place = "this process, device " + str(device)
@@ -730,7 +780,7 @@ def _run_chunks(sweep, sweep_file, store, chunk, offset, device, client, quiet, 
                      start=store.members(i).start, stop=store.members(i).stop, member_offset=offset,
                      path=str(store.chunk_path(i).resolve()), device=device, command=command,
                      progress=not quiet and client is None, cpu_workers=cpu_workers,
-                     run_id=store.manifest.get("run_id"), started=started)
+                     run_id=store.manifest.get("run_id"), started=started, record_times=record_times)
             for i in todo]
     reports, errors = run_local(jobs) if client is None else run_on_client(jobs, client, quiet)
     return reports, errors, time.perf_counter() - t0

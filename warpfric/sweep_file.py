@@ -7,7 +7,8 @@ A sweep file (examples in studies/sweeps/, reference in docs/sweeps.md)::
     [model]   tilt = true ...                           # Model switches
     [solver]  nodes = 100, rtol = 1e-5 ...              # Solver settings
     [fronts]  threshold = 0.4 ...                       # Fronts settings; `fronts = false` skips them
-    [record]  members = [0], start = 20.0, stop = 20.6, count = 121   # or times = [...]
+    [record]  members = [0], start = 20.0, stop = 20.6, count = 121   # or times = [...], or
+              window = "detachment"                 # the recorded members' detachment (a first run)
     [grid]    eccentricity = [-0.2, 0.0, 0.2]           # full grid; or {start, stop, num, spacing}
     [zip]     a = [...], b = [...]                      # zipped lists of one length
     [sample]  n = 1000, seed = 1, viscous_coefficient = {distribution = "uniform", low = 0, high = 2.7e13}
@@ -55,6 +56,22 @@ class SweepError(ValueError):
 
 
 @dataclass(frozen=True)
+class RecordDetachment:
+    """``[record] window = "detachment"``: record ``members`` (indices in the sweep) at ``count``
+    evenly spaced times over their detachment. The times are not in the file: a sweep run finds them
+    by a first run of these members (``Record.detachment``, as ``warpfric run --record`` alone does),
+    keeps them in its chunks' manifest for ``--resume`` and gives every chunk the same
+    (warpfric.runner)."""
+
+    members: tuple
+    count: int
+
+    def with_times(self, times) -> Record:
+        """The Record of these members at ``times`` (s)."""
+        return Record(members=self.members, times=tuple(times))
+
+
+@dataclass(frozen=True)
 class Sweep:
     text: str  # the file's text (stored in the output's attributes)
     title: str
@@ -62,7 +79,7 @@ class Sweep:
     model: Model
     solver: Solver
     fronts: Fronts | None
-    record: Record | None
+    record: Record | RecordDetachment | None  # RecordDetachment: times found by the run (warpfric.runner)
     members: dict  # name -> (M,) float64, only the swept parameters
     varying: tuple
     run: dict
@@ -352,14 +369,29 @@ def check_member_offset(offset: int, n_members: int, where: str) -> int:
     return offset
 
 
-def _record(spec: dict) -> Record:
-    keys = ("members", "times", "start", "stop", "count")
+def _record(spec: dict) -> Record | RecordDetachment:
+    keys = ("members", "times", "start", "stop", "count", "window")
     for key in spec:
         if key not in keys:
             raise SweepError(f"unknown key [record] {key}{_accepted(key, keys)}")
     members = spec.get("members", [0])
     if not isinstance(members, list) or not all(isinstance(i, int) and not isinstance(i, bool) for i in members):
         raise SweepError(f"[record] members = {members!r}: expected a list of member indices")
+    count = spec.get("count", RECORD_COUNT)  # as --record START STOP [COUNT]
+    if "count" in spec and (isinstance(count, bool) or not isinstance(count, int)):
+        raise SweepError(f"[record] count = {count!r}: expected an integer >= 2")
+    if "window" in spec:
+        window = spec["window"]
+        if window != "detachment":
+            raise SweepError(f"[record] window = {window!r}: expected \"detachment\" (the recorded members' detachment, "
+                             "found by a first run), or give start and stop (s) instead")
+        if any(k in spec for k in ("times", "start", "stop")):
+            raise SweepError("[record]: give either window = \"detachment\", times, or start/stop/count, not two of them")
+        try:  # the members and the count checked now, as a Record of one placeholder time would
+            Record.window(0.0, 1.0, count, members=tuple(members))
+        except ValueError as err:
+            raise SweepError(f"[record] {err}") from None
+        return RecordDetachment(members=tuple(members), count=int(count))
     if "times" in spec:
         if any(k in spec for k in ("start", "stop", "count")):
             raise SweepError("[record]: give either times or start/stop/count, not both")
@@ -367,11 +399,8 @@ def _record(spec: dict) -> Record:
         return Record(members=tuple(members), times=tuple(times))
     for key in ("start", "stop"):
         if key not in spec:
-            raise SweepError(f"[record]: missing key {key!r} (give times = [...] or start, stop and optionally "
-                             f"count, default {RECORD_COUNT})")
-    count = spec.get("count", RECORD_COUNT)  # as --record START STOP [COUNT]
-    if isinstance(count, bool) or not isinstance(count, int):
-        raise SweepError(f"[record] count = {count!r}: expected an integer >= 2")
+            raise SweepError(f"[record]: missing key {key!r} (give times = [...], start, stop and optionally "
+                             f"count, default {RECORD_COUNT}, or window = \"detachment\")")
     return Record.window(_number(spec["start"], "[record] start"), _number(spec["stop"], "[record] stop"), count,
                          members=tuple(members))
 
