@@ -282,7 +282,7 @@ def test_a_sweep_file_s_detachment_window(tmp_path):
         runner.sweep_record(load_sweep(sweep), None)
 
 
-@pytest.mark.filterwarnings("ignore:Record. recording times after a member's end")  # member 4 ends first
+@pytest.mark.filterwarnings("ignore:Record. recording times after a member's end")  # direct: member 4 ends first
 def test_a_sweep_records_its_members_detachment_and_resumes_with_the_same_times(tmp_path, capsys, monkeypatch):
     """A sweep file could record only at times it gave (start and stop): finding the detachment took a
     run of its own. With window = "detachment" the run finds it by a first run of the recorded members
@@ -318,17 +318,52 @@ def test_a_sweep_records_its_members_detachment_and_resumes_with_the_same_times(
     code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--chunk", 4, "--device", DEVICE)
     monkeypatch.setattr(simulate_module, "simulate", real)
     assert code == 130, err
-    assert [line for line in err if "recording the fields" in line] == [
+    assert [line for line in err if line.startswith("warpfric: ") and ("recording the fields" in line or "first run" in line)] == [
+        f"warpfric: finding the detachment of the recorded 2 members (1, 4): a first run of them alone on {DEVICE}",
         f"warpfric: recording the fields at 11 times from {times[0]:.6g} to {times[-1]:.6g} s, the detachment found "
-        "by the first run"]
+        "by the first run; member 4 ends before the window does: NaN after its end"]
+    assert not any("Record: recording times after a member's end" in line for line in err)  # said once, above
     manifest = json.loads((tmp_path / "s.nc.parts" / "manifest.json").read_text())
     assert manifest["record_times"] == list(times)
     monkeypatch.setattr(runner, "find_record_times", lambda *a, **k: pytest.fail("found the times again"))
     code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
     assert code == 0, err
+    assert f"warpfric: recording the fields at 11 times from {times[0]:.6g} to {times[-1]:.6g} s, the interrupted " \
+           "run's detachment window" in err
     ds = open_ensemble(out)
     direct = wf.simulate({"eccentricity": [[-0.2], [0.0], [0.2]], "normal_force": [500.0, 2000.0]}, solver=solver,
                          record=wf.Record(members=(1, 4), times=times), device=DEVICE, progress=False)
     assert list(ds.recorded_member.values) == [1, 4] and tuple(ds.time.values) == times
     for name in ("mu_s", "velocity_history", "friction_coefficient_history"):
         np.testing.assert_array_equal(ds[name].values, direct[name].values, err_msg=name)
+
+
+def test_the_detachment_window_is_found_with_a_front_that_starts_before_the_peak(tmp_path, capsys):
+    """Without fronts (`fronts = false`, --front-event off) the first run had the mu_s peak alone, and
+    the window (from half the time from there to the end before it) missed the contact front, which
+    crosses ~0.1 s earlier: the first run looks for the contact front under the stress gate and for
+    the strength front under the other laws, whatever the run reports. Members not ok are named, the
+    recorded members are in ascending order whatever --chunk, and the member numbers carry the offset."""
+    from warpfric.parameters import detachment_fronts
+
+    assert detachment_fronts(wf.Model()).events == ("contact",)
+    assert detachment_fronts(wf.Model(relaxation_gate="none")).events == ("strength",)
+    sweep = tmp_path / "s.toml"
+    sweep.write_text("fronts = false\n[solver]\nnodes = 21\n[zip]\neccentricity = [0.0, 0.1, 0.0]\n"
+                     "disc_velocity = [1e-4, 1e-4, 0.0]\n"  # member 2: a disc that never moves, no detachment
+                     '[record]\nmembers = [2, 0]\nwindow = "detachment"\ncount = 5\n')
+    alone = run({"eccentricity": [0.0]}, nodes=21, rtol=1e-5, fronts=wf.Fronts())
+    front = float(alone.front_start_time[0])
+    assert front < float(alone.mu_s_time[0]) - 0.05  # the contact front runs well before the peak
+    for chunk in (1, 3):
+        out = tmp_path / f"c{chunk}.nc"
+        code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--chunk", chunk, "--device", DEVICE,
+                               "--member-offset", 100)
+        assert code == 1, err  # member 102 ends no_peak
+        line = next(line for line in err if "recording the fields" in line)
+        assert line.endswith("the detachment found by the first run; not ok there, so not in the window: member "
+                             "102 (no_peak)"), line
+        ds = open_ensemble(out)
+        assert list(ds.recorded_member.values) == [100, 102]
+        t = ds.time.values
+        assert t[0] == pytest.approx(front - 0.5 * (float(alone.final_time[0]) - front), abs=1e-9) and t[0] < front

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
 import difflib
 import re
 import shlex
@@ -39,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from .parameters import (MAX_RECORD_TIMES, MEMBERS_NOT_OK_HINT, RECORD_COUNT, RELAXATION_GATES, Fronts, Model,
-                         Parameters, Record, Solver, detachment_start, units_text)
+                         Parameters, Record, Solver, detachment_fronts, detachment_start, units_text)
 from .progress import member_range, plural as _plural, seconds_text as _seconds
 
 
@@ -241,8 +240,7 @@ def _run_default(args) -> int:
             run = dict(scene=scene, model=model, solver=solver, device=args.device, progress=not args.quiet,
                        member_offset=offset, workers=args.cpu_workers)
             if args.record is not None and record is None:  # --record alone: find the detachment first
-                found = simulate(fronts=None if fronts is None else dataclasses.replace(fronts, grid_check=False),
-                                 **run)
+                found = simulate(fronts=detachment_fronts(model), **run)
                 record = Record.detachment(found, member_offset=offset)
                 what = ("the detachment found by a first run" if detachment_start(found, 0) is not None else
                         "the disc's start to the end: a first run found no detachment (status "

@@ -706,6 +706,15 @@ class Record:
         object.__setattr__(self, "times", tuple(float(t) for t in times))
 
 
+def detachment_fronts(model: Model) -> Fronts:
+    """The front event a first run finds a detachment window with (``Record.detachment``, ``warpfric
+    run --record``, a sweep's ``[record] window = "detachment"``), whatever fronts the run itself
+    reports: the contact front under the stress gate, the strength front under the other laws (they
+    have no gate to open). Both are located in one pass, and both start before the mu_s peak, where
+    the velocity front starts after it and a run without fronts has the peak alone."""
+    return Fronts(event="contact" if model.relaxation_gate == "stress" else "strength")
+
+
 def detachment_start(ds, position: int) -> float | None:
     """The detachment's start of the member at ``position`` (an index along ``ds.member``) in the
     outputs ``ds`` of a run: the earlier of its first front's start and its mu_s peak (s), where

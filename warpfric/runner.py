@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .parameters import DETACHMENT_NOT_OVER, MEMBERS_NOT_OK
+from .parameters import DETACHMENT_NOT_OVER, MEMBERS_NOT_OK, RECORD_PAST_END
 from .pool import chunk_record, cpu_cores, warn_once, warning_pairs
 from .progress import (SizeWarning, check_memory, front_passes, member_range, plural, seconds_text,
                        size_warning)
@@ -127,6 +127,9 @@ def run_chunk(job: ChunkJob) -> dict:
             warnings.filterwarnings("ignore", category=SizeWarning)  # said once by run_sweep
             warnings.filterwarnings("ignore", message=re.escape(MEMBERS_NOT_OK))
             warnings.filterwarnings("ignore", message=re.escape(DETACHMENT_NOT_OVER))
+            if job.record_times is not None:  # the detachment window: said by find_record_times, and
+                # the warning's advice (a later end_time) would move the window, not fill it
+                warnings.filterwarnings("ignore", message=re.escape(RECORD_PAST_END))
             ds = simulate(sweep.member_slice(sl) or None, scene=sweep.scene, model=sweep.model, solver=sweep.solver,
                           fronts=sweep.fronts, record=record, device=device, progress=label,
                           member_offset=job.member_offset + job.start, workers=job.cpu_workers)
@@ -182,30 +185,49 @@ def sweep_record(sweep, record_times):
     return sweep.record.with_times(record_times)
 
 
-def find_record_times(sweep, device: str | None, quiet: bool) -> tuple:
+def find_record_times(sweep, device: str | None, offset: int, quiet: bool) -> tuple:
     """The recording times of ``[record] window = "detachment"``: a first run of the recorded members
-    alone (in this process, on ``device``; None: this host's choice for so few members), then
-    Record.detachment over them, as ``warpfric run --record`` does for one scene. A member's outputs
-    do not depend on the others run with it, so the window is the one a run of the whole sweep would
-    show for them."""
-    from .parameters import Record, detachment_start
+    alone (in this process, on ``device``; None: this host's choice for so few members), with the
+    front of ``detachment_fronts``, then Record.detachment over them, as ``warpfric run --record``
+    does for one scene. It says where it ran, the window, the recorded members that are not ok in
+    it (they widen the window neither way) and those that end before the window does (their times
+    after their own end are NaN). A member's outputs do not depend on the members run with it, but
+    for the straggler rule (Solver.stall_factor), which compares a member with them: a member can
+    stall in its chunk and not alone, and its times after that end are NaN."""
+    from .device import check_device
+    from .parameters import Record, detachment_fronts
     from .simulate import simulate
 
     chosen = list(sweep.record.members)
+    numbers = [offset + m for m in chosen]
     values = {name: column[chosen] for name, column in sweep.members.items()} or None
-    fronts = dataclasses.replace(sweep.fronts, grid_check=False) if sweep.fronts is not None else None
-    what = f"recorded {plural(len(chosen), 'member')} ({', '.join(map(str, chosen[:8]))}{', ...' if len(chosen) > 8 else ''})"
-    _say(f"finding the detachment of the {what}: a first run of them alone", quiet)
+    device = check_device(device, len(chosen))
+    _say(f"finding the detachment of the recorded {plural(len(chosen), 'member')} ({_numbers(numbers)}): a first run of "
+         f"{'them' if len(chosen) > 1 else 'it'} alone on {device}", quiet)
     with warnings.catch_warnings():  # their chunks give these members' warnings
         warnings.simplefilter("ignore")
-        found = simulate(values, scene=sweep.scene, model=sweep.model, solver=sweep.solver, fronts=fronts,
-                         device=device, progress=False if quiet else "first run", workers=1)
+        found = simulate(values, scene=sweep.scene, model=sweep.model, solver=sweep.solver,
+                         fronts=detachment_fronts(sweep.model), device=device, progress=False if quiet else "first run",
+                         workers=1)
     times = Record.detachment(found, count=sweep.record.count).times
-    seen = any(detachment_start(found, k) is not None for k in range(found.sizes["member"]))
-    _say(f"recording the fields at {len(times)} times from {times[0]:.6g} to {times[-1]:.6g} s, "
-         + ("the detachment found by the first run" if seen else
-            "the disc's start to the end: the first run found no detachment"), quiet)
+    meanings = found.status.attrs["flag_meanings"].split()
+    status = found.status.values
+    not_ok = [f"{numbers[k]} ({meanings[int(status[k])]})" for k in range(len(chosen)) if status[k] != 0]
+    early = [numbers[k] for k in range(len(chosen)) if status[k] == 0 and float(found.final_time[k]) < times[-1]]
+    what = ("the detachment found by the first run" if len(not_ok) < len(chosen) else
+            "the disc's start to the end: the first run found no detachment")
+    one = {True: ("member", "ends", "its"), False: ("members", "end", "their")}
+    notes = ([f"not ok there, so not in the window: {one[len(not_ok) == 1][0]} {_numbers(not_ok)}"] if not_ok else []) + (
+        ["{0} {3} {1} before the window does: NaN after {2} end".format(*one[len(early) == 1], _numbers(early))]
+        if early else [])
+    _say(f"recording the fields at {len(times)} times from {times[0]:.6g} to {times[-1]:.6g} s, {what}"
+         + "".join(f"; {note}" for note in notes), False)
     return times
+
+
+def _numbers(items: list) -> str:
+    """A list of member numbers (or texts) as a person reads it: at most 8, then '...'."""
+    return ", ".join(map(str, items[:8])) + (", ..." if len(items) > 8 else "")
 
 
 def prepare_worker(sweep_text: str, sweep_name: str, device: str | None) -> dict:
@@ -612,7 +634,13 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
     record_times = None
     if isinstance(sweep.record, RecordDetachment):
         kept = previous.manifest.get("record_times") if previous is not None else None
-        record_times = tuple(kept) if kept else find_record_times(sweep, None if use_cluster else device, quiet)
+        if kept:
+            record_times = tuple(kept)
+            _say(f"recording the fields at {len(kept)} times from {kept[0]:.6g} to {kept[-1]:.6g} s, the interrupted "
+                 "run's detachment window", False)
+        else:  # on the device asked for where it is this host's (a --scheduler's workers may have others)
+            here = device if device is not None and (not use_cluster or new_local_cluster) else None
+            record_times = find_record_times(sweep, here, offset, quiet)
     own_client = None
     if use_cluster and client is None:  # before any file: an unreachable scheduler leaves nothing behind
         own_client = local_cluster(workers) if new_local_cluster else connect(where)

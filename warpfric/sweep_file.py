@@ -377,6 +377,9 @@ def _record(spec: dict) -> Record | RecordDetachment:
     members = spec.get("members", [0])
     if not isinstance(members, list) or not all(isinstance(i, int) and not isinstance(i, bool) for i in members):
         raise SweepError(f"[record] members = {members!r}: expected a list of member indices")
+    # ascending: the chunks give the combined file its recorded members in their order, so a listed
+    # order would hold only where the members share a chunk (the file's order would depend on --chunk)
+    members = sorted(members)
     count = spec.get("count", RECORD_COUNT)  # as --record START STOP [COUNT]
     if "count" in spec and (isinstance(count, bool) or not isinstance(count, int)):
         raise SweepError(f"[record] count = {count!r}: expected an integer >= 2")
