@@ -460,3 +460,41 @@ def test_a_ctrl_c_while_the_cluster_closes_after_the_file_is_written_keeps_the_r
         pytest.fail("a Ctrl-C while the cluster closed ended a run whose file was written")
     assert made and report.output == tmp_path / "local.nc" and report.failed_members == 0
     _assert_same_outputs(single, tmp_path / "local.nc")
+
+
+def test_a_ctrl_c_while_the_local_cluster_starts_is_held_until_it_has_started(tmp_path, monkeypatch):
+    """A terminal's Ctrl-C reaches the workers that the local cluster is still starting: they died
+    mid-import, and ~70 lines of their and distributed's tracebacks came before warpfric's line (or
+    the start raised 'Nanny failed to start', exit 1). The command holds the Ctrl-C until the start
+    has ended, closes the cluster and ends in 'interrupted' (KeyboardInterrupt), also where a worker
+    it hit failed the start; the workers started meanwhile ignore it from their import of warpfric."""
+    import warpfric.runner as runner
+
+    sweep = tmp_path / "s.toml"
+    sweep.write_text(SWEEP)
+    closed = []
+
+    def start(ends):
+        def local_cluster(workers=None):
+            assert os.environ[runner.STARTING_WORKER] == str(os.getpid())  # for the workers it starts
+            os.kill(os.getpid(), signal.SIGINT)  # the Ctrl-C, held: nothing raised here
+            time.sleep(0.05)
+            if ends == "raises":  # a worker the Ctrl-C hit before it ignored it
+                raise RuntimeError("Nanny failed to start.")
+            return "client"
+        return local_cluster
+
+    monkeypatch.setattr(runner, "close_local_cluster", lambda client, interrupted=False: closed.append(client))
+    for ends in ("started", "raises"):
+        monkeypatch.setattr(runner, "local_cluster", start(ends))
+        with pytest.raises(KeyboardInterrupt):
+            run_sweep(sweep, tmp_path / f"{ends}.nc", local=True, quiet=True)
+        assert runner.STARTING_WORKER not in os.environ and not list(tmp_path.glob("*.parts"))
+    assert closed == ["client"]  # the cluster that started is closed; the failed start left none
+    # a process that a warpfric process starts with the variable naming it ignores Ctrl-C once it has
+    # imported warpfric; any other process keeps Python's handler
+    code = "import signal, warpfric; print(signal.getsignal(signal.SIGINT) is signal.SIG_IGN)"
+    for value, ignored in ((str(os.getpid()), "True"), ("1", "False")):
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             env={**os.environ, runner.STARTING_WORKER: value})
+        assert out.stdout.strip() == ignored, (value, out.stderr)

@@ -7,6 +7,14 @@ import sys as _sys
 
 __version__ = "0.1.0"
 
+# A worker process that warpfric's local Dask cluster is starting (warpfric.runner.STARTING_WORKER
+# holds the command's pid): a terminal's Ctrl-C reaches it too, and the command, its parent, stops
+# it; ignored from here on, before the imports below, so that it does not die mid-import
+if _os.environ.get("WARPFRIC_STARTING_CLUSTER_WORKER") == str(_os.getppid()):
+    import signal as _signal
+
+    _signal.signal(_signal.SIGINT, _signal.SIG_IGN)
+
 
 def _attach_kernels():
     """The Warp kernels live in the top-level folder kernels/. An install maps it to

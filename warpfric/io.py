@@ -687,7 +687,7 @@ def sigterm_as_ctrl_c(signum, frame):
 
 
 @contextlib.contextmanager
-def _sigint_held():
+def sigint_held():
     """Ctrl-C (SIGINT), and SIGTERM where the command line turns it into one (sigterm_as_ctrl_c; a
     handler of the user's own is left alone), held back while the block runs; yields a list that
     holds True once one came. A netCDF write cannot be interrupted halfway: a KeyboardInterrupt
@@ -721,13 +721,13 @@ def replace_atomically(path, write, suffix: str = "") -> Path:
     one chunk, a task run twice, never share a file; for an ensemble, remove_stale_temporaries
     finds those that killed writers left), with ``suffix`` after it where the writer needs one (a
     figure's ``.png``). A Ctrl-C during the write is held until the write ends (a netCDF write
-    interrupted halfway could hang: _sigint_held), then raised as KeyboardInterrupt, ``path`` as
+    interrupted halfway could hang: sigint_held), then raised as KeyboardInterrupt, ``path`` as
     it was. Raises OutputWriteError for an I/O error (a full disk, a folder that does not exist)."""
     path = Path(path)
     _require_folder(path)
     tmp = path.with_name(f"{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp{suffix}")
     try:
-        with _sigint_held() as interrupted:
+        with sigint_held() as interrupted:
             write(tmp)
         if interrupted:  # Ctrl-C during the write: raised now, the file not moved into place
             raise KeyboardInterrupt

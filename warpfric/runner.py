@@ -24,6 +24,7 @@ import os
 import re
 import shlex
 import sys
+import threading
 import time
 import warnings
 from pathlib import Path
@@ -366,6 +367,37 @@ def local_cluster(workers: int | None = None):
     return client
 
 
+STARTING_WORKER = "WARPFRIC_STARTING_CLUSTER_WORKER"  # environment: see warpfric/__init__.py
+
+
+@contextlib.contextmanager
+def _ctrl_c_after_start():
+    """A Ctrl-C while a local cluster starts, held until it has started (yields a list that holds
+    True once one came), so that the cluster can be closed. A terminal's Ctrl-C goes to every
+    process of the command, the workers still starting among them, which ignore it only once
+    started (warpfric.cluster_worker): one that landed inside the start left a half-started
+    cluster, and its dying workers and distributed's own exit handler printed ~70 lines of
+    tracebacks. So the workers started meanwhile ignore it from their first import of warpfric on
+    (the environment variable STARTING_WORKER names this process as their parent; the interpreter's
+    own start, tens of ms, stays open), and this process holds it (warpfric.io.sigint_held). Main
+    thread only; elsewhere the block runs as it is."""
+    from .io import sigint_held
+
+    if threading.current_thread() is not threading.main_thread():
+        yield []
+        return
+    before = os.environ.get(STARTING_WORKER)
+    os.environ[STARTING_WORKER] = str(os.getpid())
+    try:
+        with sigint_held() as interrupted:
+            yield interrupted
+    finally:
+        if before is None:
+            os.environ.pop(STARTING_WORKER, None)
+        else:
+            os.environ[STARTING_WORKER] = before
+
+
 def close_local_cluster(client, interrupted: bool = False) -> None:
     """Close ``client`` (from local_cluster), then its cluster. When it returns, every worker process
     has ended (asked to stop, then killed after distributed's close timeout of about 4 s), so no
@@ -643,7 +675,19 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
             record_times = find_record_times(sweep, here, offset, quiet)
     own_client = None
     if use_cluster and client is None:  # before any file: an unreachable scheduler leaves nothing behind
-        own_client = local_cluster(workers) if new_local_cluster else connect(where)
+        if new_local_cluster:
+            with _ctrl_c_after_start() as interrupted:
+                try:
+                    own_client = local_cluster(workers)
+                except Exception:  # noqa: BLE001 - a worker that the Ctrl-C hit before it ignored it
+                    if not interrupted:
+                        raise
+            if interrupted:
+                if own_client is not None:
+                    close_local_cluster(own_client, interrupted=True)
+                raise KeyboardInterrupt
+        else:
+            own_client = connect(where)
         client = own_client
     tornado_log = logging.getLogger("tornado.application")
     if use_cluster:
