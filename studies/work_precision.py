@@ -106,8 +106,11 @@ def run(args):
                     continue
                 with warnings.catch_warnings():  # the short warm-up ends before the peak (no_peak): not news
                     warnings.simplefilter("ignore")
-                    wf.simulate(members={k: v[:1] for k, v in members.items()}, scene=wf.Parameters(end_time=20.01),
-                                model=model, fronts=fronts, solver=solver, device=device)  # compile outside the timing
+                    # compile outside the timing: all the members, since the kernel depends on their count
+                    # (the team size and the block's layout; one member compiled another kernel, and the
+                    # first timed row of each N held a compilation)
+                    wf.simulate(members=members, scene=wf.Parameters(end_time=20.01), model=model, fronts=fronts,
+                                solver=solver, device=device, progress=False)
                 t0 = time.perf_counter()
                 ds = wf.simulate(members, scene=scene, model=model, fronts=fronts, solver=solver, device=device,
                                  progress=False)
@@ -123,6 +126,14 @@ def run(args):
                     v_middle_error=float(np.nanmax(np.abs(ds.v_middle.values / r["v_middle"] - 1))),
                     mean_steps=float((ds.steps_accepted + ds.steps_rejected).mean()),
                 )
+                # the same by scene group: with velocity strengthening (viscous_coefficient > 0) and
+                # without it (under the stress gate a dynamic rupture, whose cost and error differ)
+                viscous = members["viscous_coefficient"] > 0
+                steps = (ds.steps_accepted + ds.steps_rejected).values
+                for group, chosen in (("viscous", viscous), ("inviscid", ~viscous)):
+                    if chosen.any():
+                        row[f"mu_s_error_{group}"] = float(np.nanmax(np.abs(ds.mu_s.values / r["mu_s"] - 1)[chosen]))
+                        row[f"mean_steps_{group}"] = float(steps[chosen].mean())
                 rows.append(row)
                 print(json.dumps(row), flush=True)
     meta = dict(platform=platform.platform(), warpfric=wf.__version__, device=device,
@@ -137,8 +148,12 @@ def run(args):
     table(rows)
 
 
+GROUP_KEYS = ("mu_s_error_viscous", "mu_s_error_inviscid", "mean_steps_viscous", "mean_steps_inviscid")
+
+
 def to_dataset(rows, meta) -> xr.Dataset:
     keys = ("wall_s", "wall_s_per_realisation", "mu_s_error", "mu_s_time_error", "v_middle_error", "mean_steps", "ok")
+    keys += tuple(k for k in GROUP_KEYS if all(k in r for r in rows))  # rows of an earlier log lack them
     dtypes = sorted({r["dtype"] for r in rows})
     nodes = sorted({r["nodes"] for r in rows})
     rtols = sorted({r["rtol"] for r in rows})
@@ -148,7 +163,7 @@ def to_dataset(rows, meta) -> xr.Dataset:
         for key in keys:
             data[key][i, j, k] = r[key]
     units = {"wall_s": "s", "wall_s_per_realisation": "s", "mu_s_error": "1", "mu_s_time_error": "s",
-             "v_middle_error": "1", "mean_steps": "1", "ok": "1"}
+             "v_middle_error": "1", "mean_steps": "1", "ok": "1", **{k: "1" for k in GROUP_KEYS}}
     ds = xr.Dataset({k: (("dtype", "nodes", "rtol"), v, {"units": units[k]}) for k, v in data.items()},
                     coords={"dtype": dtypes, "nodes": nodes, "rtol": rtols})
     ds.attrs.update({k: str(v) for k, v in meta.items()})
@@ -192,7 +207,9 @@ def plot(args):
     outdir.mkdir(parents=True, exist_ok=True)
     for path in args.files:
         ds = xr.load_dataset(path)
-        label = f"{ds.attrs['device']}, {int(ds.attrs['members'])} members"
+        law = (f", relaxation_gate {ds.attrs['relaxation_gate']}, {ds.attrs['front_event']} front"
+               if "relaxation_gate" in ds.attrs else "")
+        label = f"{ds.attrs['device']}, {int(ds.attrs['members'])} members{law}"
         stem = Path(path).stem
         fig, axes = plt.subplots(1, 3, figsize=(13, 4))
         for ax, (q, name) in zip(axes, (("mu_s_error", "mu_s relative error"), ("mu_s_time_error", "mu_s_time error (s)"),

@@ -194,3 +194,22 @@ def test_committed_factorial_holds_the_readme_score_table():
     best = {key: max(r["scores"][key]["passed"] for r in physical) for key in res["passed_by_claim"]}
     assert best == {"contact/spec": 8, "contact/mirrored": 9, "strength/spec": 7, "strength/mirrored": 8,
                     "velocity/spec": 6, "velocity/mirrored": 7}
+
+def test_work_precision_simulates_with_its_reference_s_law():
+    """work_precision.py simulated with the package defaults (the stress gate, the contact front)
+    against whatever reference it was given, the committed gate-less one among them: two laws in one
+    error. It takes the law and the event from the reference: the committed files name theirs (the
+    stress one) or predate the names (the gate-less one: its defaults then)."""
+    import work_precision
+    from warpfric.io import open_ensemble
+
+    root = Path(__file__).resolve().parents[1] / "studies" / "reference"
+    for name, gate, event in (("reference_scenes.nc", "none", "velocity"),
+                              ("reference_scenes_stress.nc", "stress", "contact")):
+        ref = open_ensemble(root / name)
+        model, fronts = work_precision.reference_law(ref)
+        assert (model.relaxation_gate, fronts.events) == (gate, (event,)), name
+        members, idx = work_precision.scene_members(ref, 20)  # 18 scenes tiled
+        assert idx.tolist() == list(range(18)) + [0, 1]
+        np.testing.assert_array_equal(members["eccentricity"][:18], ref.eccentricity.values)
+        assert ref.sizes["member"] == 18 and (ref.viscous_coefficient.values == 0).sum() == 9
