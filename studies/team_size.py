@@ -19,8 +19,8 @@ import numpy as np
 import warpfric as wf
 
 # (nodes, relaxation gate, rtol, end_time, members): the diffrax peers' setting (N = 40, gate-less,
-# to 20.6 s), the cheapest mu_s-only setting of "Work-precision" (N = 25, rtol 1e-4), one member of
-# the default law at N = 40
+# to 20.6 s), the cheapest mu_s-only setting of the gate-less law in "Work-precision" (N = 25, rtol
+# 1e-4; under the default law it is N = 50), one member of the default law at N = 40
 CASES = [
     (40, "none", 1e-5, 20.6, 1), (40, "none", 1e-5, 20.6, 100), (40, "none", 1e-5, 20.6, 10000),
     (25, "none", 1e-4, None, 10000), (25, "stress", 1e-4, None, 10000), (40, "stress", 1e-5, None, 1),

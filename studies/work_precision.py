@@ -96,7 +96,7 @@ def run(args):
                 if dtype == "float32" and rtol < wf.parameters.FLOAT32_MIN_RTOL:
                     continue
                 # stall_factor inf: under the stress gate the scenes without velocity strengthening are a
-                # dynamic rupture (~30x the steps of the others, docs/performance.md "Known limits"); the
+                # dynamic rupture (1.35x-100x the steps of the others, docs/performance.md "Known limits"); the
                 # straggler rule would stop them and the errors would be those of the other half
                 solver = wf.Solver(nodes=nodes, dtype=dtype, rtol=rtol, max_steps=10**6, stall_factor=float("inf"))
                 try:

@@ -493,7 +493,8 @@ def test_a_ctrl_c_while_the_local_cluster_starts_is_held_until_it_has_started(tm
     assert closed == ["client"]  # the cluster that started is closed; the failed start left none
     # a process that a warpfric process starts with the variable naming it ignores Ctrl-C once it has
     # imported warpfric; any other process keeps Python's handler
-    code = "import signal, warpfric; print(signal.getsignal(signal.SIGINT) is signal.SIG_IGN)"
+    code = ("import signal, warpfric; print(signal.getsignal(signal.SIGINT) is signal.SIG_IGN "
+            "and signal.getsignal(signal.SIGTERM) is signal.SIG_IGN)")
     for value, ignored in ((str(os.getpid()), "True"), ("1", "False")):
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                              env={**os.environ, runner.STARTING_WORKER: value})

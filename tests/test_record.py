@@ -330,6 +330,8 @@ def test_a_sweep_records_its_members_detachment_and_resumes_with_the_same_times(
     assert code == 0, err
     assert f"warpfric: recording the fields at 11 times from {times[0]:.6g} to {times[-1]:.6g} s, the interrupted " \
            "run's detachment window" in err
+    # member 4 (ending before the window) runs in this chunk: its NaN tail was said by the first run
+    assert not any("Record: recording times after a member's end" in line for line in err), err
     ds = open_ensemble(out)
     direct = wf.simulate({"eccentricity": [[-0.2], [0.0], [0.2]], "normal_force": [500.0, 2000.0]}, solver=solver,
                          record=wf.Record(members=(1, 4), times=times), device=DEVICE, progress=False)
@@ -348,6 +350,18 @@ def test_the_detachment_window_is_found_with_a_front_that_starts_before_the_peak
 
     assert detachment_fronts(wf.Model()).events == ("contact",)
     assert detachment_fronts(wf.Model(relaxation_gate="none")).events == ("strength",)
+    # the command line's --record alone: its first run too (it had the run's fronts: none here)
+    for law in ("stress", "none"):
+        out = tmp_path / f"one_{law}.nc"
+        code, _, err = run_cli(capsys, "run", "--device", DEVICE, "--nodes", "21", "--quiet", "--front-event", "off",
+                               "--relaxation-gate", law, "-o", out, "--record")
+        assert code == 0, err
+        found = run(nodes=21, rtol=1e-5, fronts=detachment_fronts(wf.Model(relaxation_gate=law)),
+                    model=wf.Model(relaxation_gate=law))
+        start = float(found.front_start_time[0])
+        assert start < float(found.mu_s_time[0]) - 0.01, law  # the front starts well before the peak
+        t = open_ensemble(out).time.values
+        assert t[0] == pytest.approx(start - 0.5 * (float(found.final_time[0]) - start), abs=1e-9), law
     sweep = tmp_path / "s.toml"
     sweep.write_text("fronts = false\n[solver]\nnodes = 21\n[zip]\neccentricity = [0.0, 0.1, 0.0]\n"
                      "disc_velocity = [1e-4, 1e-4, 0.0]\n"  # member 2: a disc that never moves, no detachment

@@ -213,3 +213,29 @@ def test_work_precision_simulates_with_its_reference_s_law():
         assert idx.tolist() == list(range(18)) + [0, 1]
         np.testing.assert_array_equal(members["eccentricity"][:18], ref.eccentricity.values)
         assert ref.sizes["member"] == 18 and (ref.viscous_coefficient.values == 0).sum() == 9
+
+
+def test_work_precision_runs_its_reference_s_law(tmp_path, monkeypatch):
+    """run() itself: every simulate it calls (warm-up and timed) gets the reference's Model and
+    Fronts, and its rows name them (two scenes, N = 11, rtol 1e-3: a fraction of a second)."""
+    import argparse
+
+    import work_precision
+
+    calls = []
+    real = work_precision.wf.simulate
+
+    def simulate(*args, **kwargs):
+        calls.append((kwargs["model"].relaxation_gate, kwargs["fronts"].events))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(work_precision.wf, "simulate", simulate)
+    out = tmp_path / "wp.nc"
+    args = argparse.Namespace(device=DEVICE, members=2, nodes=[11], rtols=[1e-3], dtypes=["float64"],
+                              reference=str(work_precision.REFERENCE), out=str(out), argv=[])
+    work_precision.run(args)
+    assert calls == [("none", ("velocity",))] * 2
+    import json
+    rows = json.loads(out.with_suffix(".json").read_text())["rows"]
+    assert [(r["relaxation_gate"], r["front_event"], r["ok"]) for r in rows] == [("none", "velocity", 2)]
+    assert rows[0]["mean_steps_viscous"] > 0 and rows[0]["mean_steps_inviscid"] > 0

@@ -8,12 +8,15 @@ import sys as _sys
 __version__ = "0.1.0"
 
 # A worker process that warpfric's local Dask cluster is starting (warpfric.runner.STARTING_WORKER
-# holds the command's pid): a terminal's Ctrl-C reaches it too, and the command, its parent, stops
-# it; ignored from here on, before the imports below, so that it does not die mid-import
+# holds the command's pid): a terminal's Ctrl-C, or a batch system's SIGTERM to the job's processes,
+# reaches it too, and the command, its parent, stops it; both ignored from here on, before the
+# imports below, so that it does not die mid-import (warpfric.cluster_worker ignores them once the
+# worker has started)
 if _os.environ.get("WARPFRIC_STARTING_CLUSTER_WORKER") == str(_os.getppid()):
     import signal as _signal
 
     _signal.signal(_signal.SIGINT, _signal.SIG_IGN)
+    _signal.signal(_signal.SIGTERM, _signal.SIG_IGN)
 
 
 def _attach_kernels():

@@ -326,7 +326,8 @@ def _run(args) -> int:
             given = [g for g in given if g[0] != "--grid-check"]  # no fronts: nothing to check on a grid
         keys = ", ".join(["fronts = false (top level)" if (flag, value) == ("--front-event", "off") else
                           f"{key} = {_toml_value(value)}" for flag, key, value in given]
-                         + (["a [record] table of members and times (or start, stop, count)"]
+                         + (["a [record] table of members and times (or start, stop, count; or window = "
+                             "\"detachment\", as --record alone)"]
                             if args.record is not None else []))
         swept = any(key.startswith("[scene]") for _, key, _ in given)
         where = ", or change the values where the file sweeps the parameter" if swept else ""

@@ -372,15 +372,16 @@ STARTING_WORKER = "WARPFRIC_STARTING_CLUSTER_WORKER"  # environment: see warpfri
 
 @contextlib.contextmanager
 def _ctrl_c_after_start():
-    """A Ctrl-C while a local cluster starts, held until it has started (yields a list that holds
-    True once one came), so that the cluster can be closed. A terminal's Ctrl-C goes to every
-    process of the command, the workers still starting among them, which ignore it only once
-    started (warpfric.cluster_worker): one that landed inside the start left a half-started
-    cluster, and its dying workers and distributed's own exit handler printed ~70 lines of
-    tracebacks. So the workers started meanwhile ignore it from their first import of warpfric on
-    (the environment variable STARTING_WORKER names this process as their parent; the interpreter's
-    own start, tens of ms, stays open), and this process holds it (warpfric.io.sigint_held). Main
-    thread only; elsewhere the block runs as it is."""
+    """A Ctrl-C (or the command line's SIGTERM) while a local cluster starts, held until it has
+    started (yields a list that holds True once one came), so that the cluster can be closed. A
+    terminal's Ctrl-C, like a batch system's SIGTERM, goes to every process of the command, the
+    workers still starting among them, which ignore it only once started (warpfric.cluster_worker):
+    one that landed inside the start left a half-started cluster, and its dying workers and
+    distributed's own exit handler printed ~70 lines of tracebacks. So the workers started
+    meanwhile ignore both from their first import of warpfric on (the environment variable
+    STARTING_WORKER names this process as their parent; the interpreter's own start, tens of ms,
+    stays open), and this process holds them (warpfric.io.sigint_held). Main thread only;
+    elsewhere the block runs as it is."""
     from .io import sigint_held
 
     if threading.current_thread() is not threading.main_thread():
