@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from .parameters import (MAX_RECORD_TIMES, MEMBERS_NOT_OK_HINT, RECORD_COUNT, RELAXATION_GATES, Fronts, Model,
-                         Parameters, Record, Solver, detachment_fronts, detachment_start, units_text)
+                         Parameters, Record, Solver, detachment_fronts, detachment_start, recording_text, units_text)
 from .progress import member_range, plural as _plural, seconds_text as _seconds
 
 
@@ -245,8 +245,7 @@ def _run_default(args) -> int:
                 what = ("the detachment found by a first run" if detachment_start(found, 0) is not None else
                         "the disc's start to the end: a first run found no detachment (status "
                         f"{_status_name(found, found.status[0])})")
-                print(f"recording the fields at {len(record.times)} times from {record.times[0]:.6g} to "
-                      f"{record.times[-1]:.6g} s, {what} (a second run records; its outputs are the first's)")
+                print(f"{recording_text(record.times)}, {what} (a second run records; its outputs are the first's)")
             ds = simulate(fronts=fronts, record=record, **run)
             _print_member(ds, solver)
             if output is not None:

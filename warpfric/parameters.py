@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from .progress import first_few
+
 INF = math.inf
 
 
@@ -660,7 +662,7 @@ class Record:
         if isinstance(member_offset, bool) or not isinstance(member_offset, (int, np.integer)) or member_offset < 0:
             raise ValueError(f"Record.detachment: member_offset = {member_offset!r} is invalid; valid: an integer >= 0, "
                              "that of the run to repeat")
-        shown = ", ".join(map(str, numbers_there[:8])) + (", ..." if numbers_there.size > 8 else "")
+        shown = first_few(numbers_there)
         if numbers.size == 0 or numbers.dtype.kind not in "iu" or not np.isin(numbers, numbers_there).all():
             raise ValueError(f"Record.detachment: members = {members!r} is invalid; valid: member numbers of ds "
                              f"({shown})")
@@ -704,6 +706,12 @@ class Record:
                              "non-decreasing times >= 0 (s)")
         object.__setattr__(self, "members", tuple(int(i) for i in members))
         object.__setattr__(self, "times", tuple(float(t) for t in times))
+
+
+def recording_text(times) -> str:
+    """'recording the fields at N times from A to B s': what a run records, as the command line says
+    it before the run (warpfric run --record, a sweep's [record] window = "detachment")."""
+    return f"recording the fields at {len(times)} times from {times[0]:.6g} to {times[-1]:.6g} s"
 
 
 def detachment_fronts(model: Model) -> Fronts:

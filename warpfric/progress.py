@@ -149,6 +149,12 @@ def member_range(n: int, first, last) -> str:
     return f"{n} members (numbers {first}..{last})" if n != 1 else f"1 member (number {first})"
 
 
+def first_few(items, limit: int = 8) -> str:
+    """Member numbers (or any items) as a person reads them: '0, 3, 7', at most ``limit``, then '...'."""
+    items = list(items)
+    return ", ".join(map(str, items[:limit])) + (", ..." if len(items) > limit else "")
+
+
 def seconds_text(value) -> str:
     """A duration in s without its unit: 2 significant digits below 1 s (0.043), else one decimal (12.3)."""
     v = float(value)

@@ -31,9 +31,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .parameters import DETACHMENT_NOT_OVER, MEMBERS_NOT_OK, RECORD_PAST_END
+from .parameters import DETACHMENT_NOT_OVER, MEMBERS_NOT_OK, RECORD_PAST_END, recording_text
 from .pool import chunk_record, cpu_cores, warn_once, warning_pairs
-from .progress import (SizeWarning, check_memory, front_passes, member_range, plural, seconds_text,
+from .progress import (SizeWarning, check_memory, first_few, front_passes, member_range, plural, seconds_text,
                        size_warning)
 
 FINAL_FIELDS = ("displacement", "velocity", "elastic_stress", "contact_age", "normal_stress", "friction_stress")
@@ -203,7 +203,7 @@ def find_record_times(sweep, device: str | None, offset: int, quiet: bool) -> tu
     numbers = [offset + m for m in chosen]
     values = {name: column[chosen] for name, column in sweep.members.items()} or None
     device = check_device(device, len(chosen))
-    _say(f"finding the detachment of the recorded {plural(len(chosen), 'member')} ({_numbers(numbers)}): a first run of "
+    _say(f"finding the detachment of the recorded {plural(len(chosen), 'member')} ({first_few(numbers)}): a first run of "
          f"{'them' if len(chosen) > 1 else 'it'} alone on {device}", quiet)
     with warnings.catch_warnings():  # their chunks give these members' warnings
         warnings.simplefilter("ignore")
@@ -218,17 +218,12 @@ def find_record_times(sweep, device: str | None, offset: int, quiet: bool) -> tu
     what = ("the detachment found by the first run" if len(not_ok) < len(chosen) else
             "the disc's start to the end: the first run found no detachment")
     one = {True: ("member", "ends", "its"), False: ("members", "end", "their")}
-    notes = ([f"not ok there, so not in the window: {one[len(not_ok) == 1][0]} {_numbers(not_ok)}"] if not_ok else []) + (
-        ["{0} {3} {1} before the window does: NaN after {2} end".format(*one[len(early) == 1], _numbers(early))]
+    notes = ([f"not ok there, so not in the window: {one[len(not_ok) == 1][0]} {first_few(not_ok)}"] if not_ok else []) + (
+        ["{0} {3} {1} before the window does: NaN after {2} end".format(*one[len(early) == 1], first_few(early))]
         if early else [])
-    _say(f"recording the fields at {len(times)} times from {times[0]:.6g} to {times[-1]:.6g} s, {what}"
+    _say(f"{recording_text(times)}, {what}"
          + "".join(f"; {note}" for note in notes), False)
     return times
-
-
-def _numbers(items: list) -> str:
-    """A list of member numbers (or texts) as a person reads it: at most 8, then '...'."""
-    return ", ".join(map(str, items[:8])) + (", ..." if len(items) > 8 else "")
 
 
 def prepare_worker(sweep_text: str, sweep_name: str, device: str | None) -> dict:
@@ -669,8 +664,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         kept = previous.manifest.get("record_times") if previous is not None else None
         if kept:
             record_times = tuple(kept)
-            _say(f"recording the fields at {len(kept)} times from {kept[0]:.6g} to {kept[-1]:.6g} s, the interrupted "
-                 "run's detachment window", False)
+            _say(f"{recording_text(kept)}, the interrupted run's detachment window", False)
         else:  # on the device asked for where it is this host's (a --scheduler's workers may have others)
             here = device if device is not None and (not use_cluster or new_local_cluster) else None
             record_times = find_record_times(sweep, here, offset, quiet)

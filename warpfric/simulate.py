@@ -20,6 +20,7 @@ from .fronts import SEGMENT_NAMES
 from .parameters import (CONTACT_WITHOUT_GATE, DETACHMENT_NOT_OVER, DISC_BEFORE_FULL_LOAD, ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, MEMBERS_NOT_OK,
                          MEMBER_NUMBER_LIMIT, MEMBERS_NOT_OK_HINT, PARAMETERS_UNUSED, RECORD_PAST_END, Fronts, Model,
                          Parameters, Record, Solver, check_fronts_method, check_precision, parameter_long_name, parameter_units)
+from .progress import first_few
 
 
 def simulate(
@@ -361,7 +362,7 @@ def warn_detachment_not_over(ds: xr.Dataset, stacklevel: int = 3) -> None:
     parts = []
     for key, which in groups.items():
         if which.any():
-            numbers = ", ".join(map(str, ds.member.values[which][:8])) + (", ..." if which.sum() > 8 else "")
+            numbers = first_few(ds.member.values[which])
             parts.append(f"{int(which.sum())} {texts[key]}: member{'' if which.sum() == 1 else 's'} {numbers}")
     fronts = "; their front outputs are NaN" if "fronts_event" in ds.attrs else ""
     total = int(sum(which.sum() for which in groups.values()))
