@@ -151,26 +151,41 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         barrier()
 
     @wp.func
+    def filter_stiffening(c: Coeffs, s: SolverSettings, n: int, g: ft):
+        """What the velocity error filter's g * diag (kg/m^2) gains so that its elastic part is that
+        of a grid of s.error_filter_nodes nodes where that grid is finer than the member's n nodes:
+        g^2 * 2 M H (1/dx_f^2 - 1/dx^2), dx_f = L / (error_filter_nodes - 1) (m), g = gamma*h (s);
+        0 where the member's grid is as fine or finer, or error_filter_nodes is 0 (docs/model.md,
+        "Time integration": the elastic diagonal 2 M H / dx^2 grows as N^2, and with it how much of
+        the pad's low-mode ringing the filter hides)."""
+        extra = ft(0.0)
+        if s.error_filter_nodes > wp.float64(n):
+            inv_dx_filter = ft((s.error_filter_nodes - wp.float64(1.0)) / wp.float64(c.L))
+            extra = g * g * ft(2.0) * c.MH * (inv_dx_filter * inv_dx_filter - c.inv_dx * c.inv_dx)
+        return extra
+
+    @wp.func
     def fold_error(c: Coeffs, step_end: array3, comp: int, i: int, m: int, e: ft, y: ft, y_new: ft, g: ft, rtol: ft,
-                   top: ft, bottom: ft):
+                   filter_extra: ft, top: ft, bottom: ft):
         """Fold the local error estimate e of component comp at node i (from y to y_new; g = gamma*h)
         into the running maximum top/bottom (ratio_max) of |e| / (rtol*(scale + max(|y|, |y_new|))),
         scale the component's natural scale; the velocity's e filtered by min(1, |rho H / (g *
-        diag)|) (diag: step_end[E_DIAG]; in float64 as |e| rho H / (weight |g diag|) where the
-        filter is below 1, without a quotient); 1e30 where e is not finite. Returns (top, bottom):
-        the sweep's norm is quotient(top, bottom)."""
+        diag + filter_extra)|) (diag: step_end[E_DIAG]; filter_extra: filter_stiffening; in float64
+        as |e| rho H / (weight |g diag + filter_extra|) where the filter is below 1, without a
+        quotient); 1e30 where e is not finite. Returns (top, bottom): the sweep's norm is
+        quotient(top, bottom)."""
         scale = c.u_scale
         num = wp.abs(e)
         den_factor = ft(1.0)
         if comp == C_V:
             scale = c.v_scale
             if wp.static(ft == wp.float64):
-                diag = wp.abs(g * step_end[E_DIAG, i, m])
+                diag = wp.abs(g * step_end[E_DIAG, i, m] + filter_extra)
                 if diag > c.rhoH:
                     num = num * c.rhoH
                     den_factor = diag
             else:
-                num = wp.abs(e * wp.min(ft(1.0), wp.abs(c.rhoH / (g * step_end[E_DIAG, i, m]))))
+                num = wp.abs(e * wp.min(ft(1.0), wp.abs(c.rhoH / (g * step_end[E_DIAG, i, m] + filter_extra))))
         if comp == C_TAU:
             scale = c.tau_scale
         if comp == C_PHI:
@@ -197,6 +212,7 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         vanish for modes that the L-stable scheme damps correctly."""
         g = ft(GAMMA) * h
         rtol = ft(s.rtol)
+        filter_extra = filter_stiffening(c, s, n, g)
         top = ft(0.0)  # the norm so far, top/bottom (fold_error)
         bottom = ft(1.0)
         for i in range(c.first_node, c.end_node):
@@ -217,7 +233,7 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
                     if comp != C_V:
                         work[comp, i, m] = y_new
                     top, bottom = fold_error(c, step_end, comp, i, m, error_increment(h, k1[comp], k2[comp], k3[comp]),
-                                             y[comp], y_new, g, rtol, top, bottom)
+                                             y[comp], y_new, g, rtol, filter_extra, top, bottom)
         return team_max(quotient(top, bottom))
 
     @wp.func
@@ -238,7 +254,8 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
             for comp in range(N_COMPONENTS):
                 state[comp, i, m] = y_new[comp]
 
-    return dict(prepare_stage=prepare_stage, fold_error=fold_error, error_norm=error_norm, advance_state=advance_state)
+    return dict(prepare_stage=prepare_stage, filter_stiffening=filter_stiffening, fold_error=fold_error,
+                error_norm=error_norm, advance_state=advance_state)
 
 
 def make_step_result(ft, newton, gates):
@@ -354,11 +371,12 @@ def make_esdirk(ft, model, terms, newton, gates, team, method="tr_bdf2"):
     out = dict(StepResult=StepResult, prepare_stage=arrays["prepare_stage"], error_norm=arrays["error_norm"],
                advance_state=arrays["advance_state"], implicit_step=steps["implicit_step"], **tableau)
     if method == "esdirk4":
-        out.update(make_esdirk4(ft, model, terms, newton, gates, team, StepResult, arrays["fold_error"]))
+        out.update(make_esdirk4(ft, model, terms, newton, gates, team, StepResult, arrays["filter_stiffening"],
+                                arrays["fold_error"]))
     return out
 
 
-def make_esdirk4_arrays(ft, model, terms, team, fold_error):
+def make_esdirk4_arrays(ft, model, terms, team, filter_stiffening, fold_error):
     """ESDIRK4's tableau applied to every node and component of a member: the stage constants and
     Newton start (prepare_stage4), the error norm (error_norm4) and the solution update
     (advance_state4); e4_row and e4_abscissa read the tableau."""
@@ -415,6 +433,7 @@ def make_esdirk4_arrays(ft, model, terms, team, fold_error):
         (I - gamma*h*J)^-1) with h*sum (b - b_hat) K over the six stages."""
         g = ft(E4_GAMMA) * h
         rtol = ft(s.rtol)
+        filter_extra = filter_stiffening(c, s, n, g)
         b = vec6(ft(E4_B0), ft(E4_B1), ft(E4_B2), ft(E4_B3), ft(E4_B4), ft(E4_B5))
         d = vec6(ft(E4_D0), ft(E4_D1), ft(E4_D2), ft(E4_D3), ft(E4_D4), ft(E4_D5))
         top = ft(0.0)  # the norm so far, top/bottom (fold_error)
@@ -429,7 +448,7 @@ def make_esdirk4_arrays(ft, model, terms, team, fold_error):
                         inc += b[j] * k
                         e += d[j] * k
                     y = state[comp, i, m]
-                    top, bottom = fold_error(c, step_end, comp, i, m, h * e, y, y + h * inc, g, rtol, top, bottom)
+                    top, bottom = fold_error(c, step_end, comp, i, m, h * e, y, y + h * inc, g, rtol, filter_extra, top, bottom)
         return team_max(quotient(top, bottom))
 
     @wp.func
@@ -450,14 +469,14 @@ def make_esdirk4_arrays(ft, model, terms, team, fold_error):
                 advance_state4=advance_state4)
 
 
-def make_esdirk4(ft, model, terms, newton, gates, team, StepResult, fold_error):
+def make_esdirk4(ft, model, terms, newton, gates, team, StepResult, filter_stiffening, fold_error):
     """ESDIRK4(3)6L[2]SA's step (Solver.method = 'esdirk4'): the stages in six slots of K, the slot
     of stage j being (s1 + j) % 6 (s1 = FSAL slot: f(y_n)); the last stage's slot becomes the next
     step's s1."""
     Coeffs = terms["Coeffs"]
     newton_solve = newton["newton_solve"]
     stage_derivatives = newton["stage_derivatives"]
-    arrays = make_esdirk4_arrays(ft, model, terms, team, fold_error)
+    arrays = make_esdirk4_arrays(ft, model, terms, team, filter_stiffening, fold_error)
     e4_abscissa = arrays["e4_abscissa"]
     prepare_stage4 = arrays["prepare_stage4"]
     error_norm4 = arrays["error_norm4"]

@@ -63,6 +63,9 @@ def test_bad_parameters(members, words):
         (dict(max_step=1e-15), ["'min_step' = 1e-14", "'max_step' = 1e-15", "min_step <= max_step"]),
         (dict(step_safety=1.5), ["step_safety", "1.5", "(0, 1)"]),
         (dict(failure_factor=0.0), ["failure_factor", "0.0"]),
+        (dict(error_filter_nodes=2), ["error_filter_nodes", "2", "0 (every grid its own filter)", "[3, 2147483647]"]),
+        (dict(error_filter_nodes=200.5), ["error_filter_nodes", "200.5"]),
+        (dict(error_filter_nodes=None), ["error_filter_nodes", "None"]),
     ],
 )
 def test_bad_solver_settings(kw, words):

@@ -649,7 +649,7 @@ def test_kernel_structs_stay_in_step_with_the_public_parameters():
     assert public - kernel_fields == {"max_end_time"}  # folded into end_time by engine.member_params
     solver = wf.Solver(rtol=1e-4, switch_tol=2.0, initial_step=2e-6, min_step=3e-14, max_step=0.5, newton_tol=0.04,
                        sliding_width=2e-3, max_steps=1234, newton_max_iter=7, step_safety=0.8, step_min_factor=0.3,
-                       step_max_factor=4.0, failure_factor=0.2, predict_switches=False)
+                       step_max_factor=4.0, failure_factor=0.2, predict_switches=False, error_filter_nodes=321)
     settings = solver_settings(solver)
     derived = {"switch_rtol": 2e-4}
     for name in types.SolverSettings.vars:

@@ -270,7 +270,7 @@ def test_the_expected_attempts_follow_an_explicit_end_time():
     """The cost model behind the progress line, workers=None and the size warning counted the
     automatic end only: a run to 80 s took 1.7x the attempts it expected. With end_time_attempts the
     default scene's member at N = 40 is within 10 % of its attempts, at the automatic end and at 25
-    and 80 s (334, 500 and 555 on this project's CPU)."""
+    and 80 s (280, 446 and 501 on this project's CPU)."""
     from warpfric.progress import end_time_attempts, expected_attempts
 
     for end in (None, 25.0, 80.0):

@@ -11,15 +11,16 @@ from conftest import DEVICE, run
 
 
 def test_a_straggler_is_stopped_within_a_bounded_factor_of_its_peers():
-    """One member with eta = 0 under the stress gate (a dynamic rupture: ~6e5 steps at N = 40) among
-    healthy ones: it is stopped with status 'stalled' and NaN mu_s once it needs more than
-    stall_factor times the ensemble's median (itself counted at its attempts so far, more than any
-    peer's); the others are untouched."""
+    """One member with eta = 0 under the stress gate among healthy ones, on a coarse grid with its own
+    velocity error filter (error_filter_nodes=0: the member then resolves the pad's ringing after
+    each gate opening, tens of thousands of steps): it is stopped with status 'stalled' and NaN
+    mu_s once it needs more than stall_factor times the ensemble's median (itself counted at its
+    attempts so far, more than any peer's); the others are untouched."""
     eta = np.full(12, 2.7e13)
     eta[5] = 0.0
     with pytest.warns(UserWarning) as caught:
         ds = run({"viscous_coefficient": eta, "eccentricity": np.linspace(-0.15, 0.15, 12)}, nodes=20, rtol=1e-5,
-                 stall_factor=5.0, stall_min_steps=500, steps_per_launch=100)
+                 stall_factor=5.0, stall_min_steps=500, steps_per_launch=100, error_filter_nodes=0)
     # one warning says how many members failed, why, and what runs them to their end
     said = [str(w.message) for w in caught if "did not end ok" in str(w.message)]
     assert said == ["members that did not end ok have NaN mu_s and fronts: 1 of 12 members: 1 stalled (stopped by "
@@ -38,7 +39,8 @@ def test_a_straggler_is_stopped_within_a_bounded_factor_of_its_peers():
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # every member ends ok: no warning
         alone = run({"viscous_coefficient": eta[healthy], "eccentricity": np.linspace(-0.15, 0.15, 12)[healthy]},
-                    nodes=20, rtol=1e-5, stall_factor=5.0, stall_min_steps=500, steps_per_launch=100)
+                    nodes=20, rtol=1e-5, stall_factor=5.0, stall_min_steps=500, steps_per_launch=100,
+                    error_filter_nodes=0)
     np.testing.assert_array_equal(alone.mu_s.values, ds.mu_s.values[healthy])  # peers unaffected
 
 

@@ -248,6 +248,7 @@ def solver_settings(solver: Solver):
     s.step_max_factor = solver.step_max_factor
     s.failure_factor = solver.failure_factor
     s.predict_switches = 1 if solver.predict_switches else 0
+    s.error_filter_nodes = float(solver.error_filter_nodes)
     return s
 
 

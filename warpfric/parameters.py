@@ -374,6 +374,16 @@ class Solver:
     sliding_width:    stress gate: a node held on the yield surface (Filippov sliding) has the gate
                       theta_w(x) = (1 + tanh x)/2, x = (|tau_f|/A - tau_c)/(sliding_width*tau_c), solved
                       implicitly; its limit 0 is the sharp equivalent gate (docs/model.md, "Gate switches").
+    error_filter_nodes: the pad velocity's error estimate is filtered by the diagonal of (I - gamma h J)^-1
+                      (docs/model.md, "Time integration"), whose elastic part 2 M H / dx^2 grows as N^2:
+                      a coarse grid's filter hides less of the pad's lowest modes' ringing (kicked by
+                      every gate opening, hardly damped without viscous friction), and its steps
+                      follow that ringing. A grid coarser than error_filter_nodes nodes is filtered
+                      with the elastic diagonal of a grid of error_filter_nodes nodes (spacing
+                      L/(error_filter_nodes - 1)); finer grids with their own. 0: every grid its
+                      own (the ringing resolved where the filter is weak: N = 25 took 57,177
+                      attempts a member for inviscid scenes at rtol 1e-5, against 739 with 200;
+                      docs/performance.md, "Known limits"). Default 200.
     steps_per_launch: attempted steps per kernel launch (progress granularity; no effect on results).
     stall_factor:     once half of an ensemble has ended ok, a member still running after more than
                       max(stall_min_steps, stall_factor * the lower median of the ok and running
@@ -413,6 +423,7 @@ class Solver:
     switch_tol: float = 1.0
     predict_switches: bool = True
     sliding_width: float = 1e-3
+    error_filter_nodes: int = 200
     steps_per_launch: int = 500
     stall_factor: float = 10.0
     stall_min_steps: int = 2000
@@ -462,6 +473,10 @@ class Solver:
              "True or False")
         need(is_real(self.sliding_width) and 0 < self.sliding_width <= 0.1, "sliding_width", self.sliding_width,
              "a number in (0, 0.1]")
+        need(is_int(self.error_filter_nodes) and (self.error_filter_nodes == 0 or 3 <= self.error_filter_nodes
+                                                  <= INT32_MAX), "error_filter_nodes", self.error_filter_nodes,
+             f"0 (every grid its own filter) or an integer in [3, {INT32_MAX}] (the grid whose elastic diagonal "
+             "filters the velocity's error estimate on coarser grids)")
         need(is_int(self.steps_per_launch) and 1 <= self.steps_per_launch <= INT32_MAX, "steps_per_launch",
              self.steps_per_launch, f"an integer in [1, {INT32_MAX}]")
         need(is_real(self.step_safety) and 0 < self.step_safety < 1, "step_safety", self.step_safety, "a number in (0, 1)")

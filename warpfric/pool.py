@@ -52,7 +52,7 @@ from .parameters import ENSEMBLE_WARNINGS
 
 # split when one core would take at least this long (s, by progress.cpu_seconds). Measured on this
 # project's 2-core machine (studies/bench_cpu_workers.py, fronts on, N = 100, fresh processes): 100
-# members (3.6 s by the estimate) 4.3 s in one process, 3.5 s on 2 new workers (they start in ~0.6 s,
+# members (3.6 s by the estimate of that time) 4.3 s in one process, 3.5 s on 2 new workers (they start in ~0.6 s,
 # and their first run pays ~1 s more: xarray's first Dataset imports dask where it is installed,
 # the kernels' modules are built), 2.3 s on a warm pool; 400 members 15.9 s, 9.5 s and 7.8 s
 MIN_CPU_SECONDS = 2.5

@@ -28,15 +28,16 @@ from pathlib import Path
 import numpy as np
 
 # --- cost model: one member of the default scene through one pass, on one core of this project's
-# CPU (rtol 1e-5, the stress gate: median 315 attempts at N = 100 over 200 members of eccentricity
-# in [-0.2, 0.2] and F in [500, 5000] N; 337 at N = 41; 540, 880, 1550 and 2990 at N = 400, 800,
-# 1600 and 3200; 11x more attempts at rtol 1e-7). Per node and attempt, with the contact front
+# CPU (rtol 1e-5, the stress gate: median 273.5 attempts at N = 41 over 200 members of eccentricity
+# in [-0.2, 0.2] and F in [500, 5000] N, 306 at N = 100, 407 at N = 200 (Solver.error_filter_nodes
+# 200; with every grid's own filter 306.5 and 311.5 at N = 41 and 100); 540, 880, 1550 and 2990 at
+# N = 400, 800, 1600 and 3200; 11x more attempts at rtol 1e-7). Per node and attempt, with the contact front
 # (one pass): 0.27 us for 200 members at N = 40 (0.72 s), 0.26 us for 64 at N = 100 (0.54 s), 0.24 us
 # for 16 at N = 200 (0.30 s), one process, best of two. The front events cost FRONT_PASSES passes
 # of that (200 members at N = 40: none 0.716 s, contact 0.713, strength 0.765, velocity 1.831: its
 # first pass takes ~30 % more steps, then a second) ---
 CPU_SECONDS_PER_NODE_ATTEMPT = 0.26e-6
-FEW_NODES_ATTEMPTS = 330.0
+FEW_NODES_ATTEMPTS = 290.0
 FRONT_PASSES = {"contact": 1.0, "strength": 1.1, "velocity": 2.6}
 
 
@@ -50,7 +51,7 @@ def front_passes(fronts) -> float:
 
 def expected_attempts(nodes: int, rtol: float = 1e-5, method: str = "tr_bdf2", extra: float = 0.0) -> float:
     """Attempted steps one member is expected to need for one pass of the protocol: with the
-    automatic end ~330 on a coarse grid, ~0.95 N on a fine one; ``extra`` more for an explicit
+    automatic end ~290 on a coarse grid, ~0.95 N on a fine one; ``extra`` more for an explicit
     end_time past the detachment (:func:`end_time_attempts`); all times (1e-5/rtol)^(1/order)."""
     return (math.hypot(FEW_NODES_ATTEMPTS, 0.95 * nodes) + extra) * _rtol_factor(rtol, method)
 
@@ -83,8 +84,8 @@ def end_time_attempts(end_time, rest_until) -> float:
 
 
 # attempts of a law without the yield gate against the stress gate's: it takes no steps at the gate
-# switches (20 members, e in [-0.2, 0.2], N = 100, rtol 1e-5, CPU: medians 133 and 133 against 378)
-LAW_ATTEMPTS = {"stress": 1.0, "none": 0.39, "velocity": 0.39}
+# switches (20 members, e in [-0.2, 0.2], N = 100, rtol 1e-5, CPU: medians 131 against 295.5)
+LAW_ATTEMPTS = {"stress": 1.0, "none": 0.44, "velocity": 0.44}
 
 
 def cpu_seconds(n_members: int, solver, passes: float = 1.0, model=None, extra: float = 0.0) -> float:
