@@ -126,8 +126,9 @@ def test_float32_members_that_stall_are_rerun_in_float64():
     "Precision"): members 0 and 2 below end max_steps_reached in float32 at t ~ 10.0001 s. With the
     default float32_fallback they are run again in float64: status ok, working_precision 64, and
     exactly the outputs of a float64 run of the same members; a healthy float32 member keeps its
-    float32 result (within 1e-6 of float64). Member 1 is healthy on the CPU; on an H100 its float32
-    round-off (another compiler's) stalls it as well, and it is then rerun like the others."""
+    float32 result (within 1e-6 of float64). Member 1 is healthy on the CPU; on an H100 float32
+    round-off (another compiler's) decides which of members 1 and 2 stall (at 9acd1f2 member 1 did
+    and member 2 did not), and those that do are rerun like member 0."""
     import warpfric as wf
 
     members = {"viscous_coefficient": [0.0, 0.0, 0.0], "normal_force": [1000.0, 100.0, 316.0],
@@ -138,9 +139,9 @@ def test_float32_members_that_stall_are_rerun_in_float64():
     plain = run(members, dtype="float32", float32_fallback=False, **kw)
     meanings = plain.status.attrs["flag_meanings"].split()
     statuses = [meanings[s] for s in plain.status.values]
-    assert set(statuses) <= {"max_steps_reached", "ok"} and statuses[0] == statuses[2] == "max_steps_reached"
+    assert set(statuses) <= {"max_steps_reached", "ok"} and statuses[0] == "max_steps_reached"
     if not DEVICE.startswith("cuda"):
-        assert statuses[1] == "ok"
+        assert statuses == ["max_steps_reached", "ok", "max_steps_reached"]
     stalled = np.array([s == "max_steps_reached" for s in statuses])
     assert np.isnan(plain.mu_s.values[stalled]).all() and (plain.final_time.values[stalled] < 10.001).all()
     ds = run(members, dtype="float32", **kw)
