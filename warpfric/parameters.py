@@ -382,8 +382,11 @@ class Solver:
                       with the elastic diagonal of a grid of error_filter_nodes nodes (spacing
                       L/(error_filter_nodes - 1)); finer grids with their own. 0: every grid its
                       own (the ringing resolved where the filter is weak: N = 25 took 57,177
-                      attempts a member for inviscid scenes at rtol 1e-5, against 739 with 200;
-                      docs/performance.md, "Known limits"). Default 200.
+                      attempts a member for inviscid scenes at rtol 1e-5, against 747 with 200;
+                      docs/performance.md, "Known limits"). Default 200: grids of 200 nodes and
+                      more keep their own filter, bit for bit. At rtol 1e-6 such members take
+                      ~1,200-1,500 attempts with 800 against 30,000-270,000 with 200, at the same
+                      largest mu_s error over the reference scenes.
     steps_per_launch: attempted steps per kernel launch (progress granularity; no effect on results).
     stall_factor:     once half of an ensemble has ended ok, a member still running after more than
                       max(stall_min_steps, stall_factor * the lower median of the ok and running
