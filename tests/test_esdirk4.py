@@ -71,7 +71,9 @@ def test_tableau_order_conditions():
 
 def test_gateless_converges_with_fewer_newton_iterations():
     """Gate-less law, N = 30: both methods against TR-BDF2 at rtol 1e-9; ESDIRK4 at rtol 1e-6 is at
-    least as accurate as TR-BDF2 at 1e-7 with far fewer Newton iterations, and its error falls with rtol."""
+    least as accurate as TR-BDF2 at 1e-7 with fewer than half its Newton iterations, and its error
+    falls with rtol. (0.386 of them on this CPU at 3b2b42a; 0.174 before 9acd1f2, whose velocity
+    error filter took TR-BDF2's gate-less steps at N < 200 down by ~2x: the bound was 0.4 then.)"""
     ref, _ = run("tr_bdf2", 1e-9, "none")
     tr, tr_newton = run("tr_bdf2", 1e-7, "none")
     e5, _ = run("esdirk4", 1e-5, "none")
@@ -80,7 +82,7 @@ def test_gateless_converges_with_fewer_newton_iterations():
     print(f"ref {ref:.12f}; tr 1e-7 {rel(tr, ref):.2e} ({tr_newton}); esdirk4 1e-5/6/7 {rel(e5, ref):.2e} "
           f"{rel(e6, ref):.2e} ({e6_newton}) {rel(e7, ref):.2e}")
     assert rel(e6, ref) <= rel(tr, ref)
-    assert e6_newton < 0.4 * tr_newton
+    assert e6_newton < 0.5 * tr_newton
     assert rel(e7, ref) < rel(e5, ref)
     assert rel(e7, ref) < 5e-8
 

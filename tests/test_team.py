@@ -31,8 +31,9 @@ def test_a_team_gives_the_thread_per_member_outputs(gate, lanes, fronts, nodes, 
     """mu_s, its time and the front speeds of a team of `lanes` threads equal the thread-per-member
     kernel's to 1e-8 relative (the runs' own error control is rtol 1e-5: the kernels differ only by
     the order of their sums); same statuses; the steps taken differ by at most ``steps`` (one; at
-    N = 130 the lift-off member's sliding after its peak takes 434-438 steps with the order of the
-    sums: 435 one thread, 434 tiles of 64 lanes and the emulated 32, 438 the emulated 64). 7 and 8 lanes
+    N = 130 the lift-off member's sliding after its peak took 434-438 steps with the order of the
+    sums before 9acd1f2: 435 one thread, 434 tiles of 64 lanes and the emulated 32, 438 the emulated
+    64; one thread takes 438 at 3b2b42a). 7 and 8 lanes
     of 30 nodes on the lift-off member are the case the review's shared-memory race broke
     (kernels/team.py, settle); 8 lanes of 16 nodes give every lane two nodes, both of them end
     nodes whose border-row entries come from the neighbouring lanes (kernels/newton.py,

@@ -385,8 +385,10 @@ class Solver:
                       attempts a member for inviscid scenes at rtol 1e-5, against 747 with 200;
                       docs/performance.md, "Known limits"). Default 200: grids of 200 nodes and
                       more keep their own filter, bit for bit. At rtol 1e-6 such members take
-                      ~1,200-1,500 attempts with 800 against 30,000-270,000 with 200, at the same
-                      largest mu_s error over the reference scenes.
+                      ~1,200-1,500 attempts with 800 against 30,000-270,000 with 200 (the largest
+                      mu_s error over the reference scenes the same at N = 25-50, smaller at 100,
+                      3.4e-6 against 3.1e-6 at 200). A very large value takes the velocity out of
+                      the error control altogether (the other components still hold the steps).
     steps_per_launch: attempted steps per kernel launch (progress granularity; no effect on results).
     stall_factor:     once half of an ensemble has ended ok, a member still running after more than
                       max(stall_min_steps, stall_factor * the lower median of the ok and running
