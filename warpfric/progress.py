@@ -31,14 +31,16 @@ import numpy as np
 # CPU (rtol 1e-5, the stress gate: median 273.5 attempts at N = 41 over 200 members of eccentricity
 # in [-0.2, 0.2] and F in [500, 5000] N, 306 at N = 100, 407 at N = 200 (Solver.error_filter_nodes
 # 200; with every grid's own filter 306.5 and 311.5 at N = 41 and 100); 540, 880, 1550 and 2990 at
-# N = 400, 800, 1600 and 3200; 11x more attempts at rtol 1e-7; expected_attempts below gives them
-# to within 7 % at N <= 100 and N >= 1600, 15 % low at N = 200, 11 % at 400, 8 % at 800). Per node and attempt, with the contact front
+# N = 400, 800, 1600 and 3200, measured before that filter, which changes nothing at N >= 200; 11x
+# more attempts at rtol 1e-7). Per node and attempt, with the contact front
 # (one pass): 0.27 us for 200 members at N = 40 (0.72 s), 0.26 us for 64 at N = 100 (0.54 s), 0.24 us
 # for 16 at N = 200 (0.30 s), one process, best of two. The front events cost FRONT_PASSES passes
 # of that (200 members at N = 40: none 0.716 s, contact 0.713, strength 0.765, velocity 1.831: its
 # first pass takes ~30 % more steps, then a second) ---
 CPU_SECONDS_PER_NODE_ATTEMPT = 0.26e-6
-FEW_NODES_ATTEMPTS = 290.0
+# (nodes, median attempts of a member) at rtol 1e-5: the measurements above
+ATTEMPTS_BY_NODES = ((41, 273.5), (100, 306.0), (200, 407.0), (400, 540.0), (800, 880.0), (1600, 1550.0),
+                     (3200, 2990.0))
 FRONT_PASSES = {"contact": 1.0, "strength": 1.1, "velocity": 2.6}
 
 
@@ -52,9 +54,15 @@ def front_passes(fronts) -> float:
 
 def expected_attempts(nodes: int, rtol: float = 1e-5, method: str = "tr_bdf2", extra: float = 0.0) -> float:
     """Attempted steps one member is expected to need for one pass of the protocol: with the
-    automatic end ~290 on a coarse grid, ~0.95 N on a fine one; ``extra`` more for an explicit
+    automatic end the measured medians of ATTEMPTS_BY_NODES, linear in log N between them (below 41
+    nodes the value at 41, above 3,200 in proportion to N: ~0.93 N); ``extra`` more for an explicit
     end_time past the detachment (:func:`end_time_attempts`); all times (1e-5/rtol)^(1/order)."""
-    return (math.hypot(FEW_NODES_ATTEMPTS, 0.95 * nodes) + extra) * _rtol_factor(rtol, method)
+    grid, attempts = zip(*ATTEMPTS_BY_NODES)
+    if nodes >= grid[-1]:
+        base = attempts[-1] * nodes / grid[-1]
+    else:
+        base = float(np.interp(math.log(max(nodes, grid[0])), np.log(grid), attempts))
+    return (base + extra) * _rtol_factor(rtol, method)
 
 
 def _rtol_factor(rtol: float, method: str) -> float:
