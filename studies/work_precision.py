@@ -5,6 +5,7 @@ grids and precisions.
     python studies/work_precision.py run  [--device cpu|cuda:0] [--members 18|10000]
                                           [--nodes 25 50 100 200] [--rtols 1e-3 ... 1e-8]
                                           [--dtypes float64 float32] [--out FILE.nc]
+                                          [--error-filter-nodes 200]   (Solver.error_filter_nodes)
     python studies/work_precision.py plot FILE.nc [FILE2.nc ...] [--outdir docs/figures]
     python studies/work_precision.py collect LOG --out FILE.nc     (rows of a cut-off run's log)
 
@@ -87,6 +88,7 @@ def run(args):
     scene = wf.Parameters(end_time=float(ref.end_time))  # the reference's protocol window
     model, fronts = reference_law(ref)  # the reference's law and front event, never today's defaults
     gate, event = model.relaxation_gate, fronts.events[0]
+    filter_nodes = getattr(args, "error_filter_nodes", wf.Solver().error_filter_nodes)  # a caller's own Namespace may lack it
     print(f"reference {args.reference}: {ref.sizes['member']} scenes; simulating with its law "
           f"(relaxation_gate={gate!r}) and front event ({event!r})", flush=True)
     rows = []
@@ -96,9 +98,11 @@ def run(args):
                 if dtype == "float32" and rtol < wf.parameters.FLOAT32_MIN_RTOL:
                     continue
                 # stall_factor inf: under the stress gate the scenes without velocity strengthening are a
-                # dynamic rupture (1.35x-100x the steps of the others, docs/performance.md "Known limits"); the
-                # straggler rule would stop them and the errors would be those of the other half
-                solver = wf.Solver(nodes=nodes, dtype=dtype, rtol=rtol, max_steps=10**6, stall_factor=float("inf"))
+                # dynamic rupture (up to 20-330x the steps of the others at rtol 1e-6, docs/performance.md
+                # "Known limits"); the straggler rule would stop them and the errors would be those of the
+                # other half
+                solver = wf.Solver(nodes=nodes, dtype=dtype, rtol=rtol, max_steps=10**6, stall_factor=float("inf"),
+                                   error_filter_nodes=filter_nodes)
                 try:
                     wf.parameters.check_precision(model, solver)
                 except ValueError as err:
@@ -119,7 +123,7 @@ def run(args):
                 ok = ds.status.values == 0
                 row = dict(
                     dtype=dtype, nodes=nodes, rtol=rtol, members=args.members, device=device,
-                    relaxation_gate=gate, front_event=event, wall_s=wall,
+                    relaxation_gate=gate, front_event=event, error_filter_nodes=filter_nodes, wall_s=wall,
                     wall_s_per_realisation=wall / args.members, ok=int(ok.sum()),
                     mu_s_error=float(np.nanmax(np.abs(ds.mu_s.values / r["mu_s"] - 1))),
                     mu_s_time_error=float(np.nanmax(np.abs(ds.mu_s_time.values - r["mu_s_time"]))),
@@ -168,7 +172,7 @@ def to_dataset(rows, meta) -> xr.Dataset:
                     coords={"dtype": dtypes, "nodes": nodes, "rtol": rtols})
     ds.attrs.update({k: str(v) for k, v in meta.items()})
     ds.attrs["members"] = rows[0]["members"]
-    for key in ("relaxation_gate", "front_event"):  # rows of a log from before these keys: not said
+    for key in ("relaxation_gate", "front_event", "error_filter_nodes"):  # rows of a log from before these keys: not said
         values = {str(r[key]) for r in rows if key in r}
         if len(values) == 1 and key not in meta:
             ds.attrs[key] = values.pop()
@@ -254,6 +258,8 @@ def main(argv=None):
     r.add_argument("--dtypes", nargs="+", default=["float64", "float32"])
     r.add_argument("--reference", default=str(REFERENCE))
     r.add_argument("--out", default="work_precision.nc")
+    r.add_argument("--error-filter-nodes", type=int, default=wf.Solver().error_filter_nodes,
+                   help="Solver.error_filter_nodes of every run (default: the package's, 200)")
     c = sub.add_parser("collect", help="build the .nc/.json from the JSON lines of a run's log (a cut-off run)")
     c.add_argument("log")
     c.add_argument("--out", required=True)
