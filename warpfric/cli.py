@@ -39,7 +39,7 @@ import numpy as np
 
 from .parameters import (MAX_RECORD_TIMES, MEMBERS_NOT_OK_HINT, RECORD_COUNT, RELAXATION_GATES, Fronts, Model,
                          Parameters, Record, Solver, detachment_fronts, detachment_start, recording_text, units_text)
-from .progress import member_range, plural as _plural, seconds_text as _seconds
+from .progress import member_range, plural as _plural, seconds_text as _seconds, status_name
 
 
 EXIT_FAILED_MEMBERS = 1
@@ -103,10 +103,6 @@ def one_line_warnings(output: str | None = None):
         yield
 
 
-def _status_name(ds, code: int) -> str:
-    return ds.status.attrs["flag_meanings"].split()[int(code)]
-
-
 def _fmt(value, unit="", spec=".4g") -> str:
     v = float(value)
     if not np.isfinite(v):
@@ -146,7 +142,7 @@ def _print_member(ds, solver: Solver) -> None:
         print(f"front     : absent: the contact front needs the yield gate (--relaxation-gate stress); under "
               f"relaxation gate {gate} --front-event strength reads a front")
     elif int(m.status) != 0:
-        print(f"front     : not given: the member did not end ok ({_status_name(ds, m.status)}), so its front outputs "
+        print(f"front     : not given: the member did not end ok ({status_name(ds, m.status)}), so its front outputs "
               "are NaN")
     elif any(not_over.values()):
         advice = {"plateau": "at max_end_time, the automatic end's cap: mu never fell 1 % below its maximum",
@@ -187,7 +183,7 @@ def _print_member(ds, solver: Solver) -> None:
             print("  (+- : the change on a grid of half the nodes, an estimate of the spatial error)")
         else:
             print("  (no error estimate: --grid-check estimates the speeds' spatial error, usually the largest)")
-    print(f"status    = {_status_name(ds, m.status)}; steps accepted {int(m.steps_accepted)}, rejected "
+    print(f"status    = {status_name(ds, m.status)}; steps accepted {int(m.steps_accepted)}, rejected "
           f"{int(m.steps_rejected)}; lift-off {'yes' if int(m.lift_off) else 'no'}; "
           f"wall {_seconds(ds.attrs['wall_time_s'])} s "
           f"(+ {_seconds(ds.attrs.get('kernel_build_time_s', 0.0))} s compiling/loading kernels; "
@@ -244,7 +240,7 @@ def _run_default(args) -> int:
                 record = Record.detachment(found, member_offset=offset)
                 what = ("the detachment found by a first run" if detachment_start(found, 0) is not None else
                         "the disc's start to the end: a first run found no detachment (status "
-                        f"{_status_name(found, found.status[0])})")
+                        f"{status_name(found, found.status[0])})")
                 print(f"{recording_text(record.times)}, {what} (a second run records; its outputs are the first's)")
             ds = simulate(fronts=fronts, record=record, **run)
             _print_member(ds, solver)

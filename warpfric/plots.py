@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .progress import plural
+from .progress import plural, status_name
 
 MAX_LEGEND = 8  # values of a colour parameter shown in a legend; more: a colour bar
 MAX_CURVES = 8  # arrival-time curves in one figure
@@ -174,18 +174,12 @@ def _require_fronts(ds, what: str) -> None:
                          "them); run with fronts=warpfric.Fronts()")
 
 
-def _status_name(ds, code: int) -> str:
-    """Status ``code``'s meaning ('max_steps_reached'), or 'status <code>' where the file gives none."""
-    meanings = ds.status.attrs.get("flag_meanings", "").split()
-    return meanings[code] if 0 <= code < len(meanings) else f"status {code}"
-
-
 def _status_text(ds, ok: np.ndarray) -> str:
     """The members that are not ok, by status, for a title: '; 3 max_steps_reached', or ''."""
     if ok.all():
         return ""
     codes, counts = np.unique(ds.status.values[~ok], return_counts=True)
-    return "; " + ", ".join(f"{k} {_status_name(ds, int(c))}" for c, k in zip(codes, counts))
+    return "; " + ", ".join(f"{k} {status_name(ds, int(c))}" for c, k in zip(codes, counts))
 
 
 def _nothing_to_plot(ax, reason: str) -> None:
@@ -560,7 +554,7 @@ def friction_history_figure(ds, recorded_index: int):
             ax.plot([at], [value], marker, color=colour, mfc="none", ms=8, ls="none", label=text.format(value),
                     clip_on=False)  # the end's marker sits on the window's edge
         elif name == "mu_s":
-            why = ("not given (status " + _status_name(ds, status) + ")" if not np.isfinite(value) else
+            why = ("not given (status " + status_name(ds, status) + ")" if not np.isfinite(value) else
                    f"{value:.6f} at t = {at:.6g} s, outside the recorded times")
             ax.plot([], [], ls="none", label=f"mu_s: {why}")
     for k, (event, prefix) in enumerate(front_events(ds)):
@@ -641,7 +635,7 @@ def space_time_figure(ds, recorded_index: int):
             status = int(ds.status.values[position])  # (_require_ensemble: every ensemble has one)
             # a member that is not ok has NaN front outputs whether or not a front ran (no_peak: the
             # map may show one): not "no front"
-            text = f"no {front}" if status == 0 else f"{front}: not given (status {_status_name(ds, status)})"
+            text = f"no {front}" if status == 0 else f"{front}: not given (status {status_name(ds, status)})"
             from .simulate import not_over_groups
 
             # a run that ended before its detachment was over (cut off by end_time, or stopped by

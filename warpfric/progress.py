@@ -165,6 +165,14 @@ def first_few(items, limit: int = 8) -> str:
     return ", ".join(map(str, items[:limit])) + (", ..." if len(items) > limit else "")
 
 
+def status_name(ds, code: int) -> str:
+    """Status ``code``'s meaning in ``ds`` ('max_steps_reached', from the status variable's
+    flag_meanings), or 'status <code>' where the file gives none."""
+    meanings = ds.status.attrs.get("flag_meanings", "").split()
+    code = int(code)
+    return meanings[code] if 0 <= code < len(meanings) else f"status {code}"
+
+
 def seconds_text(value) -> str:
     """A duration in s without its unit: 2 significant digits below 1 s (0.043), else one decimal (12.3)."""
     v = float(value)

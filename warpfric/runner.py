@@ -34,7 +34,7 @@ import numpy as np
 from .parameters import DETACHMENT_NOT_OVER, MEMBERS_NOT_OK, RECORD_PAST_END, recording_text
 from .pool import chunk_record, cpu_cores, warn_once, warning_pairs
 from .progress import (SizeWarning, check_memory, first_few, front_passes, member_range, plural, seconds_text,
-                       size_warning)
+                       size_warning, status_name)
 
 FINAL_FIELDS = ("displacement", "velocity", "elastic_stress", "contact_age", "normal_stress", "friction_stress")
 
@@ -211,9 +211,8 @@ def find_record_times(sweep, device: str | None, offset: int, quiet: bool) -> tu
                          fronts=detachment_fronts(sweep.model), device=device, progress=False if quiet else "first run",
                          workers=1)
     times = Record.detachment(found, count=sweep.record.count).times
-    meanings = found.status.attrs["flag_meanings"].split()
     status = found.status.values
-    not_ok = [f"{numbers[k]} ({meanings[int(status[k])]})" for k in range(len(chosen)) if status[k] != 0]
+    not_ok = [f"{numbers[k]} ({status_name(found, status[k])})" for k in range(len(chosen)) if status[k] != 0]
     early = [numbers[k] for k in range(len(chosen)) if status[k] == 0 and float(found.final_time[k]) < times[-1]]
     what = ("the detachment found by the first run" if len(not_ok) < len(chosen) else
             "the disc's start to the end: the first run found no detachment")
