@@ -9,7 +9,7 @@ F = 500, 1000, 5000 N; viscous_coefficient 2.7e13 Pa s/m (27 MPa s/um) and 0: 18
 
 The defaults are those of the committed studies/reference/reference_scenes.nc: the gate-less law
 and the velocity front (the stress gate without velocity strengthening is a dynamic rupture, 1.35x
-to 100x the steps, more on coarser grids; docs/performance.md, "Known limits"). The run replaces --out: give another file to
+to 1.9x the steps at rtol 1e-5, far more at tighter rtol; docs/performance.md, "Known limits"). The run replaces --out: give another file to
 compare with the committed one. The file's attributes reference_relaxation_gate and
 reference_front_event name the law and the event (studies/work_precision.py simulates with them; the
 committed file predates them and is the gate-less law and the velocity front).

@@ -88,7 +88,6 @@ def run(args):
     scene = wf.Parameters(end_time=float(ref.end_time))  # the reference's protocol window
     model, fronts = reference_law(ref)  # the reference's law and front event, never today's defaults
     gate, event = model.relaxation_gate, fronts.events[0]
-    filter_nodes = getattr(args, "error_filter_nodes", wf.Solver().error_filter_nodes)  # a caller's own Namespace may lack it
     print(f"reference {args.reference}: {ref.sizes['member']} scenes; simulating with its law "
           f"(relaxation_gate={gate!r}) and front event ({event!r})", flush=True)
     rows = []
@@ -102,7 +101,7 @@ def run(args):
                 # "Known limits"); the straggler rule would stop them and the errors would be those of the
                 # other half
                 solver = wf.Solver(nodes=nodes, dtype=dtype, rtol=rtol, max_steps=10**6, stall_factor=float("inf"),
-                                   error_filter_nodes=filter_nodes)
+                                   error_filter_nodes=args.error_filter_nodes)
                 try:
                     wf.parameters.check_precision(model, solver)
                 except ValueError as err:
@@ -123,7 +122,7 @@ def run(args):
                 ok = ds.status.values == 0
                 row = dict(
                     dtype=dtype, nodes=nodes, rtol=rtol, members=args.members, device=device,
-                    relaxation_gate=gate, front_event=event, error_filter_nodes=filter_nodes, wall_s=wall,
+                    relaxation_gate=gate, front_event=event, error_filter_nodes=args.error_filter_nodes, wall_s=wall,
                     wall_s_per_realisation=wall / args.members, ok=int(ok.sum()),
                     mu_s_error=float(np.nanmax(np.abs(ds.mu_s.values / r["mu_s"] - 1))),
                     mu_s_time_error=float(np.nanmax(np.abs(ds.mu_s_time.values - r["mu_s_time"]))),
