@@ -71,9 +71,11 @@ def test_tableau_order_conditions():
 
 def test_gateless_converges_with_fewer_newton_iterations():
     """Gate-less law, N = 30: both methods against TR-BDF2 at rtol 1e-9; ESDIRK4 at rtol 1e-6 is at
-    least as accurate as TR-BDF2 at 1e-7 with fewer than half its Newton iterations, and its error
-    falls with rtol. (0.386 of them on this CPU at 3b2b42a; 0.174 before 9acd1f2, whose velocity
-    error filter took TR-BDF2's gate-less steps at N < 200 down by ~2x: the bound was 0.4 then.)"""
+    least as accurate as TR-BDF2 at 1e-7 (9.1e-8 against 1.3e-7) with fewer Newton iterations, and
+    its error falls with rtol. The share moves with TR-BDF2's velocity error filter, which ESDIRK4's
+    steps here hardly feel: 870 against 1,613 iterations (0.54) on this CPU with the default
+    Solver.error_filter_nodes 800, against 2,255 (0.386) with 200 and 0.174 with every grid's own
+    filter (where the bounds were 0.4 and 0.5)."""
     ref, _ = run("tr_bdf2", 1e-9, "none")
     tr, tr_newton = run("tr_bdf2", 1e-7, "none")
     e5, _ = run("esdirk4", 1e-5, "none")
@@ -82,7 +84,7 @@ def test_gateless_converges_with_fewer_newton_iterations():
     print(f"ref {ref:.12f}; tr 1e-7 {rel(tr, ref):.2e} ({tr_newton}); esdirk4 1e-5/6/7 {rel(e5, ref):.2e} "
           f"{rel(e6, ref):.2e} ({e6_newton}) {rel(e7, ref):.2e}")
     assert rel(e6, ref) <= rel(tr, ref)
-    assert e6_newton < 0.5 * tr_newton
+    assert e6_newton < 0.6 * tr_newton
     assert rel(e7, ref) < rel(e5, ref)
     assert rel(e7, ref) < 5e-8
 

@@ -78,7 +78,7 @@ INVISCID = {"eccentricity": [0.0], "normal_force": [1000.0], "viscous_coefficien
 @pytest.mark.parametrize("lanes", [1, 4])
 def test_coarse_grids_filter_the_velocity_error_as_the_finer_grid_does(lanes):
     """Solver.error_filter_nodes: the velocity error estimate's filter takes the elastic diagonal of
-    a grid of 200 nodes where the grid is coarser. Without it (0: the grid's own, which grows as N^2)
+    a grid of Solver().error_filter_nodes (800) nodes where the grid is coarser. Without it (0: the grid's own, which grows as N^2)
     a member without velocity strengthening resolves the pad's low-mode ringing that every gate
     opening kicks, ~85,000 attempts at N = 20 against ~520 at N = 200; with it N = 20 takes no more
     than N = 200, and its mu_s moves by the tolerance's order only (2.2e-6 here). Both kernels: the

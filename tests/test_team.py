@@ -26,7 +26,7 @@ MEMBERS = {"eccentricity": [0.0, -0.2, 0.3, 0.6], "normal_force": [1000.0, 1000.
     ("none", 2, False, 30, 1e-8, None, 1), ("none", 7, False, 30, 1e-8, None, 1), ("none", 8, False, 30, 1e-8, None, 1),
     ("stress", 4, True, 30, 1e-8, None, 1), ("none", 8, False, 16, 1e-7, None, 1),
     ("stress", 7, False, 30, 1e-8, "emulated", 1), ("none", 8, False, 16, 1e-7, "emulated", 1),
-    ("stress", 64, False, 130, 1e-8, None if DEVICE.startswith("cuda") else "emulated", 4)])
+    ("stress", 64, False, 130, 1e-7, None if DEVICE.startswith("cuda") else "emulated", 4)])
 def test_a_team_gives_the_thread_per_member_outputs(gate, lanes, fronts, nodes, rtol, exchange, steps, monkeypatch):
     """mu_s, its time and the front speeds of a team of `lanes` threads equal the thread-per-member
     kernel's to 1e-8 relative (the runs' own error control is rtol 1e-5: the kernels differ only by
@@ -45,7 +45,10 @@ def test_a_team_gives_the_thread_per_member_outputs(gate, lanes, fronts, nodes, 
     several warps (kernels/team.py make_warps_team), which a GPU runs with its shuffles and
     buffer; without fronts, because there the lift-off member's middle front speed moves by
     1.3e-5 with the order of the sums in every team (3.58121-3.58126 m/s: tiles of 32 and 64
-    lanes, emulated 32 and 64, one thread)."""
+    lanes, emulated 32 and 64, one thread). The members without lift-off agree to 1e-10 in every
+    case (1e-13 and below where measured); at N = 130 the lift-off member's mu_s moves by 3e-9 with
+    Solver.error_filter_nodes 200 and by 2.1e-8 with 800 (433 against 437 accepted steps, emulated
+    64 lanes on the CPU), hence 1e-7 there."""
     if exchange:
         monkeypatch.setenv("WARPFRIC_TEAM_EXCHANGE", exchange)
     model = wf.Model(relaxation_gate=gate)
@@ -59,8 +62,9 @@ def test_a_team_gives_the_thread_per_member_outputs(gate, lanes, fronts, nodes, 
     assert ref.attrs["lanes"] == 1 and team.attrs["lanes"] == lanes
     np.testing.assert_array_equal(team.status.values, ref.status.values)
     assert (ref.status.values == 0).all() and ref.lift_off.values[3] == 1
-    np.testing.assert_allclose(team.mu_s.values, ref.mu_s.values, rtol=rtol)
-    np.testing.assert_allclose(team.mu_s_time.values, ref.mu_s_time.values, rtol=rtol)
+    for name in ("mu_s", "mu_s_time"):  # members without lift-off to 1e-10, the lift-off member to rtol
+        np.testing.assert_allclose(team[name].values[:3], ref[name].values[:3], rtol=1e-10, err_msg=name)
+        np.testing.assert_allclose(team[name].values[3], ref[name].values[3], rtol=rtol, err_msg=name)
     assert np.all(np.abs(team.steps_accepted.values - ref.steps_accepted.values) <= steps)
     if fronts:
         for name in ("v_left", "v_middle", "v_right"):

@@ -383,12 +383,13 @@ class Solver:
                       L/(error_filter_nodes - 1)); finer grids with their own. 0: every grid its
                       own (the ringing resolved where the filter is weak: N = 25 took 57,177
                       attempts a member for inviscid scenes at rtol 1e-5, against 747 with 200;
-                      docs/performance.md, "Known limits"). Default 200: grids of 200 nodes and
-                      more keep their own filter, bit for bit. At rtol 1e-6 such members take
-                      ~1,200-1,500 attempts with 800 against 30,000-270,000 with 200 (the largest
-                      mu_s error over the reference scenes the same at N = 25-50, smaller at 100,
-                      3.4e-6 against 3.1e-6 at 200). A very large value takes the velocity out of
-                      the error control altogether (the other components still hold the steps).
+                      docs/performance.md, "Known limits"). Default 800: at rtol 1e-6 such members
+                      take ~1,200-1,500 attempts at N = 25-200 with 800 against 30,000-270,000
+                      with 200, and at rtol 1e-5 the reference scenes take 10-24 % fewer (the
+                      viscous ones 1-2 %), at the same largest mu_s errors (docs/performance.md,
+                      "Work-precision"); grids of 800 nodes and more keep their own filter, bit for
+                      bit. A very large value takes the velocity out of the error control altogether
+                      (the other components still hold the steps).
     steps_per_launch: attempted steps per kernel launch (progress granularity; no effect on results).
     stall_factor:     once half of an ensemble has ended ok, a member still running after more than
                       max(stall_min_steps, stall_factor * the lower median of the ok and running
@@ -428,7 +429,7 @@ class Solver:
     switch_tol: float = 1.0
     predict_switches: bool = True
     sliding_width: float = 1e-3
-    error_filter_nodes: int = 200
+    error_filter_nodes: int = 800
     steps_per_launch: int = 500
     stall_factor: float = 10.0
     stall_min_steps: int = 2000
