@@ -28,18 +28,19 @@ from pathlib import Path
 import numpy as np
 
 # --- cost model: one member of the default scene through one pass, on one core of this project's
-# CPU (rtol 1e-5, the stress gate: median 273.5 attempts at N = 41 over 200 members of eccentricity
-# in [-0.2, 0.2] and F in [500, 5000] N, 306 at N = 100, 407 at N = 200 (Solver.error_filter_nodes
-# 200; with every grid's own filter 306.5 and 311.5 at N = 41 and 100); 540, 880, 1550 and 2990 at
-# N = 400, 800, 1600 and 3200, measured before that filter, which changes nothing at N >= 200; 11x
-# more attempts at rtol 1e-7). Per node and attempt, with the contact front
+# CPU (rtol 1e-5, the stress gate, the contact front, Solver.error_filter_nodes 800, at 38f2938: median
+# 283 attempts at N = 41 over 200 members of eccentricity in [-0.2, 0.2] and F in [500, 5000] N
+# (studies/bench_engine.py's members, seed 0), 297 at N = 100 and 384 at N = 200 (200 members), 573 at
+# N = 400 (100), 900 at N = 800 (50); 1550 and 2990 at N = 1600 and 3200, measured before the filter,
+# which changes nothing at N >= 800; 11x more attempts at rtol 1e-7). Per node and attempt, with the contact front
 # (one pass): 0.27 us for 200 members at N = 40 (0.72 s), 0.26 us for 64 at N = 100 (0.54 s), 0.24 us
 # for 16 at N = 200 (0.30 s), one process, best of two. The front events cost FRONT_PASSES passes
 # of that (200 members at N = 40: none 0.716 s, contact 0.713, strength 0.765, velocity 1.831: its
 # first pass takes ~30 % more steps, then a second) ---
 CPU_SECONDS_PER_NODE_ATTEMPT = 0.26e-6
 # (nodes, median attempts of a member) at rtol 1e-5: the measurements above
-ATTEMPTS_BY_NODES = ((41, 273.5), (100, 306.0), (200, 407.0), (400, 540.0), (800, 880.0), (1600, 1550.0),
+# (studies/results/attempt_medians_cpu_38f2938.txt, with its script)
+ATTEMPTS_BY_NODES = ((41, 283.0), (100, 297.0), (200, 384.0), (400, 573.0), (800, 900.0), (1600, 1550.0),
                      (3200, 2990.0))
 FRONT_PASSES = {"contact": 1.0, "strength": 1.1, "velocity": 2.6}
 
