@@ -32,7 +32,7 @@ import numpy as np
 # 283 attempts at N = 41 over 200 members of eccentricity in [-0.2, 0.2] and F in [500, 5000] N
 # (studies/bench_engine.py's members, seed 0), 297 at N = 100 and 384 at N = 200 (200 members), 573 at
 # N = 400 (100), 900 at N = 800 (50); 1550 and 2990 at N = 1600 and 3200, measured before the filter,
-# which changes nothing at N >= 800; 11x more attempts at rtol 1e-7). Per node and attempt, with the contact front
+# which changes nothing at N >= 800; 4.7x more attempts at rtol 1e-7: _rtol_factor). Per node and attempt, with the contact front
 # (one pass): 0.27 us for 200 members at N = 40 (0.72 s), 0.26 us for 64 at N = 100 (0.54 s), 0.24 us
 # for 16 at N = 200 (0.30 s), one process, best of two. The front events cost FRONT_PASSES passes
 # of that (200 members at N = 40: none 0.716 s, contact 0.713, strength 0.765, velocity 1.831: its
@@ -57,7 +57,7 @@ def expected_attempts(nodes: int, rtol: float = 1e-5, method: str = "tr_bdf2", e
     """Attempted steps one member is expected to need for one pass of the protocol: with the
     automatic end the measured medians of ATTEMPTS_BY_NODES, linear in log N between them (below 41
     nodes the value at 41, above 3,200 in proportion to N: ~0.93 N); ``extra`` more for an explicit
-    end_time past the detachment (:func:`end_time_attempts`); all times (1e-5/rtol)^(1/order)."""
+    end_time past the detachment (:func:`end_time_attempts`); all times _rtol_factor(rtol, method)."""
     grid, attempts = zip(*ATTEMPTS_BY_NODES)
     if nodes >= grid[-1]:
         base = attempts[-1] * nodes / grid[-1]
@@ -67,8 +67,13 @@ def expected_attempts(nodes: int, rtol: float = 1e-5, method: str = "tr_bdf2", e
 
 
 def _rtol_factor(rtol: float, method: str) -> float:
-    """How many more attempts than at rtol 1e-5: (1e-5/rtol)^(1/order)."""
-    return (1e-5 / rtol) ** (1.0 / (4 if method == "esdirk4" else 2))
+    """How many more attempts than at rtol 1e-5: (1e-5/rtol)^(1/(order+1)), the steps of an error
+    estimate O(h^(order+1)) under local error control: TR-BDF2 (1e-5/rtol)^(1/3), ESDIRK4 ^(1/5).
+    Measured at 38f2938 (CPU, N = 100 and 40, the default scene: studies/results/gate_convergence_cpu.log,
+    esdirk4_work_cpu.json): TR-BDF2 under the stress gate 0.64x / 2.07x / 4.66x the attempts of rtol
+    1e-5 at rtol 1e-4 / 1e-6 / 1e-7 (this factor 0.46 / 2.15 / 4.64), gate-less 1.74x / 3.47x at
+    1e-6 / 1e-7; ESDIRK4 1.3x / 1.7-1.9x at 1e-6 / 1e-7 (1.58 / 2.51)."""
+    return (1e-5 / rtol) ** (1.0 / (5 if method == "esdirk4" else 3))
 
 
 # an explicit end_time past the detachment: the pad's transient after it (~165 attempts within
