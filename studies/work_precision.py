@@ -5,7 +5,7 @@ grids and precisions.
     python studies/work_precision.py run  [--device cpu|cuda:0] [--members 18|10000]
                                           [--nodes 25 50 100 200] [--rtols 1e-3 ... 1e-8]
                                           [--dtypes float64 float32] [--out FILE.nc]
-                                          [--error-filter-nodes 200]   (Solver.error_filter_nodes)
+                                          [--error-filter-nodes 800]   (Solver.error_filter_nodes)
     python studies/work_precision.py plot FILE.nc [FILE2.nc ...] [--outdir docs/figures]
     python studies/work_precision.py collect LOG --out FILE.nc     (rows of a cut-off run's log)
 
@@ -258,7 +258,7 @@ def main(argv=None):
     r.add_argument("--reference", default=str(REFERENCE))
     r.add_argument("--out", default="work_precision.nc")
     r.add_argument("--error-filter-nodes", type=int, default=wf.Solver().error_filter_nodes,
-                   help="Solver.error_filter_nodes of every run (default: the package's, 200)")
+                   help="Solver.error_filter_nodes of every run (default: the package's)")
     c = sub.add_parser("collect", help="build the .nc/.json from the JSON lines of a run's log (a cut-off run)")
     c.add_argument("log")
     c.add_argument("--out", required=True)
