@@ -75,7 +75,7 @@ def test_gateless_converges_with_fewer_newton_iterations():
     its error falls with rtol. The share moves with TR-BDF2's velocity error filter, which ESDIRK4's
     steps here hardly feel: 870 against 1,613 iterations (0.54) on this CPU with the default
     Solver.error_filter_nodes 800, against 2,255 (0.386) with 200 and 0.174 with every grid's own
-    filter (where the bounds were 0.4 and 0.5)."""
+    filter (where the bounds were 0.5 and 0.4)."""
     ref, _ = run("tr_bdf2", 1e-9, "none")
     tr, tr_newton = run("tr_bdf2", 1e-7, "none")
     e5, _ = run("esdirk4", 1e-5, "none")

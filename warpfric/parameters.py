@@ -386,7 +386,7 @@ class Solver:
                       docs/performance.md, "Known limits"). Default 800: at rtol 1e-6 such members
                       take ~1,200-1,500 attempts at N = 25-200 with 800 against 30,000-270,000
                       with 200, and at rtol 1e-5 the reference scenes take 10-24 % fewer (the
-                      viscous ones 1-2 %), at the same largest mu_s errors (docs/performance.md,
+                      viscous ones 0-2 %), at the same largest mu_s errors (docs/performance.md,
                       "Work-precision"); grids of 800 nodes and more keep their own filter, bit for
                       bit. A very large value takes the velocity out of the error control altogether
                       (the other components still hold the steps).
