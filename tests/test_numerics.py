@@ -78,11 +78,12 @@ INVISCID = {"eccentricity": [0.0], "normal_force": [1000.0], "viscous_coefficien
 @pytest.mark.parametrize("lanes", [1, 4])
 def test_coarse_grids_filter_the_velocity_error_as_the_finer_grid_does(lanes):
     """Solver.error_filter_nodes: the velocity error estimate's filter takes the elastic diagonal of
-    a grid of Solver().error_filter_nodes (800) nodes where the grid is coarser. Without it (0: the grid's own, which grows as N^2)
-    a member without velocity strengthening resolves the pad's low-mode ringing that every gate
-    opening kicks, ~85,000 attempts at N = 20 against ~520 at N = 200; with it N = 20 takes no more
-    than N = 200, and its mu_s moves by the tolerance's order only (2.2e-6 here). Both kernels: the
-    thread kernel and a team of 4 lanes (docs/performance.md, "Known limits")."""
+    a grid of Solver().error_filter_nodes (800) nodes where the grid is coarser. Without it (0: the
+    grid's own, which grows as N^2) a member without velocity strengthening resolves the pad's
+    low-mode ringing that every gate opening kicks: 85,116 attempts at N = 20; with it N = 20 takes
+    317 and N = 200 364 (470 and 523 with the filter of 200), and its mu_s moves by the tolerance's
+    order only (1.6e-6 here). Both kernels: the thread kernel and a team of 4 lanes
+    (docs/performance.md, "Known limits")."""
     def attempts_and_mu(nodes, **kw):
         ds = run(INVISCID, nodes=nodes, rtol=1e-5, max_steps=300_000, stall_factor=float("inf"), lanes=lanes, **kw)
         assert ds.status.values[0] == 0
