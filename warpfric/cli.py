@@ -413,9 +413,8 @@ def summary(ds, name: str) -> str:
         units = units_text(ds[pname].attrs.get("units", ""))
         lines.append(f"    {pname:<22} {n_values:>6} value{'s' if n_values != 1 else ' '} in [{v.min():.6g}, {v.max():.6g}]"
                      + (f" {units}" if units else " (dimensionless)"))
-    meanings = ds.status.attrs["flag_meanings"].split()
     codes = np.unique(ds.status.values)
-    counts = {meanings[int(k)]: int((ds.status.values == k).sum()) for k in codes}
+    counts = {status_name(ds, k): int((ds.status.values == k).sum()) for k in codes}
     lines.append("  status: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
     def members_line(what: str, which: np.ndarray) -> str:
         """'    <what>: members 3, 7 and 12 more': the first NOT_OK_SHOWN numbers of ``which``."""
@@ -425,7 +424,7 @@ def summary(ds, name: str) -> str:
 
     for code in codes:
         if int(code) != 0:  # the members not ok, by number
-            lines.append(members_line(meanings[int(code)], numbers[ds.status.values == code]))
+            lines.append(members_line(status_name(ds, code), numbers[ds.status.values == code]))
     from .simulate import not_over_groups
 
     groups = not_over_groups(ds)
