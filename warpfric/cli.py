@@ -584,7 +584,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, set]:
         help="sweep file (TOML, see docs/sweeps.md); none: the default scene")
     add(run, "-o", "--output", metavar="OUT.nc", help="netCDF file to write (sweeps: default SWEEP.nc; "
         "the default scene writes one only with -o)")
-    add(run, "--device", default=None, help="Warp device: cpu, cuda:0, ... (default: first GPU, else cpu)")
+    add(run, "--device", default=None, help="Warp device: cpu, cuda:0, ... (default: cpu for a lone member, else the first GPU if any, else cpu)")
     add(run, "--cpu-workers", type=int, default=None, metavar="N",
         help="worker processes on the CPU (default: all cores for an ensemble that pays, else 1; 1: this process)")
     add(run, "--member-offset", type=int, default=None, metavar="K",

@@ -4,11 +4,13 @@ them imports another for it."""
 
 from __future__ import annotations
 
-# device=None runs ensembles up to this size on the CPU: one member is a serial chain of dependent
-# steps, which one CPU core runs ~30x faster than one GPU thread (H100: 0.58 s against 0.018 s, N =
-# 200; docs/performance.md), and the GPU's time barely grows with the ensemble up to ~1,000 members,
-# so the break-even lies near 30 members; 16 keeps the CPU side of it
-SMALL_ENSEMBLE = 16
+# device=None runs ensembles up to this size on the CPU. A lone member is a serial chain of steps
+# that a CPU core and the GPU's team of lanes run about as fast (H100: 0.038 s against 0.039 s on a
+# core of its host, the benchmark's first member, N = 200, the contact front), and a process that
+# never touches the GPU starts ~0.3 s sooner; from two members on the GPU's time barely grows while
+# the core's doubles with each doubling (2 / 16 / 64 members: 0.042 / 0.037 / 0.054 s against
+# 0.106 / 0.453 / 1.939 s). studies/device_crossover.py, docs/performance.md "Where device=None runs"
+SMALL_ENSEMBLE = 1
 
 
 def init_warp():
@@ -23,8 +25,8 @@ def init_warp():
 
 
 def default_device(n_members: int | None = None) -> str:
-    """The device for ``device=None``: 'cpu' for an ensemble of at most SMALL_ENSEMBLE (16) members,
-    else 'cuda:0' when Warp sees a CUDA device, else 'cpu'. Pass a device to force either."""
+    """The device for ``device=None``: 'cpu' for a lone member (SMALL_ENSEMBLE), else 'cuda:0' when
+    Warp sees a CUDA device, else 'cpu'. Pass a device to force either."""
     wp = init_warp()
     if n_members is not None and n_members <= SMALL_ENSEMBLE:
         return "cpu"

@@ -44,8 +44,8 @@ def simulate(
     scene:    :class:`Parameters` with the values of every parameter not given per member.
     model:    :class:`Model` switches (each combination compiles its own kernel).
     solver:   :class:`Solver` settings (grid, precision, tolerances, step bounds).
-    device:   Warp device ('cpu', 'cuda:0', ...); None: the CPU for up to 16 members (faster there than
-              on a GPU), else the first CUDA device if any, else 'cpu'.
+    device:   Warp device ('cpu', 'cuda:0', ...); None: the CPU for a lone member (a CPU core ties
+              a GPU there and starts sooner), else the first CUDA device if any, else 'cpu'.
     fronts:   :class:`Fronts`: which detachment front (default: the contact front, each node's
               stick-to-slip transition, in the one integration pass; event='velocity' costs a
               second pass) and how it is segmented; None skips the front metrics.
