@@ -202,7 +202,7 @@ def find_record_times(sweep, device: str | None, offset: int, quiet: bool) -> tu
     chosen = list(sweep.record.members)
     numbers = [offset + m for m in chosen]
     values = {name: column[chosen] for name, column in sweep.members.items()} or None
-    device = check_device(device, len(chosen))
+    device = check_device(device, len(chosen), sweep.solver)
     _say(f"finding the detachment of the recorded {plural(len(chosen), 'member')} ({first_few(numbers)}): a first run of "
          f"{'them' if len(chosen) > 1 else 'it'} alone on {device}", quiet)
     with warnings.catch_warnings():  # their chunks give these members' warnings

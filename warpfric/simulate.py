@@ -45,7 +45,9 @@ def simulate(
     model:    :class:`Model` switches (each combination compiles its own kernel).
     solver:   :class:`Solver` settings (grid, precision, tolerances, step bounds).
     device:   Warp device ('cpu', 'cuda:0', ...); None: the CPU for a lone member (a CPU core ties
-              a GPU there and starts sooner), else the first CUDA device if any, else 'cpu'.
+              a GPU there and starts sooner; up to 16 members where the GPU would run the
+              thread-per-member kernel: float32, lanes=1), else the first CUDA device if any, else
+              'cpu'.
     fronts:   :class:`Fronts`: which detachment front (default: the contact front, each node's
               stick-to-slip transition, in the one integration pass; event='velocity' costs a
               second pass) and how it is segmented; None skips the front metrics.
@@ -134,7 +136,7 @@ def simulate(
                       "nothing in this model", stacklevel=2)
     if np.any(values["rest_until"] < values["force_ramp_time"]):  # allowed, but rarely meant
         warnings.warn(DISC_BEFORE_FULL_LOAD, stacklevel=2)
-    device = check_device(device, n_members)
+    device = check_device(device, n_members, solver)
     from . import pool  # a CPU ensemble large enough to pay: its members split over worker processes
 
     from .progress import end_time_attempts
