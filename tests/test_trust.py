@@ -173,7 +173,7 @@ def test_grid_check_needs_a_grid_to_halve():
 def test_device_none_keeps_a_lone_member_on_the_cpu():
     """device=None: one member on the CPU whatever the GPUs (there a CPU core ties the GPU's team of
     lanes and starts sooner), two or more on cuda:0 when there is one; where the GPU would run the
-    thread-per-member kernel (float32, lanes=1, fewer than 16 nodes) up to 16 members on the CPU
+    thread-per-member kernel (float32, lanes=1, fewer than 16 nodes) up to 32 members on the CPU
     (docs/performance.md, "Where device=None runs")."""
     import warp as wp
 
@@ -181,13 +181,13 @@ def test_device_none_keeps_a_lone_member_on_the_cpu():
     from warpfric.device import SMALL_ENSEMBLE, SMALL_ENSEMBLE_THREAD_KERNEL, cpu_ensemble_limit
 
     gpu = "cuda:0" if wp.get_cuda_device_count() > 0 else "cpu"
-    assert (SMALL_ENSEMBLE, SMALL_ENSEMBLE_THREAD_KERNEL) == (1, 16)
+    assert (SMALL_ENSEMBLE, SMALL_ENSEMBLE_THREAD_KERNEL) == (1, 32)
     assert wf.default_device(1) == wf.default_device(1, wf.Solver()) == "cpu"
     assert wf.default_device(2) == wf.default_device(2, wf.Solver(nodes=200)) == wf.default_device(17) == gpu
     for thread_kernel in (wf.Solver(lanes=1), wf.Solver(dtype="float32"), wf.Solver(nodes=11)):
-        assert cpu_ensemble_limit(thread_kernel) == 16
-        assert wf.default_device(16, thread_kernel) == "cpu"
-        assert wf.default_device(17, thread_kernel) == gpu
+        assert cpu_ensemble_limit(thread_kernel) == 32
+        assert wf.default_device(32, thread_kernel) == "cpu"
+        assert wf.default_device(33, thread_kernel) == gpu
     assert cpu_ensemble_limit(wf.Solver(lanes=32)) == cpu_ensemble_limit(wf.Solver(nodes=16)) == 1
     ds = wf.simulate({"eccentricity": [0.0]}, solver=wf.Solver(nodes=11), fronts=None, device=None, progress=False)
     assert ds.attrs["device"] == "cpu"

@@ -13,8 +13,11 @@ from __future__ import annotations
 # s). studies/device_crossover.py, docs/performance.md "Where device=None runs"
 SMALL_ENSEMBLE = 1
 # ... and up to this size where the GPU would run the thread-per-member kernel (float32,
-# Solver(lanes=1), fewer than 16 nodes), in which one GPU thread takes a member's whole serial chain
-SMALL_ENSEMBLE_THREAD_KERNEL = 16
+# Solver(lanes=1), fewer than 16 nodes), in which one GPU thread takes a member's whole serial chain:
+# with lanes=1 the same members take 0.606 / 1.080 / 1.175 / 1.425 s on the H100 for 1 / 16 / 32 / 64
+# members against 0.042 / 0.432 / 0.853 / 2.574 s on a core of its host, warm (in fresh processes
+# 2.32 / 2.80 / 3.41 / 3.17 s against 2.11 / 2.03 / 2.50 / 3.83 s): the crossover lies between 32 and 64
+SMALL_ENSEMBLE_THREAD_KERNEL = 32
 
 
 def init_warp():
@@ -41,7 +44,7 @@ def cpu_ensemble_limit(solver=None) -> int:
 
 def default_device(n_members: int | None = None, solver=None) -> str:
     """The device for ``device=None``: 'cpu' for an ensemble of at most cpu_ensemble_limit(solver)
-    members (a lone member; up to 16 where the GPU would run the thread-per-member kernel), else
+    members (a lone member; up to 32 where the GPU would run the thread-per-member kernel), else
     'cuda:0' when Warp sees a CUDA device, else 'cpu'. Pass a device to force either."""
     wp = init_warp()
     if n_members is not None and n_members <= cpu_ensemble_limit(solver):

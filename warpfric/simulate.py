@@ -45,7 +45,7 @@ def simulate(
     model:    :class:`Model` switches (each combination compiles its own kernel).
     solver:   :class:`Solver` settings (grid, precision, tolerances, step bounds).
     device:   Warp device ('cpu', 'cuda:0', ...); None: the CPU for a lone member (a CPU core ties
-              a GPU there and starts sooner; up to 16 members where the GPU would run the
+              a GPU there and starts sooner; up to 32 members where the GPU would run the
               thread-per-member kernel: float32, lanes=1), else the first CUDA device if any, else
               'cpu'.
     fronts:   :class:`Fronts`: which detachment front (default: the contact front, each node's
