@@ -859,6 +859,16 @@ def test_a_figure_folder_that_is_a_file_is_refused(tmp_path, capsys):
     assert taken.read_bytes() == b"not a folder"
 
 
+def test_a_figure_folder_in_a_missing_folder_is_refused(tmp_path, capsys):
+    """`warpfric plot OUT.nc --outdir /mistyped/path/figs` created every missing folder of the path
+    (mkdir parents=True), where `warpfric run -o` refuses a missing folder: refused the same way,
+    nothing created."""
+    code, _out, err = run_cli(capsys, "plot", tmp_path / "any.nc", "--outdir", tmp_path / "typo" / "figs")
+    assert code == 2
+    _error_line(err, f"folder '{tmp_path / 'typo'}' does not exist", "--outdir DIR")
+    assert not (tmp_path / "typo").exists()
+
+
 def test_the_interrupt_warning_reads_kept_chunks_with_a_parameter_missing(tmp_path):
     """An interrupted sweep warns of the members not ok in its kept chunks, read from the chunk files;
     a chunk without disc_velocity (an edited file) turned Ctrl-C into an AttributeError traceback:

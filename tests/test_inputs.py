@@ -292,6 +292,51 @@ def test_parameters_held_as_coordinates_of_a_members_dataset_are_used():
         resolve_members(xr.Dataset(coords={"member": [0, 1, 2]}), wf.Parameters())
 
 
+def test_a_runs_outputs_give_its_members_back():
+    """simulate(ds) of a run's Dataset (or its file) was refused for its outputs' dims ("variable
+    'displacement' has dims ('member', 'x')"), though docs/guide.md says the way back works: it takes
+    the run's parameters, every one a variable along member, and runs the same members again, bit for
+    bit; a selection of members runs those. A Record for a run numbered from K names its members by
+    index, and the refusal of a number says so."""
+    kw = dict(solver=wf.Solver(nodes=11), fronts=None)
+    first = simulate({"eccentricity": [0.0, 0.1, -0.1]}, scene=wf.Parameters(disc_velocity=2e-4), member_offset=10,
+                     **kw)
+    again = simulate(first, member_offset=10, **kw)
+    np.testing.assert_array_equal(again.mu_s.values, first.mu_s.values)
+    np.testing.assert_array_equal(again.disc_velocity.values, [2e-4] * 3)
+    np.testing.assert_array_equal(again.member.values, [10, 11, 12])
+    two = simulate(first.sel(member=[11, 12]), **kw)
+    np.testing.assert_array_equal(two.mu_s.values, first.mu_s.values[1:])
+    with pytest.raises(ValueError, match=r"contains 12; valid: member indices 0..2 \(a member's index is its number "
+                                         r"less simulate's member_offset.*member_offset=K\)"):
+        simulate(first, member_offset=10, record=wf.Record.detachment(first, members=(12,)), **kw)
+    record = wf.Record.detachment(first, members=(12,), member_offset=10)
+    assert record.members == (2,)
+
+
+def test_a_solver_or_model_setting_given_per_member_is_named_as_such():
+    """{"nodes": [20]} was "unknown parameter 'nodes'" and the list of parameters, without a word that
+    nodes is a Solver setting: the refusal says where it goes."""
+    for name, kind in (("nodes", "Solver"), ("rtol", "Solver"), ("relaxation_gate", "Model")):
+        with pytest.raises(ValueError, match=rf"unknown parameter '{name}': {name} is a {kind} setting, the same for "
+                                             rf"every member \(wf.{kind}\({name}=...\); in a sweep file "
+                                             rf"\[{kind.lower()}\] {name} = ...\)"):
+            resolve_members({name: [20]}, wf.Parameters())
+
+
+def test_help_of_parameters_gives_units_and_ranges():
+    """docs/guide.md sends the reader to help(wf.Parameters) for units and ranges, which it lacked:
+    a line per parameter with its unit, the range the checks refuse outside of, and its default."""
+    doc = wf.Parameters.__doc__
+    lines = {line.split()[0]: line.split() for line in doc.splitlines() if line.strip()}
+    assert set(wf.PARAMETER_NAMES) <= set(lines)
+    assert lines["normal_force"][1:4] == ["N", "(0,", "inf)"] and lines["normal_force"][4] == "1000"
+    assert lines["eccentricity"][1:4] == ["-", "[-0.6,", "0.6]"]
+    assert lines["viscous_coefficient"][1:6] == ["Pa", "s", "m-1", "[0,", "inf)"]
+    with pytest.raises(ValueError, match=r"valid range \[-0.6, 0.6\]"):
+        resolve_members({"eccentricity": [0.61]}, wf.Parameters())
+
+
 def test_a_misspelt_parameter_as_a_coordinate_is_named():
     """A coordinate along member that is no parameter was dropped without a word (the stacked grid
     of 'eccentricty' ran 4 members at eccentricity 0); as a data variable it was refused."""

@@ -60,12 +60,19 @@ def test_a_scalar_is_named_without_an_index():
 
 
 def test_a_sweep_file_value_names_its_member(tmp_path, capsys):
+    """A swept value out of range names the file, the parameter's index in its list and the range; a
+    [scene] or [solver] value out of range names the file and the table."""
     sweep = tmp_path / "s.toml"
     sweep.write_text("[grid]\nnormal_force = [500.0, 1000.0]\neccentricity = [0.0, 0.2, 0.7]\n")
     assert main(["run", str(sweep), "-o", str(tmp_path / "s.nc")]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == ("warpfric: error: parameter eccentricity[2] = 0.7 is out of range; valid range [-0.6, 0.6] "
+    assert err == (f"warpfric: error: {sweep}: parameter eccentricity[2] = 0.7 is out of range; valid range [-0.6, 0.6] "
                    "(dimensionless) (2 members out of range)")
+    for table, line, words in (("scene", "normal_force = -3.0", "parameter 'normal_force' = -3.0 N is out of range"),
+                               ("solver", "nodes = 2", "solver setting 'nodes' = 2 is invalid")):
+        sweep.write_text(f"[{table}]\n{line}\n[grid]\neccentricity = [0.0]\n")
+        assert main(["run", str(sweep), "-o", str(tmp_path / "s.nc")]) == 2
+        assert capsys.readouterr().err.startswith(f"warpfric: error: {sweep}: [{table}] {words}")
 
 
 def test_info_prints_dimensionless_ranges_without_unit_1():

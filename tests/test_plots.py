@@ -11,6 +11,15 @@ from matplotlib.contour import ContourSet
 
 import warpfric as wf
 from warpfric import plots
+
+
+@pytest.fixture(autouse=True)
+def close_figures():
+    """Each test's figures closed after it (matplotlib warns from the 21st open figure on)."""
+    yield
+    import matplotlib.pyplot as plt
+
+    plt.close("all")
 from warpfric.io import open_ensemble, write_ensemble
 
 

@@ -185,8 +185,8 @@ def _print_member(ds, solver: Solver) -> None:
             print("  (no error estimate: --grid-check estimates the speeds' spatial error, usually the largest)")
     print(f"status    = {status_name(ds, m.status)}; steps accepted {int(m.steps_accepted)}, rejected "
           f"{int(m.steps_rejected)}; lift-off {'yes' if int(m.lift_off) else 'no'}; "
-          f"wall {_seconds(ds.attrs['wall_time_s'])} s "
-          f"(+ {_seconds(ds.attrs.get('kernel_build_time_s', 0.0))} s compiling/loading kernels; "
+          f"wall {_seconds(ds.attrs['wall_time_s'])} s for the run and its outputs (the progress line's time is "
+          f"the integration's; + {_seconds(ds.attrs.get('kernel_build_time_s', 0.0))} s compiling/loading kernels; "
           f"{ds.attrs.get('device_bytes_per_member', 0.0) / 1024:.1f} KiB device memory per member)")
 
 
@@ -474,6 +474,9 @@ def _plot(args) -> int:
     outdir = Path(args.outdir) if args.outdir else Path(args.file).with_suffix("")
     if outdir.exists() and not outdir.is_dir():
         raise UsageError(f"figure folder {str(outdir)!r} is a file; give another with --outdir DIR")
+    if not outdir.parent.is_dir():  # as -o: a mistyped path is refused, not created folder by folder
+        raise UsageError(f"figure folder {str(outdir)!r}: folder {str(outdir.parent)!r} does not exist; give a folder "
+                         "in an existing one with --outdir DIR (plot creates only the last folder)")
     parts = next((f for f in (outdir.resolve(), *outdir.resolve().parents) if f.name.endswith(".nc" + PARTS_SUFFIX)),
                  None)
     if parts is not None:  # a chunk's figures would go with the folder when the run ends
@@ -481,7 +484,7 @@ def _plot(args) -> int:
                          "removed when the sweep ends; give a folder outside it with --outdir DIR")
     ds = open_ensemble(args.file)
     try:
-        outdir.mkdir(parents=True, exist_ok=True)
+        outdir.mkdir(exist_ok=True)
         for path in quick_look(ds, outdir):
             print(f"wrote {path}")
         if ds.sizes["member"] == 1 and "velocity_history" not in ds:
@@ -640,7 +643,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, set]:
     plot = sub.add_parser("plot", help="quick-look PNGs of an ensemble file")
     add(plot, "file", metavar="FILE", help="ensemble file (netCDF, from warpfric run)")
     add(plot, "--outdir", default=None,
-        help="folder for the PNGs (default: OUT next to OUT.nc; the PNGs of an earlier plot there are replaced)")
+        help="folder for the PNGs, created if its parent exists (default: OUT next to OUT.nc); PNGs of the same names there are replaced, others are left")
     sens = sub.add_parser("sensitivity", help="Sobol (Saltelli design) or Morris indices of a design's outputs (needs SALib)")
     add(sens, "file", metavar="FILE", help="ensemble file of a sweep with a [design] table")
     add(sens, "--output", action="append", help="per-member output to analyse (repeatable; default mu_s)")

@@ -430,7 +430,9 @@ def record_slots(record: Record | None, n_members: int) -> np.ndarray:
         return slots
     for slot, member in enumerate(record.members):
         if member >= n_members:
-            raise ValueError(f"record setting 'members' contains {member}; valid: member indices 0..{n_members - 1}")
+            raise ValueError(f"record setting 'members' contains {member}; valid: member indices 0..{n_members - 1} "
+                             "(a member's index is its number less simulate's member_offset: for a run numbered "
+                             "from K, Record.detachment(ds, members=..., member_offset=K))")
         slots[member] = slot
     return slots
 

@@ -25,6 +25,9 @@ def _member_arrays(members: Any) -> dict[str, np.ndarray]:
     except ImportError:  # pragma: no cover - xarray is a dependency
         xr = None
     if xr is not None and isinstance(members, xr.Dataset):
+        if "warpfric_version" in members.attrs:  # a run's outputs (simulate's Dataset, or its file): its members'
+            # parameters, every one a variable along member; its outputs and recorded fields are no input
+            members = members[[name for name in PARAMETER_NAMES if name in members.data_vars]]
         out = {}
         # the parameters among its coordinates too (a grid built with .stack(member=[...]) holds them
         # there, as by_parameters gives them back): they were ignored, and the default scene ran

@@ -157,6 +157,22 @@ def parameter_range_text(name: str) -> str:
     return _range_text(_FIELDS[name].metadata)
 
 
+def _fields_text() -> str:
+    """Every parameter with its unit, valid range, default and meaning, for help(Parameters): the
+    field metadata that the checks and the files' attributes use."""
+    rows = []
+    for f in dataclasses.fields(Parameters):
+        meta = f.metadata
+        default = "None" if f.default is None else f"{f.default:g}"
+        rows.append(f"    {f.name:<26} {units_text(meta['units']) or '-':<9} {_range_text(meta):<17} {default:<9} "
+                    f"{meta['long_name']}")
+    head = f"    {'name':<26} {'unit':<9} {'valid range':<17} {'default':<9} meaning"
+    return "\n\n    Parameters (SI; unit '-': dimensionless):\n\n" + "\n".join([head, *rows]) + "\n"
+
+
+Parameters.__doc__ = (Parameters.__doc__ or "").rstrip() + _fields_text()
+
+
 def did_you_mean(name, names) -> str:
     """" (did you mean 'x'?)" with the closest of ``names`` to ``name``, or "" where none is close."""
     import difflib
@@ -168,7 +184,13 @@ def did_you_mean(name, names) -> str:
 
 
 def unknown_parameter(name: str) -> str:
-    """The message for a parameter name that is not one: the valid names and the closest match."""
+    """The message for a parameter name that is not one: the valid names and the closest match, or
+    where the name is a Solver or Model setting, that setting's place."""
+    for kind in (Solver, Model):
+        if name in {f.name for f in dataclasses.fields(kind)}:
+            return (f"unknown parameter {name!r}: {name} is a {kind.__name__} setting, the same for every member "
+                    f"(wf.{kind.__name__}({name}=...); in a sweep file [{kind.__name__.lower()}] {name} = ...); "
+                    f"valid parameter names: {', '.join(PARAMETER_NAMES)}")
     return f"unknown parameter {name!r}{did_you_mean(name, PARAMETER_NAMES)}; valid names: {', '.join(PARAMETER_NAMES)}"
 
 
