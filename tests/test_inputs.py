@@ -307,6 +307,15 @@ def test_a_runs_outputs_give_its_members_back():
     np.testing.assert_array_equal(again.member.values, [10, 11, 12])
     two = simulate(first.sel(member=[11, 12]), **kw)
     np.testing.assert_array_equal(two.mu_s.values, first.mu_s.values[1:])
+    # the parameters as coordinates (set_coords for groupby, or by_parameters' grid stacked back)
+    grid = simulate({"eccentricity": [0.0, 0.1], "normal_force": [[800.0], [1000.0]]}, **kw)
+    for back in (grid.set_coords(["normal_force", "eccentricity"]),
+                 wf.io.by_parameters(grid).stack(member=["normal_force", "eccentricity"])):
+        rerun = simulate(back, **kw)
+        assert rerun.sizes["member"] == 4
+        order = np.lexsort((rerun.eccentricity.values, rerun.normal_force.values))
+        np.testing.assert_array_equal(rerun.mu_s.values[order], grid.mu_s.values[np.lexsort(
+            (grid.eccentricity.values, grid.normal_force.values))])
     with pytest.raises(ValueError, match=r"contains 12; valid: member indices 0..2 \(a member's index is its number "
                                          r"less simulate's member_offset.*member_offset=K\)"):
         simulate(first, member_offset=10, record=wf.Record.detachment(first, members=(12,)), **kw)

@@ -67,7 +67,7 @@ def test_failed_members_are_refused_or_filled_explicitly():
     ds["y"].values[[3, 10]] = np.nan
     ds["status"].values[5] = 1
     with pytest.raises(ValueError, match=r"3 of .* members failed or lack it .*3, 5, 10.*fill-mean to replace them "
-                                         r"by the mean; 2 of them ended ok without it \(e.g. no second front\)"):
+                                         r"by the mean; 2 of them ended ok without it, so the mean stands for something"):
         analyse(ds, ("y",))  # members 3 and 10 ok without y, member 5 failed
     with pytest.warns(UserWarning, match="not resolved at base size n = 64"):  # a small design, on purpose
         res = analyse(ds, ("y",), on_failure="fill-mean")

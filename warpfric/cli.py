@@ -474,7 +474,7 @@ def _plot(args) -> int:
     outdir = Path(args.outdir) if args.outdir else Path(args.file).with_suffix("")
     if outdir.exists() and not outdir.is_dir():
         raise UsageError(f"figure folder {str(outdir)!r} is a file; give another with --outdir DIR")
-    if not outdir.parent.is_dir():  # as -o: a mistyped path is refused, not created folder by folder
+    if args.outdir and not outdir.parent.is_dir():  # as -o: a mistyped path is refused, not created folder by folder
         raise UsageError(f"figure folder {str(outdir)!r}: folder {str(outdir.parent)!r} does not exist; give a folder "
                          "in an existing one with --outdir DIR (plot creates only the last folder)")
     parts = next((f for f in (outdir.resolve(), *outdir.resolve().parents) if f.name.endswith(".nc" + PARTS_SUFFIX)),
@@ -587,7 +587,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, set]:
         help="sweep file (TOML, see docs/sweeps.md); none: the default scene")
     add(run, "-o", "--output", metavar="OUT.nc", help="netCDF file to write (sweeps: default SWEEP.nc; "
         "the default scene writes one only with -o)")
-    add(run, "--device", default=None, help="Warp device: cpu, cuda:0, ... (default: cpu for a lone member, else the first GPU if any, else cpu)")
+    add(run, "--device", default=None, help="Warp device: cpu, cuda:0, ... (default: the first GPU if any, else cpu; a lone member, or up to 32 members where the GPU would run one member a thread (float32, --lanes 1), on the cpu)")
     add(run, "--cpu-workers", type=int, default=None, metavar="N",
         help="worker processes on the CPU (default: all cores for an ensemble that pays, else 1; 1: this process)")
     add(run, "--member-offset", type=int, default=None, metavar="K",

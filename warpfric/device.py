@@ -16,7 +16,7 @@ SMALL_ENSEMBLE = 1
 # Solver(lanes=1), fewer than 16 nodes), in which one GPU thread takes a member's whole serial chain:
 # with lanes=1 the same members take 0.606 / 1.080 / 1.175 / 1.425 s on the H100 for 1 / 16 / 32 / 64
 # members against 0.042 / 0.432 / 0.853 / 2.574 s on a core of its host, warm (in fresh processes
-# 2.32 / 2.80 / 3.41 / 3.17 s against 2.11 / 2.03 / 2.50 / 3.83 s): the crossover lies between 32 and 64
+# 2.31 / 2.80 / 3.41 / 3.17 s against 2.10 / 2.03 / 2.50 / 3.83 s): the crossover lies between 32 and 64
 SMALL_ENSEMBLE_THREAD_KERNEL = 32
 
 

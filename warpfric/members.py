@@ -26,8 +26,9 @@ def _member_arrays(members: Any) -> dict[str, np.ndarray]:
         xr = None
     if xr is not None and isinstance(members, xr.Dataset):
         if "warpfric_version" in members.attrs:  # a run's outputs (simulate's Dataset, or its file): its members'
-            # parameters, every one a variable along member; its outputs and recorded fields are no input
-            members = members[[name for name in PARAMETER_NAMES if name in members.data_vars]]
+            # parameters (variables along member, scalars where its file holds one value for all, or coordinates
+            # after set_coords or by_parameters); its outputs and recorded fields are no input
+            members = members.drop_vars([name for name in members.data_vars if name not in PARAMETER_NAMES])
         out = {}
         # the parameters among its coordinates too (a grid built with .stack(member=[...]) holds them
         # there, as by_parameters gives them back): they were ignored, and the default scene ran

@@ -163,9 +163,9 @@ def _fields_text() -> str:
     rows = []
     for f in dataclasses.fields(Parameters):
         meta = f.metadata
-        default = "None" if f.default is None else f"{f.default:g}"
-        rows.append(f"    {f.name:<26} {units_text(meta['units']) or '-':<9} {_range_text(meta):<17} {default:<9} "
-                    f"{meta['long_name']}")
+        default = f"{f.default:g}" if isinstance(f.default, (int, float)) else str(f.default)
+        rows.append(f"    {f.name:<26} {units_text(meta.get('units', '')) or '-':<9} {_range_text(meta):<17} "
+                    f"{default:<9} {meta.get('long_name', '')}")
     head = f"    {'name':<26} {'unit':<9} {'valid range':<17} {'default':<9} meaning"
     return "\n\n    Parameters (SI; unit '-': dimensionless):\n\n" + "\n".join([head, *rows]) + "\n"
 

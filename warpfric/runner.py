@@ -626,7 +626,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
             _say(f"[run] device = {device!r} pins every worker to that device (--device to choose another; "
                  "leave it out to let each worker use its own GPU)", False)
     if not use_cluster:  # on a cluster, each worker checks its own device
-        device = check_device(device)
+        device = check_device(device, sweep.n_members, sweep.solver)  # None: as simulate's (a lone member: the CPU)
     elif new_local_cluster and device is not None:
         check_device(device)  # its workers run on this host: a device it lacks fails every chunk, so say it here
     digest = sweep_digest(f"{sweep.text}\nchunk={chunk}" + (f"\nmember_offset={offset}" if offset else ""))

@@ -190,9 +190,10 @@ def design_outputs(ds, outputs=("mu_s",), on_failure: str = "refuse", log: bool 
                 why = (f"; {int(not_positive.sum())} of them ok with a value <= 0, which the log (--log) cannot take"
                        if not_positive.any() else "")
                 lacking = int(((status == 0) & ~np.isfinite(ds[out].values)).sum())
-                caveat = (f"; {lacking} of them ended ok without it (e.g. no second front), so the mean stands for "
-                          "something that did not happen there and the indices mix whether it exists with its value "
-                          "(front_count's indices say what decides whether a second front exists)"
+                pointer = (" (front_count's indices say what decides whether a second front exists)"
+                           if out == "v_second" else "")
+                caveat = (f"; {lacking} of them ended ok without it, so the mean stands for something that did not "
+                          f"happen there and the indices mix whether it exists with its value{pointer}"
                           if lacking else "")
                 raise ValueError(f"output {out!r}: {bad.sum()} of {rows} members failed or lack it (members "
                                  f"{', '.join(map(str, idx[:10]))}{' ...' if idx.size > 10 else ''}{why}); the design "

@@ -46,8 +46,8 @@ def simulate(
     solver:   :class:`Solver` settings (grid, precision, tolerances, step bounds).
     device:   Warp device ('cpu', 'cuda:0', ...); None: the CPU for a lone member (a CPU core ties
               a GPU there and starts sooner; up to 32 members where the GPU would run the
-              thread-per-member kernel: float32, lanes=1), else the first CUDA device if any, else
-              'cpu'.
+              thread-per-member kernel: float32, lanes=1, fewer than 16 nodes), else the first CUDA
+              device if any, else 'cpu'.
     fronts:   :class:`Fronts`: which detachment front (default: the contact front, each node's
               stick-to-slip transition, in the one integration pass; event='velocity' costs a
               second pass) and how it is segmented; None skips the front metrics.
