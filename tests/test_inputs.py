@@ -295,8 +295,8 @@ def test_parameters_held_as_coordinates_of_a_members_dataset_are_used():
 def test_a_runs_outputs_give_its_members_back():
     """simulate(ds) of a run's Dataset (or its file) was refused for its outputs' dims ("variable
     'displacement' has dims ('member', 'x')"), though docs/guide.md says the way back works: it takes
-    the run's parameters, every one a variable along member, and runs the same members again, bit for
-    bit; a selection of members runs those. A Record for a run numbered from K names its members by
+    the run's parameters (variables along member, or coordinates after set_coords or by_parameters)
+    and runs the same members again, bit for bit; a selection of members runs those. A Record for a run numbered from K names its members by
     index, and the refusal of a number says so."""
     kw = dict(solver=wf.Solver(nodes=11), fronts=None)
     first = simulate({"eccentricity": [0.0, 0.1, -0.1]}, scene=wf.Parameters(disc_velocity=2e-4), member_offset=10,

@@ -587,7 +587,8 @@ def build_parser() -> tuple[argparse.ArgumentParser, set]:
         help="sweep file (TOML, see docs/sweeps.md); none: the default scene")
     add(run, "-o", "--output", metavar="OUT.nc", help="netCDF file to write (sweeps: default SWEEP.nc; "
         "the default scene writes one only with -o)")
-    add(run, "--device", default=None, help="Warp device: cpu, cuda:0, ... (default: the first GPU if any, else cpu; a lone member, or up to 32 members where the GPU would run one member a thread (float32, --lanes 1), on the cpu)")
+    add(run, "--device", default=None, help="Warp device: cpu, cuda:0, ... (default: the first GPU if any, else cpu; a "
+        "lone member, or up to 32 members where the GPU would run one member a thread (float32, --lanes 1), on the cpu)")
     add(run, "--cpu-workers", type=int, default=None, metavar="N",
         help="worker processes on the CPU (default: all cores for an ensemble that pays, else 1; 1: this process)")
     add(run, "--member-offset", type=int, default=None, metavar="K",
@@ -643,7 +644,8 @@ def build_parser() -> tuple[argparse.ArgumentParser, set]:
     plot = sub.add_parser("plot", help="quick-look PNGs of an ensemble file")
     add(plot, "file", metavar="FILE", help="ensemble file (netCDF, from warpfric run)")
     add(plot, "--outdir", default=None,
-        help="folder for the PNGs, created if its parent exists (default: OUT next to OUT.nc); PNGs of the same names there are replaced, others are left")
+        help="folder for the PNGs, created if its parent exists (default: OUT next to OUT.nc); PNGs of the same names "
+             "there are replaced, others are left")
     sens = sub.add_parser("sensitivity", help="Sobol (Saltelli design) or Morris indices of a design's outputs (needs SALib)")
     add(sens, "file", metavar="FILE", help="ensemble file of a sweep with a [design] table")
     add(sens, "--output", action="append", help="per-member output to analyse (repeatable; default mu_s)")

@@ -47,9 +47,9 @@ def default_device(n_members: int | None = None, solver=None) -> str:
     members (a lone member; up to 32 where the GPU would run the thread-per-member kernel), else
     'cuda:0' when Warp sees a CUDA device, else 'cpu'. Pass a device to force either."""
     wp = init_warp()
-    if n_members is not None and n_members <= cpu_ensemble_limit(solver):
+    if wp.get_cuda_device_count() == 0 or (n_members is not None and n_members <= cpu_ensemble_limit(solver)):
         return "cpu"
-    return "cuda:0" if wp.get_cuda_device_count() > 0 else "cpu"
+    return "cuda:0"
 
 
 def check_device(device: str | None, n_members: int | None = None, solver=None) -> str:

@@ -239,10 +239,10 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
     if not isinstance(title, str):
         raise SweepError(f"title = {title!r}: expected a string")
     try:
-        scene = _in_table(name, "scene", Parameters, _dataclass_kwargs(doc.get("scene", {}), Parameters, "scene",
-                                                                       parameters=True))
-        model = _in_table(name, "model", Model, _dataclass_kwargs(doc.get("model", {}), Model, "model"))
-        solver = _in_table(name, "solver", Solver, _dataclass_kwargs(doc.get("solver", {}), Solver, "solver"))
+        scene = _said_in(f"{name}: [scene] ", Parameters,
+                         **_dataclass_kwargs(doc.get("scene", {}), Parameters, "scene", parameters=True))
+        model = _said_in(f"{name}: [model] ", Model, **_dataclass_kwargs(doc.get("model", {}), Model, "model"))
+        solver = _said_in(f"{name}: [solver] ", Solver, **_dataclass_kwargs(doc.get("solver", {}), Solver, "solver"))
         check_precision(model, solver)  # before the run's first line, not inside its first chunk
         fronts_spec = doc.get("fronts", {})
         if fronts_spec is False:
@@ -356,25 +356,21 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
     n_members = next(iter(members.values())).shape[0] if members else 1
     check_member_offset(run.get("member_offset", 0), n_members, "[run] member_offset")
     # validate every member now (ranges, protocol), before anything runs or is written
-    try:
-        resolve_members(members or None, scene)
-    except SweepError:
-        raise
-    except ValueError as err:  # a swept value out of range, or a protocol the scene's times break: name the file
-        raise SweepError(f"{name}: {err}") from None
+    _said_in(f"{name}: ", resolve_members, members or None, scene)  # a swept value out of range, or a protocol
+    # the scene's times break
     varying = tuple(k for k in PARAMETER_NAMES if k in members)
     return Sweep(text, title, scene, model, solver, fronts, record, members, varying, run, design)
 
 
-def _in_table(name: str, table: str, kind, kwargs: dict):
-    """``kind(**kwargs)``, the settings of the sweep file ``name``'s [table]; its ValueError (a value out of
-    range) as a SweepError that names the file and the table."""
+def _said_in(where: str, make, *args, **kwargs):
+    """``make(*args, **kwargs)``; its ValueError (a value out of range) as a SweepError that begins with
+    ``where`` (the sweep file, and its table where one holds the value); a SweepError as it is."""
     try:
-        return kind(**kwargs)
+        return make(*args, **kwargs)
     except SweepError:
         raise
     except ValueError as err:
-        raise SweepError(f"{name}: [{table}] {err}") from None
+        raise SweepError(f"{where}{err}") from None
 
 
 def check_member_offset(offset: int, n_members: int, where: str) -> int:
