@@ -122,9 +122,9 @@ case "$mode" in
       --out "$OUT/stability_none.nc" "$@" 2>&1 | grep -v "pass [12]/2" | tee "$OUT/stability_none.log" | tail -25 ;;
   peers)
     for method in esdirk4 tr_bdf2; do
-      $B peers diffrax --members 1 100 --nodes 40 --rtols 1e-5 --end-time 20.6 --relaxation-gate none --timeout 60 \
+      $B peers diffrax --members 1 100 1000 --nodes 40 --rtols 1e-5 --end-time 20.6 --relaxation-gate none --timeout 60 \
         --kill-factor 1.2 --device gpu --warpfric-device cuda:0 --root-finders newton --warpfric-method $method \
-        --warpfric-rtols 1e-4 1e-5 1e-6 1e-7 --out "$OUT/baseline_diffrax_$method.json" "$@" 2>&1 | tail -6
+        --warpfric-rtols 1e-4 1e-5 1e-6 1e-7 --repeat 3 --out "$OUT/baseline_diffrax_$method.json" "$@" 2>&1 | tail -6
     done
     $B peers scipy --gpu-json studies/results/work_precision_h100.json --out "$OUT/baseline_scipy_gpuhost.json" 2>&1 | tail -8 ;;
   profile)
