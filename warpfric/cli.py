@@ -123,7 +123,7 @@ def _grid_error(m, name: str) -> str:
 
 
 def _print_member(ds, solver: Solver) -> None:
-    from .simulate import not_over_groups
+    from .simulate import GRID_CHECK_MIN_NODES, not_over_groups
 
     m = ds.isel(member=0)
     not_over = {key: bool(which[0]) for key, which in not_over_groups(ds.isel(member=[0])).items()}
@@ -181,6 +181,9 @@ def _print_member(ds, solver: Solver) -> None:
                       f"t = {float(m.collision_time):.5f} s{more}")
         if "v_middle_grid_error" in m:
             print("  (+- : the change on a grid of half the nodes, an estimate of the spatial error)")
+        elif ds.sizes["x"] < GRID_CHECK_MIN_NODES:  # too coarse for the check itself
+            print(f"  (no error estimate: N = {ds.sizes['x']} is too coarse for --grid-check, which needs "
+                  f"--nodes >= {GRID_CHECK_MIN_NODES}; the speeds converge to a few % from N = 50)")
         else:
             print("  (no error estimate: --grid-check estimates the speeds' spatial error, usually the largest)")
     print(f"status    = {status_name(ds, m.status)}; steps accepted {int(m.steps_accepted)}, rejected "

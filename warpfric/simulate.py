@@ -122,9 +122,9 @@ def simulate(
         warnings.warn(f"{FRONTS_SETTINGS_UNUSED}: {', '.join(unused)} (event={fronts.event!r}); "
                       "they set the velocity front's arrival level and sign: Fronts(event=('contact', 'velocity')) "
                       "reads both fronts", stacklevel=2)
-    if fronts is not None and fronts.grid_check and solver.nodes < 5:
-        raise ValueError(f"fronts setting 'grid_check' needs solver setting 'nodes' >= 5 (got {solver.nodes}): the "
-                         "check compares with (nodes + 1)//2 nodes")
+    if fronts is not None and fronts.grid_check and solver.nodes < GRID_CHECK_MIN_NODES:
+        raise ValueError(f"fronts setting 'grid_check' needs solver setting 'nodes' >= {GRID_CHECK_MIN_NODES} "
+                         f"(got {solver.nodes}): the check compares with (nodes + 1)//2 nodes")
     values, varying = resolve_members(members, scene)
     n_members = values["normal_force"].shape[0]
     if member_offset > MEMBER_NUMBER_LIMIT - n_members:  # as a sweep's check_member_offset
@@ -274,6 +274,7 @@ def _run_members(values, varying, scene, model, solver, fronts, record, device, 
     return ds
 
 
+GRID_CHECK_MIN_NODES = 5  # Fronts(grid_check=True) compares with a run on (nodes + 1)//2 >= 3 nodes
 LONG_NAME_MAX = 60  # characters: xarray labels a plot's axis with long_name [units], in lines of 30
 
 
