@@ -761,7 +761,6 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
     team_switch_test = gates["team_switch_test"]
     team_min = team["team_min"]
     team_sum = team["team_sum"]
-    team_barrier = team["barrier"]
     disc_velocity_stage = equations["disc_velocity_stage"]
     stage_displacement = equations["stage_displacement"]
     over_den = make_over_den(ft)
@@ -786,9 +785,7 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
         """Stage derivatives K[slot] = f(Y) of a converged stage; returns its StageSums and, at the end
         of a step (end_of_step = 1: the last stage of a step of size h), the gate-switch test of the
         step (kernels/gates.py; the stress gate only), and stores each node's contact and gate for
-        the fronts and the gate update. In a team the sums are the team's at the end of a step only
-        (a stage inside the step returns the lane's own partial sums, which its callers do not read,
-        and waits at one team barrier instead of three reductions)."""
+        the fronts and the gate update."""
         v_disc = ft(disc_velocity_stage(p, t_stage, t_step))
         sums = StageSums()
         sums.friction = wp.float64(0.0)
@@ -825,14 +822,11 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
             u_l = u_c
             u_c = u_r
         if wp.static(team_on):
-            if end_of_step == 1:  # the steppers read the sums and the test of a step's last stage only
-                sums.friction = team_sum(sums.friction)
-                sums.normal = team_sum(sums.normal)
-                sums.min_normal = team_min(sums.min_normal)
-                if wp.static(stress_gate):
-                    test = team_switch_test(test)
-            else:  # the team's barrier that the reductions give: the next stage reads what this one wrote
-                team_barrier()
+            sums.friction = team_sum(sums.friction)
+            sums.normal = team_sum(sums.normal)
+            sums.min_normal = team_min(sums.min_normal)
+            if end_of_step == 1 and wp.static(stress_gate):
+                test = team_switch_test(test)
         return sums, test
 
     return dict(StageSums=StageSums, stage_derivatives=stage_derivatives)
