@@ -181,9 +181,10 @@ def _print_member(ds, solver: Solver) -> None:
                       f"t = {float(m.collision_time):.5f} s{more}")
         if "v_middle_grid_error" in m:
             print("  (+- : the change on a grid of half the nodes, an estimate of the spatial error)")
-        elif ds.sizes["x"] < GRID_CHECK_MIN_NODES:  # too coarse for the check itself
-            print(f"  (no error estimate: N = {ds.sizes['x']} is too coarse for --grid-check, which needs "
-                  f"--nodes >= {GRID_CHECK_MIN_NODES}; the speeds converge to a few % from N = 50)")
+        elif solver.nodes < GRID_CHECK_MIN_NODES:  # too coarse for the check itself
+            print(f"  (no error estimate: N = {solver.nodes} is too coarse for --grid-check, which needs "
+                  f"--nodes >= {GRID_CHECK_MIN_NODES}; how the speeds move with N: docs/performance.md, "
+                  "\"Fronts: cost and convergence\")")
         else:
             print("  (no error estimate: --grid-check estimates the speeds' spatial error, usually the largest)")
     print(f"status    = {status_name(ds, m.status)}; steps accepted {int(m.steps_accepted)}, rejected "

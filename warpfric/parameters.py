@@ -278,7 +278,8 @@ def _plain_settings(settings) -> None:
 
 @functools.cache
 def _default_scene() -> Parameters:
-    """The default scene, built once (it is immutable): building it checks every value again, ~0.3 ms."""
+    """The default scene, built once (it is immutable): building it checks every value again (~0.15 ms
+    on this project's CPU)."""
     return Parameters()
 
 

@@ -123,8 +123,8 @@ def simulate(
                       "they set the velocity front's arrival level and sign: Fronts(event=('contact', 'velocity')) "
                       "reads both fronts", stacklevel=2)
     if fronts is not None and fronts.grid_check and solver.nodes < GRID_CHECK_MIN_NODES:
-        raise ValueError(f"fronts setting 'grid_check' needs solver setting 'nodes' >= {GRID_CHECK_MIN_NODES} "
-                         f"(got {solver.nodes}): the check compares with (nodes + 1)//2 nodes")
+        raise ValueError(f"fronts setting 'grid_check' needs solver setting 'nodes' >= "
+                         f"{GRID_CHECK_MIN_NODES} (got {solver.nodes}): the check compares with (nodes + 1)//2 nodes")
     values, varying = resolve_members(members, scene)
     n_members = values["normal_force"].shape[0]
     if member_offset > MEMBER_NUMBER_LIMIT - n_members:  # as a sweep's check_member_offset
@@ -283,7 +283,7 @@ def _short_long_names(ds: xr.Dataset) -> xr.Dataset:
     ' (', ': ' or '; ' after 15 characters, the whole text kept as the variable's CF ``comment`` (a
     plot's axis label read 'time at which the detachment was over (the automatic end's criterion:
     ...' for 183 characters). Names that are short already, or that have a comment, stay."""
-    for var in ds.variables.values():  # the Dataset's own Variables (their attrs in place), not DataArrays: ~60x cheaper
+    for var in ds.variables.values():  # the Variables themselves (attrs in place), not DataArrays: cheaper
         text = var.attrs.get("long_name", "")
         if len(text) <= LONG_NAME_MAX or "comment" in var.attrs:
             continue
