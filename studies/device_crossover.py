@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_engine import members, tree_commit  # noqa: E402
+from bench_engine import members, reference_path, tree_commit  # noqa: E402
 
 NODES = 200
 RTOL = 1e-5
@@ -86,7 +86,7 @@ def main(argv=None):
     ap.add_argument("--jsonl", default=None)
     args = ap.parse_args(argv)
     commit = tree_commit()
-    with open(Path(__file__).parent / "reference" / "bench_members_mu_s_stress.json") as f:
+    with open(reference_path("stress")) as f:
         reference = float(json.load(f)["mu_s"][0])  # the first member at rtol 1e-9, N = 200
     rows = []
     for m in args.members:

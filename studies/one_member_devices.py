@@ -25,7 +25,7 @@ import warpfric as wf
 from warpfric.device import init_warp
 
 sys.path.insert(0, str(Path(__file__).parent))
-from bench_engine import members, tree_commit  # noqa: E402
+from bench_engine import members, reference_path, tree_commit  # noqa: E402
 
 
 def timed(member, solver, device, repeat):
@@ -51,7 +51,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     commit = tree_commit()
     solver = wf.Solver(nodes=200, rtol=1e-5)
-    with open(Path(__file__).parent / "reference" / "bench_members_mu_s_stress.json") as f:
+    with open(reference_path("stress")) as f:
         reference = {"bench member 0": json.load(f)["mu_s"][0]}  # rtol 1e-9, N = 200 (no reference for the scene)
     scenes = {"default scene": None, "bench member 0": {k: v[:1] for k, v in members(1).items()}}
     print(f"{'member':>15} {'device':>7} {'lanes':>5} {'wall ms':>8} {'attempts':>8} {'mu_s':>10}")
