@@ -11,6 +11,7 @@ from matplotlib.contour import ContourSet
 
 import warpfric as wf
 from warpfric import plots
+from warpfric.io import open_ensemble, write_ensemble
 
 
 @pytest.fixture(autouse=True)
@@ -20,7 +21,6 @@ def close_figures():
     import matplotlib.pyplot as plt
 
     plt.close("all")
-from warpfric.io import open_ensemble, write_ensemble
 
 
 def ensemble(force, ecc, nodes=11, seed=0):
