@@ -202,7 +202,12 @@ def make_switch_location(ft, SwitchTest):
             st.missed_predictions = st.missed_predictions + 1
         st = drop_stale_limit(st, t_new)  # st.restart is 0 here: the limit this step reached
         located_pending = st.switch_limit < wp.float64(1.0e300) and st.switch_predicted == 0
-        if settings.predict_switches == 1 and st.prediction_misses < MAX_PREDICTION_MISSES and not located_pending:
+        predict = settings.predict_switches == 1 and st.prediction_misses < MAX_PREDICTION_MISSES
+        # a located retry that ended before the switch (regula falsi creeping towards a curved crossing):
+        # the margin's secant over this step, on the near side, is the next step's end, with or
+        # without predictions
+        creeping = st.switch_retries > 0 and not switched
+        if (predict or creeping) and not located_pending:
             if test.next_switch < ft(NO_PREDICTION):
                 limit = t_new + wp.float64(test.next_switch)
                 if limit < st.switch_limit:

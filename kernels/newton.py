@@ -615,8 +615,9 @@ def make_newton_system(ft, model, terms, team, equations, solver, team_solver):
 NEWTON_ERROR_FRACTION = 0.1
 
 
-def make_newton_solve(ft, terms, team, equations, solver, system):
+def make_newton_solve(ft, model, terms, team, equations, solver, system):
     """newton_solve: one implicit stage by Newton's method on the bordered system."""
+    inertia = bool(model.inertia)
     Coeffs = terms["Coeffs"]
     team_on = team["lanes"] > 1
     team_max = team["team_max"]
@@ -631,10 +632,14 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
     @wp.func
     def update_velocity(c: Coeffs, work: array3, lo: int, hi: int, m: int, g: ft, rtol: ft, d_delta0: ft, d_tilt: ft):
         """Apply the Newton update dV of nodes [lo, hi) to work[W_V]; returns the error-weighted norm
-        of dV and of the displacement's g*dV, and whether every update (with d_delta0, d_tilt) is
-        finite."""
+        of dV and of the displacement's g*dV, the norm of what dV moves in the stage's states
+        (without inertia: the displacement's g*dV and, bounded with a contact area of 1, the elastic
+        stress's g*Kh*dV; with inertia, where V is a state, the norm itself), and whether every
+        update (with d_delta0, d_tilt) is finite."""
         top = ft(0.0)  # the norm so far, top/bottom (ratio_max: one division for the sweep)
         bottom = ft(1.0)
+        state_top = ft(0.0)
+        state_bottom = ft(1.0)
         finite = wp.isfinite(d_delta0) and wp.isfinite(d_tilt)  # the maximum drops NaN: test each
         for i in range(lo, hi):
             dv = solution_row(work, i, m, d_delta0, d_tilt)
@@ -645,7 +650,14 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
                 finite = False
             top, bottom = ratio_max(top, bottom, wp.abs(dv), rtol * (c.v_scale + wp.abs(vel)))
             top, bottom = ratio_max(top, bottom, g * wp.abs(dv), rtol * (c.u_scale + wp.abs(u)))
-        return quotient(top, bottom), finite
+            if wp.static(not inertia):
+                state_top, state_bottom = ratio_max(state_top, state_bottom, g * wp.abs(dv), rtol * (c.u_scale + wp.abs(u)))
+                state_top, state_bottom = ratio_max(state_top, state_bottom, g * c.Kh * wp.abs(dv), rtol * c.tau_scale)
+        norm = quotient(top, bottom)
+        state_norm = norm
+        if wp.static(not inertia):
+            state_norm = quotient(state_top, state_bottom)
+        return norm, state_norm, finite
 
     @wp.func
     def newton_solve(
@@ -693,7 +705,7 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
             d_delta0, d_tilt = schur_solve(bs.d11, bs.d12, bs.d21, bs.d22, bs.e1, bs.e2, bs.s10, bs.s11, bs.s12,
                                            bs.s20, bs.s21, bs.s22)
             # ---- pass 3: update and error-weighted norm of the update ----
-            norm, finite = update_velocity(c, work, c.first_node, c.end_node, m, g, rtol, d_delta0, d_tilt)
+            norm, state_norm, finite = update_velocity(c, work, c.first_node, c.end_node, m, g, rtol, d_delta0, d_tilt)
             if wp.static(team_on):
                 # every lane must take the same branch, so every decision below reads the one
                 # reduced value: a lane's non-finite update reaches the others as an infinite norm
@@ -702,10 +714,15 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
                     norm = ft(wp.inf)
                 norm = team_max(norm)
                 finite = wp.isfinite(norm)
+                if wp.static(not inertia):
+                    state_norm = team_max(state_norm)
             delta0 = delta0 + d_delta0
             tilt = tilt + d_tilt
             norm = wp.max(norm, wp.abs(d_delta0) / (rtol * (c.delta_scale + wp.abs(delta0))))
             norm = wp.max(norm, wp.abs(d_tilt) / (rtol * (c.tilt_scale + wp.abs(tilt))))
+            if wp.static(not inertia):
+                state_norm = wp.max(state_norm, wp.abs(d_delta0) / (rtol * (c.delta_scale + wp.abs(delta0))))
+                state_norm = wp.max(state_norm, wp.abs(d_tilt) / (rtol * (c.tilt_scale + wp.abs(tilt))))
             if not finite or not wp.isfinite(norm):
                 non_finite = 1
                 break
@@ -734,6 +751,15 @@ def make_newton_solve(ft, terms, team, equations, solver, system):
             if it > 0 and norm <= ft(1.0) and norm > ft(0.5) * prev_norm:
                 converged = 1
                 break
+            if wp.static(not inertia):
+                # without inertia V is not a state but the force balance's solution, whose Jacobian
+                # scales with g: its round-off level (the residual's, over g) exceeds the velocity's
+                # tolerance once a step is short enough (after a located gate switch at rtol 1e-8).
+                # An update that no longer halves and moves the stage's states (g*dV) by at most
+                # their tolerance has reached that level
+                if it > 0 and state_norm <= ft(1.0) and norm > ft(0.5) * prev_norm:
+                    converged = 1
+                    break
             prev_norm = norm
         if wp.static(ft == wp.float64):
             # a curvature measured where an iteration met a kink is no guide for the next stage
@@ -840,7 +866,7 @@ def make_newton(ft, model, terms, gates, team, method="tr_bdf2"):
     team_solver = make_team_solver(ft, team) if team["lanes"] > 1 else {}
     equations = make_stage_equations(ft, model, terms, gates, method)
     system = make_newton_system(ft, model, terms, team, equations, solver, team_solver)
-    solve = make_newton_solve(ft, terms, team, equations, solver, system)
+    solve = make_newton_solve(ft, model, terms, team, equations, solver, system)
     derivatives = make_stage_derivatives(ft, model, terms, gates, team, equations)
     return dict(StageSums=derivatives["StageSums"], newton_solve=solve["newton_solve"],
                 stage_derivatives=derivatives["stage_derivatives"], **solver)
