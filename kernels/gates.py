@@ -212,7 +212,9 @@ def make_switch_location(ft, SwitchTest):
                 limit = t_new + wp.float64(test.next_switch)
                 if limit < st.switch_limit:
                     st.switch_limit = limit
-                    st.switch_predicted = 1
+                    # a prediction where predictions are on (a miss counts); located-only, the
+                    # continuation of the located switch
+                    st.switch_predicted = settings.predict_switches
         return st
 
     return dict(locate_switch=locate_switch, drop_stale_limit=drop_stale_limit, after_accept=after_accept)

@@ -613,6 +613,9 @@ def make_newton_system(ft, model, terms, team, equations, solver, team_solver):
 # usual contraction; as loose as the test itself, the velocity's noise made the velocity front's
 # time-error estimate 4x larger (docs/performance.md, "Newton iterations")
 NEWTON_ERROR_FRACTION = 0.1
+# without inertia: the largest error-weighted velocity update that newton_solve accepts as the force
+# balance's round-off level (its stall test; seen at 1.0-4.7 in steps of ~1e-10 s at rtol 1e-8)
+STALLED_VELOCITY_ERROR = 100.0
 
 
 def make_newton_solve(ft, model, terms, team, equations, solver, system):
@@ -756,10 +759,12 @@ def make_newton_solve(ft, model, terms, team, equations, solver, system):
                 # scales with g: its round-off level (the residual's, over g) exceeds the velocity's
                 # tolerance once a step is short enough (after a located gate switch at rtol 1e-8).
                 # An update that no longer halves and moves the stage's states (g*dV) by at most
-                # their tolerance has reached that level
-                if it > 0 and state_norm <= ft(1.0) and norm > ft(0.5) * prev_norm:
-                    converged = 1
-                    break
+                # their tolerance has reached that level: not at a kink, where a cycling iteration
+                # stalls too, and not with V's own error above STALLED_VELOCITY_ERROR tolerances
+                if it > 0 and state_norm <= ft(1.0) and norm > ft(0.5) * prev_norm and norm <= ft(STALLED_VELOCITY_ERROR):
+                    if team_max(kinked) == ft(0.0):
+                        converged = 1
+                        break
             prev_norm = norm
         if wp.static(ft == wp.float64):
             # a curvature measured where an iteration met a kink is no guide for the next stage

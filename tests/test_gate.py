@@ -118,12 +118,12 @@ QUASI_STATIC_MEMBERS = {"eccentricity": [0.0, -0.2, 0.3, 0.6], "normal_force": [
 
 def test_a_curved_crossing_is_located_and_its_short_steps_converge_in_the_quasi_static_pad():
     """Located retries that land before a curved crossing go on from the margin's near-side secant
-    (before, eight of them crept towards it and the switch was accepted unlocated, mu_s 1.70 at rtol
-    1e-5 located-only), and the Newton solves of the short steps that reach it converge at the
-    force balance's round-off level (before, members ended step_size_underflow at rtol 1e-8). With
-    and without predictions: every member ok, no switch unlocated, mu_s within 1e-5 of the tight
-    run at rtol 1e-5 and within 1e-7 at 1e-8, and the members that differ only by an eccentricity
-    the model ignores equal bit for bit."""
+    (the chord alone creeps towards it and accepts the switch unlocated, mu_s 1.70 at rtol 1e-5
+    located-only), and the Newton solves of the short steps that secant leads to converge at the
+    force balance's round-off level (without that test one member ends step_size_underflow at rtol
+    1e-8 located-only). With and without predictions: every member ok, no switch unlocated, mu_s
+    within 1e-5 of the tight run at rtol 1e-5 and within 1e-7 at 1e-8, and the members that differ
+    only by an eccentricity the model ignores equal bit for bit."""
     runs = {(predict, rtol): run(QUASI_STATIC_MEMBERS, model=QUASI_STATIC, nodes=30, rtol=rtol, predict_switches=predict)
             for predict in (False, True) for rtol in (1e-5, 1e-8)}
     ref = runs[True, 1e-8].mu_s.values
