@@ -134,6 +134,21 @@ def test_a_curved_crossing_is_located_and_its_short_steps_converge_in_the_quasi_
         assert ds.mu_s.values[0] == ds.mu_s.values[1]
 
 
+def test_a_touchdown_after_lift_off_is_located():
+    """A lifted-off node that touches down again closes its gate at the touchdown, where its margin
+    (flat at its relaxed elastic stress while out of contact) would fall from a kink: with the
+    margin continued in the normal stress out of contact, the switch is located at every rtol
+    (with the flat margin one switch per member stayed unlocated at rtol 1e-4..1e-9), and mu_s
+    converges to the tight run's (relative error below rtol)."""
+    members = {"eccentricity": [0.6, 0.35], "normal_force": [3000.0, 1000.0]}
+    ref = run(members, rtol=1e-8, max_steps=10**6, stall_factor=float("inf"))
+    assert (ref.lift_off.values == 1).all()  # the pad lifts off at its far edge
+    for rtol in (1e-4, 1e-5, 1e-6, 1e-8):
+        ds = ref if rtol == 1e-8 else run(members, rtol=rtol)
+        assert (ds.status.values == 0).all() and (ds.unlocated_switches.values == 0).all(), (rtol, ds.unlocated_switches.values)
+        assert (np.abs(ds.mu_s.values / ref.mu_s.values - 1) < rtol).all(), (rtol, ds.mu_s.values, ref.mu_s.values)
+
+
 def test_predicted_switches_save_rejected_steps_at_the_same_accuracy():
     """Predicting the next gate switch from the margins' secants (the default) takes most switches
     without a rejected step: at N = 100 every node switches at least once, and the located-only stepping
