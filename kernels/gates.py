@@ -97,14 +97,7 @@ def make_switch_test(ft, model, terms, team, node_sliding):
         size (like the step's error norm) is the switch error; > 1 rejects the step, and the retry
         ends where that error is 0.5."""
         rtol = ft(wp.min(settings.switch_rtol, wp.float64(1.0e30)))
-        area = fr.area
-        if fr.contact == ft(0.0) and fr.stress != ft(0.0):
-            # out of contact (A = 0) the margin |tau_f| would be flat up to a touchdown and fall after
-            # it; continued linearly in the normal stress (A = sigma/H, the aging factor 1) it keeps
-            # its sign and puts a touchdown's crossing where sigma crosses 0, which the linear
-            # location and the predictions then find
-            area = sigma * c.inv_hardness
-        z1 = yield_margin(c, fr.stress, area)
+        z1 = yield_margin(c, fr.stress, fr.area, sigma)
         gates[G_MARGIN_END, i, m] = z1
         slip = v_disc - c.kif * velocity
         relax = wp.abs(slip) * c.inv_D

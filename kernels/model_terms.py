@@ -613,10 +613,16 @@ def make_friction_law(ft, model, Coeffs, friction_at_gate):
         return fr
 
     @wp.func
-    def yield_margin(c: Coeffs, tau_f: ft, area: ft):
-        """|tau_f| - tau_c*A (Pa): the stress gate is open where this is > 0, i.e. where the
-        asperity-level stress |tau_f|/A exceeds tau_c; a point without contact area (A = 0) that still
-        carries a friction stress is open (the limit A -> 0+), one carrying none is closed."""
+    def yield_margin(c: Coeffs, tau_f: ft, area: ft, sigma: ft):
+        """|tau_f| - tau_c*A (Pa) at normal stress sigma (Pa): the stress gate is open where this is
+        > 0, i.e. where the asperity-level stress |tau_f|/A exceeds tau_c; a point without contact
+        area (A = 0) that still carries a friction stress is open (the limit A -> 0+), one carrying
+        none is closed. Out of contact (sigma < 0) with a friction stress the margin is continued
+        linearly in the normal stress, |tau_f| - tau_c*sigma/H (the aging factor 1): the same sign,
+        but not flat up to a touchdown, so that a touchdown's crossing lies where sigma crosses 0,
+        which the located switches and the predictions then find (kernels/gates.py)."""
+        if sigma < ft(0.0) and tau_f != ft(0.0):
+            return wp.abs(tau_f) - c.tau_c * (sigma * c.inv_hardness)
         return wp.abs(tau_f) - c.tau_c * area
 
     return dict(interface_friction=interface_friction, yield_margin=yield_margin)

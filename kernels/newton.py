@@ -651,11 +651,13 @@ def make_newton_solve(ft, model, terms, team, equations, solver, system):
             u = work[W_ZU, i, m] + g * vel
             if not wp.isfinite(dv):
                 finite = False
+            du = g * wp.abs(dv)  # the displacement's update (m) and its tolerance
+            du_tol = rtol * (c.u_scale + wp.abs(u))
             top, bottom = ratio_max(top, bottom, wp.abs(dv), rtol * (c.v_scale + wp.abs(vel)))
-            top, bottom = ratio_max(top, bottom, g * wp.abs(dv), rtol * (c.u_scale + wp.abs(u)))
+            top, bottom = ratio_max(top, bottom, du, du_tol)
             if wp.static(not inertia):
-                state_top, state_bottom = ratio_max(state_top, state_bottom, g * wp.abs(dv), rtol * (c.u_scale + wp.abs(u)))
-                state_top, state_bottom = ratio_max(state_top, state_bottom, g * c.Kh * wp.abs(dv), rtol * c.tau_scale)
+                state_top, state_bottom = ratio_max(state_top, state_bottom, du, du_tol)
+                state_top, state_bottom = ratio_max(state_top, state_bottom, c.Kh * du, rtol * c.tau_scale)
         norm = quotient(top, bottom)
         state_norm = norm
         if wp.static(not inertia):
@@ -721,11 +723,11 @@ def make_newton_solve(ft, model, terms, team, equations, solver, system):
                     state_norm = team_max(state_norm)
             delta0 = delta0 + d_delta0
             tilt = tilt + d_tilt
-            norm = wp.max(norm, wp.abs(d_delta0) / (rtol * (c.delta_scale + wp.abs(delta0))))
-            norm = wp.max(norm, wp.abs(d_tilt) / (rtol * (c.tilt_scale + wp.abs(tilt))))
+            plate_norm = wp.max(wp.abs(d_delta0) / (rtol * (c.delta_scale + wp.abs(delta0))),
+                                wp.abs(d_tilt) / (rtol * (c.tilt_scale + wp.abs(tilt))))
+            norm = wp.max(norm, plate_norm)
             if wp.static(not inertia):
-                state_norm = wp.max(state_norm, wp.abs(d_delta0) / (rtol * (c.delta_scale + wp.abs(delta0))))
-                state_norm = wp.max(state_norm, wp.abs(d_tilt) / (rtol * (c.tilt_scale + wp.abs(tilt))))
+                state_norm = wp.max(state_norm, plate_norm)
             if not finite or not wp.isfinite(norm):
                 non_finite = 1
                 break
