@@ -72,6 +72,34 @@ def test_gate_opens_where_the_asperity_stress_reaches_tau_c():
         assert near.yield_gate.values[0, first] == (1 if sign > 0 else 0)
 
 
+def test_yield_time_is_the_stick_to_slip_transition_in_contact_and_converges():
+    """yield_time is each node's first opening after the disc starts, of a node in contact.
+    2e/L = 0.45 at 1000 N, N = 100: in the force ramp's first microseconds nodes at a contact edge
+    open and close again, where their margin grazes 0 (whether node 21 does turns on rtol: it would
+    read 1.1e-5 s at rtol 1e-7 and 20.155 s at 1e-5). 2e/L = -0.35: node 93 lifts off 0.5 ms after
+    the disc starts, and its leftover asperity stress opens its gate (the margin out of contact); it
+    did not slip. So every yield_time lies after the disc start, converges in rtol with the same
+    nodes, equals the contact front's arrival within its error, and every arrival's node carries a
+    contact pressure there (the recorded fields, an independent reading)."""
+    members = {"eccentricity": [0.45, -0.35], "normal_force": [1000.0, 1000.0]}
+    record = wf.Record.window(20.0, 20.05, 501, members=(1,))
+    runs = [run(members, nodes=100, rtol=rtol, fronts=wf.Fronts(), record=record) for rtol in (1e-5, 1e-7)]
+    for ds in runs:
+        assert (ds.status.values == 0).all() and (ds.lift_off.values == 1).all()
+        yt, ta, err = ds.yield_time.values, ds.arrival_time.values, ds.arrival_time_error.values
+        assert (yt[np.isfinite(yt)] > 20.0).all()
+        np.testing.assert_array_equal(np.isfinite(yt), np.isfinite(ta))
+        done = np.isfinite(ta)
+        assert (np.abs(ta - yt)[done] <= err[done] * (1 + 1e-9) + 1e-15).all()
+        pressure, times = ds.normal_stress_history.values[0], ds.time.values
+        for i in np.flatnonzero(done[1] & (ta[1] < times[-1])):
+            j = np.searchsorted(times, ta[1, i])
+            assert pressure[j - 1, i] > 0 and pressure[j, i] > 0, (i, ta[1, i])
+    coarse, fine = (ds.yield_time.values for ds in runs)
+    np.testing.assert_array_equal(np.isnan(coarse), np.isnan(fine))
+    assert np.nanmax(np.abs(coarse - fine)) < 1e-4  # 2.1e-5 s
+
+
 def test_steady_sliding_keeps_the_gate_open():
     """In steady sliding |tau_f|/A = mu0*D/h + eta*v*ln(1 + s/v*) = 150 MPa + ... > tau_c = 130 MPa:
     every gate is open and the margin is the closed form's."""
