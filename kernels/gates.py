@@ -16,7 +16,7 @@ from .controller import STEP_AT_SWITCH
 from .model_terms import disc_velocity_at
 from .reductions import crossing_time_quadratic
 from .types import (
-    C_PHI, C_TAU, C_V, E_CONTACT, EV_CONTACT, G_DMARGIN, G_GATE, G_GATE_END, G_MARGIN, G_MARGIN_END, G_MARGIN_OLD, G_SLIDE, IntegratorState,
+    C_PHI, C_TAU, C_V, EV_CONTACT, G_DMARGIN, G_GATE, G_GATE_END, G_MARGIN, G_MARGIN_END, G_MARGIN_OLD, G_SLIDE, IntegratorState,
     MemberParams, OutputSettings, SolverSettings,
 )
 
@@ -256,7 +256,7 @@ def make_contact_arrival(ft):
 
 def make_gate_update(ft, terms, team):
     """After an accepted step: each node's gate regime for the next step, the FSAL correction, the
-    first opening time and the contact front's arrival (switch_gates)."""
+    stick-to-slip time (yield_time) and the contact front's arrival (switch_gates)."""
     Coeffs = terms["Coeffs"]
     team_count = team["team_count"]
     contact_arrival = make_contact_arrival(ft)["contact_arrival"]
@@ -275,7 +275,7 @@ def make_gate_update(ft, terms, team):
     @wp.func
     def switch_gates(
         c: Coeffs, p: MemberParams, st: IntegratorState, outputs: OutputSettings, m: int, n: int, state: array3,
-        K: array4, slot: int, gates: array3, step_end: array3, t_old: wp.float64, t_new: wp.float64,
+        K: array4, slot: int, gates: array3, t_old: wp.float64, t_new: wp.float64,
         backward_euler: int, yield_time: wp.array2d(dtype=wp.float64), arrival: wp.array3d(dtype=wp.float64),
         arrival_error: wp.array3d(dtype=wp.float64),
     ):
@@ -283,9 +283,8 @@ def make_gate_update(ft, terms, team):
         from its end-of-step yield margin z1, store the margin, correct the FSAL derivatives K[slot] of
         the nodes whose gate changed (the gate enters only the relaxation rates of tau_el and phi,
         closed-form in the state) and record the stick-to-slip transition's time (yield_time: the
-        first opening from the closed gate after the disc started, of a node in contact at the step's
-        end, linear in the margin; openings in the loading phase, where the margin of a node at a
-        contact edge can graze 0, and openings at a lift-off are not recorded).
+        first opening after the disc started, linear in the margin; openings in the loading phase,
+        where the margin of a node at a contact edge can graze 0, are not recorded).
 
         A closed or open node takes the Heaviside theta(z1), unless it crossed the yield surface
         z = 0 into a side whose field points back (Filippov sliding): the margin's rate is affine in
@@ -293,10 +292,11 @@ def make_gate_update(ft, terms, team):
         at its end (gates[G_DMARGIN]); with dr < 0 and the far side's rate of opposite sign the node
         slides. A sliding node's gate is solved in every stage from |tau_f| = tau_c*A
         (interface_friction), pinned at 1 or 0 where that cannot hold; the node keeps that implicit
-        regime for the rest of the run. With the contact front (outputs.contact_front), a node in
-        contact whose gate leaves the closed regime after the disc started, for the first time in
-        that window, records its arrival (contact_arrival). The lane's nodes; the switches are counted over the
-        team (which is also a barrier: no lane reads another lane's gates)."""
+        regime for the rest of the run. With the contact front (outputs.contact_front), a node whose
+        gate opens after the disc started, for the first time in that window, records its arrival
+        (contact_arrival): the event of yield_time, so that the two agree to the arrival's error.
+        The lane's nodes; the switches are counted over the team (which is also a barrier: no lane
+        reads another lane's gates)."""
         v_disc = ft(disc_velocity_at(p, t_new, t_old))
         h = ft(t_new - t_old)
         switches = int(0)
@@ -332,17 +332,17 @@ def make_gate_update(ft, terms, team):
                 K[slot, C_PHI, i, m] = K[slot, C_PHI, i, m] - state[C_PHI, i, m] * relax
             if gate_regime(new_gate, new_sliding) != gate_regime(gate, sliding):
                 switches += 1
-            # an opening has gate 0 at the step's start: yield_time and the contact front are read only
-            # there, not at every node; a node out of contact at the step's end (lifted off: its margin
-            # is its leftover asperity stress) has no stick-to-slip transition
-            opened = gate_start == ft(0.0) and new_gate > ft(0.0) and step_end[E_CONTACT, i, m] != ft(0.0)
+            # an opening has gate 0 at the step's start and above 0 at its end (a closed node opening or
+            # entering the sliding regime, or a sliding node's gate leaving 0): yield_time and the
+            # contact front read the gates only there, not at every node
+            opened = gate_start == ft(0.0) and new_gate > ft(0.0)
             if opened and t_new > p.rest_until:
                 if not wp.isfinite(yield_time[i, m]):
                     theta = wp.float64(0.0)
                     if z0 != z1 and z1 > ft(0.0):
                         theta = wp.clamp(wp.float64(z0) / wp.float64(z0 - z1), wp.float64(0.0), wp.float64(1.0))
                     yield_time[i, m] = t_old + theta * (t_new - t_old)
-            if outputs.contact_front == 1 and opened and gate_regime(gate, sliding) == 0:
+            if outputs.contact_front == 1 and opened:
                 if not wp.isfinite(arrival[EV_CONTACT, i, m]):
                     t_cross, t_err = contact_arrival(p, st, t_old, t_new, gates[G_MARGIN_OLD, i, m], z0, z1,
                                                      backward_euler)

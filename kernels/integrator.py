@@ -389,7 +389,7 @@ def make_acceptance(ft, model, method, stages):
             advance_state(c, m, n, state, K, work, s3, ft(step.h), restart)
         if wp.static(stress_gate):
             switches_before = st.gate_switches
-            st = switch_gates(c, p, st, outputs, m, n, state, K, s3, gates, step_end, t, step.t_new, restart, yield_time,
+            st = switch_gates(c, p, st, outputs, m, n, state, K, s3, gates, t, step.t_new, restart, yield_time,
                               arrival, arrival_error)
             if restart == 0:
                 st = after_accept(st, settings, switches_before, res.switch_test, step.t_new, step.clipped)

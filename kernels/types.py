@@ -19,7 +19,7 @@ work               (work_slot, node, member)           ft     stage constants, N
 step_end           (step_end_slot, node, member)       ft     Jacobian diagonal (Pa s/m), contact (1) at a step's end
 gates              (gate_slot, node, member)           ft     stress gate: gate (1), margin (Pa), sliding (1), ...;
                                                               (gate_slot, 1, 1) for the other laws
-yield_time         (node, member)                      f64    first gate opening (s); (1, 1) unless stress gate
+yield_time         (node, member)                      f64    first gate opening after the disc starts (s); (1, 1) unless stress gate
 arrival            (front_event, node, member)         f64    front arrival time t_a of each event (FRONT_EVENTS)
                                                               (s), NaN: none; (N_EVENTS, 1, 1) without fronts
 arrival_error      (front_event, node, member)         f64    its error estimate (s)
