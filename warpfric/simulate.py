@@ -624,8 +624,8 @@ def _yield_variables(status: np.ndarray, yield_time: np.ndarray, yield_gate: np.
         yield_time[broken] = np.nan
     return {
         "yield_time": (("member", "x"), yield_time, {
-            "units": "s", "long_name": "time at which the asperity-level stress |tau_f|/A first reached tau_c "
-            "after the disc started (the yield gate opened: the stick-to-slip transition; NaN: never)"}),
+            "units": "s", "long_name": "time at which |tau_f|/A first reached tau_c after the disc started (the "
+            "asperity-level stress: the yield gate opened, the stick-to-slip transition; NaN: never)"}),
         "yield_gate": (("member", "x"), yield_gate, {
             "units": "1", "long_name": "yield gate at the final time: 0 closed (stuck, ageing), 1 open "
             "(sliding, rejuvenating), in between: held on the yield surface |tau_f|/A = tau_c"}),
