@@ -294,7 +294,8 @@ def make_gate_update(ft, terms, team):
         (interface_friction), pinned at 1 or 0 where that cannot hold; the node keeps that implicit
         regime for the rest of the run. With the contact front (outputs.contact_front), a node whose
         gate opens after the disc started, for the first time in that window, records its arrival
-        (contact_arrival): the event of yield_time, so that the two agree to the arrival's error.
+        (contact_arrival; its window ends at the disc's stop): the event of yield_time, so that the
+        two agree to the arrival's error.
         The lane's nodes; the switches are counted over the team (which is also a barrier: no lane
         reads another lane's gates)."""
         v_disc = ft(disc_velocity_at(p, t_new, t_old))

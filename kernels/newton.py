@@ -837,7 +837,7 @@ def make_stage_derivatives(ft, model, terms, gates, team, equations):
                                    g, node_gate(gates, i, m), node_sliding(gates, i, m), ft(settings.sliding_width))
             sigma = ns.value
             if end_of_step == 1:
-                step_end[E_CONTACT, i, m] = fr.contact  # at the end of the step: fronts skip lifted-off nodes
+                step_end[E_CONTACT, i, m] = fr.contact  # at the end of the step: the velocity and strength fronts skip lifted-off nodes
                 if wp.static(stress_gate):
                     gates[G_GATE_END, i, m] = fr.gate
                     test = test_switch(c, settings, gates, i, m, fr, sigma, vel, v_disc, h, test)
