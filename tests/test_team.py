@@ -34,8 +34,9 @@ def test_a_team_gives_the_thread_per_member_outputs(gate, lanes, fronts, nodes, 
     N = 130 the lift-off member's sliding after its peak takes 415-423 accepted steps with the
     order of the sums, its mu_s within 1.8e-8: on the H100 at a8cf0bf 423 one thread, 417 / 415 /
     417 teams of 16 / 32 / 64 lanes with the work in shared memory, 418 64 lanes with it in global
-    memory; 417 one thread on the CPU (`studies/results/h100/team130_steps_a8cf0bf.txt`); before
-    the touchdown's location, 797d042, 434-438, and ``steps`` 4). 7 and 8 lanes
+    memory; 417 one thread on the CPU (`studies/results/h100/team130_steps_a8cf0bf.txt`): that case
+    allows 8, the spread on the H100; before the touchdown's location, 797d042, it took 434-438
+    steps and allowed 4). 7 and 8 lanes
     of 30 nodes on the lift-off member are the case the review's shared-memory race broke
     (kernels/team.py, settle); 8 lanes of 16 nodes give every lane two nodes, both of them end
     nodes whose border-row entries come from the neighbouring lanes (kernels/newton.py,
