@@ -698,7 +698,7 @@ def make_newton_solve(ft, model, terms, team, equations, solver, system):
         prev_norm = ft(1.0e30)
         curvature = curvature_in
         kinked = ft(0.0)  # whether an iteration of this solve met a kink (this thread's nodes)
-        kink_free = int(0)  # 1: the team's reduction of kinked said none (the contraction ended the solve)
+        kink_free = int(0)  # 1: the team's reduction of kinked said none (the contraction or the stall test ended the solve)
         for it in range(settings.newton_max_iter):
             iters = it + 1
             # ---- pass 1: residuals, Jacobian rows, forward elimination (3 right-hand sides) ----
@@ -766,6 +766,7 @@ def make_newton_solve(ft, model, terms, team, equations, solver, system):
                 if it > 0 and state_norm <= ft(1.0) and norm > ft(0.5) * prev_norm and norm <= ft(STALLED_VELOCITY_ERROR):
                     if team_max(kinked) == ft(0.0):
                         converged = 1
+                        kink_free = 1
                         break
             prev_norm = norm
         if wp.static(ft == wp.float64):
