@@ -8,6 +8,9 @@ import warpfric as wf
 # CPU by default (CI); WARPFRIC_TEST_DEVICE=cuda:0 runs the same assertions on a GPU
 DEVICE = os.environ.get("WARPFRIC_TEST_DEVICE", "cpu")
 
+# the members of studies/outputs_equal.py: e = 0, -0.2 (1000 N), 0.3 (300 N), 0.6 (3000 N: lift-off)
+REFACTOR_MEMBERS = {"eccentricity": [0.0, -0.2, 0.3, 0.6], "normal_force": [1000.0, 1000.0, 300.0, 3000.0]}
+
 # a sweep file of three tiny members without fronts, for the command-line tests
 TINY_SWEEP = """
 fronts = false

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 import warpfric as wf
-from conftest import DEVICE
+from conftest import DEVICE, REFACTOR_MEMBERS
 
 N = 30
 
@@ -39,7 +39,7 @@ def test_cooperative_kernel_agrees_with_the_thread_kernel(gate):
     studies/outputs_equal.py, lift-off at e = 0.6 included."""
     import warnings
 
-    members = {"eccentricity": [0.0, -0.2, 0.3, 0.6], "normal_force": [1000.0, 1000.0, 300.0, 3000.0]}
+    members = REFACTOR_MEMBERS
     runs = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the CPU-fibers warning of lanes > 1

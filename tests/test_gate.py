@@ -2,7 +2,7 @@
 
 import numpy as np
 import pytest
-from conftest import run
+from conftest import REFACTOR_MEMBERS, run
 
 import warpfric as wf
 
@@ -141,7 +141,6 @@ def test_located_switches_converge_with_rtol_and_beat_unlocated_ones():
 # the quasi-static pad with every model switch off: every node yields at once, on a strongly curved
 # margin (docs/model.md, "Gate switches"); without the tilt the eccentricity changes nothing
 QUASI_STATIC = wf.Model(inertia=False, tilt=False, poisson_coupling=False, viscous_friction=False)
-QUASI_STATIC_MEMBERS = {"eccentricity": [0.0, -0.2, 0.3, 0.6], "normal_force": [1000.0, 1000.0, 300.0, 3000.0]}
 
 
 def test_a_curved_crossing_is_located_and_its_short_steps_converge_in_the_quasi_static_pad():
@@ -152,7 +151,7 @@ def test_a_curved_crossing_is_located_and_its_short_steps_converge_in_the_quasi_
     1e-8 located-only). With and without predictions: every member ok, no switch unlocated, mu_s
     within 1e-5 of the tight run at rtol 1e-5 and within 1e-7 at 1e-8, and the members that differ
     only by an eccentricity the model ignores equal bit for bit."""
-    runs = {(predict, rtol): run(QUASI_STATIC_MEMBERS, model=QUASI_STATIC, nodes=30, rtol=rtol, predict_switches=predict)
+    runs = {(predict, rtol): run(REFACTOR_MEMBERS, model=QUASI_STATIC, nodes=30, rtol=rtol, predict_switches=predict)
             for predict in (False, True) for rtol in (1e-5, 1e-8)}
     ref = runs[True, 1e-8].mu_s.values
     for (predict, rtol), ds in runs.items():

@@ -10,13 +10,11 @@ import numpy as np
 import pytest
 import warp as wp
 from conftest import DEVICE, run
+from conftest import REFACTOR_MEMBERS as MEMBERS  # the members of studies/outputs_equal.py
 
 import warpfric as wf
 from warpfric.engine import (AUTO_LANES, AUTO_MIN_NODES, alike_blocks, choose_lanes, cpu_blocks, member_order,
                              morton_key, slower_float32)
-
-# the members of studies/outputs_equal.py: e = 0, -0.2 (1000 N), 0.3 (300 N), 0.6 (3000 N: lift-off)
-MEMBERS = {"eccentricity": [0.0, -0.2, 0.3, 0.6], "normal_force": [1000.0, 1000.0, 300.0, 3000.0]}
 
 
 # the lane exchange (kernels/team.py): None is the device's automatic one (tiles on the CPU, warp
