@@ -635,6 +635,118 @@ def test_mu_s_cubic_observer_is_exact_on_a_cubic_peak():
     assert abs(parabola["mu_s"] - 0.5) > 1e-7
 
 
+def _switch_gates_kernel():
+    stages = make_stages(f64, wf.Model())
+    switch_gates = stages["gates"]["switch_gates"]
+    make_coeffs = stages["terms"]["make_coeffs"]
+
+    @wp.kernel(module="unique")
+    def switch(params: wp.array(dtype=types.MemberParams), states: wp.array(dtype=types.IntegratorState),
+               outputs: types.OutputSettings, state: wp.array3d(dtype=f64), K: wp.array4d(dtype=f64),
+               gates: wp.array3d(dtype=f64), t_old: f64, t_new: f64, backward_euler: int,
+               yield_time: wp.array2d(dtype=f64), arrival: wp.array3d(dtype=f64),
+               arrival_error: wp.array3d(dtype=f64)):
+        """One accepted step's gate update (thread kernel: the member's nodes in one thread)."""
+        n = state.shape[1]
+        c = make_coeffs(params[0], n)
+        states[0] = switch_gates(c, params[0], states[0], outputs, 0, n, state, K, 2, gates, t_old, t_new,
+                                 backward_euler, yield_time, arrival, arrival_error)
+
+    return switch
+
+
+def _switch_gates(nodes, t_old, t_new, backward_euler, t_prev, contact_front=1, recorded=np.nan):
+    """Run switch_gates once on the node rows of ``nodes`` (dicts of gate slots; unset: 0), with the
+    state tau = 1e4 Pa, phi = 2 s, V = 0, the FSAL slot K[2] = (0, 0, 1, 1) and every yield time and
+    contact arrival ``recorded`` before (its error 0); returns the gates, yield times, contact
+    arrivals and their errors, K[2], the member state and the parameters."""
+    n = len(nodes)
+    values, _ = resolve_members(None, wf.Parameters())
+    params = member_params(values)
+    st = np.zeros(1, dtype=types.IntegratorState.numpy_dtype())
+    st["t"], st["t2"], st["npts"] = t_old, t_prev, 3
+    gates = np.zeros((types.N_GATE, n, 1))
+    for i, node in enumerate(nodes):
+        for slot, value in node.items():
+            gates[getattr(types, slot), i, 0] = value
+    state = np.zeros((types.N_COMPONENTS, n, 1))
+    state[types.C_TAU], state[types.C_PHI] = 1e4, 2.0
+    K = np.zeros((3, types.N_COMPONENTS, n, 1))
+    K[2, types.C_TAU] = K[2, types.C_PHI] = 1.0
+    outputs = types.OutputSettings()
+    outputs.contact_front = contact_front
+    arrays = dict(gates=wp.array(gates, dtype=f64, device=DEVICE), K=wp.array(K, dtype=f64, device=DEVICE),
+                  yield_time=wp.full((n, 1), recorded, dtype=f64, device=DEVICE),
+                  arrival=wp.full((types.N_EVENTS, n, 1), recorded, dtype=f64, device=DEVICE),
+                  arrival_error=wp.full((types.N_EVENTS, n, 1), 0.0 if np.isfinite(recorded) else np.nan,
+                                        dtype=f64, device=DEVICE))
+    states = wp.array(st, dtype=types.IntegratorState, device=DEVICE)
+    wp.launch(_switch_gates_kernel(), dim=1, device=DEVICE, inputs=[
+        wp.array(params, dtype=types.MemberParams, device=DEVICE), states, outputs,
+        wp.array(state, dtype=f64, device=DEVICE), arrays["K"], arrays["gates"], t_old, t_new, backward_euler,
+        arrays["yield_time"], arrays["arrival"], arrays["arrival_error"]])
+    out = {name: a.numpy() for name, a in arrays.items()}
+    return (out["gates"][:, :, 0], out["yield_time"][:, 0], out["arrival"][types.EV_CONTACT, :, 0],
+            out["arrival_error"][types.EV_CONTACT, :, 0], out["K"][2, :, :, 0], states.numpy()[0], values)
+
+
+def test_switch_gates_records_each_first_opening_after_the_disc_starts():
+    """One accepted step's gate update on nodes in every regime, against the rules of
+    kernels/gates.py switch_gates written out here: a closed node whose margin crosses 0 opens (its
+    yield time the margin's linear crossing; its contact arrival the root of the parabola through
+    the last three margins, with its distance to the linear crossing as the error); a sliding node
+    whose solved gate leaves 0 opens too (its margin, on the yield surface, does not cross 0: a
+    time inside the step, the whole step as the error); a sliding node whose gate was already
+    above 0, an open node and a node whose margin stays negative do not open; a time already
+    recorded is kept; the FSAL relaxation rates follow each changed gate; an opening before the
+    disc starts records nothing."""
+    t_prev, t_old, t_new = 20.09, 20.1, 20.102
+    root = 20.1013  # the closed node's margin z(t) = 50 (t - root) - 4e4 (t - root)^2 (Pa)
+    z = lambda t: 50.0 * (t - root) - 4e4 * (t - root) ** 2  # noqa: E731
+    nodes = [
+        dict(G_MARGIN_OLD=z(t_prev), G_MARGIN=z(t_old), G_MARGIN_END=z(t_new)),  # closed, opens
+        dict(G_SLIDE=1.0, G_GATE_END=0.3, G_MARGIN_OLD=-0.2, G_MARGIN=-0.1, G_MARGIN_END=-0.05),  # sliding, leaves 0
+        dict(G_SLIDE=1.0, G_GATE=0.5, G_GATE_END=0.7, G_MARGIN=-0.1, G_MARGIN_END=-0.05),  # sliding, already above 0
+        dict(G_GATE=1.0, G_MARGIN=3.0, G_MARGIN_END=4.0),  # open, stays open
+        dict(G_MARGIN=-3.0, G_MARGIN_END=-2.0),  # closed, stays closed
+        dict(G_GATE=1.0, G_MARGIN=1.0, G_MARGIN_END=-1.0),  # open, closes (no opening)
+    ]
+    gates, yield_time, arrival, error, K, st, values = _switch_gates(nodes, t_old, t_new, 0, t_prev)
+    linear = t_old + (t_new - t_old) * z(t_old) / (z(t_old) - z(t_new))
+    assert np.isfinite(yield_time).tolist() == [True, True, False, False, False, False]
+    assert yield_time[0] == pytest.approx(linear, abs=1e-12) and yield_time[1] == t_old
+    assert arrival[0] == pytest.approx(root, abs=1e-12) and error[0] == pytest.approx(abs(root - linear), abs=1e-12)
+    # the sliding node: yield_time the step's start, the arrival inside the step, the two within its error
+    assert t_old <= arrival[1] <= t_new and error[1] == pytest.approx(t_new - t_old, rel=1e-12)
+    assert abs(arrival[1] - yield_time[1]) <= error[1]
+    assert np.isnan(arrival[2:]).all() and np.isnan(error[2:]).all()
+    np.testing.assert_array_equal(gates[types.G_GATE], [1.0, 0.3, 0.7, 1.0, 0.0, 0.0])
+    np.testing.assert_array_equal(gates[types.G_SLIDE], [0.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+    np.testing.assert_array_equal(gates[types.G_MARGIN], [node["G_MARGIN_END"] for node in nodes])
+    np.testing.assert_array_equal(gates[types.G_MARGIN_OLD], [node.get("G_MARGIN", 0.0) for node in nodes])
+    assert st["gate_switches"] == 2  # the regimes that changed: node 0 closed -> open, node 5 open -> closed
+    # the FSAL slot: d tau/dt and d phi/dt lose state * (gate change) * |v_disc - kif V| / D (V = 0)
+    v_disc = values["disc_velocity"][0] * (t_new - values["rest_until"][0]) / values["velocity_ramp_time"][0]
+    # (a sliding node's slot already follows its last stage's solved gate: no change)
+    relax = np.array([1.0, 0.0, 0.0, 0.0, 0.0, -1.0]) * abs(v_disc) / values["memory_length"][0]
+    np.testing.assert_allclose(K[types.C_TAU], 1.0 - 1e4 * relax, rtol=1e-13)
+    np.testing.assert_allclose(K[types.C_PHI], 1.0 - 2.0 * relax, rtol=1e-13)
+    # a first opening only: a node whose times are recorded keeps them
+    kept = _switch_gates(nodes, t_old, t_new, 0, t_prev, recorded=20.05)
+    assert (kept[1] == 20.05).all() and (kept[2] == 20.05).all() and (kept[3] == 0.0).all()
+    # before the disc starts nothing is recorded, and without the contact front no arrival
+    before = _switch_gates(nodes, 19.9, 19.902, 0, 19.89)
+    assert np.isnan(before[1]).all() and np.isnan(before[2]).all()
+    np.testing.assert_array_equal(before[0][types.G_GATE], [1.0, 0.3, 0.7, 1.0, 0.0, 0.0])
+    off = _switch_gates(nodes, t_old, t_new, 0, t_prev, contact_front=0)
+    np.testing.assert_array_equal(off[1], yield_time)
+    assert np.isnan(off[2]).all()
+    # after a (re)start no earlier point belongs to the step's smooth piece: the linear crossing, the
+    # whole step as the error
+    restart = _switch_gates(nodes[:1], t_old, t_new, 1, t_prev)
+    assert restart[2][0] == pytest.approx(linear, abs=1e-12) and restart[3][0] == pytest.approx(t_new - t_old)
+
+
 # ------------------------------------------------------------------------------------------------
 # kernel-visible structs in step with the public types
 # ------------------------------------------------------------------------------------------------
