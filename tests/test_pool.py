@@ -53,6 +53,13 @@ def test_split_equals_one_process_bit_for_bit():
     again = wf.simulate(members, workers=2, **kw)  # the pool is kept: no start the second time
     assert again.attrs["worker_start_time_s"] == 0.0
     assert_same(one, again)
+    # a worker whose "ready" was not read in the call that started it (that call's chunks done
+    # first: seen on a 16-core host) tells it in a later call, which started nothing
+    pool._POOL.ready -= 1
+    pool._POOL.inbox.put(("ready", 0))
+    late = wf.simulate({"eccentricity": [0.0, 0.1]}, workers=2, solver=wf.Solver(nodes=11), fronts=None, device="cpu",
+                       progress=False)
+    assert late.attrs["workers"] == 2 and late.attrs["worker_start_time_s"] == 0.0
 
 
 def test_failed_members_of_a_split_run_are_told_once_for_the_ensemble(recwarn):

@@ -233,23 +233,25 @@ class _Pool:
     inbox: object
     created: float
     ready: int = 0
-    ready_at: float | None = None
+    ready_at: float | None = None  # when the last of its workers said it was ready (perf_counter, s)
 
 
 _POOL: _Pool | None = None
 _RUN_IDS = itertools.count()
 
 
-def _get_pool(n_workers: int) -> _Pool:
+def _get_pool(n_workers: int) -> tuple[_Pool, bool]:
+    """(the kept pool of n_workers processes, True where it was created in this call)."""
     global _POOL
     if _POOL is not None and _POOL.workers != n_workers:
         shutdown()
-    if _POOL is None:
-        ctx = _Context()
-        inbox = ctx.Queue()
-        executor = cf.ProcessPoolExecutor(n_workers, mp_context=ctx, initializer=_init_worker, initargs=(inbox,))
-        _POOL = _Pool(n_workers, executor, inbox, time.perf_counter())
-    return _POOL
+    if _POOL is not None:
+        return _POOL, False
+    ctx = _Context()
+    inbox = ctx.Queue()
+    executor = cf.ProcessPoolExecutor(n_workers, mp_context=ctx, initializer=_init_worker, initargs=(inbox,))
+    _POOL = _Pool(n_workers, executor, inbox, time.perf_counter())
+    return _POOL, True
 
 
 def shutdown(terminate: bool = False) -> None:
@@ -298,8 +300,10 @@ def run(n_workers: int, values: dict, *, scene, model, solver, fronts, record, d
     sizes = np.array([stop - start for start, stop in bounds])
     show = sys.stderr.isatty() if progress is None else bool(progress)
     line = progress_module.Line(n, progress if isinstance(progress, str) else "") if show else None
-    pool = _get_pool(n_workers)
-    started_here = pool.ready < n_workers
+    # started here: the processes of a pool created in this call (a kept pool's worker may still say
+    # it is ready in a later call, when its first call ended before its message was read: that is no
+    # start of this call's)
+    pool, started_here = _get_pool(n_workers)
     run_id = next(_RUN_IDS)
     common = dict(scene=scene, model=model, solver=solver, fronts=fronts, device=device)
     records = [chunk_record(record, start, stop) for start, stop in bounds]
@@ -353,8 +357,7 @@ def _read_inbox(pool: _Pool, run_id: int, fractions: np.ndarray, done: np.ndarra
         block = False
         if message[0] == "ready":
             pool.ready += 1
-            if pool.ready == pool.workers:
-                pool.ready_at = time.perf_counter()
+            pool.ready_at = time.perf_counter()
         elif message[1] == run_id:
             _, _, chunk, fraction, members_done = message
             fractions[chunk] = max(fractions[chunk], fraction)
