@@ -231,7 +231,9 @@ def make_contact_arrival(ft):
         quadratic through the margins at the last three accepted points (t_prev = st.t2, t_old, t_new),
         and its distance to the linear crossing (the yield_time rule) as the error; the linear
         crossing with the whole step as the error after a (re)start, where no earlier point belongs
-        to the same smooth piece. (nan, nan) outside the window from the disc start to the stop."""
+        to the same smooth piece, or where the margin does not cross 0 in the step (a sliding node,
+        on the yield surface, whose solved gate left 0: its yield_time is the step's start too).
+        (nan, nan) outside the window from the disc start to the stop."""
         if t_new <= p.rest_until or t_old >= p.stop_time:
             return wp.float64(wp.nan), wp.float64(wp.nan)
         zp = wp.float64(z_prev)
@@ -242,7 +244,7 @@ def make_contact_arrival(ft):
             theta = wp.clamp(za / (za - zb), wp.float64(0.0), wp.float64(1.0))
         t_lin = t_old + theta * (t_new - t_old)
         t_prev = st.t2
-        if backward_euler == 0 and st.npts >= 2 and t_prev < t_old and za < wp.float64(0.0):
+        if backward_euler == 0 and st.npts >= 2 and t_prev < t_old and za < wp.float64(0.0) and zb > wp.float64(0.0):
             # crossing_time_quadratic takes the middle point at a fraction c_mid of its interval:
             # the interval (t_prev, t_new) with t_old inside
             c_mid = (t_old - t_prev) / (t_new - t_prev)
