@@ -126,6 +126,23 @@ def test_every_option_and_argument_has_help():
     assert {("run", "dtype"), ("info", "file"), ("plot", "file"), ("run", "cpu_workers"), ("run", "sweep")} <= dests
 
 
+def test_every_option_a_help_names_exists():
+    """A --option named in a help text or description is an option of the same command (the
+    --device help named --lanes, which only a Solver or a sweep file's [solver] table has)."""
+    import re
+
+    parser, _ = build_parser()
+    sub = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")  # noqa: SLF001
+    checked = 0
+    for command, cmd_parser in sub.choices.items():
+        options = {name for action in cmd_parser._actions for name in action.option_strings}  # noqa: SLF001
+        texts = [cmd_parser.description or ""] + [action.help or "" for action in cmd_parser._actions]  # noqa: SLF001
+        named = {name for text in texts for name in re.findall(r"(?<![\w-])--[a-z][a-z0-9-]*", text)}
+        assert named <= options, (command, sorted(named - options))
+        checked += len(named)
+    assert checked >= 5  # the run command's helps name several of its options
+
+
 def test_help_shows_the_exit_codes(capsys):
     with pytest.raises(SystemExit):
         main(["--help"])

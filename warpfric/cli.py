@@ -592,7 +592,8 @@ def build_parser() -> tuple[argparse.ArgumentParser, set]:
     add(run, "-o", "--output", metavar="OUT.nc", help="netCDF file to write (sweeps: default SWEEP.nc; "
         "the default scene writes one only with -o)")
     add(run, "--device", default=None, help="Warp device: cpu, cuda:0, ... (default: the first GPU if any, else cpu; a "
-        "lone member, or up to 32 members where the GPU would run one member a thread (float32, --lanes 1), on the cpu)")
+        "lone member, or up to 32 members where the GPU would run one member a thread (float32, [solver] lanes = 1, or "
+        "--nodes below 16), on the cpu)")
     add(run, "--cpu-workers", type=int, default=None, metavar="N",
         help="worker processes on the CPU (default: all cores for an ensemble that pays, else 1; 1: this process)")
     add(run, "--member-offset", type=int, default=None, metavar="K",

@@ -21,7 +21,8 @@ is paid once per process; a warm pool costs ~20 ms a chunk. The workers do not r
 without ``if __name__ == "__main__":`` works) and see no CUDA device. Ctrl-C stops them at once.
 
 Attributes of a split run: ``workers``, ``worker_chunks``, ``worker_start_time_s`` (starting the
-processes in this call; 0 when they were running), ``wall_time_s`` (the parent's time from the split
+processes in the call that created the pool, until the last of them that said it was ready during
+that call; 0 in the calls after it), ``wall_time_s`` (the parent's time from the split
 to the joined Dataset, worker start included, the slowest worker's kernel loads not) and
 ``kernel_build_time_s`` (the slowest worker's).
 """
