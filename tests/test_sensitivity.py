@@ -42,6 +42,34 @@ def test_ishigami_sobol_indices_within_confidence():
     assert abs(float(res.ST.sel(parameter="x4"))) < 0.01
 
 
+def test_a_ctrl_c_inside_the_sampling_is_raised_after_it(monkeypatch):
+    """A Ctrl-C that lands inside SALib's sampling: scipy's compiled Sobol set-up swallows the
+    KeyboardInterrupt raised there (emulated: a sample function that catches it and goes on), so
+    generate holds the signal and raises it once the sampling ends."""
+    import os
+    import signal
+    import time
+
+    from SALib.sample import sobol
+
+    real_sample = sobol.sample
+
+    def swallowing_sample(*args, **kwargs):
+        try:
+            os.kill(os.getpid(), signal.SIGINT)
+            time.sleep(0.2)  # Python runs the handler here
+        except KeyboardInterrupt:
+            pass  # what scipy's compiled code does: "Exception ignored in ..."
+        return real_sample(*args, **kwargs)
+
+    monkeypatch.setattr(sobol, "sample", swallowing_sample)
+    with pytest.raises(KeyboardInterrupt):
+        ishigami_dataset(n=8)
+    monkeypatch.undo()
+    assert generate(parse_design({"method": "saltelli", "n": 8, "seed": 1, "parameters": {
+        "x1": {"low": 0.0, "high": 1.0}, "x2": {"low": 0.0, "high": 1.0}}}, check_names=False))["x1"].size == 48
+
+
 def test_a_small_base_size_warns_that_the_indices_are_not_resolved():
     """At n = 8 the Ishigami indices have half-widths of ~0.6 (S1 of x3 below 0): one warning names
     the output and its half-width; at n = 1024 (half-widths <= 0.08) there is none."""

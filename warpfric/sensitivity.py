@@ -105,17 +105,25 @@ def _problem(design: dict) -> dict:
 
 
 def generate(design: dict) -> dict:
-    """The design's rows as {name: (rows,) float64} in SI units (log-scaled parameters exponentiated)."""
+    """The design's rows as {name: (rows,) float64} in SI units (log-scaled parameters exponentiated).
+    A Ctrl-C during the sampling is held until it ends, then raised (KeyboardInterrupt): scipy's
+    compiled Sobol set-up, which SALib's Saltelli sampling calls, swallows one raised inside it
+    ("Exception ignored in: 'scipy.stats._sobol._initialize_v'"), and the sweep went on."""
     _salib()
     from SALib.sample import latin, morris, sobol
 
+    from .io import sigint_held
+
     problem = _problem(design)
-    if design["method"] == "saltelli":
-        X = sobol.sample(problem, design["n"], calc_second_order=design["second_order"], seed=design["seed"])
-    elif design["method"] == "morris":
-        X = morris.sample(problem, design["n"], num_levels=design["levels"], seed=design["seed"])
-    else:
-        X = latin.sample(problem, design["n"], seed=design["seed"])
+    with sigint_held() as interrupted:
+        if design["method"] == "saltelli":
+            X = sobol.sample(problem, design["n"], calc_second_order=design["second_order"], seed=design["seed"])
+        elif design["method"] == "morris":
+            X = morris.sample(problem, design["n"], num_levels=design["levels"], seed=design["seed"])
+        else:
+            X = latin.sample(problem, design["n"], seed=design["seed"])
+    if interrupted:
+        raise KeyboardInterrupt
     out = {}
     for j, (name, scale) in enumerate(zip(design["names"], design["scales"])):
         out[name] = np.exp(X[:, j]) if scale == "log" else X[:, j].astype(np.float64)
