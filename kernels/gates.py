@@ -231,8 +231,9 @@ def make_contact_arrival(ft):
         quadratic through the margins at the last three accepted points (t_prev = st.t2, t_old, t_new),
         and its distance to the linear crossing (the yield_time rule) as the error; the linear
         crossing with the whole step as the error after a (re)start, where no earlier point belongs
-        to the same smooth piece, or where the margin does not cross 0 in the step (a sliding node,
-        on the yield surface, whose solved gate left 0: its yield_time is the step's start too).
+        to the same smooth piece, or where the margin is not above 0 at the step's end (a sliding
+        node, near the yield surface, whose solved gate left 0 with its margin still negative: its
+        yield_time is the step's start too).
         (nan, nan) outside the window from the disc start to the stop."""
         if t_new <= p.rest_until or t_old >= p.stop_time:
             return wp.float64(wp.nan), wp.float64(wp.nan)

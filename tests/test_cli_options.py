@@ -141,6 +141,12 @@ def test_every_option_a_help_names_exists():
         assert named <= options, (command, sorted(named - options))
         checked += len(named)
     assert checked >= 5  # the run command's helps name several of its options
+    # the top level's description and epilog: an option of some command
+    every = {name for cmd_parser in sub.choices.values() for action in cmd_parser._actions  # noqa: SLF001
+             for name in action.option_strings}
+    top = " ".join([parser.description or "", parser.epilog or ""])
+    named = set(re.findall(r"(?<![\w-])--[a-z][a-z0-9-]*", top))
+    assert named <= every, sorted(named - every)
 
 
 def test_help_shows_the_exit_codes(capsys):

@@ -655,13 +655,14 @@ def _switch_gates_kernel():
     return switch
 
 
-def _switch_gates(nodes, t_old, t_new, backward_euler, t_prev, contact_front=1, recorded=np.nan):
+def _switch_gates(nodes, t_old, t_new, backward_euler, t_prev, contact_front=1, recorded=np.nan, **scene):
     """Run switch_gates once on the node rows of ``nodes`` (dicts of gate slots; unset: 0), with the
     state tau = 1e4 Pa, phi = 2 s, V = 0, the FSAL slot K[2] = (0, 0, 1, 1) and every yield time and
     contact arrival ``recorded`` before (its error 0); returns the gates, yield times, contact
-    arrivals and their errors, K[2], the member state and the parameters."""
+    arrivals and their errors, K[2], the member state and the parameters; ``scene``: Parameters
+    fields."""
     n = len(nodes)
-    values, _ = resolve_members(None, wf.Parameters())
+    values, _ = resolve_members(None, wf.Parameters(**scene))
     params = member_params(values)
     st = np.zeros(1, dtype=types.IntegratorState.numpy_dtype())
     st["t"], st["t2"], st["npts"] = t_old, t_prev, 3
@@ -691,15 +692,18 @@ def _switch_gates(nodes, t_old, t_new, backward_euler, t_prev, contact_front=1, 
 
 
 def test_switch_gates_records_each_first_opening_after_the_disc_starts():
-    """One accepted step's gate update on nodes in every regime, against the rules of
-    kernels/gates.py switch_gates written out here: a closed node whose margin crosses 0 opens (its
+    """One accepted step's gate update on nodes in every regime and every change of regime, against
+    the rules of kernels/gates.py switch_gates written out here: a closed node whose margin crosses 0
+    opens (its
     yield time the margin's linear crossing; its contact arrival the root of the parabola through
     the last three margins, with its distance to the linear crossing as the error); a sliding node
     whose solved gate leaves 0 opens too (its margin, on the yield surface, does not cross 0: the
     step's start, the whole step as the error); a sliding node whose gate was already
     above 0, an open node and a node whose margin stays negative do not open; a time already
-    recorded is kept; the FSAL relaxation rates follow each changed gate; an opening before the
-    disc starts records nothing."""
+    recorded is kept; the FSAL relaxation rates follow each changed gate; a closed node whose
+    margin crosses 0 into a side whose rate points back slides (Filippov), its gate started where
+    the margin's rate, affine in the gate, brings it to 0 over the step; an opening before the disc
+    starts records nothing, and one after the disc's stop no arrival."""
     t_prev, t_old, t_new = 20.09, 20.1, 20.102
     root = 20.1013  # the closed node's margin z(t) = 50 (t - root) - 4e4 (t - root)^2 (Pa)
     z = lambda t: 50.0 * (t - root) - 4e4 * (t - root) ** 2  # noqa: E731
@@ -710,33 +714,47 @@ def test_switch_gates_records_each_first_opening_after_the_disc_starts():
         dict(G_GATE=1.0, G_MARGIN=3.0, G_MARGIN_END=4.0),  # open, stays open
         dict(G_MARGIN=-3.0, G_MARGIN_END=-2.0),  # closed, stays closed
         dict(G_GATE=1.0, G_MARGIN=1.0, G_MARGIN_END=-1.0),  # open, closes (no opening)
+        dict(G_MARGIN_OLD=z(t_prev), G_MARGIN=z(t_old), G_MARGIN_END=z(t_new), G_DMARGIN=-200.0),  # enters sliding
     ]
     gates, yield_time, arrival, error, K, st, values = _switch_gates(nodes, t_old, t_new, 0, t_prev)
     linear = t_old + (t_new - t_old) * z(t_old) / (z(t_old) - z(t_new))
-    assert np.isfinite(yield_time).tolist() == [True, True, False, False, False, False]
+    h = t_new - t_old
+    # node 6: seen rate r_obs = (z1 - z0)/h, with the gate open the rate r_obs + dr < 0 (points back):
+    # it slides, from the gate at which r_obs + g dr brings the margin z1 to 0 over a step, -z1/h
+    r_obs = (z(t_new) - z(t_old)) / h
+    assert r_obs - 200.0 < 0
+    slide_gate = (-z(t_new) / h - r_obs) / -200.0
+    assert 0.0 < slide_gate < 1.0
+    assert np.isfinite(yield_time).tolist() == [True, True, False, False, False, False, True]
     assert yield_time[0] == pytest.approx(linear, abs=1e-12) and yield_time[1] == t_old
+    assert yield_time[6] == yield_time[0] and arrival[6] == arrival[0] and error[6] == error[0]
     assert arrival[0] == pytest.approx(root, abs=1e-12) and error[0] == pytest.approx(abs(root - linear), abs=1e-12)
     # the sliding node: yield_time and arrival the step's start, the whole step as the error
     assert arrival[1] == t_old and error[1] == pytest.approx(t_new - t_old, rel=1e-12)
-    assert np.isnan(arrival[2:]).all() and np.isnan(error[2:]).all()
-    np.testing.assert_array_equal(gates[types.G_GATE], [1.0, 0.3, 0.7, 1.0, 0.0, 0.0])
-    np.testing.assert_array_equal(gates[types.G_SLIDE], [0.0, 1.0, 1.0, 0.0, 0.0, 0.0])
+    assert np.isnan(arrival[2:6]).all() and np.isnan(error[2:6]).all()
+    # (the sliding start gate to the round-off of the step's h = t_new - t_old at t ~ 20 s)
+    np.testing.assert_allclose(gates[types.G_GATE], [1.0, 0.3, 0.7, 1.0, 0.0, 0.0, slide_gate], rtol=1e-10)
+    np.testing.assert_array_equal(gates[types.G_SLIDE], [0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0])
     np.testing.assert_array_equal(gates[types.G_MARGIN], [node["G_MARGIN_END"] for node in nodes])
     np.testing.assert_array_equal(gates[types.G_MARGIN_OLD], [node.get("G_MARGIN", 0.0) for node in nodes])
-    assert st["gate_switches"] == 2  # the regimes that changed: node 0 closed -> open, node 5 open -> closed
+    assert st["gate_switches"] == 3  # the regimes that changed: 0 closed -> open, 5 open -> closed, 6 closed -> sliding
     # the FSAL slot: d tau/dt and d phi/dt lose state * (gate change) * |v_disc - kif V| / D (V = 0)
     v_disc = values["disc_velocity"][0] * (t_new - values["rest_until"][0]) / values["velocity_ramp_time"][0]
     # (a sliding node's slot already follows its last stage's solved gate: no change)
-    relax = np.array([1.0, 0.0, 0.0, 0.0, 0.0, -1.0]) * abs(v_disc) / values["memory_length"][0]
-    np.testing.assert_allclose(K[types.C_TAU], 1.0 - 1e4 * relax, rtol=1e-13)
-    np.testing.assert_allclose(K[types.C_PHI], 1.0 - 2.0 * relax, rtol=1e-13)
+    relax = np.array([1.0, 0.0, 0.0, 0.0, 0.0, -1.0, slide_gate]) * abs(v_disc) / values["memory_length"][0]
+    np.testing.assert_allclose(K[types.C_TAU], 1.0 - 1e4 * relax, rtol=1e-10)
+    np.testing.assert_allclose(K[types.C_PHI], 1.0 - 2.0 * relax, rtol=1e-10)
     # a first opening only: a node whose times are recorded keeps them
     kept = _switch_gates(nodes, t_old, t_new, 0, t_prev, recorded=20.05)
     assert (kept[1] == 20.05).all() and (kept[2] == 20.05).all() and (kept[3] == 0.0).all()
     # before the disc starts nothing is recorded, and without the contact front no arrival
     before = _switch_gates(nodes, 19.9, 19.902, 0, 19.89)
     assert np.isnan(before[1]).all() and np.isnan(before[2]).all()
-    np.testing.assert_array_equal(before[0][types.G_GATE], [1.0, 0.3, 0.7, 1.0, 0.0, 0.0])
+    np.testing.assert_allclose(before[0][types.G_GATE], gates[types.G_GATE], rtol=1e-10)
+    # the arrival's window ends at the disc's stop: a step that starts there records yield_time only
+    stopped = _switch_gates(nodes, t_old, t_new, 0, t_prev, stop_time=t_old)
+    np.testing.assert_array_equal(stopped[1], yield_time)
+    assert np.isnan(stopped[2]).all()
     off = _switch_gates(nodes, t_old, t_new, 0, t_prev, contact_front=0)
     np.testing.assert_array_equal(off[1], yield_time)
     assert np.isnan(off[2]).all()

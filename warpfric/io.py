@@ -692,7 +692,9 @@ def sigint_held():
     handler of the user's own is left alone), held back while the block runs; yields a list that
     holds True once one came. A netCDF write cannot be interrupted halfway: a KeyboardInterrupt
     inside xarray's file locks left one half taken, and the writer's own close then waited on it for
-    ever (a Ctrl-C while a sweep wrote its combined file hung `warpfric run`). SIGINT only where
+    ever (a Ctrl-C while a sweep wrote its combined file hung `warpfric run`); SALib's sampling
+    (warpfric.sensitivity.generate) is held too, since scipy's compiled Sobol set-up swallows a
+    KeyboardInterrupt raised inside it. SIGINT only where
     Python's own handler is in place; all in the main thread only; elsewhere the block runs as it is."""
     interrupted = []
     if threading.current_thread() is not threading.main_thread():

@@ -233,8 +233,7 @@ class _Pool:
     executor: cf.ProcessPoolExecutor
     inbox: object
     created: float
-    ready: int = 0
-    ready_at: float | None = None  # when the last of its workers said it was ready (perf_counter, s)
+    ready_at: float | None = None  # when the parent last read a worker's "ready" message (perf_counter, s)
 
 
 _POOL: _Pool | None = None
@@ -301,15 +300,16 @@ def run(n_workers: int, values: dict, *, scene, model, solver, fronts, record, d
     sizes = np.array([stop - start for start, stop in bounds])
     show = sys.stderr.isatty() if progress is None else bool(progress)
     line = progress_module.Line(n, progress if isinstance(progress, str) else "") if show else None
-    # started here: the processes of a pool created in this call (a kept pool's worker may still say
-    # it is ready in a later call, when its first call ended before its message was read: that is no
-    # start of this call's)
-    pool, started_here = _get_pool(n_workers)
     run_id = next(_RUN_IDS)
     common = dict(scene=scene, model=model, solver=solver, fronts=fronts, device=device)
     records = [chunk_record(record, start, stop) for start, stop in bounds]
     fractions, done = np.zeros(len(bounds)), np.zeros(len(bounds), dtype=np.int64)
     try:
+        # started here: the processes of a pool created in this call (a kept pool's worker may still
+        # say it is ready in a later call, when its first call ended before its message was read:
+        # that is no start of this call's); inside the try, so that a Ctrl-C before the first
+        # submit stops the new pool instead of keeping it without processes
+        pool, started_here = _get_pool(n_workers)
         futures = [pool.executor.submit(_run_chunk, runner, run_id, k, {name: v[start:stop] for name, v in values.items()},
                                         records[k][0], member_offset + start, show, common)
                    for k, (start, stop) in enumerate(bounds)]
@@ -357,7 +357,6 @@ def _read_inbox(pool: _Pool, run_id: int, fractions: np.ndarray, done: np.ndarra
             return
         block = False
         if message[0] == "ready":
-            pool.ready += 1
             pool.ready_at = time.perf_counter()
         elif message[1] == run_id:
             _, _, chunk, fraction, members_done = message
