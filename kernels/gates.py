@@ -220,6 +220,18 @@ def make_switch_location(ft, SwitchTest):
     return dict(locate_switch=locate_switch, drop_stale_limit=drop_stale_limit, after_accept=after_accept)
 
 
+@wp.func
+def margin_crossing(t_old: wp.float64, t_new: wp.float64, z0: wp.float64, z1: wp.float64):
+    """The yield margin's linear crossing of 0 in the step (t_old, t_new], s, from its values z0 at
+    the step's start and z1 at its end (Pa); the step's start where the margin is not above 0 at
+    the end (a sliding node whose solved gate left 0). A node's yield_time, and the linear crossing
+    against which the contact arrival measures its error (contact_arrival)."""
+    theta = wp.float64(0.0)
+    if z0 != z1 and z1 > wp.float64(0.0):
+        theta = wp.clamp(z0 / (z0 - z1), wp.float64(0.0), wp.float64(1.0))
+    return t_old + theta * (t_new - t_old)
+
+
 def make_contact_arrival(ft):
     """The contact front's arrival time at a node whose gate opened in a step (contact_arrival)."""
 
@@ -240,10 +252,7 @@ def make_contact_arrival(ft):
         zp = wp.float64(z_prev)
         za = wp.float64(z0)
         zb = wp.float64(z1)
-        theta = wp.float64(0.0)
-        if za != zb and zb > wp.float64(0.0):
-            theta = wp.clamp(za / (za - zb), wp.float64(0.0), wp.float64(1.0))
-        t_lin = t_old + theta * (t_new - t_old)
+        t_lin = margin_crossing(t_old, t_new, za, zb)
         t_prev = st.t2
         if backward_euler == 0 and st.npts >= 2 and t_prev < t_old and za < wp.float64(0.0) and zb > wp.float64(0.0):
             # crossing_time_quadratic takes the middle point at a fraction c_mid of its interval:
@@ -342,10 +351,7 @@ def make_gate_update(ft, terms, team):
             opened = gate_start == ft(0.0) and new_gate > ft(0.0)
             if opened and t_new > p.rest_until:
                 if not wp.isfinite(yield_time[i, m]):
-                    theta = wp.float64(0.0)
-                    if z0 != z1 and z1 > ft(0.0):
-                        theta = wp.clamp(wp.float64(z0) / wp.float64(z0 - z1), wp.float64(0.0), wp.float64(1.0))
-                    yield_time[i, m] = t_old + theta * (t_new - t_old)
+                    yield_time[i, m] = margin_crossing(t_old, t_new, wp.float64(z0), wp.float64(z1))
             if outputs.contact_front == 1 and opened:
                 if not wp.isfinite(arrival[EV_CONTACT, i, m]):
                     t_cross, t_err = contact_arrival(p, st, t_old, t_new, gates[G_MARGIN_OLD, i, m], z0, z1,
