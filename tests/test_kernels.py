@@ -659,11 +659,10 @@ def _switch_gates(nodes, t_old, t_new, backward_euler, t_prev, contact_front=1, 
     """Run switch_gates once on the node rows of ``nodes`` (dicts of gate slots; unset: 0), with the
     state tau = 1e4 Pa, phi = 2 s, V = 0, the FSAL slot K[2] = (0, 0, 1, 1) and every yield time and
     contact arrival ``recorded`` before (its error 0); returns the gates, yield times, contact
-    arrivals and their errors, K[2], the member state and the parameters; ``scene``: Parameters
+    arrivals and their errors, K[2], the member state and its MemberParams; ``scene``: Parameters
     fields."""
     n = len(nodes)
-    values, _ = resolve_members(None, wf.Parameters(**scene))
-    params = member_params(values)
+    params = _coeffs_params(**scene)
     st = np.zeros(1, dtype=types.IntegratorState.numpy_dtype())
     st["t"], st["t2"], st["npts"] = t_old, t_prev, 3
     gates = np.zeros((types.N_GATE, n, 1))
@@ -683,19 +682,17 @@ def _switch_gates(nodes, t_old, t_new, backward_euler, t_prev, contact_front=1, 
                                         dtype=f64, device=DEVICE))
     states = wp.array(st, dtype=types.IntegratorState, device=DEVICE)
     wp.launch(_switch_gates_kernel(), dim=1, device=DEVICE, inputs=[
-        wp.array(params, dtype=types.MemberParams, device=DEVICE), states, outputs,
-        wp.array(state, dtype=f64, device=DEVICE), arrays["K"], arrays["gates"], t_old, t_new, backward_euler,
+        params, states, outputs, wp.array(state, dtype=f64, device=DEVICE), arrays["K"], arrays["gates"], t_old, t_new, backward_euler,
         arrays["yield_time"], arrays["arrival"], arrays["arrival_error"]])
     out = {name: a.numpy() for name, a in arrays.items()}
     return (out["gates"][:, :, 0], out["yield_time"][:, 0], out["arrival"][types.EV_CONTACT, :, 0],
-            out["arrival_error"][types.EV_CONTACT, :, 0], out["K"][2, :, :, 0], states.numpy()[0], values)
+            out["arrival_error"][types.EV_CONTACT, :, 0], out["K"][2, :, :, 0], states.numpy()[0], params.numpy()[0])
 
 
 def test_switch_gates_records_each_first_opening_after_the_disc_starts():
     """One accepted step's gate update on nodes in every regime and every change of regime, against
     the rules of kernels/gates.py switch_gates written out here: a closed node whose margin crosses 0
-    opens (its
-    yield time the margin's linear crossing; its contact arrival the root of the parabola through
+    opens (its yield time the margin's linear crossing; its contact arrival the root of the parabola through
     the last three margins, with its distance to the linear crossing as the error); a sliding node
     whose solved gate leaves 0 opens too (its margin, on the yield surface, does not cross 0: the
     step's start, the whole step as the error); a sliding node whose gate was already
@@ -716,7 +713,7 @@ def test_switch_gates_records_each_first_opening_after_the_disc_starts():
         dict(G_GATE=1.0, G_MARGIN=1.0, G_MARGIN_END=-1.0),  # open, closes (no opening)
         dict(G_MARGIN_OLD=z(t_prev), G_MARGIN=z(t_old), G_MARGIN_END=z(t_new), G_DMARGIN=-200.0),  # enters sliding
     ]
-    gates, yield_time, arrival, error, K, st, values = _switch_gates(nodes, t_old, t_new, 0, t_prev)
+    gates, yield_time, arrival, error, K, st, p = _switch_gates(nodes, t_old, t_new, 0, t_prev)
     linear = t_old + (t_new - t_old) * z(t_old) / (z(t_old) - z(t_new))
     h = t_new - t_old
     # node 6: seen rate r_obs = (z1 - z0)/h, with the gate open the rate r_obs + dr < 0 (points back):
@@ -739,9 +736,9 @@ def test_switch_gates_records_each_first_opening_after_the_disc_starts():
     np.testing.assert_array_equal(gates[types.G_MARGIN_OLD], [node.get("G_MARGIN", 0.0) for node in nodes])
     assert st["gate_switches"] == 3  # the regimes that changed: 0 closed -> open, 5 open -> closed, 6 closed -> sliding
     # the FSAL slot: d tau/dt and d phi/dt lose state * (gate change) * |v_disc - kif V| / D (V = 0)
-    v_disc = values["disc_velocity"][0] * (t_new - values["rest_until"][0]) / values["velocity_ramp_time"][0]
+    v_disc = p["disc_velocity"] * (t_new - p["rest_until"]) / p["velocity_ramp_time"]
     # (a sliding node's slot already follows its last stage's solved gate: no change)
-    relax = np.array([1.0, 0.0, 0.0, 0.0, 0.0, -1.0, slide_gate]) * abs(v_disc) / values["memory_length"][0]
+    relax = np.array([1.0, 0.0, 0.0, 0.0, 0.0, -1.0, slide_gate]) * abs(v_disc) / p["memory_length"]
     np.testing.assert_allclose(K[types.C_TAU], 1.0 - 1e4 * relax, rtol=1e-10)
     np.testing.assert_allclose(K[types.C_PHI], 1.0 - 2.0 * relax, rtol=1e-10)
     # a first opening only: a node whose times are recorded keeps them

@@ -232,7 +232,6 @@ class _Pool:
     workers: int
     executor: cf.ProcessPoolExecutor
     inbox: object
-    created: float
     ready_at: float | None = None  # when the parent last read a worker's "ready" message (perf_counter, s)
 
 
@@ -250,7 +249,7 @@ def _get_pool(n_workers: int) -> tuple[_Pool, bool]:
     ctx = _Context()
     inbox = ctx.Queue()
     executor = cf.ProcessPoolExecutor(n_workers, mp_context=ctx, initializer=_init_worker, initargs=(inbox,))
-    _POOL = _Pool(n_workers, executor, inbox, time.perf_counter())
+    _POOL = _Pool(n_workers, executor, inbox)
     return _POOL, True
 
 
