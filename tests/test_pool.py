@@ -281,6 +281,19 @@ def test_the_line_of_a_split_run_counts_members_only(monkeypatch):
 
 
 
+def test_a_workers_member_blocks_report_to_the_parents_line(capfd):
+    """A worker's chunk of more than CPU_MEMBER_BLOCK members runs in member blocks (simulate's CPU
+    path), whose progress goes to the parent, which draws the ensemble's one line: each worker drew a
+    line of its own over the parent's, or outside a terminal a summary line a chunk."""
+    n = 8 * 33  # 8 chunks on 2 workers (pool.CHUNKS_PER_WORKER), each above a block of 32
+    assert min(b - a for a, b in pool.chunk_bounds(n, 2)) > sys.modules["warpfric.simulate"].CPU_MEMBER_BLOCK
+    pool.shutdown()  # workers started here write to this test's captured stderr
+    wf.simulate({"eccentricity": np.linspace(-0.3, 0.3, n)}, solver=wf.Solver(nodes=11, rtol=1e-4), fronts=None,
+                device="cpu", workers=2, progress=True)
+    lines = [line for line in capfd.readouterr().err.splitlines() if line.startswith("warpfric")]
+    assert len(lines) == 1 and lines[0].startswith(f"warpfric: {n} members in ") and lines[0].endswith(", 2 workers"), lines
+
+
 def test_a_split_run_warns_of_late_recording_times_once_for_the_ensemble():
     """Each worker piece would name only its own recorded members: the parent warns once, with every
     recorded member whose run ended before some recording times, in the order recorded."""

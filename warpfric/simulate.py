@@ -179,8 +179,9 @@ def _in_member_blocks(device, solver: Solver, n_members: int) -> bool:
 
 def _run_member_blocks(values, varying, scene, model, solver, fronts, record, device, progress, member_offset):
     """_run_members on blocks of CPU_MEMBER_BLOCK members one after the other, joined as the worker
-    processes' chunks are (pool.join): one progress line for the ensemble, each block's warnings
-    once (the ensemble's own are the caller's)."""
+    processes' chunks are (pool.join): one progress line for the ensemble, or, in a worker process
+    (progress.SINK set), the chunk's progress to its parent, which draws the line; each block's
+    warnings once (the ensemble's own are the caller's)."""
     from . import pool
     from . import progress as progress_module
 
@@ -188,14 +189,19 @@ def _run_member_blocks(values, varying, scene, model, solver, fronts, record, de
     n = values["normal_force"].shape[0]
     bounds = [(start, min(start + CPU_MEMBER_BLOCK, n)) for start in range(0, n, CPU_MEMBER_BLOCK)]
     show = sys.stderr.isatty() if progress is None else bool(progress)
-    line = progress_module.Line(n, progress if isinstance(progress, str) else "") if show else None
+    saved_sink = progress_module.SINK  # a worker's: its parent draws the ensemble's line
+    line = (progress_module.Line(n, progress if isinstance(progress, str) else "")
+            if show and saved_sink is None else None)
     parts, chosen, caught_all = [], [], []
-    saved_sink = progress_module.SINK
     try:
         for start, stop in bounds:
-            if line is not None:  # the block's engine reports its fraction here, not on a line of its own
+            # the block's engine reports its fraction of the whole, not on a line of its own
+            if line is not None:
                 progress_module.SINK = (lambda fraction, done, final, start=start, size=stop - start:
                                         line.show((start + fraction * size) / n, start + done))
+            elif show:
+                progress_module.SINK = (lambda fraction, done, final, start=start, size=stop - start, last=stop == n:
+                                        saved_sink((start + fraction * size) / n, start + done, final and last))
             block_record, block_chosen = pool.chunk_record(record, start, stop)
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
