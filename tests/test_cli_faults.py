@@ -269,6 +269,12 @@ def test_too_little_free_space_is_refused_before_the_run(tmp_path, sweep, capsys
      ["the sweep's 1,600,000,000 members need about 38.4 GB for their parameter values alone", "more than this machine's"]),
     ("[sample]\nn = 3000000000\neccentricity = {low = -0.2, high = 0.2}\n",
      ["[sample] n = 3000000000: expected an integer in [1, 2130706432]"]),
+    # a range or a sample was built before the check (16 GB for 2e9 values: a numpy MemoryError)
+    ("[sample]\nn = 2000000000\neccentricity = {low = -0.2, high = 0.2}\n",
+     ["[sample] n = 2,000,000,000: 2,000,000,000 members need about 32.0 GB", "more than this machine's 25.0 GB"]),
+    ("[grid]\nnormal_force = {start = 500, stop = 5000, num = 2000000000}\n",
+     ["[grid] normal_force.num = 2,000,000,000: 2,000,000,000 members need about 32.0 GB",
+      "more than this machine's 25.0 GB"]),
     ("[grid]\neccentricity = [0.0]\n[record]\nstart = 20\nstop = 21\ncount = 100000000\n",
      ["record setting 'count' = 100000000 is invalid; valid: an integer in [2, 1,000,000]"]),
     # 53 GB for one member: the system killed the run and left its lock and parts folder

@@ -143,6 +143,17 @@ def _dataclass_kwargs(table: dict, cls, where: str, parameters: bool = False) ->
     return out
 
 
+def _check_table_memory(total: int, columns: int, what: str) -> None:
+    """Raise SweepError where ``total`` members' values of ``columns`` parameters (float64, and one
+    index column) exceed this machine's memory: checked before such arrays are built."""
+    table = total * 8 * (columns + 1)
+    have = machine_memory_bytes()
+    if have is not None and table > have:
+        raise SweepError(f"{what} {total:,} members need about {table / 1e9:.1f} GB for their parameter values "
+                         f"alone, more than this machine's {have / 1e9:.1f} GB; fewer values, or several sweep files "
+                         "with [run] member_offset")
+
+
 def _values(spec, where: str) -> np.ndarray:
     """A list of numbers or {start, stop, num, spacing = 'linear' | 'log'}."""
     if isinstance(spec, list):
@@ -160,6 +171,7 @@ def _values(spec, where: str) -> np.ndarray:
         num = spec["num"]
         if isinstance(num, bool) or not isinstance(num, int) or num < 1:
             raise SweepError(f"{where}.num = {num!r}: expected an integer >= 1")
+        _check_table_memory(num, 1, f"{where}.num = {num:,}:")
         spacing = spec.get("spacing", "linear")
         if spacing == "linear":
             return np.linspace(start, stop, num)
@@ -292,6 +304,7 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
             raise SweepError(f"[sample] seed = {seed!r}: expected an integer >= 0")
         if not sample:
             raise SweepError("[sample] has no parameters to sample")
+        _check_table_memory(n, len(sample), f"[sample] n = {n:,}:")
         cols = {}
         for pname, spec in sample.items():
             claim(pname, _where("sample", pname))
@@ -331,12 +344,7 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
             factors = " x ".join(f"{size:,} ({', '.join(b)})" for size, b in zip(sizes, blocks))
             raise SweepError(f"the sweep has {total:,} members ({factors}); at most {MEMBER_NUMBER_LIMIT:,} (member "
                              "numbers are int32): fewer values, or several sweep files with [run] member_offset")
-        table = total * 8 * (sum(len(b) for b in blocks) + 1)  # the members' values and one index column
-        have = machine_memory_bytes()
-        if have is not None and table > have:
-            raise SweepError(f"the sweep's {total:,} members need about {table / 1e9:.1f} GB for their parameter "
-                             f"values alone, more than this machine's {have / 1e9:.1f} GB; fewer values, or "
-                             "several sweep files with [run] member_offset")
+        _check_table_memory(total, sum(len(b) for b in blocks), "the sweep's")
         stride = total
         for size, block in zip(sizes, blocks):  # the product's order: the last block varies fastest
             stride //= size
