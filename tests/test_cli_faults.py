@@ -212,6 +212,20 @@ def test_a_full_disk_in_a_chunk_exits_3_and_keeps_the_finished_chunks(tmp_path, 
     assert _files(tmp_path) == ["s.nc", "s.toml"]
 
 
+def test_ctrl_c_in_a_sweep_of_one_chunk_says_how_chunks_keep_results(tmp_path, sweep, capsys, monkeypatch):
+    """Without --chunk a sweep is one chunk, and a Ctrl-C near its end kept nothing: the line says how a
+    run keeps what finishes (its members were not named: 3 here)."""
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(SIMULATE_MODULE, "simulate", interrupted)
+    code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--device", DEVICE, "--quiet")
+    assert code == 130 and err[-1] == ("warpfric: interrupted; nothing was kept (the sweep ran as one chunk of 3 "
+                                       "members: with --chunk N, or [run] chunk = N, each N members are kept once "
+                                       "they finish, and --resume goes on from them)"), err
+    assert _files(tmp_path) == ["s.toml"]
+
+
 def test_a_full_disk_in_the_first_chunk_leaves_nothing(tmp_path, sweep, capsys, monkeypatch):
     _full_disk(monkeypatch, "chunk-000000.nc")
     code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--device", DEVICE, "--quiet")

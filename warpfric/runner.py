@@ -752,6 +752,9 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         what = (f"the {plural(len(kept), 'finished chunk')} {'is' if len(kept) == 1 else 'are'} kept in "
                 f"{str(parts)!r}{late}; {first}`{resume_command}` goes on from them"
                 if kept else "nothing was kept")
+        if interrupted and not kept and store is not None and store.n_chunks == 1 and sweep.n_members > 1:
+            what += (f" (the sweep ran as one chunk of {sweep.n_members:,} members: with --chunk N, or [run] chunk = N, "
+                     "each N members are kept once they finish, and --resume goes on from them)")
         if interrupted:
             stopped = "the local cluster is stopped, so no chunk is written after this; " if cluster_stopped else ""
             raise RunInterrupted(f"interrupted; {stopped}{what}") from None
