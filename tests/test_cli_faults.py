@@ -839,9 +839,13 @@ def test_a_write_error_keeps_its_disk_full_flag_across_processes():
 def test_a_figure_folder_that_cannot_be_written_is_one_line(tmp_path, capsys, monkeypatch):
     """`warpfric plot` into a read-only or forbidden folder ended in matplotlib's or mkdir's
     traceback (exit 1): one line, exit 2, with the reason and --outdir."""
-    import warpfric.plots
+    import xarray as xr
 
-    monkeypatch.setattr(IO_MODULE, "open_ensemble", lambda path: None)
+    import warpfric.plots
+    from warpfric.cli import RUN_OUTPUTS
+
+    run_outputs = xr.Dataset({name: ("member", [0.0]) for name in RUN_OUTPUTS})  # what plot reads of every file
+    monkeypatch.setattr(IO_MODULE, "open_ensemble", lambda path: run_outputs)
     for error, reason in ((errno.EROFS, "read-only file system"), (errno.EACCES, "permission denied")):
         def refused(ds, outdir, error=error):
             raise OSError(error, os.strerror(error), str(outdir / "mu_s.png"))
@@ -1005,6 +1009,28 @@ def test_info_names_the_members_cut_off_before_their_detachment_was_over(tmp_pat
     assert "    ok, but ended before the detachment was over at end_time (their fronts are NaN): members 0, 1" in out, out
     # the front lines count over the members whose fronts were read ("present in 0/2" read as absent)
     assert "  first front's middle segment: no member's front was read (2 not ok or cut off)" in out, out
+
+
+def test_info_and_plot_name_what_a_partial_file_lacks(tmp_path, capsys, monkeypatch):
+    """A file written from a selection of a run's Dataset (write_ensemble takes any) made `info` and
+    `plot` end in an AttributeError or KeyError traceback: one line, exit 2, naming what it lacks;
+    the whole file passes."""
+    from warpfric.io import open_ensemble, write_ensemble
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "tiny.toml").write_text(TINY_SWEEP.replace("fronts = false", ""))  # with the contact front
+    assert run_cli(capsys, "run", "tiny.toml", "-o", "tiny.nc", "--quiet")[0] == 0
+    whole = open_ensemble("tiny.nc")
+    write_ensemble(whole[["mu_s", "status", "eccentricity", "normal_force"]], "few.nc")
+    write_ensemble(whole.drop_vars("v_left"), "no_left.nc")
+    for command in ("info", "plot"):
+        code, _, err = run_cli(capsys, command, "few.nc")
+        assert code == 2
+        _error_line(err, "few.nc lacks mu_s_time, mu_final, final_time:", f"`warpfric {command}` reads a run's outputs")
+        code, _, err = run_cli(capsys, command, "no_left.nc")
+        assert code == 2
+        _error_line(err, "no_left.nc lacks v_left:")
+    assert run_cli(capsys, "info", "tiny.nc")[0] == 0
 
 
 def test_a_finished_chunk_is_read_once_while_it_is_unchanged(tmp_path, capsys, monkeypatch):

@@ -338,6 +338,29 @@ def _run(args) -> int:
     return _run_sweep(args)
 
 
+# what `warpfric info` and `plot` read of every file (and, where a file has front outputs, every front
+# output of its first event; its varying parameters too)
+RUN_OUTPUTS = ("status", "mu_s", "mu_s_time", "mu_final", "final_time")
+
+
+def _whole_run(ds, name: str, command: str):
+    """``ds`` where it holds a run's outputs as simulate writes them; a file written from a part of
+    such a Dataset (e.g. ``write_ensemble(ds[["mu_s", "status"]], ...)``) raises UsageError naming
+    what it lacks, instead of a traceback from deep inside info or plot."""
+    from .fronts import FRONT_METRIC_NAMES
+
+    needed = list(RUN_OUTPUTS) + ds.attrs.get("varying_parameters", "").split()
+    if any(output in ds for output in FRONT_METRIC_NAMES):
+        needed += FRONT_METRIC_NAMES
+    missing = [output for output in dict.fromkeys(needed) if output not in ds]
+    if missing:
+        shown = ", ".join(missing[:5]) + (f" and {len(missing) - 5} more" if len(missing) > 5 else "")
+        raise UsageError(f"{name} lacks {shown}: `warpfric {command}` reads a run's outputs as simulate writes them, "
+                         "and this file holds a part of them (written from a selection of a Dataset); read it with "
+                         "warpfric.io.open_ensemble and xarray")
+    return ds
+
+
 def _info(args) -> int:
     from .io import ChunkStore, open_ensemble, open_ensembles, parts_dir, resume_command, running_writer
 
@@ -364,11 +387,11 @@ def _info(args) -> int:
         print("\n".join(lines))
         return 1
     if len(args.file) > 1:  # several files: their combination (refused when member numbers repeat)
-        ds = open_ensembles(args.file)
+        ds = _whole_run(open_ensembles(args.file), " + ".join(args.file), "info")
         print(summary(ds, " + ".join(args.file)))
         return 0
     path = Path(args.file[0])
-    ds = open_ensemble(path)
+    ds = _whole_run(open_ensemble(path), str(path), "info")
     print(summary(ds, str(path)))
     try:  # a --overwrite run replacing it, running or interrupted (a parts folder without a manifest: none)
         store = ChunkStore.load(parts_dir(path)) if parts_dir(path).is_dir() else None
@@ -486,7 +509,7 @@ def _plot(args) -> int:
     if parts is not None:  # a chunk's figures would go with the folder when the run ends
         raise UsageError(f"figure folder {str(outdir)!r} lies in {str(parts)!r}, the chunks of a sweep, which is "
                          "removed when the sweep ends; give a folder outside it with --outdir DIR")
-    ds = open_ensemble(args.file)
+    ds = _whole_run(open_ensemble(args.file), str(args.file), "plot")
     try:
         outdir.mkdir(exist_ok=True)
         for path in quick_look(ds, outdir):
