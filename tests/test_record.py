@@ -113,6 +113,57 @@ def test_run_record_alone_records_the_default_scenes_detachment(tmp_path, capsys
         "space-time map and mu(t))"]
 
 
+@pytest.mark.parametrize("front_event", ["contact", "off"])
+def test_run_record_alone_ends_where_the_recording_run_ends(tmp_path, capsys, front_event):
+    """The first run locates the detachment with detachment_fronts' event, the strength front under
+    the gate-less law; the automatic end waits for the fronts a run reads, so the recording run, with
+    the contact front (NaN there) or none, ended before the window did (20.287 against 20.299 s at
+    N = 40): its last 13 % of times were NaN. The window ends where a run with the recording run's
+    fronts ends, and its outputs are those of a run without recording."""
+    out = tmp_path / f"gate_less_{front_event}.nc"
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "fronts event 'contact' with relaxation_gate='none'")
+        code, lines, err = run_cli(capsys, "run", "--device", DEVICE, "--nodes", "21", "--quiet", "-o", out, "--record",
+                                   "--relaxation-gate", "none", "--front-event", front_event)
+        assert code == 0, err
+        model = wf.Model(relaxation_gate="none")
+        alone = run(nodes=21, rtol=1e-5, model=model, fronts=None if front_event == "off" else wf.Fronts())
+        strength = run(nodes=21, rtol=1e-5, model=model, fronts=wf.Fronts(event="strength"))
+    ds = open_ensemble(out)
+    for name in ("mu_s", "mu_s_time", "mu_final", "final_time", "steps_accepted", "steps_rejected"):
+        np.testing.assert_array_equal(ds[name].values, alone[name].values, err_msg=name)
+    end, start = float(alone.final_time[0]), float(strength.front_start_time[0])
+    assert end < float(strength.final_time[0])  # the case: the strength front's run ends later
+    t = ds.time.values
+    assert t[-1] == end and t[0] == pytest.approx(start - 0.5 * (end - start), abs=1e-12)
+    assert np.isfinite(ds.velocity_history.values).all()  # no time after the member's end
+    assert not any("recording times after a member's end" in line for line in err), err
+
+
+def test_a_sweeps_detachment_window_ends_where_its_own_runs_end(tmp_path, capsys):
+    """The sweep's first run, like --record's, read the strength front under the gate-less law while
+    the chunks read the contact front (NaN there) and ended earlier: its line named member 0 as
+    ending before the window while member 1's last 208 of 1001 times were NaN as well, unsaid. The
+    window ends with the latest of the members' own runs, and the line names exactly the members
+    with NaN times."""
+    sweep = tmp_path / "g.toml"
+    sweep.write_text('[model]\nrelaxation_gate = "none"\n[solver]\nnodes = 21\n[grid]\neccentricity = [0.0, 0.2]\n'
+                     '[record]\nmembers = [0, 1]\nwindow = "detachment"\ncount = 101\n')
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", "fronts event 'contact' with relaxation_gate='none'")
+        code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "g.nc", "--device", DEVICE)
+        assert code == 0, err
+        alone = run({"eccentricity": [0.0, 0.2]}, nodes=21, rtol=1e-5, model=wf.Model(relaxation_gate="none"),
+                    fronts=wf.Fronts())
+    ds = open_ensemble(tmp_path / "g.nc")
+    ends = alone.final_time.values
+    assert ds.time.values[-1] == ends.max() and ends[0] < ends[1]
+    nan_times = np.isnan(ds.velocity_history.values).any(axis=-1).sum(axis=-1)
+    assert nan_times[1] == 0 and nan_times[0] == (ds.time.values > ends[0]).sum() > 0
+    assert any(line.endswith("the detachment found by the first run; member 0 ends before the window does: NaN after "
+                             "its end") for line in err), err
+
+
 def test_record_detachment_spans_every_chosen_members_detachment(tmp_path):
     # the last two: no_peak, their discs stopped early; the last runs on to 25 s
     members = {"eccentricity": [0.0, 0.3, 0.0, 0.0], "stop_time": [np.inf, np.inf, 20.03, 20.03],
@@ -153,7 +204,7 @@ def test_run_record_alone_without_a_detachment_records_the_whole_run(tmp_path, c
     t = open_ensemble(out).time.values
     assert (t[0], t[-1], t.size) == (20.0, 20.05, 1001)  # from the disc's start (rest_until)
     assert "recording the fields at 1001 times from 20 to 20.05 s, the disc's start to the end: a first run found " \
-           "no detachment (status no_peak) (a second run records; its outputs are the first's)" in lines
+           "no detachment (status no_peak) (a last run records; its outputs are those of a run without recording)" in lines
 
 
 def test_run_record_with_a_window(tmp_path, capsys):
@@ -358,10 +409,11 @@ def test_the_detachment_window_is_found_with_a_front_that_starts_before_the_peak
         assert code == 0, err
         found = run(nodes=21, rtol=1e-5, fronts=detachment_fronts(wf.Model(relaxation_gate=law)),
                     model=wf.Model(relaxation_gate=law))
-        start = float(found.front_start_time[0])
+        own = run(nodes=21, rtol=1e-5, fronts=None, model=wf.Model(relaxation_gate=law))  # where the run ends
+        start, end = float(found.front_start_time[0]), float(own.final_time[0])
         assert start < float(found.mu_s_time[0]) - 0.01, law  # the front starts well before the peak
         t = open_ensemble(out).time.values
-        assert t[0] == pytest.approx(start - 0.5 * (float(found.final_time[0]) - start), abs=1e-9), law
+        assert t[0] == pytest.approx(start - 0.5 * (end - start), abs=1e-9) and t[-1] == end, law
     sweep = tmp_path / "s.toml"
     sweep.write_text("fronts = false\n[solver]\nnodes = 21\n[zip]\neccentricity = [0.0, 0.1, 0.0]\n"
                      "disc_velocity = [1e-4, 1e-4, 0.0]\n"  # member 2: a disc that never moves, no detachment

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from .parameters import (MAX_RECORD_TIMES, MEMBERS_NOT_OK_HINT, RECORD_COUNT, RELAXATION_GATES, Fronts, Model,
-                         Parameters, Record, Solver, detachment_fronts, detachment_start, recording_text, units_text)
+                         Parameters, Record, Solver, detachment_start, recording_text, units_text)
 from .progress import member_range, plural as _plural, seconds_text as _seconds, status_name
 
 
@@ -202,7 +202,7 @@ def _toml_value(value) -> str:
 
 def _run_default(args) -> int:
     from .io import check_free_space, estimate_bytes, history_time, output_lock, remove_stale_temporaries, write_ensemble
-    from .runner import check_output, check_output_name
+    from .runner import check_output, check_output_name, detachment_runs
     from .simulate import simulate
     from .sweep_file import check_member_offset
 
@@ -240,12 +240,13 @@ def _run_default(args) -> int:
             run = dict(scene=scene, model=model, solver=solver, device=args.device, progress=not args.quiet,
                        member_offset=offset, workers=args.cpu_workers)
             if args.record is not None and record is None:  # --record alone: find the detachment first
-                found = simulate(fronts=detachment_fronts(model), **run)
-                record = Record.detachment(found, member_offset=offset)
-                what = ("the detachment found by a first run" if detachment_start(found, 0) is not None else
-                        "the disc's start to the end: a first run found no detachment (status "
+                found, final_time = detachment_runs(None, fronts=fronts, **run)
+                record = Record.detachment(found, member_offset=offset, final_time=final_time)
+                what = ("the detachment found by a first run" if detachment_start(found, 0, final_time[0]) is not None
+                        else "the disc's start to the end: a first run found no detachment (status "
                         f"{status_name(found, found.status[0])})")
-                print(f"{recording_text(record.times)}, {what} (a second run records; its outputs are the first's)")
+                print(f"{recording_text(record.times)}, {what} (a last run records; its outputs are those of a run "
+                      "without recording)")
             ds = simulate(fronts=fronts, record=record, **run)
             _print_member(ds, solver)
             if output is not None:

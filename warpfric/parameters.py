@@ -685,7 +685,8 @@ class Record:
         return Record(members=tuple(members), times=tuple(np.linspace(float(start), float(stop), int(count))))
 
     @staticmethod
-    def detachment(ds, members=None, count: int = RECORD_COUNT, member_offset: int = 0) -> "Record":
+    def detachment(ds, members=None, count: int = RECORD_COUNT, member_offset: int = 0,
+                   final_time=None) -> "Record":
         """``count`` evenly spaced times over the detachment of ``members`` in ``ds``, the outputs of a
         run without recording, for running the same members again (recording changes no output).
 
@@ -693,6 +694,10 @@ class Record:
                        every member of ``ds``.
         member_offset: that of the run to repeat (simulate's ``member_offset``): a member's index
                        there (``Record.members``) is its number less the offset.
+        final_time:    the final times (s, along ``ds.member``) of the run to repeat, where ``ds``
+                       was run with other fronts (the automatic end waits for the front events a
+                       run reads, so it can come earlier or later: the window ends there); default
+                       ``ds.final_time``.
 
         The window: for each member with a detachment (its first front's start or its mu_s peak
         before its end), from the earlier of the two, less half the time from there to its end
@@ -713,12 +718,13 @@ class Record:
                              f"{member_offset}; valid: the offset of the run to repeat, at most its first member's number")
         positions = [int(np.flatnonzero(numbers_there == m)[0]) for m in numbers]
         n = ds.sizes["member"]
+        final = np.broadcast_to(np.asarray(ds.final_time.values if final_time is None else final_time, dtype=float), (n,))
         rest_until = np.broadcast_to(np.asarray(ds["rest_until"].values, dtype=float), (n,)) if "rest_until" in ds \
             else np.zeros(n)
         starts, ends, all_ends = [], [], []
         for m in positions:
-            end = float(ds.final_time.values[m])
-            start = detachment_start(ds, m)
+            end = float(final[m])
+            start = detachment_start(ds, m, end)
             if start is not None:
                 starts.append(max(0.0, start - 0.5 * (end - start)))
                 ends.append(end)
@@ -765,12 +771,13 @@ def detachment_fronts(model: Model) -> Fronts:
     return Fronts(event="contact" if model.relaxation_gate == "stress" else "strength")
 
 
-def detachment_start(ds, position: int) -> float | None:
+def detachment_start(ds, position: int, end: float | None = None) -> float | None:
     """The detachment's start of the member at ``position`` (an index along ``ds.member``) in the
     outputs ``ds`` of a run: the earlier of its first front's start and its mu_s peak (s), where
-    either lies before its end (final_time); None where neither does (not ok, or ended before it).
-    Record.detachment's window and `warpfric run --record` read a detachment by this one rule."""
-    end = float(ds.final_time.values[position])
+    either lies before its end (``end``, s; default its final_time); None where neither does (not
+    ok, or ended before it). Record.detachment's window and `warpfric run --record` read a
+    detachment by this one rule."""
+    end = float(ds.final_time.values[position]) if end is None else float(end)
     marks = [float(ds[name].values[position]) for name in ("front_start_time", "mu_s_time") if name in ds]
     marks = [t for t in marks if np.isfinite(t) and t < end]
     return min(marks) if marks else None

@@ -186,6 +186,27 @@ def sweep_record(sweep, record_times):
     return sweep.record.with_times(record_times)
 
 
+def detachment_runs(members, *, fronts, model, **run) -> tuple:
+    """The first runs of a recording of the detachment (`warpfric run --record`, `[record] window =
+    "detachment"`): (the outputs that locate the detachment, of a run with ``detachment_fronts``'s
+    event; the final times (s, along member) of a run with ``fronts``, the recording run's own, which
+    ends where the recording run will: recording changes no output). One run where ``fronts`` reads
+    that event alone, else a second with ``fronts`` (without its grid check): the automatic end waits
+    for the front events a run reads, so a run with other fronts ends elsewhere (under the gate-less
+    laws, with the contact front or none, ~12 ms before the strength front's run at N = 40, and the
+    last 13 % of the recording's times were NaN). ``run``: simulate's other arguments."""
+    from .parameters import detachment_fronts
+    from .simulate import simulate
+
+    located = detachment_fronts(model)
+    found = simulate(members, fronts=located, model=model, **run)
+    if fronts is not None and fronts.events == located.events:
+        return found, found.final_time.values
+    own = simulate(members, fronts=None if fronts is None else dataclasses.replace(fronts, grid_check=False),
+                   model=model, **run)
+    return found, own.final_time.values
+
+
 def find_record_times(sweep, device: str | None, offset: int, quiet: bool) -> tuple:
     """The recording times of ``[record] window = "detachment"``: a first run of the recorded members
     alone (in this process, on ``device``; None: this host's choice for so few members), with the
@@ -196,8 +217,7 @@ def find_record_times(sweep, device: str | None, offset: int, quiet: bool) -> tu
     for the straggler rule (Solver.stall_factor), which compares a member with them: a member can
     stall in its chunk and not alone, and its times after that end are NaN."""
     from .device import check_device
-    from .parameters import Record, detachment_fronts
-    from .simulate import simulate
+    from .parameters import Record
 
     chosen = list(sweep.record.members)
     numbers = [offset + m for m in chosen]
@@ -207,13 +227,13 @@ def find_record_times(sweep, device: str | None, offset: int, quiet: bool) -> tu
          f"{'them' if len(chosen) > 1 else 'it'} alone on {device}", quiet)
     with warnings.catch_warnings():  # their chunks give these members' warnings
         warnings.simplefilter("ignore")
-        found = simulate(values, scene=sweep.scene, model=sweep.model, solver=sweep.solver,
-                         fronts=detachment_fronts(sweep.model), device=device, progress=False if quiet else "first run",
-                         workers=1)
-    times = Record.detachment(found, count=sweep.record.count).times
+        found, final_time = detachment_runs(values, fronts=sweep.fronts, scene=sweep.scene, model=sweep.model,
+                                            solver=sweep.solver, device=device,
+                                            progress=False if quiet else "first run", workers=1)
+    times = Record.detachment(found, count=sweep.record.count, final_time=final_time).times
     status = found.status.values
     not_ok = [f"{numbers[k]} ({status_name(found, status[k])})" for k in range(len(chosen)) if status[k] != 0]
-    early = [numbers[k] for k in range(len(chosen)) if status[k] == 0 and float(found.final_time[k]) < times[-1]]
+    early = [numbers[k] for k in range(len(chosen)) if status[k] == 0 and float(final_time[k]) < times[-1]]
     what = ("the detachment found by the first run" if len(not_ok) < len(chosen) else
             "the disc's start to the end: the first run found no detachment")
     one = {True: ("member", "ends", "its"), False: ("members", "end", "their")}
