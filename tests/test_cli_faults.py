@@ -285,10 +285,11 @@ def test_too_little_free_space_is_refused_before_the_run(tmp_path, sweep, capsys
      ["[sample] n = 3000000000: expected an integer in [1, 2130706432]"]),
     # a range or a sample was built before the check (16 GB for 2e9 values: a numpy MemoryError)
     ("[sample]\nn = 2000000000\neccentricity = {low = -0.2, high = 0.2}\n",
-     ["[sample] n = 2,000,000,000: 2,000,000,000 members need about 32.0 GB", "more than this machine's 25.0 GB"]),
+     ["the sweep's 2,000,000,000 members need about 32.0 GB", "more than this machine's 25.0 GB"]),
     ("[grid]\nnormal_force = {start = 500, stop = 5000, num = 2000000000}\n",
-     ["[grid] normal_force.num = 2,000,000,000: 2,000,000,000 members need about 32.0 GB",
-      "more than this machine's 25.0 GB"]),
+     ["the sweep's 2,000,000,000 members need about 32.0 GB", "more than this machine's 25.0 GB"]),
+    ("[grid]\neccentricity = [0.0]\n[record]\ntimes = {start = 20, stop = 21, num = 20000000000}\n",
+     ["[record] times has 20,000,000,000 times; valid: at most 1,000,000"]),
     ("[grid]\neccentricity = [0.0]\n[record]\nstart = 20\nstop = 21\ncount = 100000000\n",
      ["record setting 'count' = 100000000 is invalid; valid: an integer in [2, 1,000,000]"]),
     # 53 GB for one member: the system killed the run and left its lock and parts folder
@@ -1014,7 +1015,7 @@ def test_info_names_the_members_cut_off_before_their_detachment_was_over(tmp_pat
 def test_info_and_plot_name_what_a_partial_file_lacks(tmp_path, capsys, monkeypatch):
     """A file written from a selection of a run's Dataset (write_ensemble takes any) made `info` and
     `plot` end in an AttributeError or KeyError traceback: one line, exit 2, naming what it lacks;
-    the whole file passes."""
+    the whole file passes, and so does one without an output they do not read."""
     from warpfric.io import open_ensemble, write_ensemble
 
     monkeypatch.chdir(tmp_path)
@@ -1026,11 +1027,13 @@ def test_info_and_plot_name_what_a_partial_file_lacks(tmp_path, capsys, monkeypa
     for command in ("info", "plot"):
         code, _, err = run_cli(capsys, command, "few.nc")
         assert code == 2
-        _error_line(err, "few.nc lacks mu_s_time, mu_final, final_time:", f"`warpfric {command}` reads a run's outputs")
+        _error_line(err, f"few.nc lacks mu_s_time, mu_final, final_time, which `warpfric {command}` reads")
         code, _, err = run_cli(capsys, command, "no_left.nc")
         assert code == 2
-        _error_line(err, "no_left.nc lacks v_left:")
+        _error_line(err, "no_left.nc lacks v_left, which")
     assert run_cli(capsys, "info", "tiny.nc")[0] == 0
+    write_ensemble(whole.drop_vars("second_front_length"), "older.nc")  # e.g. a file of another version
+    assert run_cli(capsys, "info", "older.nc")[0] == 0
 
 
 def test_a_finished_chunk_is_read_once_while_it_is_unchanged(tmp_path, capsys, monkeypatch):

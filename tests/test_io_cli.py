@@ -247,6 +247,27 @@ def test_a_sweep_file_that_repeats_members_is_warned(tmp_path, body, words):
         assert load_sweep(path).n_members == 8
 
 
+def test_a_long_blocks_repeats_are_found_without_sorting_its_rows(tmp_path, monkeypatch):
+    """Above REPEAT_CHECK_ROWS rows (ranges: a list that long is not typed) np.unique's copies and sort
+    took several times the values' memory after the memory check had passed them: such a block
+    repeats where all its columns are constant (a range's start equals its stop), said without it."""
+    import warpfric.sweep_file as sweep_file
+
+    monkeypatch.setattr(sweep_file, "REPEAT_CHECK_ROWS", 4)
+    monkeypatch.setattr(sweep_file.np, "unique", lambda *a, **k: pytest.fail("sorted a long block's rows"))
+    path = tmp_path / "s.toml"
+    path.write_text("[zip]\neccentricity = {start = 0.1, stop = 0.1, num = 5}\n"
+                    "normal_force = {start = 500, stop = 500, num = 5}\n")
+    with pytest.warns(UserWarning, match=re.escape("[zip] repeats a row (eccentricity = 0.1, normal_force = 500: 5 "
+                                                   "times)")):
+        sweep_file.load_sweep(path)
+    path.write_text("[zip]\neccentricity = {start = 0.1, stop = 0.1, num = 5}\n"
+                    "normal_force = {start = 500, stop = 900, num = 5}\n")  # distinct rows
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert sweep_file.load_sweep(path).n_members == 5
+
+
 def test_a_sweep_file_may_ask_for_several_front_events(tmp_path):
     """[fronts] event = ["contact", "strength"] was refused ("expected a string"), although docs/sweeps.md
     speaks of every front event in the file and Fronts takes several."""

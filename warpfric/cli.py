@@ -245,7 +245,7 @@ def _run_default(args) -> int:
                 what = ("the detachment found by a first run" if detachment_start(found, 0, final_time[0]) is not None
                         else "the disc's start to the end: a first run found no detachment (status "
                         f"{status_name(found, found.status[0])})")
-                print(f"{recording_text(record.times)}, {what} (a last run records; its outputs are those of a run "
+                print(f"{recording_text(record.times)}, {what} (the last run records; its outputs are those of a run "
                       "without recording)")
             ds = simulate(fronts=fronts, record=record, **run)
             _print_member(ds, solver)
@@ -339,25 +339,27 @@ def _run(args) -> int:
     return _run_sweep(args)
 
 
-# what `warpfric info` and `plot` read of every file (and, where a file has front outputs, every front
-# output of its first event; its varying parameters too)
+# what `warpfric info` and `plot` read of every file, and of a file with front outputs (its varying
+# parameters too): found by dropping each output of a file with the contact front in turn
 RUN_OUTPUTS = ("status", "mu_s", "mu_s_time", "mu_final", "final_time")
+FRONT_OUTPUTS_READ = ("front_start_time", "front_end_time", "v_left", "v_middle", "v_right", "collision_time",
+                      "arrival_time")
 
 
 def _whole_run(ds, name: str, command: str):
-    """``ds`` where it holds a run's outputs as simulate writes them; a file written from a part of
-    such a Dataset (e.g. ``write_ensemble(ds[["mu_s", "status"]], ...)``) raises UsageError naming
-    what it lacks, instead of a traceback from deep inside info or plot."""
+    """``ds`` where it holds the outputs that `warpfric info` and `plot` read; a file without some
+    (e.g. written from a selection of a run's Dataset: ``write_ensemble(ds[["mu_s", "status"]], ...)``)
+    raises UsageError naming them, instead of a traceback from deep inside info or plot."""
     from .fronts import FRONT_METRIC_NAMES
 
     needed = list(RUN_OUTPUTS) + ds.attrs.get("varying_parameters", "").split()
     if any(output in ds for output in FRONT_METRIC_NAMES):
-        needed += FRONT_METRIC_NAMES
+        needed += FRONT_OUTPUTS_READ
     missing = [output for output in dict.fromkeys(needed) if output not in ds]
     if missing:
         shown = ", ".join(missing[:5]) + (f" and {len(missing) - 5} more" if len(missing) > 5 else "")
-        raise UsageError(f"{name} lacks {shown}: `warpfric {command}` reads a run's outputs as simulate writes them, "
-                         "and this file holds a part of them (written from a selection of a Dataset); read it with "
+        raise UsageError(f"{name} lacks {shown}, which `warpfric {command}` reads (a file written from a selection "
+                         "of a run's Dataset, or by another version of warpfric?); read it with "
                          "warpfric.io.open_ensemble and xarray")
     return ds
 

@@ -36,8 +36,8 @@ from pathlib import Path
 import numpy as np
 
 from .members import resolve_members
-from .parameters import (MEMBER_NUMBER_LIMIT, PARAMETER_NAMES, RECORD_COUNT, Fronts, Model, Parameters, Record, Solver,
-                         check_fronts_method, check_precision, did_you_mean, parameter_range_text, parameter_units,
+from .parameters import (_RECORD_TIMES_WHY, MAX_RECORD_TIMES, MEMBER_NUMBER_LIMIT, PARAMETER_NAMES, RECORD_COUNT,
+                         Fronts, Model, Parameters, Record, Solver, check_fronts_method, check_precision, did_you_mean, parameter_range_text, parameter_units,
                          units_text, validate_value)
 from .progress import machine_memory_bytes, plural
 
@@ -49,6 +49,10 @@ MEMBERS_NEEDED = ("a sweep file needs members: a [grid], [zip], [sample] or [des
                   "(even an empty one) to run that scene as one member")
 DISTRIBUTIONS = {"uniform": ("low", "high"), "normal": ("mean", "std"), "loguniform": ("low", "high")}
 RANGE_KEYS = ("start", "stop", "num", "spacing")
+# a [grid] or [zip] block of more rows is checked for repeated rows by its constant columns only: the
+# copies and sort of np.unique took several times the memory of the values (a range's rows repeat
+# only where its start equals its stop)
+REPEAT_CHECK_ROWS = 1_000_000
 
 
 class SweepError(ValueError):
@@ -154,33 +158,45 @@ def _check_table_memory(total: int, columns: int, what: str) -> None:
                          "with [run] member_offset")
 
 
-def _values(spec, where: str) -> np.ndarray:
-    """A list of numbers or {start, stop, num, spacing = 'linear' | 'log'}."""
+def _range(spec: dict, where: str) -> tuple:
+    """A checked range table {start, stop, num, spacing = 'linear' | 'log'}: (start, stop, num, spacing)."""
+    unknown = set(spec) - set(RANGE_KEYS)
+    if unknown:
+        raise SweepError(f"unknown key {where}.{sorted(unknown)[0]}{_accepted(sorted(unknown)[0], RANGE_KEYS)}")
+    for key in ("start", "stop", "num"):
+        if key not in spec:
+            raise SweepError(f"{where}: missing key {key!r} (a range needs start, stop, num)")
+    start, stop = _number(spec["start"], f"{where}.start"), _number(spec["stop"], f"{where}.stop")
+    num = spec["num"]
+    if isinstance(num, bool) or not isinstance(num, int) or num < 1:
+        raise SweepError(f"{where}.num = {num!r}: expected an integer >= 1")
+    spacing = spec.get("spacing", "linear")
+    if spacing not in ("linear", "log"):
+        raise SweepError(f"{where}.spacing = {spacing!r}; accepted: linear, log")
+    if spacing == "log" and (start <= 0 or stop <= 0):
+        raise SweepError(f"{where}: log spacing needs start > 0 and stop > 0, got {start!r}, {stop!r}")
+    return start, stop, num, spacing
+
+
+def _length(spec, where: str) -> int:
+    """How many values ``spec`` (as :func:`_values` takes it) gives, checked, without building them."""
     if isinstance(spec, list):
         if not spec:
             raise SweepError(f"{where} is empty: give at least one value")
-        return np.array([_number(v, where) for v in spec], dtype=np.float64)
+        return len(spec)
     if isinstance(spec, dict):
-        unknown = set(spec) - set(RANGE_KEYS)
-        if unknown:
-            raise SweepError(f"unknown key {where}.{sorted(unknown)[0]}{_accepted(sorted(unknown)[0], RANGE_KEYS)}")
-        for key in ("start", "stop", "num"):
-            if key not in spec:
-                raise SweepError(f"{where}: missing key {key!r} (a range needs start, stop, num)")
-        start, stop = _number(spec["start"], f"{where}.start"), _number(spec["stop"], f"{where}.stop")
-        num = spec["num"]
-        if isinstance(num, bool) or not isinstance(num, int) or num < 1:
-            raise SweepError(f"{where}.num = {num!r}: expected an integer >= 1")
-        _check_table_memory(num, 1, f"{where}.num = {num:,}:")
-        spacing = spec.get("spacing", "linear")
-        if spacing == "linear":
-            return np.linspace(start, stop, num)
-        if spacing == "log":
-            if start <= 0 or stop <= 0:
-                raise SweepError(f"{where}: log spacing needs start > 0 and stop > 0, got {start!r}, {stop!r}")
-            return np.geomspace(start, stop, num)
-        raise SweepError(f"{where}.spacing = {spacing!r}; accepted: linear, log")
+        return _range(spec, where)[2]
     raise SweepError(f"{where} = {spec!r}: expected a list of numbers or a table {{start, stop, num, spacing}}")
+
+
+def _values(spec, where: str) -> np.ndarray:
+    """A list of numbers or {start, stop, num, spacing = 'linear' | 'log'} (its length: _length, which a
+    caller checks first where it may be large)."""
+    if isinstance(spec, dict):
+        start, stop, num, spacing = _range(spec, where)
+        return np.linspace(start, stop, num) if spacing == "linear" else np.geomspace(start, stop, num)
+    _length(spec, where)
+    return np.array([_number(v, where) for v in spec], dtype=np.float64)
 
 
 def _draw(name: str, spec, n: int, seed: int, where: str) -> np.ndarray:
@@ -278,22 +294,23 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
             raise SweepError(f"parameter {pname!r} is swept twice ({seen[pname]} and {where})")
         seen[pname] = where
 
-    for pname, spec in doc.get("grid", {}).items():
+    # the members' count and the memory of their values, checked before any array is built: a range
+    # or a sample of 2e9 values took 16 GB (a MemoryError) before the product was checked
+    grid, zipped, sample = doc.get("grid", {}), doc.get("zip", {}), dict(doc.get("sample", {}))
+    sizes, size_names = [], []  # each block's length and parameters
+    for pname, spec in grid.items():
         claim(pname, _where("grid", pname))
-        blocks.append({pname: _values(spec, _where("grid", pname))})
-        block_names.append(f"[grid] {pname}")
-    zipped = doc.get("zip", {})
+        sizes.append(_length(spec, _where("grid", pname)))
+        size_names.append((pname,))
     if zipped:
-        cols = {}
+        lengths = {}
         for pname, spec in zipped.items():
             claim(pname, _where("zip", pname))
-            cols[pname] = _values(spec, _where("zip", pname))
-        lengths = {k: len(v) for k, v in cols.items()}
+            lengths[pname] = _length(spec, _where("zip", pname))
         if len(set(lengths.values())) != 1:
             raise SweepError(f"[zip] lists differ in length: {lengths}; all must have one length")
-        blocks.append(cols)
-        block_names.append("[zip]")
-    sample = dict(doc.get("sample", {}))
+        sizes.append(next(iter(lengths.values())))
+        size_names.append(tuple(zipped))
     if sample:
         n = sample.pop("n", None)
         seed = sample.pop("seed", 0)
@@ -304,12 +321,25 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
             raise SweepError(f"[sample] seed = {seed!r}: expected an integer >= 0")
         if not sample:
             raise SweepError("[sample] has no parameters to sample")
-        _check_table_memory(n, len(sample), f"[sample] n = {n:,}:")
-        cols = {}
-        for pname, spec in sample.items():
+        for pname in sample:
             claim(pname, _where("sample", pname))
-            cols[pname] = _draw(pname, spec, n, seed, _where("sample", pname))
-        blocks.append(cols)
+        sizes.append(n)
+        size_names.append(tuple(sample))
+    if sizes:
+        total = math.prod(sizes)
+        if total > MEMBER_NUMBER_LIMIT:
+            factors = " x ".join(f"{size:,} ({', '.join(names)})" for size, names in zip(sizes, size_names))
+            raise SweepError(f"the sweep has {total:,} members ({factors}); at most {MEMBER_NUMBER_LIMIT:,} (member "
+                             "numbers are int32): fewer values, or several sweep files with [run] member_offset")
+        _check_table_memory(total, sum(len(names) for names in size_names), "the sweep's")
+    for pname, spec in grid.items():
+        blocks.append({pname: _values(spec, _where("grid", pname))})
+        block_names.append(f"[grid] {pname}")
+    if zipped:
+        blocks.append({pname: _values(spec, _where("zip", pname)) for pname, spec in zipped.items()})
+        block_names.append("[zip]")
+    if sample:
+        blocks.append({pname: _draw(pname, spec, n, seed, _where("sample", pname)) for pname, spec in sample.items()})
         block_names.append("[sample]")
     members: dict[str, np.ndarray] = {}
     design = None
@@ -329,22 +359,21 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
     for block, table in zip(blocks, block_names):
         if table == "[sample]":  # continuous draws
             continue
-        rows = np.stack([np.asarray(v, dtype=np.float64) for v in block.values()], axis=1)
-        unique, counts = np.unique(rows, axis=0, return_counts=True)
-        if (counts > 1).any():
+        rows_count = len(next(iter(block.values())))
+        if rows_count > REPEAT_CHECK_ROWS:
+            repeated, count = (([float(v[0]) for v in block.values()], rows_count)
+                               if all(np.ptp(v) == 0 for v in block.values()) else (None, 0))
+        else:
+            rows = np.stack([np.asarray(v, dtype=np.float64) for v in block.values()], axis=1)
+            unique, counts = np.unique(rows, axis=0, return_counts=True)
             k = int(np.argmax(counts > 1))
-            example = ", ".join(f"{n} = {v:g}" for n, v in zip(block, unique[k]))
+            repeated, count = (unique[k], int(counts[k])) if (counts > 1).any() else (None, 0)
+        if repeated is not None:
+            example = ", ".join(f"{n} = {v:g}" for n, v in zip(block, repeated))
             warnings.warn(f"{table} repeats {'a value' if len(block) == 1 else 'a row'} ({example}: "
-                          f"{int(counts[k])} times): its members run more than once, with equal results, and "
+                          f"{count} times): its members run more than once, with equal results, and "
                           "warpfric.io.by_parameters refuses such a file", stacklevel=2)
     if blocks:
-        sizes = [len(next(iter(b.values()))) for b in blocks]
-        total = math.prod(sizes)  # checked before any table of that length is built
-        if total > MEMBER_NUMBER_LIMIT:
-            factors = " x ".join(f"{size:,} ({', '.join(b)})" for size, b in zip(sizes, blocks))
-            raise SweepError(f"the sweep has {total:,} members ({factors}); at most {MEMBER_NUMBER_LIMIT:,} (member "
-                             "numbers are int32): fewer values, or several sweep files with [run] member_offset")
-        _check_table_memory(total, sum(len(b) for b in blocks), "the sweep's")
         stride = total
         for size, block in zip(sizes, blocks):  # the product's order: the last block varies fastest
             stride //= size
@@ -419,6 +448,10 @@ def _record(spec: dict) -> Record | RecordDetachment:
     if "times" in spec:
         if any(k in spec for k in ("start", "stop", "count")):
             raise SweepError("[record]: give either times or start/stop/count, not both")
+        count = _length(spec["times"], "[record] times")  # before a range of that many is built
+        if count > MAX_RECORD_TIMES:
+            raise SweepError(f"[record] times has {count:,} times; valid: at most {MAX_RECORD_TIMES:,} "
+                             f"{_RECORD_TIMES_WHY}")
         times = _values(spec["times"], "[record] times")
         return Record(members=tuple(members), times=tuple(times))
     for key in ("start", "stop"):
