@@ -294,6 +294,22 @@ def test_a_workers_member_blocks_report_to_the_parents_line(capfd):
     assert len(lines) == 1 and lines[0].startswith(f"warpfric: {n} members in ") and lines[0].endswith(", 2 workers"), lines
 
 
+def test_member_blocks_report_their_fraction_of_the_whole_chunk(monkeypatch):
+    """What a worker's member blocks send its sink (the parent's line for the chunk): fractions of the
+    whole chunk that never go back, members done counted over the blocks, and the final report once,
+    at the end (each block's own fraction sent as the chunk's made it reach 100 % after its first)."""
+    reports = []
+    monkeypatch.setattr(progress, "SINK", lambda fraction, done, final: reports.append((fraction, done, final)))
+    n = 70  # blocks of 32, 32 and 6 (simulate.CPU_MEMBER_BLOCK)
+    wf.simulate({"eccentricity": np.linspace(-0.2, 0.2, n)}, solver=wf.Solver(nodes=11, rtol=1e-4), fronts=None,
+                device="cpu", workers=1, progress=True)
+    fractions = [fraction for fraction, _, _ in reports]
+    assert all(b >= a for a, b in zip(fractions, fractions[1:])) and max(fractions) == 1.0
+    assert [final for _, _, final in reports].count(True) == 1 and reports[-1] == (1.0, n, True)
+    done = [members for _, members, _ in reports]
+    assert all(b >= a for a, b in zip(done, done[1:])) and {32, 64, n} <= set(done)
+
+
 def test_a_split_run_warns_of_late_recording_times_once_for_the_ensemble():
     """Each worker piece would name only its own recorded members: the parent warns once, with every
     recorded member whose run ended before some recording times, in the order recorded."""

@@ -194,6 +194,11 @@ def test_record_detachment_spans_every_chosen_members_detachment(tmp_path):
         wf.Record.detachment(ds, members=(4,))
     with pytest.raises(ValueError, match="member 8 lies before member_offset = 9"):
         wf.Record.detachment(shifted, members=(8,), member_offset=9)
+    # the ends of the run to repeat, where ds read other fronts: one per member of ds, in its order
+    later = ds.final_time.values + [0.01, 0.02, 0.0, 0.0]
+    assert wf.Record.detachment(ds, members=(0, 1), count=11, final_time=later).times[-1] == later[:2].max()
+    with pytest.raises(ValueError, match=r"final_time has 1 values; valid: one per member of ds \(4\)"):
+        wf.Record.detachment(ds, members=(1,), final_time=[20.3])
 
 
 def test_run_record_alone_without_a_detachment_records_the_whole_run(tmp_path, capsys):
@@ -204,7 +209,7 @@ def test_run_record_alone_without_a_detachment_records_the_whole_run(tmp_path, c
     t = open_ensemble(out).time.values
     assert (t[0], t[-1], t.size) == (20.0, 20.05, 1001)  # from the disc's start (rest_until)
     assert "recording the fields at 1001 times from 20 to 20.05 s, the disc's start to the end: a first run found " \
-           "no detachment (status no_peak) (a last run records; its outputs are those of a run without recording)" in lines
+           "no detachment (status no_peak) (the last run records; its outputs are those of a run without recording)" in lines
 
 
 def test_run_record_with_a_window(tmp_path, capsys):

@@ -718,7 +718,10 @@ class Record:
                              f"{member_offset}; valid: the offset of the run to repeat, at most its first member's number")
         positions = [int(np.flatnonzero(numbers_there == m)[0]) for m in numbers]
         n = ds.sizes["member"]
-        final = np.broadcast_to(np.asarray(ds.final_time.values if final_time is None else final_time, dtype=float), (n,))
+        final = np.asarray(ds.final_time.values if final_time is None else final_time, dtype=float).reshape(-1)
+        if final.shape != (n,):
+            raise ValueError(f"Record.detachment: final_time has {final.size} values; valid: one per member of ds "
+                             f"({n}), in its order")
         rest_until = np.broadcast_to(np.asarray(ds["rest_until"].values, dtype=float), (n,)) if "rest_until" in ds \
             else np.zeros(n)
         starts, ends, all_ends = [], [], []

@@ -186,21 +186,31 @@ def sweep_record(sweep, record_times):
     return sweep.record.with_times(record_times)
 
 
+def _automatic_end_reads(fronts) -> tuple:
+    """What of ``fronts`` (a Fronts or None) the automatic end waits for (kernels/observers.py,
+    detachment_over): every node past its strength peak (the strength front), the velocity front's
+    detachment velocity below half its arrival level (its settings); the contact front, whose
+    arrivals come before the mu_s peak, not at all."""
+    events = () if fronts is None else fronts.events
+    velocity = (fronts.threshold, fronts.direction, fronts.min_event_fraction) if "velocity" in events else None
+    return "strength" in events, velocity
+
+
 def detachment_runs(members, *, fronts, model, **run) -> tuple:
     """The first runs of a recording of the detachment (`warpfric run --record`, `[record] window =
     "detachment"`): (the outputs that locate the detachment, of a run with ``detachment_fronts``'s
     event; the final times (s, along member) of a run with ``fronts``, the recording run's own, which
-    ends where the recording run will: recording changes no output). One run where ``fronts`` reads
-    that event alone, else a second with ``fronts`` (without its grid check): the automatic end waits
-    for the front events a run reads, so a run with other fronts ends elsewhere (under the gate-less
-    laws, with the contact front or none, ~12 ms before the strength front's run at N = 40, and the
-    last 13 % of the recording's times were NaN). ``run``: simulate's other arguments."""
+    ends where the recording run will: recording changes no output). One run where the two fronts
+    end a run alike (_automatic_end_reads), else a second with ``fronts`` (without its grid check):
+    the automatic end waits for the strength and velocity fronts a run reads, so under the gate-less
+    laws a run with the contact front or none ended ~12 ms before the strength front's run at
+    N = 40, and the last 13 % of the recording's times were NaN. ``run``: simulate's other arguments."""
     from .parameters import detachment_fronts
     from .simulate import simulate
 
     located = detachment_fronts(model)
     found = simulate(members, fronts=located, model=model, **run)
-    if fronts is not None and fronts.events == located.events:
+    if _automatic_end_reads(fronts) == _automatic_end_reads(located):
         return found, found.final_time.values
     own = simulate(members, fronts=None if fronts is None else dataclasses.replace(fronts, grid_check=False),
                    model=model, **run)
