@@ -37,8 +37,8 @@ import numpy as np
 
 from .members import resolve_members
 from .parameters import (_RECORD_TIMES_WHY, MAX_RECORD_TIMES, MEMBER_NUMBER_LIMIT, PARAMETER_NAMES, RECORD_COUNT,
-                         Fronts, Model, Parameters, Record, Solver, check_fronts_method, check_precision, did_you_mean, parameter_range_text, parameter_units,
-                         units_text, validate_value)
+                         Fronts, Model, Parameters, Record, Solver, check_fronts_method, check_precision, did_you_mean,
+                         parameter_range_text, parameter_units, units_text, validate_value)
 from .progress import machine_memory_bytes, plural
 
 TOP_KEYS = ("title", "description", "scene", "model", "solver", "fronts", "record", "grid", "zip", "sample", "design",
