@@ -462,13 +462,18 @@ def test_a_ctrl_c_while_the_cluster_closes_after_the_file_is_written_keeps_the_r
     _assert_same_outputs(single, tmp_path / "local.nc")
 
 
-def test_a_ctrl_c_while_the_local_cluster_starts_is_held_until_it_has_started(tmp_path, monkeypatch):
+def test_a_ctrl_c_while_the_local_cluster_starts_is_held_until_it_has_started(tmp_path, monkeypatch, request):
     """A terminal's Ctrl-C reaches the workers that the local cluster is still starting: they died
     mid-import, and ~70 lines of their and distributed's tracebacks came before warpfric's line (or
     the start raised 'Nanny failed to start', exit 1). The command holds the Ctrl-C until the start
     has ended, closes the cluster and ends in 'interrupted' (KeyboardInterrupt), also where a worker
     it hit failed the start; the workers started meanwhile ignore it from their import of warpfric."""
     import warpfric.runner as runner
+
+    # Python's own Ctrl-C, as in a terminal, also where the tests run with SIGINT ignored (started with
+    # & from a script: the Ctrl-C was not held, and the processes it starts inherited the ignoring)
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)
+    request.addfinalizer(lambda: signal.signal(signal.SIGINT, inherited))
 
     sweep = tmp_path / "s.toml"
     sweep.write_text(SWEEP)
