@@ -100,7 +100,9 @@ def test_members_from_xarray_dataset_and_broadcasting():
 
 
 @pytest.mark.parametrize("cls, typo, right", [(wf.Parameters, "normal_forse", "normal_force"), (wf.Solver, "rtoll", "rtol"),
-                                             (wf.Model, "relaxation_gates", "relaxation_gate")])
+                                             (wf.Model, "relaxation_gates", "relaxation_gate"),
+                                             # one word of a single name (an audit's 'gate' had no suggestion)
+                                             (wf.Model, "gate", "relaxation_gate"), (wf.Parameters, "arm", "torque_arm")])
 def test_unknown_keyword_names_the_valid_ones(cls, typo, right):
     with pytest.raises(TypeError, match=f"unknown parameter '{typo}' \\(did you mean '{right}'\\?\\); valid names: .*{right}"):
         cls(**{typo: 1})

@@ -174,13 +174,17 @@ Parameters.__doc__ = (Parameters.__doc__ or "").rstrip() + _fields_text()
 
 
 def did_you_mean(name, names) -> str:
-    """" (did you mean 'x'?)" with the closest of ``names`` to ``name``, or "" where none is close."""
+    """" (did you mean 'x'?)" with the closest of ``names`` to ``name``, or "" where none is close; a
+    name that is one word of a single one of ``names`` is close to it ('gate': 'relaxation_gate')."""
     import difflib
 
     names = list(names)
     by_lower = {str(n).lower(): n for n in reversed(names)}  # a name's case alone wrong (mu_S) is close too
     close = difflib.get_close_matches(str(name).lower(), list(by_lower), n=1)
-    return f" (did you mean {by_lower[close[0]]!r}?)" if close else ""
+    if close:
+        return f" (did you mean {by_lower[close[0]]!r}?)"
+    holding = [n for n in names if str(name).lower() in str(n).lower().split("_")]
+    return f" (did you mean {holding[0]!r}?)" if len(holding) == 1 else ""
 
 
 def unknown_parameter(name: str) -> str:
