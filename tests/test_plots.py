@@ -230,6 +230,9 @@ def test_the_space_time_map_draws_the_contact_fronts_arrival_times(contact_run):
         (float(ds.collision_position.values[0]) * 1e3, float(ds.collision_time.values[0])))
     assert [text.get_text() for text in ax.get_legend().get_texts()] == ["contact front: arrival time t_a",
                                                                         f"contact front: {MEETS}"]
+    # the legend lies below the map: inside it covered the later fronts' curves (an audit's figure)
+    fig.canvas.draw()
+    assert ax.get_legend().get_window_extent().y1 < ax.get_window_extent().y0
     assert not contours(ax)  # the threshold contour belongs to the velocity event
     # the default scene's contact front is two fronts: the meeting point is marked on the curve
     ax = plots.arrival_times_figure(ds).axes[0]

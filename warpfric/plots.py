@@ -660,7 +660,9 @@ def space_time_figure(ds, recorded_index: int):
     ax.set_xlim(window[0])
     ax.set_ylim(window[1])
     if handles:
-        ax.legend(handles=handles, fontsize=7, loc="upper right", framealpha=0.8)
+        # below the axes: inside, it covered the later fronts' curves (the strength and velocity
+        # fronts cross near the window's top)
+        ax.legend(handles=handles, fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.15), frameon=False)
     ax.set_xlabel("x (mm)" if metres else "x / L")
     ax.set_ylabel("t (s)")
     ax.set_title(_member_title(ds, member, position, "pad velocity"), fontsize=10)
