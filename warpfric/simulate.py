@@ -192,16 +192,14 @@ def _run_member_blocks(values, varying, scene, model, solver, fronts, record, de
     saved_sink = progress_module.SINK  # a worker's: its parent draws the ensemble's line
     line = (progress_module.Line(n, progress if isinstance(progress, str) else "")
             if show and saved_sink is None else None)
+    # where the ensemble's progress goes, sink(fraction, done, final): this process's line, or the parent's
+    ensemble_sink = saved_sink if line is None else (lambda fraction, done, final: line.show(fraction, done))
     parts, chosen, caught_all = [], [], []
     try:
         for start, stop in bounds:
-            # the block's engine reports its fraction of the whole, not on a line of its own
-            if line is not None:
-                progress_module.SINK = (lambda fraction, done, final, start=start, size=stop - start:
-                                        line.show((start + fraction * size) / n, start + done))
-            elif show:
+            if show:  # the block's engine reports its fraction of the whole, not on a line of its own
                 progress_module.SINK = (lambda fraction, done, final, start=start, size=stop - start, last=stop == n:
-                                        saved_sink((start + fraction * size) / n, start + done, final and last))
+                                        ensemble_sink((start + fraction * size) / n, start + done, final and last))
             block_record, block_chosen = pool.chunk_record(record, start, stop)
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
