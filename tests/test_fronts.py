@@ -411,6 +411,21 @@ def test_speed_error_estimate_by_hand():
     assert out["v_middle_error"][0] == np.inf and np.isnan(out["v_middle_error"][4])
 
 
+def test_a_detachment_all_at_once_has_an_infinite_speed_and_says_so():
+    """Every node arriving at one time (the limit of a pad too thin to couple its nodes): the time
+    spent is 0, so the whole front's speed is inf, not a large finite number nor NaN (NaN says "no
+    segment"); the left node nucleates (exact ties go left), one front, no meeting; the Dataset's
+    attrs say what inf means."""
+    metrics = segment(np.full((1, N), 20.0), L, device=DEVICE)
+    assert metrics["v_first"][0] == np.inf and metrics["v_middle"][0] == np.inf
+    assert np.isnan(metrics["v_left"][0]) and np.isnan(metrics["v_right"][0])
+    assert metrics["nucleation_position"][0] == -L / 2 and metrics["front_count"][0] == 1
+    assert np.isnan(metrics["collision_position"][0])
+    assert metrics["first_front_length"][0] == pytest.approx(L, rel=1e-12)
+    from warpfric.simulate import _FRONT_ATTRS
+    assert "inf: its nodes arrived at one time" in _FRONT_ATTRS["v_first"][2]
+
+
 def test_front_collisions_count_the_fronts_and_place_where_they_meet():
     """One front from the right edge: one front, no collision. Two fronts (from both edges, 5 and
     30 m/s) meet where their arrival times are equal, the interior maximum of t_a(x): the node there

@@ -611,7 +611,8 @@ for _seg, (_short, _definition) in _SEGMENT_WORDS.items():
     _FRONT_ATTRS[f"{_seg}_front_length"] = ("m", f"length of {_short} of the {{front}}",
                                             f"{_short[4:]}: {_definition}; {{words}}")
     _FRONT_ATTRS[f"v_{_seg}"] = ("m s-1", f"speed of {_short} of the {{front}}",
-                                 f"mean speed, 1/|slope| of t_a(x); {_short[4:]}: {_definition}; {{words}}")
+                                 f"mean speed, 1/|slope| of t_a(x); {_short[4:]}: {_definition}; inf: its nodes "
+                                 f"arrived at one time (not resolved, v_{_seg}_error inf); {{words}}")
     _FRONT_ATTRS[f"v_{_seg}_error"] = ("m s-1", f"interpolation error of v_{_seg}", "from the arrival_time_error of "
                                        "its end (and nucleation) nodes: a lower bound, not the speed's error "
                                        "(v_*_grid_error from Fronts(grid_check=True) is usually far larger); inf: "
