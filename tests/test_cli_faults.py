@@ -265,6 +265,21 @@ def test_an_io_error_that_is_not_a_full_disk_says_what_it_was(tmp_path, capsys, 
     assert _files(tmp_path) == []
 
 
+def test_a_file_system_without_a_size_is_not_a_full_disk(tmp_path, monkeypatch):
+    """A pseudo file system (/proc, /sys) reports 0 bytes of 0 in all; a write that fails there is
+    the write's own error, not "disk full" (it was, before free_bytes read the total); a real disk
+    with 0 bytes free still is one."""
+    from warpfric.io import free_bytes, write_failure
+
+    monkeypatch.setattr(shutil, "disk_usage", lambda folder: shutil._ntuple_diskusage(0, 0, 0))
+    assert free_bytes(tmp_path) is None
+    err = write_failure(tmp_path / "x.nc", PermissionError(13, "Permission denied"), free_bytes(tmp_path))
+    assert not err.disk_full and "could not write" in str(err) and "Permission denied" in str(err)
+    monkeypatch.setattr(shutil, "disk_usage", lambda folder: shutil._ntuple_diskusage(10**9, 10**9, 0))
+    assert free_bytes(tmp_path) == 0
+    assert write_failure(tmp_path / "x.nc", RuntimeError("NetCDF: HDF error"), free_bytes(tmp_path)).disk_full
+
+
 def test_too_little_free_space_is_refused_before_the_run(tmp_path, sweep, capsys, monkeypatch, no_simulation):
     monkeypatch.setattr(shutil, "disk_usage", lambda folder: shutil._ntuple_diskusage(10**9, 10**9 - 1000, 1000))
     code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "s.nc", "--device", DEVICE)

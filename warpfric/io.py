@@ -137,11 +137,14 @@ def _size(n: float) -> str:
 
 
 def free_bytes(folder) -> int | None:
-    """Free bytes in ``folder`` for this user, None where the file system does not say."""
+    """Free bytes in ``folder`` for this user, None where the file system does not say: also where
+    it reports a size of 0 (a pseudo file system such as /proc or /sys, whose 0 bytes free are not
+    a full disk)."""
     try:
-        return shutil.disk_usage(folder).free
+        usage = shutil.disk_usage(folder)
     except OSError:
         return None
+    return usage.free if usage.total > 0 else None
 
 
 # what a file holds whatever its members: netCDF4/HDF5's headers and chunk indices of its variables,
