@@ -295,14 +295,14 @@ def test_too_little_free_space_is_refused_before_the_run(tmp_path, sweep, capsys
      ["the sweep has 10,000,000,000 members (100,000 (eccentricity) x 100,000 (normal_force))", "at most 2,130,706,432"]),
     ("[grid]\neccentricity = {start = -0.5, stop = 0.5, num = 40000}\n"
      "normal_force = {start = 500, stop = 5000, num = 40000}\n",
-     ["the sweep's 1,600,000,000 members need about 38.4 GB for their parameter values alone", "more than this machine's"]),
+     ["the sweep's 1,600,000,000 members need about 51.5 GB to build and check their parameter values alone", "more than this machine's"]),
     ("[sample]\nn = 3000000000\neccentricity = {low = -0.2, high = 0.2}\n",
      ["[sample] n = 3000000000: expected an integer in [1, 2130706432]"]),
     # a range or a sample was built before the check (16 GB for 2e9 values: a numpy MemoryError)
     ("[sample]\nn = 2000000000\neccentricity = {low = -0.2, high = 0.2}\n",
-     ["the sweep's 2,000,000,000 members need about 32.0 GB", "more than this machine's 25.0 GB"]),
+     ["the sweep's 2,000,000,000 members need about 64.3 GB", "more than this machine's 25.0 GB"]),
     ("[grid]\nnormal_force = {start = 500, stop = 5000, num = 2000000000}\n",
-     ["the sweep's 2,000,000,000 members need about 32.0 GB", "more than this machine's 25.0 GB"]),
+     ["the sweep's 2,000,000,000 members need about 64.3 GB", "more than this machine's 25.0 GB"]),
     ("[grid]\neccentricity = [0.0]\n[record]\ntimes = {start = 20, stop = 21, num = 20000000000}\n",
      ["[record] times has 20,000,000,000 times; valid: at most 1,000,000"]),
     ("[grid]\neccentricity = [0.0]\n[record]\nstart = 20\nstop = 21\ncount = 100000000\n",
@@ -1093,3 +1093,55 @@ def test_info_counts_members_stopped_by_max_end_time_as_not_read(capsys, tmp_pat
     assert code == 0 and int(ds.nucleation_edge.values[0]) == -3
     line = next(line for line in out if line.startswith("  first front's middle segment"))
     assert "present in 1/1 member" in line and "(1 more not read: not ok or cut off)" in line, out
+
+
+ECCENTRICITY_BEYOND = np.linspace(-0.5, 0.9285, 2000) > 0.6  # eccentricity's range is [-0.6, 0.6]
+END_BEFORE_REST = np.linspace(30, 19.9, 2000) <= 20.0
+
+
+@pytest.mark.parametrize("body, words", [
+    # members out of range from the sixth slice of 300 on
+    ("[zip]\neccentricity = {start = -0.5, stop = 0.9285, num = 2000}\nnormal_force = {start = 500, stop = 600, "
+     "num = 2000}\n", [f"eccentricity[{np.argmax(ECCENTRICITY_BEYOND)}]",
+                       f"({ECCENTRICITY_BEYOND.sum()} members out of range)"]),
+    # a protocol broken in the seventh slice: runs that end before the disc starts to move
+    ("[scene]\nrest_until = 20.0\n[zip]\nend_time = {start = 30, stop = 19.9, num = 2000}\n"
+     "eccentricity = {start = -0.5, stop = 0.5, num = 2000}\n", [f"(member {np.argmax(END_BEFORE_REST)})"]),
+])
+def test_a_large_sweep_is_validated_slice_by_slice_with_the_same_message(monkeypatch, body, words):
+    """Beyond VALIDATE_ROWS members the sweep's members are validated slice by slice (resolve_members
+    holds ~272 bytes a member: 272 GB for 1e9 members, while the sweep's own check counted ~24): the
+    message must name the same member, value and count as validating them all at once."""
+    from warpfric import sweep_file
+    from warpfric.sweep_file import SweepError, parse_sweep
+
+    with pytest.raises(SweepError) as whole:
+        parse_sweep(body, "s.toml")
+    monkeypatch.setattr(sweep_file, "VALIDATE_ROWS", 300)
+    with pytest.raises(SweepError) as sliced:
+        parse_sweep(body, "s.toml")
+    assert str(sliced.value) == str(whole.value)
+    assert all(word in str(whole.value) for word in words), (str(whole.value), words)
+
+
+def test_building_a_large_sweep_stays_within_its_memory_check(monkeypatch):
+    """The sweep's memory check must not be a gross underestimate: tracemalloc's peak while a
+    1,000,000-member grid of two parameters is built and validated (in slices of 10,000) stays
+    within 1.25x the check's 8 * (columns + 2) bytes a member plus its blocks (it was ~11x, 272
+    bytes a member against 24, while every member was validated at once)."""
+    import tracemalloc
+
+    from warpfric import sweep_file
+
+    monkeypatch.setattr(sweep_file, "VALIDATE_ROWS", 10_000)
+    body = ("[grid]\neccentricity = {start = -0.5, stop = 0.5, num = 1000}\n"
+            "normal_force = {start = 500, stop = 5000, num = 1000}\n")
+    tracemalloc.start()
+    try:
+        sweep = sweep_file.parse_sweep(body, "s.toml")
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert len(sweep.members["eccentricity"]) == 1_000_000
+    checked = 8 * (1_000_000 * (2 + 2) + 2 * 1000) + sweep_file.VALIDATE_BYTES_PER_MEMBER * 10_000
+    assert peak < 1.25 * checked, (peak, checked)

@@ -57,9 +57,12 @@ def _member_arrays(members: Any) -> dict[str, np.ndarray]:
     )
 
 
-def resolve_members(members: Any, scene: Parameters) -> tuple[dict[str, np.ndarray], tuple[str, ...]]:
+def resolve_members(members: Any, scene: Parameters,
+                    first_member: int = 0) -> tuple[dict[str, np.ndarray], tuple[str, ...]]:
     """Return (values, varying): every parameter as a float64 array of shape (M,), and the names
-    of the parameters given per member. Raises ValueError naming the parameter, value and range."""
+    of the parameters given per member. Raises ValueError naming the parameter, value and range;
+    ``first_member``: the number of the first member in such messages (a slice of a larger
+    ensemble validated slice by slice)."""
     if not isinstance(scene, Parameters):
         raise ValueError(f"scene: expected a warpfric.Parameters, got {type(scene).__name__}")
     given = _member_arrays(members)
@@ -94,13 +97,13 @@ def resolve_members(members: Any, scene: Parameters) -> tuple[dict[str, np.ndarr
     if given.get("torque_arm", 0.0) is None or ("torque_arm" not in arrays and scene.torque_arm is None):
         values["torque_arm"] = values["height"].copy()
     for name in PARAMETER_NAMES:
-        validate_value(name, values[name])
-    _check_protocol(values)
+        validate_value(name, values[name], first_member)
+    _check_protocol(values, first_member)
     return values, tuple(name for name in PARAMETER_NAMES if name in given)
 
 
-def _check_protocol(values: dict[str, np.ndarray]) -> None:
-    """Cross-parameter rules of the load protocol."""
+def _check_protocol(values: dict[str, np.ndarray], first_member: int = 0) -> None:
+    """Cross-parameter rules of the load protocol (member numbers in messages from ``first_member``)."""
     rest = values["rest_until"]
     # each a time after the disc starts to move: what one before it does, the range's closing
     # bracket (inf: none for an end, no stop for stop_time), a note
@@ -117,5 +120,5 @@ def _check_protocol(values: dict[str, np.ndarray]) -> None:
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(
                 f"parameter {name!r} = {float(values[name][i])!r} (s) {what}; "
-                f"valid range (rest_until, inf{bracket} = ({float(rest[i])!r}, inf{bracket} s{note} (member {i})"
+                f"valid range (rest_until, inf{bracket} = ({float(rest[i])!r}, inf{bracket} s{note} (member {first_member + i})"
             )

@@ -241,8 +241,9 @@ def resolve_value(name: str, value: Any, scene: Parameters | None = None):
     return arr.astype(np.float64)
 
 
-def validate_value(name: str, value: np.ndarray) -> None:
-    """Raise ValueError naming ``name``, the first bad value and the valid range."""
+def validate_value(name: str, value: np.ndarray, first_member: int = 0) -> None:
+    """Raise ValueError naming ``name``, the first bad value and the valid range (a per-member
+    array's members numbered from ``first_member``)."""
     if name not in _FIELDS:
         raise ValueError(unknown_parameter(name))
     meta = _FIELDS[name].metadata
@@ -259,7 +260,7 @@ def validate_value(name: str, value: np.ndarray) -> None:
         first = float(arr.reshape(-1)[index])
         units = units_text(parameter_units(name))
         # a per-member array: name the member, e.g. eccentricity[1234] = nan
-        what = f"{name}[{index}]" if arr.size > 1 else repr(name)
+        what = f"{name}[{first_member + index}]" if arr.size > 1 or first_member else repr(name)
         more = f" ({int(flat.sum())} members out of range)" if flat.sum() > 1 else ""
         raise ValueError(
             f"parameter {what} = {first!r}{' ' + units if units else ''} is out of range; valid range "

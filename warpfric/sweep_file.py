@@ -53,6 +53,10 @@ RANGE_KEYS = ("start", "stop", "num", "spacing")
 # copies and sort of np.unique took several times the memory of the values (a range's rows repeat
 # only where its start equals its stop)
 REPEAT_CHECK_ROWS = 1_000_000
+# members validated at once, and what resolve_members holds a member while it validates them
+# (tracemalloc: 272 bytes, ~33 float64 parameters and their temporaries)
+VALIDATE_ROWS = 1_000_000
+VALIDATE_BYTES_PER_MEMBER = 272
 
 
 class SweepError(ValueError):
@@ -147,14 +151,17 @@ def _dataclass_kwargs(table: dict, cls, where: str, parameters: bool = False) ->
     return out
 
 
-def _check_table_memory(total: int, columns: int, what: str) -> None:
-    """Raise SweepError where ``total`` members' values of ``columns`` parameters (float64, and one
-    index column) exceed this machine's memory: checked before such arrays are built."""
-    table = total * 8 * (columns + 1)
+def _check_table_memory(total: int, columns: int, what: str, block_values: int = 0) -> None:
+    """Raise SweepError where ``total`` members' values of ``columns`` parameters (float64), the two
+    index temporaries of building their product, and the ``block_values`` values of the blocks it is
+    built from (the peak that tracemalloc measures: 8 * (columns + 2)
+    bytes a member beside the blocks), with a slice of members being validated, exceed this machine's
+    memory: checked before such arrays are built."""
+    table = 8 * (total * (columns + 2) + block_values) + VALIDATE_BYTES_PER_MEMBER * min(total, VALIDATE_ROWS)
     have = machine_memory_bytes()
     if have is not None and table > have:
-        raise SweepError(f"{what} {total:,} members need about {table / 1e9:.1f} GB for their parameter values "
-                         f"alone, more than this machine's {have / 1e9:.1f} GB; fewer values, or several sweep files "
+        raise SweepError(f"{what} {total:,} members need about {table / 1e9:.1f} GB to build and check their "
+                         f"parameter values alone, more than this machine's {have / 1e9:.1f} GB; fewer values, or several sweep files "
                          "with [run] member_offset")
 
 
@@ -331,7 +338,8 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
             factors = " x ".join(f"{size:,} ({', '.join(names)})" for size, names in zip(sizes, size_names))
             raise SweepError(f"the sweep has {total:,} members ({factors}); at most {MEMBER_NUMBER_LIMIT:,} (member "
                              "numbers are int32): fewer values, or several sweep files with [run] member_offset")
-        _check_table_memory(total, sum(len(names) for names in size_names), "the sweep's")
+        _check_table_memory(total, sum(len(names) for names in size_names), "the sweep's",
+                            sum(size * len(names) for size, names in zip(sizes, size_names)))
     for pname, spec in grid.items():
         blocks.append({pname: _values(spec, _where("grid", pname))})
         block_names.append(f"[grid] {pname}")
@@ -392,11 +400,27 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
         raise SweepError(f"[run] workers = {run['workers']}: expected an integer >= 1 (Dask workers of a local cluster)")
     n_members = next(iter(members.values())).shape[0] if members else 1
     check_member_offset(run.get("member_offset", 0), n_members, "[run] member_offset")
-    # validate every member now (ranges, protocol), before anything runs or is written
-    _said_in(f"{name}: ", resolve_members, members or None, scene)  # a swept value out of range, or a protocol
-    # the scene's times break
+    # validate every member now (ranges, protocol), before anything runs or is written: a swept value
+    # out of range, or a protocol the scene's times break
+    _validate_members(members, scene, f"{name}: ")
     varying = tuple(k for k in PARAMETER_NAMES if k in members)
     return Sweep(text, title, scene, model, solver, fronts, record, members, varying, run, design)
+
+
+def _validate_members(members: dict, scene, where: str) -> None:
+    """SweepError (beginning with ``where``) for the first member out of range or whose protocol
+    breaks. resolve_members holds every parameter of every member (~33 float64, 272 bytes a member
+    with its temporaries), so more than VALIDATE_ROWS members are checked slice by slice, after each
+    swept column whole (which names the first bad member and counts the bad ones)."""
+    n = next(iter(members.values())).shape[0] if members else 1
+    if n <= VALIDATE_ROWS:
+        _said_in(where, resolve_members, members or None, scene)
+        return
+    for pname, column in members.items():
+        _said_in(where, validate_value, pname, column)
+    for start in range(0, n, VALIDATE_ROWS):
+        _said_in(where, resolve_members, {k: v[start:start + VALIDATE_ROWS] for k, v in members.items()}, scene,
+                 first_member=start)
 
 
 def _said_in(where: str, make, *args, **kwargs):
