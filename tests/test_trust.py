@@ -365,3 +365,22 @@ def test_a_velocity_front_that_never_ends_is_told_apart_from_a_plateau():
     assert "plateau" not in said[0] and ds.mu_final.values[0] < 0.99 * ds.mu_s.values[0]
     assert ds.final_time.values[0] == 22.0 and int(ds.nucleation_edge.values[0]) == -3
     assert ds.final_time.values[1] < 22.0 and np.isfinite(ds.detachment_end_time.values[1])
+
+
+def test_mu_s_at_a_fast_discs_kinked_start_is_the_peak_not_a_parabolas_overshoot():
+    """A fast disc (0.03 m/s) under a high load (5e4 N): mu(t) falls from ~0.02 to ~0 within
+    microseconds where the disc starts, and the parabola through a long step and that drop rose to
+    mu_s = 79.6 at 20.00002 s, status ok; the automatic end then never came (the false maximum lies
+    before 0.5 D of travel) and the run went on to max_end_time. The peak must agree with an
+    independent run (ESDIRK4, whose cubic refinement had the same fault: 5.86 at 3e4 N, v = 0.1 m/s)
+    and with a run at rtol 1e-8, to the error control, and lie where the disc slides."""
+    members = {"normal_force": [5e4, 3e4], "disc_velocity": [0.03, 0.1]}
+    ds = run(members, rtol=1e-5)
+    tight = run(members, rtol=1e-8)
+    esdirk = run(members, rtol=1e-6, method="esdirk4")
+    assert (ds.status.values == 0).all() and (esdirk.status.values == 0).all()
+    np.testing.assert_allclose(ds.mu_s.values, tight.mu_s.values, rtol=1e-4)
+    np.testing.assert_allclose(esdirk.mu_s.values, tight.mu_s.values, rtol=1e-4)
+    assert (tight.mu_s.values > 0.5).all() and (tight.mu_s.values < 0.6).all()
+    assert (ds.mu_s_time.values > 20.01).all() and (ds.final_time.values < 21.0).all()  # the automatic end came
+
