@@ -80,10 +80,13 @@ def friction_point(st: IntegratorState, p: MemberParams, t_new: wp.float64, fric
 @wp.func
 def detachment_over(p: MemberParams, st: IntegratorState, outputs: OutputSettings):
     """The automatic end: mu has passed a maximum reached after the disc slid AUTO_END_MIN_TRAVEL*D
-    and fallen AUTO_END_PEAK_DROP below it, (velocity front) no node is above AUTO_END_FRONT_FRACTION
-    of the arrival level, and (strength front) every node in contact has passed its peak of
-    tau_f/sigma_n by STRENGTH_PEAK_DROP. A disc that stopped before it slid AUTO_END_MIN_TRAVEL*D
-    can give no such maximum (its travel stays where it stopped): the run ends at the stop."""
+    and fallen AUTO_END_PEAK_DROP below it, (stress gate) every node in contact has opened its gate
+    since the disc started, while the disc moves (a partial slip that arrests drops mu too, and mu
+    rises past it to the detachment's peak), (velocity front) no node is above
+    AUTO_END_FRONT_FRACTION of the arrival level, and (strength front) every node in contact has
+    passed its peak of tau_f/sigma_n by STRENGTH_PEAK_DROP. A disc that stopped before it slid
+    AUTO_END_MIN_TRAVEL*D can give no such maximum (its travel stays where it stopped): the run ends
+    at the stop."""
     min_travel = wp.float64(AUTO_END_MIN_TRAVEL) * p.memory_length
     if st.t >= p.stop_time and disc_travel_at(p, p.stop_time) < min_travel:
         return True
@@ -92,6 +95,8 @@ def detachment_over(p: MemberParams, st: IntegratorState, outputs: OutputSetting
     if disc_travel_at(p, st.mu_s_time) < min_travel:
         return False  # the maximum must come from the sliding disc
     if st.mu_final > (wp.float64(1.0) - wp.float64(AUTO_END_PEAK_DROP)) * st.mu_s:
+        return False
+    if st.stuck_nodes > 0 and st.t < p.stop_time:
         return False
     if outputs.velocity_front == 1 and st.front_max > wp.float64(0.0):
         if st.front_now >= wp.float64(AUTO_END_FRONT_FRACTION) * outputs.front_threshold * st.front_max:

@@ -205,6 +205,7 @@ class IntegratorState:
     record_slot: wp.int32  # index among the recorded members, -1: not recorded
     record_next: wp.int32  # next index of the recording time grid
     strength_rising: wp.int32  # nodes in contact whose tau_f/sigma_n is within STRENGTH_PEAK_DROP of its maximum (strength front)
+    stuck_nodes: wp.int32  # nodes in contact whose gate has not opened since the disc started (stress gate; 0 otherwise)
     # why steps were rejected (the three add up to steps_rejected), and wasted predictions
     rejected_error_test: wp.int32  # rejected by the error test (error norm > 1)
     rejected_newton: wp.int32  # rejected because a stage's Newton solve failed (no convergence or a non-finite value)

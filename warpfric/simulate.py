@@ -340,7 +340,7 @@ def not_over_groups(ds: xr.Dataset) -> dict[str, np.ndarray]:
     max_end_time with mu never AUTO_END_PEAK_DROP below its maximum (mu_s may be a plateau's);
     "front", stopped there with mu that fell but a front event not over (a velocity front's pad
     above half its arrival level, e.g. ringing after a sudden stop; a strength front's node not past
-    its peak); "cut", at an explicit end_time with fronts on. The warning, `warpfric run` and
+    its peak; under the stress gate a node in contact whose gate never opened); "cut", at an explicit end_time with fronts on. The warning, `warpfric run` and
     `warpfric info` say them alike."""
     from warpfric.kernels.observers import AUTO_END_PEAK_DROP
 
@@ -363,7 +363,8 @@ def warn_detachment_not_over(ds: xr.Dataset, stacklevel: int = 3) -> None:
                         "maximum (mu_s may be a plateau's, not a static peak: a later max_end_time)",
              "front": f"at max_end_time, the automatic end's cap, with mu {AUTO_END_PEAK_DROP:.0%} below its maximum "
                       "but the front event not over (a velocity front's pad above half its arrival level, e.g. ringing "
-                      "after a sudden stop; a strength front's node not past its peak)",
+                      "after a sudden stop; a strength front's node not past its peak; under the stress gate a node in "
+                      "contact whose gate never opened)",
              "cut": "at end_time (a later end_time, or end_time=None: the automatic end)"}
     n = ds.sizes["member"]
     parts = []
