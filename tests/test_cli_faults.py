@@ -1145,3 +1145,25 @@ def test_building_a_large_sweep_stays_within_its_memory_check(monkeypatch):
     assert len(sweep.members["eccentricity"]) == 1_000_000
     checked = 8 * (1_000_000 * (2 + 2) + 2 * 1000) + sweep_file.VALIDATE_BYTES_PER_MEMBER * 10_000
     assert peak < 1.25 * checked, (peak, checked)
+
+
+def test_a_reader_that_goes_away_loses_no_file_and_prints_no_traceback(tmp_path):
+    """`warpfric run -o OUT.nc | head -1`, `warpfric info OUT.nc | head -1`: the reader of stdout
+    closes the pipe. The run still writes its file (it printed before writing, and a
+    BrokenPipeError ended it with a traceback and no file), exits with its own code, and neither
+    command prints a traceback. Here the pipe's read end is closed before the command starts, so
+    every write to stdout fails."""
+    out = tmp_path / "bp.nc"
+    env = {**os.environ, "PYTHONWARNINGS": "ignore"}
+    for args in (["run", "--nodes", "11", "--device", DEVICE, "-o", str(out)], ["info", str(out)]):
+        read_end, write_end = os.pipe()
+        os.close(read_end)
+        try:
+            res = subprocess.run([sys.executable, "-m", "warpfric", *args], stdout=write_end, stderr=subprocess.PIPE,
+                                 text=True, timeout=300, env=env)
+        finally:
+            os.close(write_end)
+        assert res.returncode == 0, res.stderr
+        assert "Traceback" not in res.stderr and "BrokenPipeError" not in res.stderr, res.stderr
+        assert out.exists()
+    assert int(open_ensemble(out).status.values[0]) == 0

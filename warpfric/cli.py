@@ -27,6 +27,8 @@ from __future__ import annotations
 import argparse
 import contextlib
 import difflib
+import io
+import os
 import re
 import shlex
 import signal
@@ -248,9 +250,10 @@ def _run_default(args) -> int:
                 print(f"{recording_text(record.times)}, {what} (the last run records; its outputs are those of a run "
                       "without recording)")
             ds = simulate(fronts=fronts, record=record, **run)
+            if output is not None:  # written before anything is printed: a closed stdout loses no file
+                write_ensemble(ds, output, command=args.command_line, started=started)
             _print_member(ds, solver)
             if output is not None:
-                write_ensemble(ds, output, command=args.command_line, started=started)
                 print(f"wrote {output}" + (f" (with the recorded fields: warpfric plot {shlex.quote(str(output))} draws "
                                            "them)" if record is not None else ""))
         except KeyboardInterrupt:  # one scene: no chunks to keep, nothing to resume
@@ -719,6 +722,51 @@ def _sigterm_as_ctrl_c():
         signal.signal(signal.SIGTERM, previous)
 
 
+class _PipeSafe:
+    """A text stream whose writes survive its reader going away (`warpfric info OUT.nc | head -1`):
+    after a BrokenPipeError the rest is dropped, its file descriptor pointed at /dev/null so that
+    Python's flush at exit does not fail either, and the command goes on (a run still writes its
+    file and exits with its own code). Everything else is the stream's."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def write(self, text):
+        try:
+            return self._stream.write(text)
+        except BrokenPipeError:
+            self._drop()
+            return len(text)
+
+    def flush(self):
+        try:
+            self._stream.flush()
+        except BrokenPipeError:
+            self._drop()
+
+    def _drop(self) -> None:
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, self._stream.fileno())
+            os.close(devnull)
+        except (OSError, ValueError, io.UnsupportedOperation):  # no descriptor (a test's capture): nothing to flush
+            pass
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+@contextlib.contextmanager
+def _pipe_safe_output():
+    """sys.stdout and sys.stderr as _PipeSafe streams while a command runs."""
+    out, err = sys.stdout, sys.stderr
+    sys.stdout, sys.stderr = _PipeSafe(out), _PipeSafe(err)
+    try:
+        yield
+    finally:
+        sys.stdout, sys.stderr = out, err
+
+
 def main(argv=None) -> int:
     from .io import OutputBusy, OutputWriteError
 
@@ -730,7 +778,8 @@ def main(argv=None) -> int:
     args.command_line = shlex.join(["warpfric", *argv])  # the files' history attribute
     handlers = {"run": _run, "info": _info, "plot": _plot, "sensitivity": _sensitivity}
     try:
-        with one_line_warnings(args.output if args.command == "run" else None), _sigterm_as_ctrl_c():
+        with _pipe_safe_output(), one_line_warnings(args.output if args.command == "run" else None), \
+                _sigterm_as_ctrl_c():
             return handlers[args.command](args)
     except ValueError as err:  # bad input, or an output folder that cannot be written: one line, exit 2
         return _fail(str(err))
