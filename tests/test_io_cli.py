@@ -422,6 +422,26 @@ def test_a_chunked_sweep_warns_once_of_its_members_not_ok(tmp_path, capsys):
     assert "6 of 6 members: 6 max_steps_reached" in warned[0] and "warpfric info" in warned[0]
 
 
+def test_a_chunked_sweep_says_it_combines_and_counts_the_combine_in_its_time(tmp_path, capsys):
+    """The combine of the chunk files ran without a word (22 s for 100 chunks, after the last chunk's
+    line) and the final line's time left it out: a line says it starts, and the final line gives the
+    chunks' time and the combine's apart, each a number of seconds. A sweep of one chunk has no
+    combine to tell (--quiet leaves out the line that it starts, as it does the chunks' lines)."""
+    import re
+
+    sweep = tmp_path / "s.toml"
+    sweep.write_text("[solver]\nnodes = 11\n[grid]\neccentricity = [-0.1, 0.0, 0.1]\n")
+    assert main(["run", str(sweep), "-o", str(tmp_path / "s.nc"), "--chunk", "1", "--device", "cpu"]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert f"warpfric: combining the 3 chunk files into {tmp_path / 's.nc'}" in err, err
+    wrote = [line for line in err if line.startswith("warpfric: wrote")]
+    assert len(wrote) == 1 and re.search(r"\(3 members, [0-9.e+-]+ s running chunks now and [0-9.e+-]+ s combining 3 "
+                                         r"chunk files, 0 failed members", wrote[0]), wrote
+    assert main(["run", str(sweep), "-o", str(tmp_path / "one.nc"), "--device", "cpu", "--quiet"]) == 0
+    err = capsys.readouterr().err
+    assert "combining" not in err and "s running chunks now, 0 failed" in err, err
+
+
 def test_a_worker_names_the_gpus_it_has_when_a_pinned_one_is_missing(monkeypatch):
     """A pinned cuda:3 on a worker that sees one GPU (dask-cuda shows each worker its own, as cuda:0)
     raised check_device's ValueError inside simulate, logged by distributed with its traceback for

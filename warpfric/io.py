@@ -468,14 +468,16 @@ def parameters_along_member(ds: xr.Dataset) -> xr.Dataset:
 
 
 def collapse_constants(ds: xr.Dataset, varying) -> xr.Dataset:
-    """Parameters not in ``varying`` become scalars (they must be constant along member)."""
-    out = ds.copy()
+    """Parameters not in ``varying`` become scalars (they must be constant along member). One
+    assignment for all of them: one per parameter took ~7 ms each, 0.2 s a chunk file read, 20 s of
+    the combine of a sweep of 100 chunks."""
+    constant = {}
     for name in PARAMETER_NAMES:
-        if name in out and name not in varying and "member" in out[name].dims:
-            values = out[name].values
+        if name in ds and name not in varying and "member" in ds[name].dims:
+            values = ds[name].values
             if values.size and np.all(values == values.reshape(-1)[0]):
-                out[name] = out[name].isel(member=0, drop=True)
-    return out
+                constant[name] = ds[name].isel(member=0, drop=True)
+    return ds.assign(constant) if constant else ds.copy()
 
 
 MAX_EMPTY_FRACTION = 0.5  # by_parameters: refused where more of the array than this would be empty

@@ -752,8 +752,12 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
             warn_detachment_not_over(ds, stacklevel=2)
             _warn_members_not_ok(ds, sweep.solver)
 
+        t_combine = time.perf_counter()
+        if store.n_chunks > 1:  # ~0.1 s a chunk file: tens of seconds for hundreds of chunks
+            _say(f"combining the {store.n_chunks:,} chunk files into {out}", quiet)
         try:
             store.combine(out, command=command, on_combined=on_combined, started=started)
+            combine_s = time.perf_counter() - t_combine
         except ChunksDoNotCombine as err:  # no bad input (refused before any chunk runs): chunks that differ
             # (written by another warpfric version for --resume) are left where they are
             raise OutputWriteError(f"the chunks in {str(parts)!r} do not combine into one file ({err}; remove the "
@@ -798,7 +802,8 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         tornado_log.removeFilter(drop_sync_cancel_error)
     report = RunReport(chunks=reports, errors=[], output=out, wall_s=wall, file_failed_members=in_file[0])
     resumed = f", {report.file_failed_members} in the file" if previous is not None else ""
-    _say(f"wrote {out} ({plural(sweep.n_members, 'member')}, {seconds_text(wall)} s this run, "
+    combined = f" and {seconds_text(combine_s)} s combining {store.n_chunks:,} chunk files" if store.n_chunks > 1 else ""
+    _say(f"wrote {out} ({plural(sweep.n_members, 'member')}, {seconds_text(wall)} s running chunks now{combined}, "
          f"{plural(report.failed_members, 'failed member')} in the chunks run now{resumed})", False)
     return report
 
