@@ -1167,3 +1167,23 @@ def test_a_reader_that_goes_away_loses_no_file_and_prints_no_traceback(tmp_path)
         assert "Traceback" not in res.stderr and "BrokenPipeError" not in res.stderr, res.stderr
         assert out.exists()
     assert int(open_ensemble(out).status.values[0]) == 0
+
+
+def test_a_parts_name_that_holds_no_run_is_said_as_such(tmp_path, sweep, capsys, no_simulation):
+    """A file named OUT.nc.parts sent a user round in circles: `run` said it held an interrupted run
+    (pass --resume or --overwrite), --resume said "not a directory" and --overwrite failed to write
+    with exit 3. A parts folder whose manifest cannot be read was to be resumed by `run`, and could
+    not be by --resume. Both are now one line, exit 2, that says what to do, whatever the option."""
+    out = tmp_path / "s.nc"
+    Path(f"{out}.parts").write_text("")
+    for option in ([], ["--resume"], ["--overwrite"]):
+        code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--chunk", 1, "--device", DEVICE, *option)
+        assert code == 2, (option, err)
+        _error_line(err, f"'{out}.parts' is a file, where a chunked run keeps its finished chunks", "remove or rename it")
+    Path(f"{out}.parts").unlink()
+    Path(f"{out}.parts").mkdir()
+    Path(f"{out}.parts", "manifest.json").write_text("{not json")
+    for option in ([], ["--resume"]):
+        code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--chunk", 1, "--device", DEVICE, *option)
+        assert code == 2, (option, err)
+        _error_line(err, "unreadable chunk manifest", "nothing can be resumed from it: --overwrite starts the run again")

@@ -213,6 +213,16 @@ def test_results_are_not_replaced_without_overwrite_and_the_ensemble_never(tmp_p
     code, err = run("--overwrite")
     assert code == 0 and result.exists() and figure.read_bytes() != b"an older figure"
     assert not list(tmp_path.glob("*.tmp*"))
+    # a folder where the figure goes: refused before anything is written (the result was written, then
+    # the figure failed with exit 3), also with --overwrite, which cannot replace a folder
+    result.unlink()
+    figure.unlink()
+    figure.mkdir()
+    code, err = run("--overwrite")
+    assert code == 2 and len(err) == 1 and "ish_sensitivity.png' is a folder" in err[0] and not result.exists(), err
+    figure.rmdir()
+    code, err = run("--overwrite")
+    assert code == 0 and result.exists() and figure.is_file()
     with xr.open_dataset(result) as res:
         assert "S1" in res and list(res.output.values) == ["y"]
 

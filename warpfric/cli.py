@@ -547,6 +547,9 @@ def _sensitivity(args) -> int:
     # --overwrite to learn them), and an unwritable folder before the analysis
     design_outputs(ds, outputs, args.on_failure, args.log)
     for path in (out, figure):
+        if path.is_dir():  # --overwrite cannot replace a folder: found after the analysis had written the .nc
+            raise UsageError(f"output {str(path)!r} is a folder; give -o another name (the figure goes beside the "
+                             "file, with .png)")
         if path.exists() and not args.overwrite:
             raise UsageError(f"output {str(path)!r} exists; pass --overwrite to replace it")
     probe_writable(out.parent, out)

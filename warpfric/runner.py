@@ -543,7 +543,13 @@ def check_output(path: Path, resume: bool, overwrite: bool) -> None:
     if path.exists() and not overwrite and not (resume and parts.exists()):
         raise RunError(f"output {str(path)!r} exists; pass --overwrite to replace it"
                        + (" (it is complete: nothing to resume)" if resume else ""))
+    if parts.exists() and not parts.is_dir():  # no run's: --resume and --overwrite could do nothing with it
+        raise RunError(f"{str(parts)!r} is a file, where a chunked run keeps its finished chunks in a folder of "
+                       "that name: remove or rename it")
     if parts.exists() and not (resume or overwrite):
+        from .io import ChunkStore
+
+        ChunkStore.load(parts)  # an unreadable manifest: nothing to resume, which its ValueError says
         raise RunError(f"{str(parts)!r} holds an interrupted run; pass --resume to finish it "
                        "or --overwrite to start again")
 
