@@ -243,7 +243,7 @@ def test_a_full_disk_while_combining_keeps_every_chunk_for_resume(tmp_path, swee
     assert not list(tmp_path.rglob("*.tmp")) and not out.exists()
     monkeypatch.undo()
     code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
-    assert code == 0 and "0 of them to run" in err[-2], err  # resume only combines
+    assert code == 0 and "0 of them to run" in err[-3] and "combining the 2 chunk files" in err[-2], err  # resume only combines
     assert _files(tmp_path) == ["s.nc", "s.toml"]
 
 

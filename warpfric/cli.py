@@ -203,7 +203,8 @@ def _toml_value(value) -> str:
 
 
 def _run_default(args) -> int:
-    from .io import check_free_space, estimate_bytes, history_time, output_lock, remove_stale_temporaries, write_ensemble
+    from .io import (OutputWriteError, check_free_space, estimate_bytes, history_time, output_lock,
+                     remove_stale_temporaries, write_ensemble)
     from .runner import check_output, check_output_name, detachment_runs
     from .simulate import simulate
     from .sweep_file import check_member_offset
@@ -250,9 +251,15 @@ def _run_default(args) -> int:
                 print(f"{recording_text(record.times)}, {what} (the last run records; its outputs are those of a run "
                       "without recording)")
             ds = simulate(fronts=fronts, record=record, **run)
-            if output is not None:  # written before anything is printed: a closed stdout loses no file
-                write_ensemble(ds, output, command=args.command_line, started=started)
+            failed_write = None
+            if output is not None:  # written before anything is printed; a failed write still shows the run
+                try:
+                    write_ensemble(ds, output, command=args.command_line, started=started)
+                except OutputWriteError as err:
+                    failed_write = err
             _print_member(ds, solver)
+            if failed_write is not None:
+                raise failed_write
             if output is not None:
                 print(f"wrote {output}" + (f" (with the recorded fields: warpfric plot {shlex.quote(str(output))} draws "
                                            "them)" if record is not None else ""))
