@@ -401,3 +401,20 @@ def test_max_end_time_is_checked_only_where_it_can_end_the_run():
     assert float(ds.final_time[0]) == 100.05 and ds.status.values[0] == 4  # no peak in 50 ms: no_peak, as asked
     with pytest.raises(ValueError, match=r"'max_end_time' = 80.0 \(s\) ends before the disc starts to move"):
         simulate({"rest_until": [100.0]}, solver=wf.Solver(nodes=11), fronts=None)
+
+
+def test_a_sweep_files_fronts_and_scheduler_faults_use_the_files_words(tmp_path, capsys):
+    """In a sweep file, a bad [fronts] setting pointed to simulate(..., fronts=None) and did not name
+    its table; a scheduler that is no address did not say what one looks like."""
+    from conftest import run_cli
+
+    sweep = tmp_path / "f.toml"
+    sweep.write_text('[solver]\nnodes = 11\n[fronts]\nevent = "foo"\n[grid]\neccentricity = [0.0]\n')
+    code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "f.nc", "--device", "cpu")
+    assert code == 2 and len(err) == 1 and err[0].startswith(f"warpfric: error: {sweep}: [fronts] fronts setting "
+                                                             "'event' = 'foo' is invalid"), err
+    assert "write `fronts = false` at the file's top level" in err[0] and "simulate(" not in err[0], err
+    pytest.importorskip("distributed")
+    sweep.write_text('[solver]\nnodes = 11\n[grid]\neccentricity = [0.0]\n')
+    code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "g.nc", "--scheduler", "locl", "--device", "cpu")
+    assert code == 2 and "expected a scheduler's address such as 'tcp://host:8786'" in err[-1], err

@@ -152,7 +152,28 @@ BAD = [
      ["n = 100", "power of two"]),
     ('method = "sobolev"\nn = 16\n[design.parameters]\neccentricity = {low = 0.0, high = 0.1}\nnormal_force = {low = 1.0, high = 2.0}\n',
      ["sobolev", "saltelli"]),
+    # a missing key read "n = None" / "method = None"; a bound outside the range was found only if a
+    # sampled row fell outside it, as "eccentricity[0] = -0.72..., 2 members out of range"
+    ('method = "saltelli"\n[design.parameters]\neccentricity = {low = 0.0, high = 0.1}\nnormal_force = {low = 1.0, high = 2.0}\n',
+     ["[design] n: missing", "the base sample size"]),
+    ('n = 16\n[design.parameters]\neccentricity = {low = 0.0, high = 0.1}\nnormal_force = {low = 1.0, high = 2.0}\n',
+     ["[design] method: missing", "saltelli, morris, latin"]),
+    ('method = "latin"\nn = 4\n[design.parameters]\neccentricity = {low = -0.9, high = 0.2}\nnormal_force = {low = 1.0, high = 2.0}\n',
+     ["[design.parameters] eccentricity.low = -0.9 is outside eccentricity's valid range [-0.6, 0.6]"]),
 ]
+
+
+@pytest.mark.parametrize("key, method", [("second_order = true", "morris"), ("levels = 4", "saltelli")])
+def test_a_design_key_that_its_method_does_not_read_is_said(key, method):
+    """second_order (saltelli only) and levels (morris only) were accepted without a word under the
+    other method, as an unused [fronts] threshold is not."""
+    from warpfric.sweep_file import parse_sweep
+
+    text = (f'[design]\nmethod = "{method}"\nn = 4\n{key}\n[design.parameters]\n'
+            'eccentricity = {low = -0.1, high = 0.1}\nnormal_force = {low = 500.0, high = 2000.0}\n')
+    with pytest.warns(UserWarning, match=rf"\[design\] {key.split()[0]} applies to method = '(saltelli|morris)' only: "
+                                         rf"method = '{method}' does not read it"):
+        parse_sweep(text, "d.toml")
 
 
 @pytest.mark.parametrize("design, words", BAD)

@@ -513,7 +513,9 @@ def connect(address: str):
         raise RunError(f"scheduler {address!r}: cannot connect ({err})") from None
     if err is not None:
         raise RunError(f"scheduler {address!r}: not a Dask scheduler ({type(err).__name__}: "
-                       f"{' '.join(str(err).split())[:120]})") from None
+                       f"{' '.join(str(err).split())[:120]}); expected a scheduler's address such as "
+                       "'tcp://host:8786' (--scheduler, [run] scheduler), or 'local' in a sweep file for a local "
+                       "cluster (--local-cluster)") from None
     return outcome["client"]
 
 

@@ -26,10 +26,12 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 
 import numpy as np
 
-from .parameters import PARAMETER_NAMES, did_you_mean
+from .parameters import (PARAMETER_NAMES, did_you_mean, parameter_range_text, parameter_units, units_text,
+                         validate_value)
 
 METHODS = ("saltelli", "morris", "latin")
 DESIGN_ATTR = "sensitivity_design"
@@ -52,9 +54,16 @@ def parse_design(table: dict, check_names: bool = True) -> dict:
     for key in table:
         if key not in allowed:
             raise DesignError(f"unknown key [design] {key}; accepted: {', '.join(sorted(allowed))}")
+    for key, what in (("method", f"one of {', '.join(METHODS)}"), ("n", "the base sample size, an integer >= 1")):
+        if key not in table:
+            raise DesignError(f"[design] {key}: missing; expected {what}")
     method = table.get("method")
     if method not in METHODS:
         raise DesignError(f"[design] method = {method!r}; accepted: {', '.join(METHODS)}")
+    for key, owner in (("second_order", "saltelli"), ("levels", "morris")):
+        if key in table and method != owner:  # as an unused [fronts] threshold: said, not refused
+            warnings.warn(f"[design] {key} applies to method = {owner!r} only: method = {method!r} does not read it",
+                          stacklevel=3)
     n = table.get("n")
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise DesignError(f"[design] n = {n!r}: expected an integer >= 1 (the base sample size)")
@@ -91,6 +100,15 @@ def parse_design(table: dict, check_names: bool = True) -> dict:
             raise DesignError(f"{where}.scale = {scale!r}; accepted: linear, log")
         if scale == "log" and low <= 0:
             raise DesignError(f"{where}: scale = 'log' needs low > 0, got {low!r}")
+        if check_names:  # a bound outside the parameter's range draws values outside it (as [sample] says)
+            for key, value in (("low", low), ("high", high)):
+                inside = float(np.nextafter(value, -np.inf)) if key == "high" else float(value)
+                try:
+                    validate_value(name, np.float64(inside))
+                except ValueError:
+                    units = units_text(parameter_units(name))
+                    raise DesignError(f"{where}.{key} = {value!r} is outside {name}'s valid range "
+                                      f"{parameter_range_text(name)}{' ' + units if units else ''}") from None
         names.append(name)
         bounds.append([float(low), float(high)])
         scales.append(scale)

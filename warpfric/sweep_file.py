@@ -283,7 +283,11 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
         if fronts_spec is False:
             fronts = None
         elif isinstance(fronts_spec, dict):
-            fronts = Fronts(**_dataclass_kwargs(fronts_spec, Fronts, "fronts"))
+            try:
+                fronts = Fronts(**_dataclass_kwargs(fronts_spec, Fronts, "fronts"))
+            except ValueError as err:  # the file's words: its table, and no fronts written as a file does
+                raise SweepError(f"{name}: [fronts] " + str(err).replace(
+                    "simulate(..., fronts=None)", "write `fronts = false` at the file's top level")) from None
         else:
             raise SweepError(f"fronts = {fronts_spec!r}: expected a table [fronts] or false")
         check_fronts_method(fronts, solver)
