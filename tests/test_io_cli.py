@@ -176,6 +176,17 @@ def test_resume_after_kill_gives_the_uninterrupted_result(tmp_path):
     with pytest.raises(ValueError, match=f"incomplete run, .* finished in .*; `warpfric run {sweep} -o {out} --resume "
                                          f"--device {DEVICE}` finishes it"):
         open_ensemble(out)
+    # while a run holds the output's lock (it is still going), --resume would be refused (exit 4):
+    # open_ensemble says to wait instead
+    from warpfric.io import lock_output, unlock_output
+
+    lock = lock_output(out, "warpfric run (a run still going)")
+    try:
+        with pytest.raises(ValueError, match=r"incomplete run, .*; its run is still going \(pid \d+ on .*\): open it "
+                                             "when that ends"):
+            open_ensemble(out)
+    finally:
+        unlock_output(lock)
     res = _cli("run", str(sweep), "-o", str(out), "--device", DEVICE)  # no --resume: refuses, exit 2
     assert res.returncode == 2 and "--resume" in res.stderr
     res = _cli("run", str(sweep), "-o", str(out), "--chunk", "1", "--device", DEVICE, "--resume")

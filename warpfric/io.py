@@ -811,9 +811,11 @@ def open_ensemble(path) -> xr.Dataset:
     if not path.exists():
         if parts.exists():
             store = ChunkStore.load(parts)
+            writer = running_writer(path)
             raise ValueError(
                 f"{path}: incomplete run, {store.done_count()}/{store.n_chunks} chunks finished in {parts}; "
-                f"`{resume_command(store, path)}` finishes it"
+                + (f"its run is still going ({writer}): open it when that ends" if writer is not None else
+                   f"`{resume_command(store, path)}` finishes it")
             )
         raise ValueError(f"{path}: no such file")
     if path.is_dir():
