@@ -40,6 +40,7 @@ def test_ishigami_sobol_indices_within_confidence():
         assert np.all(np.abs(est - true) <= 1.5 * conf + 0.01), (key, est, conf)
     assert abs(float(res.S2.sel(parameter="x1", parameter_2="x3")) - 0.2437) < 0.1  # the x1-x3 interaction
     assert abs(float(res.ST.sel(parameter="x4"))) < 0.01
+    assert res.S2.attrs["units"] == res.S2_conf.attrs["units"] == "1"  # Sobol indices are fractions of the variance
 
 
 def test_a_ctrl_c_inside_the_sampling_is_raised_after_it(monkeypatch):
@@ -132,6 +133,11 @@ aging_coefficient = {low = 0.05, high = 0.1}
     assert res.returncode == 0, res.stderr
     result = xr.load_dataset(tmp_path / "design_sensitivity.nc")
     assert result.attrs["members"] == 32 * 5
+    # CF: every variable has units and every coordinate a long_name; the file says what wrote it
+    assert all("units" in result[v].attrs for v in result.data_vars), {v: result[v].attrs for v in result.data_vars}
+    assert all("long_name" in result[c].attrs for c in result.coords)
+    assert result.attrs["Conventions"] == "CF-1.8" and "warpfric sensitivity" in result.attrs["history"]
+    assert result.attrs["title"] == "saltelli sensitivity of mu_s, v_middle to eccentricity, normal_force, aging_coefficient"
     st = result.ST.sel(output="mu_s")
     # the aging coefficient sets the contact strength; eccentricity and force move mu_s by < 1e-3
     assert float(st.sel(parameter="aging_coefficient")) > 0.8

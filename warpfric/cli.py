@@ -538,7 +538,7 @@ def _plot(args) -> int:
 
 
 def _sensitivity(args) -> int:
-    from .io import open_ensemble, probe_writable, replace_atomically
+    from .io import history_line, open_ensemble, probe_writable, replace_atomically
     from .runner import check_output_name
     from .sensitivity import analyse, bar_plot, design_outputs
 
@@ -561,6 +561,7 @@ def _sensitivity(args) -> int:
             raise UsageError(f"output {str(path)!r} exists; pass --overwrite to replace it")
     probe_writable(out.parent, out)
     res = analyse(ds, outputs=outputs, on_failure=args.on_failure, log=args.log)
+    res.attrs["history"] = history_line(args.command_line)
     replace_atomically(out, res.to_netcdf)
     replace_atomically(figure, lambda tmp: bar_plot(res, tmp), suffix=".png")
     for o in res.output.values:

@@ -451,7 +451,7 @@ def history_time() -> str:
     return datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
-def _history_line(command: str | None, started: str | None = None) -> str:
+def history_line(command: str | None, started: str | None = None) -> str:
     """One ``history`` line: when the command started (``started``, from history_time; None: now),
     the command, and the version."""
     from . import __version__
@@ -660,7 +660,7 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
     out = parameters_along_member(ds)
     out.attrs["varying_parameters"] = " ".join(v for v in PARAMETER_NAMES if v in set(varying))
     out.attrs[COMPLETE_ATTR] = np.int8(1)
-    line = _history_line(command, started)  # the chunks of a sweep carry the line of the run that combines them
+    line = history_line(command, started)  # the chunks of a sweep carry the line of the run that combines them
     earlier = [old for old in str(out.attrs.get("history", "")).splitlines() if old and old != line]
     out.attrs["history"] = "\n".join([line, *earlier])
     root, recorded = _to_file_layout(out, run_id)

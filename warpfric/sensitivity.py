@@ -280,13 +280,20 @@ def analyse(ds, outputs=("mu_s",), on_failure: str = "refuse", num_resamples: in
         for k in ("S2", "S2_conf"):
             data[k] = (("output", "parameter", "parameter_2"),
                        np.array([np.asarray(result[o][k], dtype=float).reshape(d, d) for o in outputs]),
-                       {"long_name": ("second-order Sobol index" if k == "S2" else "confidence half-width of S2")})
+                       {"long_name": ("second-order Sobol index" if k == "S2" else "confidence half-width of S2"),
+                        "units": "1"})
     data["filled_members"] = (("output",), np.array([filled[o] for o in outputs], dtype=np.int32),
                               {"long_name": f"members replaced by the mean ({on_failure})", "units": "1"})
-    res = xr.Dataset(data, coords={"output": list(outputs), "parameter": names, "parameter_2": names})
+    res = xr.Dataset(data, coords={
+        "output": ("output", list(outputs), {"long_name": "ensemble output analysed"}),
+        "parameter": ("parameter", names, {"long_name": "design parameter"}),
+        "parameter_2": ("parameter_2", names, {"long_name": "second design parameter of a pair (S2)"})})
     if design["method"] == "saltelli":
         _warn_unresolved(res, design["n"])
-    res.attrs.update({DESIGN_ATTR: ds.attrs[DESIGN_ATTR], "conf_level": conf_level, "num_resamples": num_resamples,
+    res.attrs.update({"Conventions": "CF-1.8",
+                      "title": f"{design['method']} sensitivity of {', '.join(outputs)} to {', '.join(names)}",
+                      "source": "warpfric sensitivity (SALib)",
+                      DESIGN_ATTR: ds.attrs[DESIGN_ATTR], "conf_level": conf_level, "num_resamples": num_resamples,
                       "on_failure": on_failure, "members": rows, "output_transform": "log" if log else "none"})
     return res
 
