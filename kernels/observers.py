@@ -27,7 +27,6 @@ from .reductions import (
     crossing_time,
     crossing_time_quadratic,
     detachment_velocity,
-    peak_within_falls,
     record_friction_point,
     record_friction_point_cubic,
 )
@@ -283,7 +282,7 @@ def make_strength_front(ft, terms, team, interface):
                     t_peak = wp.float64(0.5) * (t_old + st.t2) - d1 / (wp.float64(2.0) * curv)
                     if t_peak >= st.t2 and t_peak <= t_new:
                         r_peak = r2 + d1 * (t_peak - st.t2) + curv * (t_peak - st.t2) * (t_peak - t_old)
-                        if r_peak >= r_max and peak_within_falls(r_peak, r1, wp.min(r2, r_new)):
+                        if r_peak >= r_max:
                             r_max = r_peak
                             arrival[EV_STRENGTH, i, m] = t_peak
                             arrival_error[EV_STRENGTH, i, m] = wp.abs(t_peak - t_old)

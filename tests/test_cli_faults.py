@@ -1107,6 +1107,9 @@ END_BEFORE_REST = np.linspace(30, 19.9, 2000) <= 20.0
     # a protocol broken in the seventh slice: runs that end before the disc starts to move
     ("[scene]\nrest_until = 20.0\n[zip]\nend_time = {start = 30, stop = 19.9, num = 2000}\n"
      "eccentricity = {start = -0.5, stop = 0.5, num = 2000}\n", [f"(member {np.argmax(END_BEFORE_REST)})"]),
+    # two parameters out of range, the file's first after the other in PARAMETER_NAMES: the same one is named
+    ("[zip]\neccentricity = {start = -0.5, stop = 0.9285, num = 2000}\nnormal_force = {start = 500, stop = -100, "
+     "num = 2000}\n", ["normal_force["]),
 ])
 def test_a_large_sweep_is_validated_slice_by_slice_with_the_same_message(monkeypatch, body, words):
     """Beyond VALIDATE_ROWS members the sweep's members are validated slice by slice (resolve_members
@@ -1167,6 +1170,15 @@ def test_a_reader_that_goes_away_loses_no_file_and_prints_no_traceback(tmp_path)
         assert "Traceback" not in res.stderr and "BrokenPipeError" not in res.stderr, res.stderr
         assert out.exists()
     assert int(open_ensemble(out).status.values[0]) == 0
+    # an error line to a reader gone as well: the exit code stays the fault's (it became 1)
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    try:
+        res = subprocess.run([sys.executable, "-m", "warpfric", "info", str(tmp_path / "none.nc")], stdout=write_end,
+                             stderr=write_end, timeout=300, env=env)
+    finally:
+        os.close(write_end)
+    assert res.returncode == 2
 
 
 def test_a_parts_name_that_holds_no_run_is_said_as_such(tmp_path, sweep, capsys, no_simulation):

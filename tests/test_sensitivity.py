@@ -166,6 +166,9 @@ BAD = [
      ["[design] method: missing", "saltelli, morris, latin"]),
     ('method = "latin"\nn = 4\n[design.parameters]\neccentricity = {low = -0.9, high = 0.2}\nnormal_force = {low = 1.0, high = 2.0}\n',
      ["[design.parameters] eccentricity.low = -0.9 is outside eccentricity's valid range [-0.6, 0.6]"]),
+    # morris levels take high itself: poisson_ratio's open limit 0.5 was found only in the sampled rows
+    ('method = "morris"\nn = 4\n[design.parameters]\npoisson_ratio = {low = 0.3, high = 0.5}\nnormal_force = {low = 1.0, high = 2.0}\n',
+     ["[design.parameters] poisson_ratio.high = 0.5 is outside poisson_ratio's valid range (-1, 0.5)"]),
 ]
 
 

@@ -377,7 +377,7 @@ def test_mu_s_at_a_fast_discs_kinked_start_is_the_peak_not_a_parabolas_overshoot
     members = {"normal_force": [5e4, 3e4], "disc_velocity": [0.03, 0.1]}
     ds = run(members, rtol=1e-5)
     tight = run(members, rtol=1e-8)
-    esdirk = run(members, rtol=1e-6, method="esdirk4")
+    esdirk = run(members, rtol=1e-5, method="esdirk4")  # at 1e-6 its cubic does not overshoot here
     assert (ds.status.values == 0).all() and (esdirk.status.values == 0).all()
     np.testing.assert_allclose(ds.mu_s.values, tight.mu_s.values, rtol=1e-4)
     np.testing.assert_allclose(esdirk.mu_s.values, tight.mu_s.values, rtol=1e-4)

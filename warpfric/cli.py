@@ -788,20 +788,20 @@ def main(argv=None) -> int:
         _subcommand_parser(parser, args.command).error(f"unrecognized arguments: {' '.join(extra)}")
     args.command_line = shlex.join(["warpfric", *argv])  # the files' history attribute
     handlers = {"run": _run, "info": _info, "plot": _plot, "sensitivity": _sensitivity}
-    try:
-        with _pipe_safe_output(), one_line_warnings(args.output if args.command == "run" else None), \
-                _sigterm_as_ctrl_c():
-            return handlers[args.command](args)
-    except ValueError as err:  # bad input, or an output folder that cannot be written: one line, exit 2
-        return _fail(str(err))
-    except OutputWriteError as err:  # disk full (or another I/O error) while writing
-        return _fail(str(err), EXIT_WRITE_FAILED)
-    except OutputBusy as err:
-        return _fail(str(err), EXIT_OUTPUT_BUSY)
-    except KeyboardInterrupt as err:
-        message = getattr(err, "message", None) or (str(err) if err.args else "interrupted")
-        print(f"warpfric: {message}", file=sys.stderr)
-        return EXIT_INTERRUPTED
+    with _pipe_safe_output():  # the error lines too: a reader gone does not turn exit 2, 3 or 4 into 1
+        try:
+            with one_line_warnings(args.output if args.command == "run" else None), _sigterm_as_ctrl_c():
+                return handlers[args.command](args)
+        except ValueError as err:  # bad input, or an output folder that cannot be written: one line, exit 2
+            return _fail(str(err))
+        except OutputWriteError as err:  # disk full (or another I/O error) while writing
+            return _fail(str(err), EXIT_WRITE_FAILED)
+        except OutputBusy as err:
+            return _fail(str(err), EXIT_OUTPUT_BUSY)
+        except KeyboardInterrupt as err:
+            message = getattr(err, "message", None) or (str(err) if err.args else "interrupted")
+            print(f"warpfric: {message}", file=sys.stderr)
+            return EXIT_INTERRUPTED
 
 
 if __name__ == "__main__":  # pragma: no cover

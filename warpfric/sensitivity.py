@@ -102,7 +102,9 @@ def parse_design(table: dict, check_names: bool = True) -> dict:
             raise DesignError(f"{where}: scale = 'log' needs low > 0, got {low!r}")
         if check_names:  # a bound outside the parameter's range draws values outside it (as [sample] says)
             for key, value in (("low", low), ("high", high)):
-                inside = float(np.nextafter(value, -np.inf)) if key == "high" else float(value)
+                # latin and saltelli draw below high (which may be an open limit, poisson_ratio's 0.5); morris
+                # levels take high itself
+                inside = float(np.nextafter(value, -np.inf)) if key == "high" and method != "morris" else float(value)
                 try:
                     validate_value(name, np.float64(inside))
                 except ValueError:

@@ -420,8 +420,9 @@ def _validate_members(members: dict, scene, where: str) -> None:
     if n <= VALIDATE_ROWS:
         _said_in(where, resolve_members, members or None, scene)
         return
-    for pname, column in members.items():
-        _said_in(where, validate_value, pname, column)
+    for pname in PARAMETER_NAMES:  # resolve_members' order: the same first fault where several parameters have one
+        if pname in members:
+            _said_in(where, validate_value, pname, members[pname])
     for start in range(0, n, VALIDATE_ROWS):
         _said_in(where, resolve_members, {k: v[start:start + VALIDATE_ROWS] for k, v in members.items()}, scene,
                  first_member=start)
