@@ -241,6 +241,22 @@ def resolve_value(name: str, value: Any, scene: Parameters | None = None):
     return arr.astype(np.float64)
 
 
+def bound_outside_range(name: str, key: str, value: float, takes_high: bool = False) -> str | None:
+    """What is wrong with a distribution's bound or mean ``key`` = ``value`` for parameter ``name``
+    ("high = 0.7 is outside eccentricity's valid range [-0.6, 0.6] (dimensionless)"), or None where
+    the values drawn from it lie inside the range. A ``high`` is checked just below itself, where the
+    draws lie (it may be an open limit of the range: poisson_ratio's 0.5), unless ``takes_high``
+    (Morris levels take the bound itself). A [sample] distribution and a [design] bound say it alike."""
+    inside = float(np.nextafter(value, -np.inf)) if key == "high" and not takes_high else float(value)
+    try:
+        validate_value(name, np.float64(inside))
+    except ValueError:
+        units = units_text(parameter_units(name))
+        return (f"{key} = {value!r} is outside {name}'s valid range "
+                f"{parameter_range_text(name)}{' ' + units if units else ''}")
+    return None
+
+
 def validate_value(name: str, value: np.ndarray, first_member: int = 0) -> None:
     """Raise ValueError naming ``name``, the first bad value and the valid range (a per-member
     array's members numbered from ``first_member``)."""

@@ -30,8 +30,7 @@ import warnings
 
 import numpy as np
 
-from .parameters import (PARAMETER_NAMES, did_you_mean, parameter_range_text, parameter_units, units_text,
-                         validate_value)
+from .parameters import PARAMETER_NAMES, bound_outside_range, did_you_mean
 
 METHODS = ("saltelli", "morris", "latin")
 DESIGN_ATTR = "sensitivity_design"
@@ -102,15 +101,10 @@ def parse_design(table: dict, check_names: bool = True) -> dict:
             raise DesignError(f"{where}: scale = 'log' needs low > 0, got {low!r}")
         if check_names:  # a bound outside the parameter's range draws values outside it (as [sample] says)
             for key, value in (("low", low), ("high", high)):
-                # latin and saltelli draw below high (which may be an open limit, poisson_ratio's 0.5); morris
-                # levels take high itself
-                inside = float(np.nextafter(value, -np.inf)) if key == "high" and method != "morris" else float(value)
-                try:
-                    validate_value(name, np.float64(inside))
-                except ValueError:
-                    units = units_text(parameter_units(name))
-                    raise DesignError(f"{where}.{key} = {value!r} is outside {name}'s valid range "
-                                      f"{parameter_range_text(name)}{' ' + units if units else ''}") from None
+                # latin and saltelli draw below high; morris levels take high itself
+                problem = bound_outside_range(name, key, value, takes_high=method == "morris")
+                if problem is not None:
+                    raise DesignError(f"{where}.{problem}")
         names.append(name)
         bounds.append([float(low), float(high)])
         scales.append(scale)

@@ -37,8 +37,9 @@ import numpy as np
 
 from .members import resolve_members
 from .parameters import (_RECORD_TIMES_WHY, MAX_RECORD_TIMES, MEMBER_NUMBER_LIMIT, PARAMETER_NAMES, RECORD_COUNT,
-                         Fronts, Model, Parameters, Record, Solver, check_fronts_method, check_precision, did_you_mean,
-                         parameter_range_text, parameter_units, units_text, validate_value)
+                         Fronts, Model, Parameters, Record, Solver, bound_outside_range, check_fronts_method,
+                         check_precision, did_you_mean, parameter_range_text, parameter_units, units_text,
+                         validate_value)
 from .progress import machine_memory_bytes, plural
 
 TOP_KEYS = ("title", "description", "scene", "model", "solver", "fronts", "record", "grid", "zip", "sample", "design",
@@ -222,15 +223,9 @@ def _draw(name: str, spec, n: int, seed: int, where: str) -> np.ndarray:
             raise SweepError(f"{where}: missing key {key!r} for the {dist} distribution")
     a, b = (_number(spec[k], f"{where}.{k}") for k in keys)
     for key, value in zip(keys, (a, b)):  # a bound or mean outside the parameter's range draws values outside it
-        if key in ("low", "high", "mean"):
-            # the draws lie below high: high may be an open upper limit of the range (poisson_ratio's 0.5)
-            inside = np.nextafter(value, -np.inf) if key == "high" else value
-            try:
-                validate_value(name, np.float64(inside))
-            except ValueError:
-                units = units_text(parameter_units(name))
-                raise SweepError(f"{where}.{key} = {value!r} is outside {name}'s valid range "
-                                 f"{parameter_range_text(name)}{' ' + units if units else ''}") from None
+        problem = bound_outside_range(name, key, value) if key in ("low", "high", "mean") else None
+        if problem is not None:
+            raise SweepError(f"{where}.{problem}")
     rng = np.random.default_rng([seed, zlib.crc32(name.encode())])
     if dist == "uniform":
         if not a < b:
