@@ -340,8 +340,8 @@ def not_over_groups(ds: xr.Dataset) -> dict[str, np.ndarray]:
     max_end_time with mu never AUTO_END_PEAK_DROP below its maximum (mu_s may be a plateau's);
     "front", stopped there with mu that fell but a front event not over (a velocity front's pad
     above half its arrival level, e.g. ringing after a sudden stop; a strength front's node not past
-    its peak; under the stress gate a node in contact whose gate never opened); "cut", at an explicit end_time with fronts on. The warning, `warpfric run` and
-    `warpfric info` say them alike."""
+    its peak; under the stress gate a node in contact whose gate never opened); "cut", at an explicit
+    end_time with fronts on. The warning, `warpfric run` and `warpfric info` say them alike."""
     from warpfric.kernels.observers import AUTO_END_PEAK_DROP
 
     capped, cut = detachment_not_over(ds)
