@@ -224,8 +224,8 @@ def make_switch_location(ft, SwitchTest):
 def margin_crossing(t_old: wp.float64, t_new: wp.float64, z0: wp.float64, z1: wp.float64):
     """The yield margin's linear crossing of 0 in the step (t_old, t_new], s, from its values z0 at
     the step's start and z1 at its end (Pa); the step's start where the margin is not above 0 at
-    the end (a sliding node whose solved gate left 0). A node's yield_time, and the linear crossing
-    against which the contact arrival measures its error (contact_arrival)."""
+    the end (switch_gates records openings only where it is). A node's yield_time, and the linear
+    crossing against which the contact arrival measures its error (contact_arrival)."""
     theta = wp.float64(0.0)
     if z0 != z1 and z1 > wp.float64(0.0):
         theta = wp.clamp(z0 / (z0 - z1), wp.float64(0.0), wp.float64(1.0))
@@ -243,9 +243,8 @@ def make_contact_arrival(ft):
         quadratic through the margins at the last three accepted points (t_prev = st.t2, t_old, t_new),
         and its distance to the linear crossing (the yield_time rule) as the error; the linear
         crossing with the whole step as the error after a (re)start, where no earlier point belongs
-        to the same smooth piece, or where the margin is not above 0 at the step's end (a sliding
-        node, near the yield surface, whose solved gate left 0 with its margin still negative: its
-        yield_time is the step's start too).
+        to the same smooth piece (or where the margin is not above 0 at the step's end, which
+        switch_gates does not pass).
         (nan, nan) outside the window from the disc start to the stop."""
         if t_new <= p.rest_until or t_old >= p.stop_time:
             return wp.float64(wp.nan), wp.float64(wp.nan)
@@ -295,8 +294,9 @@ def make_gate_update(ft, terms, team):
         from its end-of-step yield margin z1, store the margin, correct the FSAL derivatives K[slot] of
         the nodes whose gate changed (the gate enters only the relaxation rates of tau_el and phi,
         closed-form in the state) and record the stick-to-slip transition's time (yield_time: the
-        first opening after the disc started, linear in the margin; openings in the loading phase,
-        where the margin of a node at a contact edge can graze 0, are not recorded).
+        first opening after the disc started, linear in the margin: the margin's first crossing of 0
+        from below, for a node in the sliding regime too; openings in the loading phase, where the
+        margin of a node at a contact edge can graze 0, are not recorded).
 
         A closed or open node takes the Heaviside theta(z1), unless it crossed the yield surface
         z = 0 into a side whose field points back (Filippov sliding): the margin's rate is affine in
@@ -347,10 +347,17 @@ def make_gate_update(ft, terms, team):
                 K[slot, C_PHI, i, m] = K[slot, C_PHI, i, m] - state[C_PHI, i, m] * relax
             if gate_regime(new_gate, new_sliding) != gate_regime(gate, sliding):
                 switches += 1
-            # an opening has gate 0 at the step's start and above 0 at its end (a closed node opening or
-            # entering the sliding regime, or a sliding node's gate leaving 0): yield_time and the
-            # contact front read the gates only there, not at every node
-            opened = gate_start == ft(0.0) and new_gate > ft(0.0)
+            # an opening, the stick-to-slip transition, is the yield margin crossing 0: a closed node has
+            # gate 0 at the step's start and above 0 at its end (it opens or enters the sliding regime,
+            # z1 > 0); a node in the sliding regime crosses where its margin does (its regularised gate
+            # theta_w's midpoint, 1/2), not where its gate leaves 0: theta_w's tail ~exp(2x) leaves 0
+            # far below the yield surface (1e-12 at a margin of -15 kPa, where the node still sticks).
+            # yield_time and the contact front read the gates only there, not at every node
+            opened = False
+            if sliding > ft(0.0):
+                opened = z0 <= ft(0.0) and z1 > ft(0.0)
+            else:
+                opened = gate_start == ft(0.0) and new_gate > ft(0.0)
             if opened and t_new > p.rest_until:
                 if not wp.isfinite(yield_time[i, m]):
                     yield_time[i, m] = margin_crossing(t_old, t_new, wp.float64(z0), wp.float64(z1))

@@ -4,6 +4,7 @@
     python studies/known_limits.py float32       # float32 at low disc velocity against float64
     python studies/known_limits.py float32-wide  # float32 against float64 over members drawn wider
     python studies/known_limits.py stop-lift-off # a sudden stop of eccentric pads that lift off, with damping
+    python studies/known_limits.py fronts-wide   # the contact front of 300 wide-range members at rtol 1e-5
     python studies/known_limits.py all
     (also: python studies/bench.py limits vibration|float32|all)
 """
@@ -99,11 +100,53 @@ def stop_lift_off():
                   f"{int(ds.steps_accepted[m]):9d} {float(ds.mu_final[m]):11.8f}")
 
 
+def fronts_wide():
+    """The contact front over 300 random members (seed 7: 2e/L uniform in [-0.6, 0.6], F log-uniform
+    in 10 N-300 kN, |v| log-uniform in 1e-6-0.3 m/s with a random sign; N = 30, automatic end)
+    with TR-BDF2 and ESDIRK4 at rtol 1e-5 against TR-BDF2 at rtol 1e-7: members whose front
+    nucleates at another node, whose v_first is off by more than 10 %, whose mu_s is off by more
+    than 1e-4 (relative), and the moved members' first openings."""
+    import warnings
+
+    import numpy as np
+
+    rng = np.random.default_rng(7)
+    m = 300
+    members = {"eccentricity": rng.uniform(-0.6, 0.6, m),
+               "normal_force": np.exp(rng.uniform(np.log(10.0), np.log(3e5), m)),
+               "disc_velocity": np.exp(rng.uniform(np.log(1e-6), np.log(0.3), m)) * rng.choice([-1, 1], m)}
+    runs = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for method, rtol in (("tr_bdf2", 1e-7), ("tr_bdf2", 1e-5), ("esdirk4", 1e-5)):
+            runs[method, rtol] = wf.simulate(members, solver=wf.Solver(nodes=30, method=method, rtol=rtol),
+                                             device="cpu", progress=False)
+    ref = runs["tr_bdf2", 1e-7]
+    start = np.broadcast_to(np.asarray(ref.rest_until.values, dtype=float), (m,))
+    print(f"{'method':>8} {'rtol':>6} {'ok':>4} {'nucleation moved':>17} {'v_first >10 %':>14} {'mu_s >1e-4 rel':>15}")
+    for (method, rtol), ds in runs.items():
+        if ds is ref:
+            continue
+        moved = np.abs(ds.nucleation_position.values - ref.nucleation_position.values) > 1e-9
+        moved &= np.isfinite(ds.nucleation_position.values) | np.isfinite(ref.nucleation_position.values)
+        off = np.abs(ds.v_first.values / ref.v_first.values - 1) > 0.1
+        mu_off = np.abs(ds.mu_s.values / ref.mu_s.values - 1) > 1e-4
+        print(f"{method:>8} {rtol:6.0e} {int((ds.status.values == 0).sum()):4d} {int(moved.sum()):17d} "
+              f"{int(off.sum()):14d} {int(mu_off.sum()):15d}  (largest {np.nanmax(np.abs(ds.mu_s.values / ref.mu_s.values - 1)):.1e})")
+        for i in np.flatnonzero(moved):
+            first = np.nanmin(ds.yield_time.values[i]) - start[i]
+            first_ref = np.nanmin(ref.yield_time.values[i]) - start[i]
+            print(f"    member {i:3d}: 2e/L {members['eccentricity'][i]:+.2f}, F {members['normal_force'][i]:9.1f} N, "
+                  f"v {members['disc_velocity'][i]:+.2e} m/s: first opening {first * 1e3:8.3f} ms "
+                  f"(rtol 1e-7: {first_ref * 1e3:8.3f} ms), v_first {float(ds.v_first[i]):.3g} "
+                  f"({float(ref.v_first[i]):.3g}) m/s")
+
+
 def main(argv=None):
     import argparse
 
     checks = {"vibration": vibration, "float32": float32, "float32-wide": float32_wide,
-              "stop-lift-off": stop_lift_off}
+              "stop-lift-off": stop_lift_off, "fronts-wide": fronts_wide}
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("check", nargs="?", default="all", choices=[*checks, "all"], help="which measurement (default all)")
     name = ap.parse_args(sys.argv[1:] if argv is None else argv).check

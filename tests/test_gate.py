@@ -299,6 +299,27 @@ def test_no_peak_inside_the_run_is_a_status_not_a_number():
     assert auto.final_time.values[1] < 21.0
 
 
+def test_a_node_sliding_since_the_loading_phase_opens_where_its_margin_crosses_zero():
+    """A node that slid on the yield surface in the loading phase keeps the sliding regime, whose gate
+    is the regularised theta_w(x), x = margin/(w tau_c A); after the rest its contact has aged and its
+    margin lies tens of kPa below 0. Its stick-to-slip transition is the margin's crossing of 0 (the
+    sharp gate of SPEC section 5, the limit w -> 0), so yield_time must not depend on the width w.
+    The tail of theta_w, ~exp(2x), leaves 0 earlier the wider w is: taken as the opening, it moved
+    the edge nodes' yield_time from 1.59 / 1.66 ms after the disc start at w = 1e-3 to 1.98 / 2.34 ms
+    at 1e-4 and 2.03 / 2.39 ms at 1e-5 (the crossing: 2.01-2.04 / 2.40 ms at every width). The scene
+    (F = 164 kN, 2e/L = 0.195, v = 0.070 m/s, N = 30) is a member of a random sample whose two edge
+    nodes, 0 and 1, slide since the loading phase."""
+    scene = wf.Parameters(normal_force=164292.76369479008, eccentricity=0.19465768600614453,
+                          disc_velocity=0.070152697419325)
+    times = []
+    for width in (1e-3, 1e-5):
+        ds = run(scene=scene, nodes=30, rtol=1e-6, sliding_width=width)
+        assert ds.status.values[0] == 0
+        times.append(ds.yield_time.values[0, :2] - scene.rest_until)
+    print("edge nodes' yield_time after the disc start (ms) at w = 1e-3, 1e-5:", np.array(times) * 1e3)
+    np.testing.assert_allclose(times[0], times[1], atol=5e-5)
+
+
 def test_steady_sliding_below_the_yield_stress_holds_the_yield_surface():
     """With mu0*D/h + tau_vis below tau_c (interface_stiffness 2e14: 100 + 18.7 MPa < 130 MPa) a fully
     open gate cannot keep the asperity stress at tau_c: the nodes slide on the yield surface with the

@@ -693,10 +693,11 @@ def test_switch_gates_records_each_first_opening_after_the_disc_starts():
     """One accepted step's gate update on nodes in every regime and every change of regime, against
     the rules of kernels/gates.py switch_gates written out here: a closed node whose margin crosses 0
     opens (its yield time the margin's linear crossing; its contact arrival the root of the parabola through
-    the last three margins, with its distance to the linear crossing as the error); a sliding node
-    whose solved gate leaves 0 opens too (its margin, on the yield surface, does not cross 0: the
-    step's start, the whole step as the error); a sliding node whose gate was already
-    above 0, an open node and a node whose margin stays negative do not open; a time already
+    the last three margins, with its distance to the linear crossing as the error); a node in the
+    sliding regime opens where its margin crosses 0, as a closed node does, and not where its solved
+    gate leaves 0 with the margin still negative (the regularised gate's tail, far below the yield
+    surface); a sliding node whose gate was already above 0, an open node and a node whose margin
+    stays negative do not open; a time already
     recorded is kept; the FSAL relaxation rates follow each changed gate; a closed node whose
     margin crosses 0 into a side whose rate points back slides (Filippov), its gate started where
     the margin's rate, affine in the gate, brings it to 0 over the step; an opening before the disc
@@ -706,12 +707,14 @@ def test_switch_gates_records_each_first_opening_after_the_disc_starts():
     z = lambda t: 50.0 * (t - root) - 4e4 * (t - root) ** 2  # noqa: E731
     nodes = [
         dict(G_MARGIN_OLD=z(t_prev), G_MARGIN=z(t_old), G_MARGIN_END=z(t_new)),  # closed, opens
-        dict(G_SLIDE=1.0, G_GATE_END=0.3, G_MARGIN_OLD=-0.2, G_MARGIN=-0.1, G_MARGIN_END=-0.05),  # sliding, leaves 0
+        dict(G_SLIDE=1.0, G_GATE_END=0.3, G_MARGIN_OLD=-0.2, G_MARGIN=-0.1, G_MARGIN_END=-0.05),  # sliding, gate leaves 0
         dict(G_SLIDE=1.0, G_GATE=0.5, G_GATE_END=0.7, G_MARGIN=-0.1, G_MARGIN_END=-0.05),  # sliding, already above 0
         dict(G_GATE=1.0, G_MARGIN=3.0, G_MARGIN_END=4.0),  # open, stays open
         dict(G_MARGIN=-3.0, G_MARGIN_END=-2.0),  # closed, stays closed
         dict(G_GATE=1.0, G_MARGIN=1.0, G_MARGIN_END=-1.0),  # open, closes (no opening)
         dict(G_MARGIN_OLD=z(t_prev), G_MARGIN=z(t_old), G_MARGIN_END=z(t_new), G_DMARGIN=-200.0),  # enters sliding
+        dict(G_SLIDE=1.0, G_GATE=0.2, G_GATE_END=0.6, G_MARGIN_OLD=z(t_prev), G_MARGIN=z(t_old),
+             G_MARGIN_END=z(t_new)),  # sliding, its margin crosses 0
     ]
     gates, yield_time, arrival, error, K, st, p = _switch_gates(nodes, t_old, t_new, 0, t_prev)
     linear = t_old + (t_new - t_old) * z(t_old) / (z(t_old) - z(t_new))
@@ -722,23 +725,22 @@ def test_switch_gates_records_each_first_opening_after_the_disc_starts():
     assert r_obs - 200.0 < 0
     slide_gate = (-z(t_new) / h - r_obs) / -200.0
     assert 0.0 < slide_gate < 1.0
-    assert np.isfinite(yield_time).tolist() == [True, True, False, False, False, False, True]
-    assert yield_time[0] == pytest.approx(linear, abs=1e-12) and yield_time[1] == t_old
-    assert yield_time[6] == yield_time[0] and arrival[6] == arrival[0] and error[6] == error[0]
+    assert np.isfinite(yield_time).tolist() == [True, False, False, False, False, False, True, True]
+    assert yield_time[0] == pytest.approx(linear, abs=1e-12)
+    for node in (6, 7):  # entering the sliding regime, and crossing inside it: the closed node's times
+        assert yield_time[node] == yield_time[0] and arrival[node] == arrival[0] and error[node] == error[0]
     assert arrival[0] == pytest.approx(root, abs=1e-12) and error[0] == pytest.approx(abs(root - linear), abs=1e-12)
-    # the sliding node: yield_time and arrival the step's start, the whole step as the error
-    assert arrival[1] == t_old and error[1] == pytest.approx(t_new - t_old, rel=1e-12)
-    assert np.isnan(arrival[2:6]).all() and np.isnan(error[2:6]).all()
+    assert np.isnan(arrival[1:6]).all() and np.isnan(error[1:6]).all()
     # (the sliding start gate to the round-off of the step's h = t_new - t_old at t ~ 20 s)
-    np.testing.assert_allclose(gates[types.G_GATE], [1.0, 0.3, 0.7, 1.0, 0.0, 0.0, slide_gate], rtol=1e-10)
-    np.testing.assert_array_equal(gates[types.G_SLIDE], [0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0])
+    np.testing.assert_allclose(gates[types.G_GATE], [1.0, 0.3, 0.7, 1.0, 0.0, 0.0, slide_gate, 0.6], rtol=1e-10)
+    np.testing.assert_array_equal(gates[types.G_SLIDE], [0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 1.0])
     np.testing.assert_array_equal(gates[types.G_MARGIN], [node["G_MARGIN_END"] for node in nodes])
     np.testing.assert_array_equal(gates[types.G_MARGIN_OLD], [node.get("G_MARGIN", 0.0) for node in nodes])
     assert st["gate_switches"] == 3  # the regimes that changed: 0 closed -> open, 5 open -> closed, 6 closed -> sliding
     # the FSAL slot: d tau/dt and d phi/dt lose state * (gate change) * |v_disc - kif V| / D (V = 0)
     v_disc = p["disc_velocity"] * (t_new - p["rest_until"]) / p["velocity_ramp_time"]
     # (a sliding node's slot already follows its last stage's solved gate: no change)
-    relax = np.array([1.0, 0.0, 0.0, 0.0, 0.0, -1.0, slide_gate]) * abs(v_disc) / p["memory_length"]
+    relax = np.array([1.0, 0.0, 0.0, 0.0, 0.0, -1.0, slide_gate, 0.0]) * abs(v_disc) / p["memory_length"]
     np.testing.assert_allclose(K[types.C_TAU], 1.0 - 1e4 * relax, rtol=1e-10)
     np.testing.assert_allclose(K[types.C_PHI], 1.0 - 2.0 * relax, rtol=1e-10)
     # a first opening only: a node whose times are recorded keeps them
