@@ -426,6 +426,23 @@ def test_a_detachment_all_at_once_has_an_infinite_speed_and_says_so():
     assert "inf: its nodes arrived at one time" in _FRONT_ATTRS["v_first"][2]
 
 
+def test_nodes_sliding_since_the_loading_arrive_at_their_own_times():
+    """A loaded, eccentric pad whose nodes near the nucleation slid on the yield surface in the
+    loading phase (F = 1e5 N, 2e/L = 0.6, v = 1e-6 m/s, N = 40): each such node's arrival is its
+    own margin crossing, so neighbouring nodes arrive at distinct times and the front's speeds are
+    finite (its nodes opening where their regularised gates left 0, four of them took one step's
+    start, and v_main was inf). The arrivals rise away from the nucleation node on both sides
+    within the front's run of nodes, as a front's must."""
+    ds = run({"normal_force": [1e5], "eccentricity": [0.6], "disc_velocity": [1e-6]}, fronts=wf.Fronts())
+    assert ds.status.values[0] == 0 and ds.front_count.values[0] == 1
+    arrival = ds.arrival_time.values[0]
+    reached = np.flatnonzero(np.isfinite(arrival))
+    first = int(np.argmin(np.where(np.isfinite(arrival), arrival, np.inf)))
+    assert np.all(np.diff(arrival[first:reached[-1] + 1]) > 0) and np.all(np.diff(arrival[reached[0]:first + 1]) < 0)
+    for speed in ("v_first", "v_main"):
+        assert np.isfinite(ds[speed].values[0]) and np.isfinite(ds[f"{speed}_error"].values[0]), speed
+
+
 def test_front_collisions_count_the_fronts_and_place_where_they_meet():
     """One front from the right edge: one front, no collision. Two fronts (from both edges, 5 and
     30 m/s) meet where their arrival times are equal, the interior maximum of t_a(x): the node there
