@@ -347,17 +347,18 @@ def make_gate_update(ft, terms, team):
                 K[slot, C_PHI, i, m] = K[slot, C_PHI, i, m] - state[C_PHI, i, m] * relax
             if gate_regime(new_gate, new_sliding) != gate_regime(gate, sliding):
                 switches += 1
-            # an opening, the stick-to-slip transition, is the yield margin crossing 0: a closed node has
-            # gate 0 at the step's start and above 0 at its end (it opens or enters the sliding regime,
-            # z1 > 0); a node in the sliding regime crosses where its margin does (its regularised gate
-            # theta_w's midpoint, 1/2), not where its gate leaves 0: theta_w's tail ~exp(2x) leaves 0
-            # far below the yield surface (1e-12 at a margin of -15 kPa, where the node still sticks).
-            # yield_time and the contact front read the gates only there, not at every node
+            # an opening, the stick-to-slip transition, is the yield margin crossing 0 at a node that
+            # sticks: a closed node in contact (z0 < 0; a node out of contact without friction stress
+            # has z = 0) has gate 0 at the step's start and above 0 at its end (it opens or enters
+            # the sliding regime, z1 > 0); a node in the sliding regime crosses where its margin does
+            # (its regularised gate theta_w's midpoint, 1/2), not where its gate leaves 0: theta_w's
+            # tail ~exp(2x) leaves 0 far below the yield surface (1e-12 at a margin of -15 kPa, where
+            # the node still sticks). yield_time and the contact front read the gates only there
             opened = False
             if sliding > ft(0.0):
                 opened = z0 <= ft(0.0) and z1 > ft(0.0)
             else:
-                opened = gate_start == ft(0.0) and new_gate > ft(0.0)
+                opened = gate_start == ft(0.0) and new_gate > ft(0.0) and z0 < ft(0.0)
             if opened and t_new > p.rest_until:
                 if not wp.isfinite(yield_time[i, m]):
                     yield_time[i, m] = margin_crossing(t_old, t_new, wp.float64(z0), wp.float64(z1))

@@ -697,7 +697,8 @@ def test_switch_gates_records_each_first_opening_after_the_disc_starts():
     sliding regime opens where its margin crosses 0, as a closed node does, and not where its solved
     gate leaves 0 with the margin still negative (the regularised gate's tail, far below the yield
     surface); a sliding node whose gate was already above 0, an open node and a node whose margin
-    stays negative do not open; a time already
+    stays negative do not open; a node out of contact without friction stress (margin 0) that picks
+    up some opens its gate but records no transition (it was not sticking); a time already
     recorded is kept; the FSAL relaxation rates follow each changed gate; a closed node whose
     margin crosses 0 into a side whose rate points back slides (Filippov), its gate started where
     the margin's rate, affine in the gate, brings it to 0 over the step; an opening before the disc
@@ -715,6 +716,7 @@ def test_switch_gates_records_each_first_opening_after_the_disc_starts():
         dict(G_MARGIN_OLD=z(t_prev), G_MARGIN=z(t_old), G_MARGIN_END=z(t_new), G_DMARGIN=-200.0),  # enters sliding
         dict(G_SLIDE=1.0, G_GATE=0.2, G_GATE_END=0.6, G_MARGIN_OLD=z(t_prev), G_MARGIN=z(t_old),
              G_MARGIN_END=z(t_new)),  # sliding, its margin crosses 0
+        dict(G_MARGIN=0.0, G_MARGIN_END=3.0),  # out of contact without stress, picks up 3 Pa: opens, no transition
     ]
     gates, yield_time, arrival, error, K, st, p = _switch_gates(nodes, t_old, t_new, 0, t_prev)
     linear = t_old + (t_new - t_old) * z(t_old) / (z(t_old) - z(t_new))
@@ -725,22 +727,22 @@ def test_switch_gates_records_each_first_opening_after_the_disc_starts():
     assert r_obs - 200.0 < 0
     slide_gate = (-z(t_new) / h - r_obs) / -200.0
     assert 0.0 < slide_gate < 1.0
-    assert np.isfinite(yield_time).tolist() == [True, False, False, False, False, False, True, True]
+    assert np.isfinite(yield_time).tolist() == [True, False, False, False, False, False, True, True, False]
     assert yield_time[0] == pytest.approx(linear, abs=1e-12)
     for node in (6, 7):  # entering the sliding regime, and crossing inside it: the closed node's times
         assert yield_time[node] == yield_time[0] and arrival[node] == arrival[0] and error[node] == error[0]
     assert arrival[0] == pytest.approx(root, abs=1e-12) and error[0] == pytest.approx(abs(root - linear), abs=1e-12)
-    assert np.isnan(arrival[1:6]).all() and np.isnan(error[1:6]).all()
+    assert np.isnan(arrival[[1, 2, 3, 4, 5, 8]]).all() and np.isnan(error[[1, 2, 3, 4, 5, 8]]).all()
     # (the sliding start gate to the round-off of the step's h = t_new - t_old at t ~ 20 s)
-    np.testing.assert_allclose(gates[types.G_GATE], [1.0, 0.3, 0.7, 1.0, 0.0, 0.0, slide_gate, 0.6], rtol=1e-10)
-    np.testing.assert_array_equal(gates[types.G_SLIDE], [0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 1.0])
+    np.testing.assert_allclose(gates[types.G_GATE], [1.0, 0.3, 0.7, 1.0, 0.0, 0.0, slide_gate, 0.6, 1.0], rtol=1e-10)
+    np.testing.assert_array_equal(gates[types.G_SLIDE], [0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0])
     np.testing.assert_array_equal(gates[types.G_MARGIN], [node["G_MARGIN_END"] for node in nodes])
     np.testing.assert_array_equal(gates[types.G_MARGIN_OLD], [node.get("G_MARGIN", 0.0) for node in nodes])
-    assert st["gate_switches"] == 3  # the regimes that changed: 0 closed -> open, 5 open -> closed, 6 closed -> sliding
+    assert st["gate_switches"] == 4  # the regimes that changed: 0 and 8 closed -> open, 5 open -> closed, 6 closed -> sliding
     # the FSAL slot: d tau/dt and d phi/dt lose state * (gate change) * |v_disc - kif V| / D (V = 0)
     v_disc = p["disc_velocity"] * (t_new - p["rest_until"]) / p["velocity_ramp_time"]
     # (a sliding node's slot already follows its last stage's solved gate: no change)
-    relax = np.array([1.0, 0.0, 0.0, 0.0, 0.0, -1.0, slide_gate, 0.0]) * abs(v_disc) / p["memory_length"]
+    relax = np.array([1.0, 0.0, 0.0, 0.0, 0.0, -1.0, slide_gate, 0.0, 1.0]) * abs(v_disc) / p["memory_length"]
     np.testing.assert_allclose(K[types.C_TAU], 1.0 - 1e4 * relax, rtol=1e-10)
     np.testing.assert_allclose(K[types.C_PHI], 1.0 - 2.0 * relax, rtol=1e-10)
     # a first opening only: a node whose times are recorded keeps them
