@@ -30,7 +30,7 @@ import math
 import warp as wp
 
 from .model_terms import make_ratio_max, quotient
-from .types import C_PHI, C_TAU, C_U, C_V, E_DIAG, N_COMPONENTS, W_V, MemberParams, SolverSettings
+from .types import C_PHI, C_TAU, C_U, C_V, E_CONTACT, E_DIAG, N_COMPONENTS, W_V, MemberParams, SolverSettings
 
 GAMMA = 1.0 - math.sqrt(2.0) / 2.0
 W_TRB = math.sqrt(2.0) / 4.0
@@ -179,6 +179,8 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         den_factor = ft(1.0)
         if comp == C_V:
             scale = c.v_scale
+            if step_end[E_CONTACT, i, m] != ft(0.0):  # in contact at the step's end: contact_velocity_scale
+                scale = c.v_scale_contact
             if wp.static(ft == wp.float64):
                 diag = wp.abs(g * step_end[E_DIAG, i, m] + filter_extra)
                 if diag > c.rhoH:

@@ -425,6 +425,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
     step_factor = step_factor_for(method)
     stress_gate = model.relaxation_gate == "stress"
     make_coeffs = stages["terms"]["make_coeffs"]
+    contact_velocity_scale = stages["terms"]["contact_velocity_scale"]
     esdirk = stages["esdirk"]
     implicit_step = esdirk["implicit_step"]
     esdirk4_step = esdirk.get("esdirk4_step", implicit_step)
@@ -543,6 +544,7 @@ def make_integrate_kernel(ft, model, lanes: int, method, stages, acceptance, opt
                 break
             t = st.t
             step = propose_step(p, st, settings, t)
+            c.v_scale_contact = contact_velocity_scale(c, p, settings.viscous_velocity_cap, step.t_new, t)
             s1 = st.fsal
             s2 = (s1 + 1) % n_slots
             s3 = (s1 + n_slots - 1) % n_slots  # the last stage's slot (TR-BDF2: s1 + 2; ESDIRK4: s1 + 5)

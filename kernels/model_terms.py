@@ -239,6 +239,7 @@ def make_coefficients(ft):
         tau_scale: ft
         u_scale: ft
         v_scale: ft
+        v_scale_contact: ft  # the velocity's scale at nodes in contact this step (contact_velocity_scale)
         phi_scale: ft
         delta_scale: ft
         tilt_scale: ft
@@ -288,6 +289,7 @@ def make_coefficients(ft):
             # this scale: below it the error test never passes (docs/performance.md, stability map)
             v_ref = wp.max(v_ref, wp.float64(FLOAT32_VELOCITY_FLOOR))
         c.v_scale = ft(u_scale * v_ref / p.memory_length)
+        c.v_scale_contact = c.v_scale
         c.phi_scale = ft(p.aging_time)
         c.delta_scale = ft(sigma0 / M * p.height)
         c.tilt_scale = ft(sigma0 / M * p.height / p.length)
@@ -654,6 +656,28 @@ def make_model_terms(ft, model):
         fr = interface_friction(c, ns.value, velocity, v_disc, z_tau, z_phi, g, gate, sliding, width)
         return ns, fr
 
+    viscous = bool(model.viscous_friction)
+
+    @wp.func
+    def contact_velocity_scale(c: Coeffs, p: MemberParams, cap: wp.float64, t_new: wp.float64, t_old: wp.float64):
+        """The pad velocity's error scale (m/s) at nodes in contact for the step (t_old, t_new]: the
+        member's scale u_scale*max(|v_d|, v*)/D (c.v_scale, from the disc's full velocity) capped at
+        cap*hardness/viscous_coefficient, but not below u_scale*max(|v_d(t_new)|, v*)/D of the disc's
+        velocity now. A velocity error dV moves a sticking node's viscous stress by up to
+        eta*A*dV ~ eta*(sigma_n/hardness)*dV, so at the cap an error of rtol times the scale moves
+        it by ~cap*rtol*sigma_n, against the stress's tolerance rtol*sigma_0; while the disc ramps
+        up, the nodes slip at about its velocity, where the stress is less sensitive. Members whose
+        c.v_scale is below the cap keep it, bit for bit; float32 (and the law without viscous
+        friction) always keep it (docs/model.md, "Time integration")."""
+        scale = c.v_scale
+        if wp.static(ft == wp.float64 and viscous):
+            sigma0 = p.normal_force / (p.depth * p.length)
+            u_scale = sigma0 * p.height / (wp.float64(2.0) * p.shear_modulus)
+            v_now = wp.max(wp.abs(disc_velocity_at(p, t_new, t_old)), p.reference_velocity)
+            sticking = cap * p.hardness / wp.max(p.viscous_coefficient, wp.float64(1.0e-300))
+            scale = wp.max(ft(u_scale * v_now / p.memory_length), wp.min(c.v_scale, ft(sticking)))
+        return scale
+
     return dict(
         Coeffs=Coeffs,
         StencilTerm=stencil["StencilTerm"],
@@ -667,4 +691,5 @@ def make_model_terms(ft, model):
         interface_friction=interface_friction,
         contact_terms=contact_terms,
         yield_margin=law["yield_margin"],
+        contact_velocity_scale=contact_velocity_scale,
     )

@@ -653,7 +653,7 @@ def make_newton_solve(ft, model, terms, team, equations, solver, system):
                 finite = False
             du = g * wp.abs(dv)  # the displacement's update (m) and its tolerance
             du_tol = rtol * (c.u_scale + wp.abs(u))
-            top, bottom = ratio_max(top, bottom, wp.abs(dv), rtol * (c.v_scale + wp.abs(vel)))
+            top, bottom = ratio_max(top, bottom, wp.abs(dv), rtol * (c.v_scale_contact + wp.abs(vel)))
             top, bottom = ratio_max(top, bottom, du, du_tol)
             if wp.static(not inertia):
                 state_top, state_bottom = ratio_max(state_top, state_bottom, du, du_tol)

@@ -143,6 +143,7 @@ class SolverSettings:
     failure_factor: wp.float64
     predict_switches: wp.int32  # stress gate: 1: end a step just past the next gate switch predicted from the margins
     error_filter_nodes: wp.float64  # the velocity error filter's elastic stiffness is at least that of a grid of this many nodes (0: the grid's own)
+    viscous_velocity_cap: wp.float64  # the velocity's error scale at nodes in contact is at most this times hardness/viscous_coefficient (inf: off)
 
 # how the detachment velocity w is read from the pad velocity u_t (docs/model.md, "Fronts")
 FRONT_AGAINST_DISC = 0  # w = -sign(v_max) * u_t: the pad springing back as the interface lets go

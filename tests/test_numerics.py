@@ -122,6 +122,46 @@ def test_the_velocity_error_filter_changes_nothing_on_grids_at_least_as_fine(dty
     assert finer.mu_s.values[0] != own.mu_s.values[0]
 
 
+LOADED_FAST = {"eccentricity": [-0.5532169907603456], "normal_force": [91108.68726784074],
+               "disc_velocity": [0.10693808344323688]}  # a member of a wide random sample: F*|v| ~ 2e4 x the default scene's
+
+
+@pytest.mark.parametrize("method", ["tr_bdf2", "esdirk4"])
+def test_a_loaded_pad_with_a_fast_disc_converges_from_the_disc_start(method):
+    """F = 91 kN, 2e/L = -0.55, v = 0.107 m/s (N = 30): the member's velocity scale u_scale*v/D
+    (2 m/s) let a velocity error of 1.2e-6 m/s through the disc's first step, which moved an edge
+    node's viscous stress, logarithmic in the slip rate near v*, by 220 kPa: the node opened 11 us
+    after the disc started, against 1.85 ms at rtol 1e-7, and the front nucleated at the other edge
+    (v_first 1.7 against 4.6 m/s). Capped at 10 hardness/eta in contact (Solver.viscous_velocity_cap),
+    rtol 1e-5 finds rtol 1e-7's nucleation, first opening, v_first and mu_s."""
+    fronts = wf.Fronts()
+    loose = run(LOADED_FAST, nodes=30, rtol=1e-5, method=method, fronts=fronts)
+    tight = run(LOADED_FAST, nodes=30, rtol=1e-7, fronts=fronts)
+    for ds in (loose, tight):
+        assert ds.status.values[0] == 0
+    assert loose.nucleation_position.values[0] == tight.nucleation_position.values[0]
+    first = [np.nanmin(ds.yield_time.values[0]) - 20.0 for ds in (loose, tight)]
+    print(method, "first opening after the disc start (ms) at rtol 1e-5, 1e-7:", np.array(first) * 1e3)
+    assert abs(first[0] - first[1]) < 1e-5
+    np.testing.assert_allclose(loose.v_first.values, tight.v_first.values, rtol=0.05)
+    np.testing.assert_allclose(loose.mu_s.values, tight.mu_s.values, rtol=1e-4)
+
+
+def test_the_viscous_velocity_cap_leaves_members_below_it_bit_for_bit():
+    """Members whose velocity scale is below the cap (the default scene, and the benchmark's
+    heaviest load, 5 kN, with v = 1e-4 m/s) run bit for bit as with the cap off (inf), under both
+    methods; the loaded pad with a fast disc does not."""
+    below = {"eccentricity": [0.0, 0.2], "normal_force": [1000.0, 5000.0]}
+    for method in ("tr_bdf2", "esdirk4"):
+        on, off = (run(below, nodes=30, rtol=1e-5, method=method, fronts=wf.Fronts(), viscous_velocity_cap=cap)
+                   for cap in (10.0, float("inf")))
+        for name in ("mu_s", "mu_s_time", "steps_accepted", "steps_rejected", "arrival_time", "newton_iterations"):
+            if name in on:
+                np.testing.assert_array_equal(on[name].values, off[name].values, err_msg=f"{method} {name}")
+    on, off = (run(LOADED_FAST, nodes=30, rtol=1e-5, viscous_velocity_cap=cap) for cap in (10.0, float("inf")))
+    assert on.steps_accepted.values[0] != off.steps_accepted.values[0]
+
+
 def test_newton_converges_quadratically():
     """An exact Jacobian needs about two Newton iterations per implicit stage (full protocol to 22 s)."""
     ds = run(rtol=1e-6, scene=wf.Parameters(end_time=22.0))

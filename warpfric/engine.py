@@ -249,6 +249,7 @@ def solver_settings(solver: Solver):
     s.failure_factor = solver.failure_factor
     s.predict_switches = 1 if solver.predict_switches else 0
     s.error_filter_nodes = float(solver.error_filter_nodes)
+    s.viscous_velocity_cap = float(solver.viscous_velocity_cap)
     return s
 
 
