@@ -71,7 +71,7 @@ def client():
     # CPU workers even on a GPU host (the reference runs on the CPU; the GPU test asks for cuda:0 explicitly)
     cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
                                        env={"CUDA_VISIBLE_DEVICES": ""})
-    c = distributed.Client(cluster)
+    c = distributed.Client(cluster, set_as_default=False)  # a sweep takes its client by name, as warpfric's own
     yield c
     c.close()
     cluster.close()
@@ -188,7 +188,7 @@ from warpfric.runner import run_sweep
 if __name__ == "__main__":
     cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
                                        env={{"CUDA_VISIBLE_DEVICES": ""}})
-    client = distributed.Client(cluster)
+    client = distributed.Client(cluster, set_as_default=False)
     if {{plugin}}:
         client.register_plugin(LocalClusterWorker(), name="warpfric-local-cluster-worker")
     report = run_sweep({str(sweep)!r}, {str(tmp_path / "gpu.nc")!r}, client=client, device="cuda:0", quiet=True)
@@ -443,7 +443,7 @@ def test_a_ctrl_c_while_the_cluster_closes_after_the_file_is_written_keeps_the_r
 
     def in_process_cluster(workers=None):
         made.append(distributed.Client(distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
-                                                                dashboard_address=None)))
+                                                                dashboard_address=None), set_as_default=False))
         return made[-1]
 
     def interrupted_close(client, interrupted=False):
@@ -504,3 +504,29 @@ def test_a_ctrl_c_while_the_local_cluster_starts_is_held_until_it_has_started(tm
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                              env={**os.environ, runner.STARTING_WORKER: value})
         assert out.stdout.strip() == ignored, (value, out.stderr)
+
+
+def test_a_sweeps_cluster_leaves_dasks_default_scheduler_to_the_caller(reference, tmp_path):
+    """The sweep's own client (a local cluster, or one connected to --scheduler) submits its chunks
+    by name and is not made dask's default: while it is open and after, the caller's dask work runs
+    on the scheduler it had (as default, distributed's Client sets dask's 'scheduler' to itself, and
+    one whose close is cut short leaves that setting behind: the caller's next xarray compute then
+    fails with 'Requested dask.distributed scheduler but no Client active'). A sweep on a client
+    that is not the default runs (its chunks are gathered on that client's loop)."""
+    import dask
+    import dask.array as da
+
+    import warpfric.runner as runner
+
+    before = dask.config.get("scheduler", None)
+    client = runner.local_cluster(workers=1)
+    try:
+        assert dask.config.get("scheduler", None) == before
+        assert float(da.ones(4, chunks=2).sum().compute()) == 4.0  # the caller's own scheduler
+        sweep, single = reference
+        report = run_sweep(sweep, tmp_path / "own.nc", client=client, quiet=True)
+        assert report.failed_members == 0
+        _assert_same_outputs(single, tmp_path / "own.nc")
+    finally:
+        runner.close_local_cluster(client)
+    assert dask.config.get("scheduler", None) == before

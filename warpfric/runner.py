@@ -323,7 +323,7 @@ def run_on_client(jobs: list, client, quiet: bool = False) -> tuple[list, list]:
     write_error = None
     members_done = 0
     try:
-        for future in as_completed(list(futures)):
+        for future in as_completed(list(futures), loop=client.loop):  # the client is not dask's default
             job = futures[future]
             try:
                 report = future.result()
@@ -384,7 +384,9 @@ def local_cluster(workers: int | None = None):
             cluster = LocalCluster(n_workers=workers or n_gpus, threads_per_worker=1, processes=True)
     else:
         cluster = LocalCluster(n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True)
-    client = Client(cluster)
+    # not dask's default: the sweep submits and gathers on this client by name, and a caller's own
+    # dask work in the same process (an xarray compute after the run) keeps the scheduler it had
+    client = Client(cluster, set_as_default=False)
     from .cluster_worker import LocalClusterWorker  # Ctrl-C and SIGTERM left to this process: close_local_cluster
 
     client.register_plugin(LocalClusterWorker(), name="warpfric-local-cluster-worker")
@@ -498,7 +500,7 @@ def connect(address: str):
 
     def attempt():  # in a daemon thread: one that never returns does not hold the command's exit
         try:
-            outcome["client"] = Client(address, timeout="20s")
+            outcome["client"] = Client(address, timeout="20s", set_as_default=False)  # as local_cluster's
         except BaseException as err:  # noqa: BLE001 - reported below, in this thread
             outcome["error"] = err
 
