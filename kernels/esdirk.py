@@ -179,8 +179,9 @@ def make_tr_bdf2_arrays(ft, model, terms, team, tableau):
         den_factor = ft(1.0)
         if comp == C_V:
             scale = c.v_scale
-            if step_end[E_CONTACT, i, m] != ft(0.0):  # in contact at the step's end: contact_velocity_scale
-                scale = c.v_scale_contact
+            if c.v_scale_contact != c.v_scale:  # capped (contact_velocity_scale): at nodes in contact at the step's end
+                if step_end[E_CONTACT, i, m] != ft(0.0):
+                    scale = c.v_scale_contact
             if wp.static(ft == wp.float64):
                 diag = wp.abs(g * step_end[E_DIAG, i, m] + filter_extra)
                 if diag > c.rhoH:

@@ -673,10 +673,8 @@ def make_model_terms(ft, model):
         if wp.static(ft == wp.float64 and viscous):
             sticking = ft(cap * p.hardness / wp.max(p.viscous_coefficient, wp.float64(1.0e-300)))
             if sticking < c.v_scale:  # else the member's own scale, as it is
-                sigma0 = p.normal_force / (p.depth * p.length)
-                u_scale = sigma0 * p.height / (wp.float64(2.0) * p.shear_modulus)
                 v_now = wp.max(wp.abs(disc_velocity_at(p, t_new, t_old)), p.reference_velocity)
-                scale = wp.max(ft(u_scale * v_now / p.memory_length), sticking)
+                scale = wp.max(c.u_scale * v_now / p.memory_length, sticking)  # float64 here: c.u_scale exact
         return scale
 
     return dict(
