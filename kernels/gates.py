@@ -307,8 +307,9 @@ def make_gate_update(ft, terms, team):
         regime for the rest of the run. With the contact front (outputs.contact_front), a node whose
         gate opens after the disc started, for the first time in that window, records its arrival
         (contact_arrival; its window ends at the disc's stop): the event of yield_time, so that the
-        two agree to the arrival's error. st.stuck_nodes counts the nodes in contact that have not
-        opened since the disc started (the automatic end waits for them: observers.py detachment_over).
+        two agree to the arrival's error. st.stuck_nodes counts the nodes in contact (margin below 0)
+        that have not opened since the disc started, closed or in the sliding regime (the automatic end
+        waits for them: observers.py detachment_over).
         The lane's nodes; the switches are counted over the team (which is also a barrier: no lane
         reads another lane's gates)."""
         v_disc = ft(disc_velocity_at(p, t_new, t_old))
@@ -373,8 +374,10 @@ def make_gate_update(ft, terms, team):
             gates[G_MARGIN_OLD, i, m] = z0
             gates[G_MARGIN, i, m] = z1
             # still stuck: in contact below the yield threshold (z1 < 0: a node without contact area
-            # has z = 0 or carries a stress, z > 0), closed, and not opened since the disc started
-            if new_gate == ft(0.0) and new_sliding == ft(0.0) and z1 < ft(0.0) and not wp.isfinite(yield_time[i, m]):
+            # has z = 0 or carries a stress, z > 0) and not opened since the disc started. Below it a
+            # closed node's gate is 0; a node in the sliding regime sticks there too, whatever the
+            # tail of its regularised gate (~exp(2x), not exactly 0)
+            if z1 < ft(0.0) and not wp.isfinite(yield_time[i, m]):
                 stuck += 1
         st.gate_switches = st.gate_switches + team_count(switches)
         st.stuck_nodes = team_count(stuck)

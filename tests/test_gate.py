@@ -320,6 +320,37 @@ def test_a_node_sliding_since_the_loading_phase_opens_where_its_margin_crosses_z
     np.testing.assert_allclose(times[0], times[1], atol=5e-5)
 
 
+def test_the_automatic_end_waits_for_edge_nodes_that_slide_since_the_loading_phase():
+    """The automatic end waits until every node in contact has opened (its stick-to-slip transition
+    recorded). A node in the sliding regime since the loading phase, whose regularised gate theta_w is
+    ~0 while its margin lies below 0, still sticks, and is counted as stuck whatever its gate's tail:
+    the run must not end before it opens. Counted only where its gate was exactly 0 (or not at all),
+    the run ended 0.3-6 ms before the last edge nodes of these members opened, and their yield_time
+    was NaN. Their openings converge as the gate's width w shrinks (the margin's crossing of 0; node 0
+    of the second member opens 37 us later at w = 1e-3 than at 1e-4 and 1e-5, which agree within
+    10 us at rtol 1e-5 to 1e-7: the regularisation's own O(w) effect on the node's stress), and mu_s
+    does not move. Members of a random sample (N = 30; 2e/L 0.189 and -0.155, F 156 and 93 kN, v 0.0132
+    and -0.0030 m/s), whose edge nodes 28-29 and 0-1 slide since the loading phase."""
+    members = {"eccentricity": [0.18931287604621727, -0.15512064620849692],
+               "normal_force": [156122.3158302238, 92813.70192322713],
+               "disc_velocity": [0.013186648029815496, -0.003041163051535]}
+    last_edge = [[28, 29], [0, 1]]
+    times, mu_s = [], []
+    for width in (1e-3, 1e-5):
+        ds = run(members, nodes=30, rtol=1e-5, sliding_width=width)
+        assert (ds.status.values == 0).all()
+        in_contact = ds.normal_stress.values > 0
+        assert in_contact[0, 28:].all() and in_contact[1, :2].all()
+        assert np.isfinite(ds.yield_time.values[in_contact]).all(), "a node in contact never opened"
+        times.append([ds.yield_time.values[k, nodes] for k, nodes in enumerate(last_edge)])
+        mu_s.append(ds.mu_s.values)
+        # each run ends at its automatic end, within a few ms of its last opening
+        assert (ds.final_time.values - np.nanmax(ds.yield_time.values, axis=1) < 0.01).all()
+    print("last edge nodes' yield_time at w = 1e-3, 1e-5 (s):", times)
+    np.testing.assert_allclose(times[0], times[1], rtol=0, atol=5e-5)
+    np.testing.assert_allclose(mu_s[0], mu_s[1], rtol=1e-5)
+
+
 def test_steady_sliding_below_the_yield_stress_holds_the_yield_surface():
     """With mu0*D/h + tau_vis below tau_c (interface_stiffness 2e14: 100 + 18.7 MPa < 130 MPa) a fully
     open gate cannot keep the asperity stress at tau_c: the nodes slide on the yield surface with the
