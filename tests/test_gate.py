@@ -351,6 +351,23 @@ def test_the_automatic_end_waits_for_edge_nodes_that_slide_since_the_loading_pha
     np.testing.assert_allclose(mu_s[0], mu_s[1], rtol=1e-5)
 
 
+def test_the_automatic_end_reads_the_peak_that_a_fixed_end_reads_after_edge_nodes_slid_since_loading():
+    """A member (2e/L = 0.362, F = 129 kN, v = 0.0214 m/s, interface_stiffness 1.97e14 Pa/m, N = 30)
+    whose mu falls by 1 % while its edge nodes, in the sliding regime since the loading phase, still
+    stick, then rises to the detachment's peak once they open. Counted as stuck only where their gate
+    was exactly 0, the automatic end came at 20.0438 s with mu_s 0.29085, 0.5 % below the peak that
+    a run to a fixed end_time reads (0.29245 at 20.0487 s; rtol 1e-7: 0.292446)."""
+    member = {"eccentricity": [0.3615293582476763], "normal_force": [129159.15634080952],
+              "disc_velocity": [0.021429232392145305], "interface_stiffness": [196963818236337.8]}
+    auto = run(member, nodes=30, rtol=1e-5)
+    fixed = run(member, scene=wf.Parameters(end_time=20.2), nodes=30, rtol=1e-5)
+    assert auto.status.values[0] == 0 and fixed.status.values[0] == 0
+    assert auto.final_time.values[0] < 20.1
+    # the two ends read the peak 4e-11 apart (relative); the old automatic end was 5e-3 below it
+    np.testing.assert_allclose(auto.mu_s.values, fixed.mu_s.values, rtol=1e-9)
+    np.testing.assert_allclose(auto.mu_s_time.values, fixed.mu_s_time.values, rtol=0, atol=1e-7)
+
+
 def test_steady_sliding_below_the_yield_stress_holds_the_yield_surface():
     """With mu0*D/h + tau_vis below tau_c (interface_stiffness 2e14: 100 + 18.7 MPa < 130 MPa) a fully
     open gate cannot keep the asperity stress at tau_c: the nodes slide on the yield surface with the
