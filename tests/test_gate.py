@@ -324,9 +324,8 @@ def test_the_automatic_end_waits_for_edge_nodes_that_slide_since_the_loading_pha
     """The automatic end waits until every node in contact has opened (its stick-to-slip transition
     recorded). A node in the sliding regime since the loading phase, whose regularised gate theta_w is
     ~0 while its margin lies below 0, still sticks, and is counted as stuck whatever its gate's tail:
-    the run must not end before it opens. Counted only where its gate was exactly 0 (or not at all),
-    the run ended 0.3-6 ms before the last edge nodes of these members opened, and their yield_time
-    was NaN. Their openings converge as the gate's width w shrinks (the margin's crossing of 0; node 0
+    the run must not end before it opens. When only closed nodes were counted, the run ended 3 and
+    6 ms before the last edge nodes of these members opened, and their yield_time was NaN. Their openings converge as the gate's width w shrinks (the margin's crossing of 0; node 0
     of the second member opens 37 us later at w = 1e-3 than at 1e-4 and 1e-5, which agree within
     10 us at rtol 1e-5 to 1e-7: the regularisation's own O(w) effect on the node's stress), and mu_s
     does not move. Members of a random sample (N = 30; 2e/L 0.189 and -0.155, F 156 and 93 kN, v 0.0132
@@ -354,8 +353,8 @@ def test_the_automatic_end_waits_for_edge_nodes_that_slide_since_the_loading_pha
 def test_the_automatic_end_reads_the_peak_that_a_fixed_end_reads_after_edge_nodes_slid_since_loading():
     """A member (2e/L = 0.362, F = 129 kN, v = 0.0214 m/s, interface_stiffness 1.97e14 Pa/m, N = 30)
     whose mu falls by 1 % while its edge nodes, in the sliding regime since the loading phase, still
-    stick, then rises to the detachment's peak once they open. Counted as stuck only where their gate
-    was exactly 0, the automatic end came at 20.0438 s with mu_s 0.29085, 0.5 % below the peak that
+    stick, then rises to the detachment's peak once they open. When only closed nodes were counted as
+    stuck, the automatic end came at 20.0438 s with mu_s 0.29085, 0.5 % below the peak that
     a run to a fixed end_time reads (0.29245 at 20.0487 s; rtol 1e-7: 0.292446)."""
     member = {"eccentricity": [0.3615293582476763], "normal_force": [129159.15634080952],
               "disc_velocity": [0.021429232392145305], "interface_stiffness": [196963818236337.8]}
