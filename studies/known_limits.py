@@ -5,6 +5,7 @@
     python studies/known_limits.py float32-wide  # float32 against float64 over members drawn wider
     python studies/known_limits.py stop-lift-off # a sudden stop of eccentric pads that lift off, with damping
     python studies/known_limits.py fronts-wide   # the contact front of 300 wide-range members at rtol 1e-5
+    python studies/known_limits.py soft-interface  # steps of loaded pads with a soft interface (mu0/h)
     python studies/known_limits.py all
     (also: python studies/bench.py limits vibration|float32|all)
 """
@@ -146,11 +147,66 @@ def fronts_wide():
                   f"({float(ref.v_first[i]):.3g}) m/s")
 
 
+def soft_interface():
+    """Steps of 120 loaded random members with a soft interface (seed 11: 2e/L uniform in [-0.6, 0.6],
+    F log-uniform in 30-300 kN, |v| log-uniform in 1e-5-0.3 m/s with a random sign, interface_stiffness
+    log-uniform in 1e12-1e14 Pa/m, 3-300x below the default 3e14; N = 30, rtol 1e-5, automatic end):
+    the statuses, the accepted steps' median and 90th percentile, the costliest members, and for the
+    costliest the steps and rejections by reason up to fractions of its time from the disc start to its
+    automatic end (runs to fixed ends); then the three costliest at sliding widths 1e-2, 1e-3, 1e-4."""
+    import warnings
+
+    import numpy as np
+
+    rng = np.random.default_rng(11)
+    m = 120
+    members = {"eccentricity": rng.uniform(-0.6, 0.6, m),
+               "normal_force": np.exp(rng.uniform(np.log(3e4), np.log(3e5), m)),
+               "disc_velocity": np.exp(rng.uniform(np.log(1e-5), np.log(0.3), m)) * rng.choice([-1, 1], m),
+               "interface_stiffness": np.exp(rng.uniform(np.log(1e12), np.log(1e14), m))}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        ds = wf.simulate(members, solver=wf.Solver(nodes=30), device="cpu", progress=False, fronts=None)
+    steps = ds.steps_accepted.values
+    statuses = {name: int((ds.status.values == code).sum()) for code, name in
+                enumerate(ds.status.attrs["flag_meanings"].split()) if (ds.status.values == code).any()}
+    print(f"statuses {statuses}; accepted steps: median {np.median(steps):.0f}, 90th percentile "
+          f"{np.percentile(steps, 90):.0f}, largest {steps.max()}")
+    for i in np.argsort(steps)[::-1][:8]:
+        print(f"    member {i:3d}: 2e/L {members['eccentricity'][i]:+.3f}, F {members['normal_force'][i] / 1e3:6.1f} kN, "
+              f"v {members['disc_velocity'][i]:+.2e} m/s, mu0/h {members['interface_stiffness'][i]:.2e} Pa/m: "
+              f"{steps[i]} steps, status {ds.status.values[i]}")
+    worst = int(np.argmax(steps))
+    one = {key: [value[worst]] for key, value in members.items()}
+    start = float(np.asarray(ds.rest_until.values).ravel()[0])
+    span = float(ds.final_time.values[worst]) - start
+    print(f"  member {worst} to fixed ends (ms after the disc start; its automatic end at {span * 1e3:.1f} ms): "
+          f"accepted, rejected by the error test / Newton / a switch, gate switches")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for after in span * np.array([0.25, 0.5, 0.75, 0.9, 1.0]):
+            run = wf.simulate(one, scene=wf.Parameters(end_time=start + after), solver=wf.Solver(nodes=30),
+                              device="cpu", progress=False, fronts=None).isel(member=0)
+            print(f"    {after * 1e3:7.2f}: {int(run.steps_accepted):6d} {int(run.rejected_error_test):6d} "
+                  f"{int(run.rejected_newton):6d} {int(run.rejected_switch):6d} {int(run.gate_switches):6d}")
+    top = [int(i) for i in np.argsort(steps)[::-1][:3]]
+    three = {key: value[top] for key, value in members.items()}
+    print(f"  members {top} against the sliding gate's width (Solver.sliding_width; no straggler limit): "
+          f"status, accepted steps, mu_s")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for width in (1e-2, 1e-3, 1e-4):
+            run = wf.simulate(three, solver=wf.Solver(nodes=30, sliding_width=width, stall_factor=float("inf")),
+                              device="cpu", progress=False, fronts=None)
+            print(f"    {width:.0e}: {run.status.values.tolist()} {run.steps_accepted.values.tolist()} "
+                  f"{np.round(run.mu_s.values, 6).tolist()}")
+
+
 def main(argv=None):
     import argparse
 
     checks = {"vibration": vibration, "float32": float32, "float32-wide": float32_wide,
-              "stop-lift-off": stop_lift_off, "fronts-wide": fronts_wide}
+              "stop-lift-off": stop_lift_off, "fronts-wide": fronts_wide, "soft-interface": soft_interface}
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("check", nargs="?", default="all", choices=[*checks, "all"], help="which measurement (default all)")
     name = ap.parse_args(sys.argv[1:] if argv is None else argv).check
