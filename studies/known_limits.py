@@ -153,7 +153,8 @@ def soft_interface():
     log-uniform in 1e12-1e14 Pa/m, 3-300x below the default 3e14; N = 30, rtol 1e-5, automatic end):
     the statuses, the accepted steps' median and 90th percentile, the costliest members, and for the
     costliest the steps and rejections by reason up to fractions of its time from the disc start to its
-    automatic end (runs to fixed ends); then the three costliest at sliding widths 1e-2, 1e-3, 1e-4."""
+    automatic end (runs to fixed ends); then the three costliest at sliding widths 1e-2, 1e-3, 1e-4
+    and at rtol 1e-5 to 1e-8."""
     import warnings
 
     import numpy as np
@@ -199,6 +200,14 @@ def soft_interface():
             run = wf.simulate(three, solver=wf.Solver(nodes=30, sliding_width=width, stall_factor=float("inf")),
                               device="cpu", progress=False, fronts=None)
             print(f"    {width:.0e}: {run.status.values.tolist()} {run.steps_accepted.values.tolist()} "
+                  f"{np.round(run.mu_s.values, 6).tolist()}")
+    print(f"  the same members against rtol (width 1e-3, no straggler limit): status, accepted steps, mu_s")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for rtol in (1e-5, 1e-6, 1e-7, 1e-8):
+            run = wf.simulate(three, solver=wf.Solver(nodes=30, rtol=rtol, stall_factor=float("inf"),
+                                                      max_steps=1_000_000), device="cpu", progress=False, fronts=None)
+            print(f"    {rtol:.0e}: {run.status.values.tolist()} {run.steps_accepted.values.tolist()} "
                   f"{np.round(run.mu_s.values, 6).tolist()}")
 
 
