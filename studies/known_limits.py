@@ -154,7 +154,8 @@ def soft_interface():
     the statuses, the accepted steps' median and 90th percentile, the costliest members, and for the
     costliest the steps and rejections by reason up to fractions of its time from the disc start to its
     automatic end (runs to fixed ends); then the three costliest at sliding widths 1e-2, 1e-3, 1e-4
-    and at rtol 1e-5 to 1e-8."""
+    and at rtol 1e-5 to 1e-8; then the conditioning of the one whose mu_s moves most from rtol 1e-7
+    to 1e-8: its normal force perturbed, at widths 1e-3 and 1e-2."""
     import warnings
 
     import numpy as np
@@ -204,11 +205,29 @@ def soft_interface():
     print(f"  the same members against rtol (width 1e-3, no straggler limit): status, accepted steps, mu_s")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
+        by_rtol = {}
         for rtol in (1e-5, 1e-6, 1e-7, 1e-8):
             run = wf.simulate(three, solver=wf.Solver(nodes=30, rtol=rtol, stall_factor=float("inf"),
                                                       max_steps=1_000_000), device="cpu", progress=False, fronts=None)
+            by_rtol[rtol] = run.mu_s.values
             print(f"    {rtol:.0e}: {run.status.values.tolist()} {run.steps_accepted.values.tolist()} "
                   f"{np.round(run.mu_s.values, 6).tolist()}")
+    # the conditioning of the member whose mu_s moves most from rtol 1e-7 to 1e-8: its normal force
+    # perturbed by 1e-10, 1e-8 and 1e-6 (relative), at two widths
+    k = int(np.argmax(np.abs(by_rtol[1e-8] / by_rtol[1e-7] - 1)))
+    factors = np.array([1.0, 1 + 1e-10, 1 + 1e-8, 1 + 1e-6])
+    perturbed = {key: np.full(4, value[k]) for key, value in three.items()}
+    perturbed["normal_force"] = three["normal_force"][k] * factors
+    print(f"  member {top[k]} with F times 1, 1 + 1e-10, 1 + 1e-8, 1 + 1e-6 (no straggler limit): mu_s, "
+          f"accepted steps")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for width, rtol in ((1e-3, 1e-7), (1e-3, 1e-8), (1e-2, 1e-7), (1e-2, 1e-8)):
+            run = wf.simulate(perturbed, solver=wf.Solver(nodes=30, rtol=rtol, sliding_width=width,
+                                                          stall_factor=float("inf"), max_steps=1_000_000),
+                              device="cpu", progress=False, fronts=None)
+            print(f"    width {width:.0e}, rtol {rtol:.0e}: {np.round(run.mu_s.values, 7).tolist()} "
+                  f"{run.steps_accepted.values.tolist()}")
 
 
 def main(argv=None):
