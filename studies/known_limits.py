@@ -155,7 +155,8 @@ def soft_interface():
     costliest the steps and rejections by reason up to fractions of its time from the disc start to its
     automatic end (runs to fixed ends); then the three costliest at sliding widths 1e-2, 1e-3, 1e-4
     and at rtol 1e-5 to 1e-8; then the conditioning of the one whose mu_s moves most from rtol 1e-7
-    to 1e-8: its normal force perturbed, at widths 1e-3 and 1e-2."""
+    to 1e-8: its normal force perturbed, at widths 1e-3 and 1e-2, and where two runs 1e-10 apart in F
+    part (recorded fields)."""
     import warnings
 
     import numpy as np
@@ -228,6 +229,24 @@ def soft_interface():
                               device="cpu", progress=False, fronts=None)
             print(f"    width {width:.0e}, rtol {rtol:.0e}: {np.round(run.mu_s.values, 7).tolist()} "
                   f"{run.steps_accepted.values.tolist()}")
+            if width == 1e-3 and rtol == 1e-7:
+                peak = float(run.mu_s_time.values[0])
+    # where the two runs of F and F (1 + 1e-10) part: their friction stress fields recorded from the
+    # disc start to the peak; a flip of a discrete decision would jump, an unstable mode grows
+    pair = {key: value[:2] for key, value in perturbed.items()}
+    times = wf.Record.window(start - 1e-3, peak, 2000, members=(0, 1))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = wf.simulate(pair, scene=wf.Parameters(end_time=peak + 1e-4),
+                          solver=wf.Solver(nodes=30, rtol=1e-7, stall_factor=float("inf"), max_steps=1_000_000),
+                          device="cpu", progress=False, fronts=None, record=times)
+    stress = run.friction_stress_history.values
+    apart = np.abs(stress[0] - stress[1]).max(axis=1) / np.abs(stress[0]).max()
+    when = ", ".join(f"{level:.0e} at {(run.time.values[np.argmax(apart > level)] - start) * 1e3:.1f} ms"
+                     if (apart > level).any() else f"{level:.0e} never" for level in (1e-10, 1e-8, 1e-6, 1e-4, 1e-2))
+    print(f"  F against F (1 + 1e-10), width 1e-3, rtol 1e-7: the friction stress fields' largest difference "
+          f"(relative to the field's largest value) first exceeds {when} after the disc start (the peak at "
+          f"{(peak - start) * 1e3:.1f} ms)")
 
 
 def main(argv=None):
