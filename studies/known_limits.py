@@ -147,6 +147,18 @@ def fronts_wide():
                   f"({float(ref.v_first[i]):.3g}) m/s")
 
 
+def soft_interface_members():
+    """The 120 members of soft_interface (seed 11), {parameter: (120,) array}."""
+    import numpy as np
+
+    rng = np.random.default_rng(11)
+    m = 120
+    return {"eccentricity": rng.uniform(-0.6, 0.6, m),
+            "normal_force": np.exp(rng.uniform(np.log(3e4), np.log(3e5), m)),
+            "disc_velocity": np.exp(rng.uniform(np.log(1e-5), np.log(0.3), m)) * rng.choice([-1, 1], m),
+            "interface_stiffness": np.exp(rng.uniform(np.log(1e12), np.log(1e14), m))}
+
+
 def soft_interface():
     """Steps of 120 loaded random members with a soft interface (seed 11: 2e/L uniform in [-0.6, 0.6],
     F log-uniform in 30-300 kN, |v| log-uniform in 1e-5-0.3 m/s with a random sign, interface_stiffness
@@ -161,12 +173,7 @@ def soft_interface():
 
     import numpy as np
 
-    rng = np.random.default_rng(11)
-    m = 120
-    members = {"eccentricity": rng.uniform(-0.6, 0.6, m),
-               "normal_force": np.exp(rng.uniform(np.log(3e4), np.log(3e5), m)),
-               "disc_velocity": np.exp(rng.uniform(np.log(1e-5), np.log(0.3), m)) * rng.choice([-1, 1], m),
-               "interface_stiffness": np.exp(rng.uniform(np.log(1e12), np.log(1e14), m))}
+    members = soft_interface_members()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         ds = wf.simulate(members, solver=wf.Solver(nodes=30), device="cpu", progress=False, fronts=None)
