@@ -24,7 +24,8 @@ def test_a_straggler_is_stopped_within_a_bounded_factor_of_its_peers():
     # one warning says how many members failed, why, and what runs them to their end
     said = [str(w.message) for w in caught if "did not end ok" in str(w.message)]
     assert said == ["members that did not end ok have NaN mu_s and fronts: 1 of 12 members: 1 stalled (stopped by "
-                    "the straggler rule after stall_factor = 5 times the attempts of the typical member: "
+                    "the straggler rule after stall_factor = 5 times the attempts of the typical member, or "
+                    "stall_min_steps = 500 where that is more: "
                     "Solver(stall_factor=float('inf')), in a sweep file [solver] stall_factor = inf, runs them to "
                     "their end); their numbers: ds.member[ds.status != 0] (docs/model.md, \"Statuses\")"]
     meanings = ds.status.attrs["flag_meanings"].split()

@@ -302,7 +302,8 @@ _STATUS_ADVICE = {
     "non_finite_state": "the state became NaN or inf: a tighter rtol, or float64",
     "step_size_underflow": "the step size fell below its floor: a tighter rtol, or float64",
     "stalled": ("stopped by the straggler rule after stall_factor = {stall_factor:g} times the attempts of the "
-                "typical member: Solver(stall_factor=float('inf')), in a sweep file [solver] stall_factor = inf, "
+                "typical member, or stall_min_steps = {stall_min_steps:,} where that is more: "
+                "Solver(stall_factor=float('inf')), in a sweep file [solver] stall_factor = inf, "
                 "runs them to their end"),
     "no_peak": ("mu was still rising at the run's end or had its largest value at the disc's stop, peaked "
                 "before the disc moved, or never fell below its largest value by more than rtol (steady "
@@ -398,7 +399,8 @@ def members_not_ok_text(ds: xr.Dataset, solver: Solver, where: str = "") -> str 
     failed = {meanings[c]: int(k) for c, k in zip(codes, counts) if meanings[c] != "ok"}
     if not failed:
         return None
-    advice = {name: text.format(max_steps=solver.max_steps, stall_factor=solver.stall_factor)
+    advice = {name: text.format(max_steps=solver.max_steps, stall_factor=solver.stall_factor,
+                                stall_min_steps=solver.stall_min_steps)
               for name, text in _STATUS_ADVICE.items()}
     if "no_peak" in failed:
         still = int(np.sum((ds.status.values == meanings.index("no_peak")) & (np.asarray(ds.disc_velocity) == 0.0)))
