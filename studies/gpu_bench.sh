@@ -10,7 +10,7 @@
 # studies/results/. Compilation is excluded from every timing (a warm-up run compiles first).
 #
 # modes (default settings of the tables: N = 200, rtol 1e-5, float64, the bench_engine members):
-#   tests          the test suite on cuda:0
+#   tests          the test suite on cuda:0 (ARGS go to pytest: -n 8 runs it in eight processes, pytest-xdist)
 #   engine         stress gate: team of 32 lanes and thread per member, predicted switches on and off,
 #                  1 / 1,000 / 10,000 members
 #   gateless       the same for relaxation_gate="none" (predictions do not apply)
