@@ -21,7 +21,7 @@ _REFERENCES: dict = {}
 
 def run_scipy(scene, n, rtol, model, **options):
     """baseline_scipy.run_scipy, each reference integrated once in a session: the heavy undamped pad
-    serves both cases of the inertia test (~90 s of scipy BDF on a 2-core CPU)."""
+    serves both cases of the inertia test (~14 s of scipy BDF on a 2-core CPU)."""
     key = (scene, n, rtol, model, tuple(sorted(options.items())))
     if key not in _REFERENCES:
         _REFERENCES[key] = _run_scipy(scene, n, rtol, model, **options)
@@ -62,18 +62,23 @@ def test_smoothed_gate_converges_to_the_located_sharp_gate():
     assert abs(float(ds.mu_s[0]) / none["mu_s"] - 1) > 0.01
 
 
-@pytest.mark.parametrize("damping", [0.0, 1e8])
+@pytest.mark.parametrize("damping", [0.0, 3e8])
 def test_warpfric_agrees_with_scipy_bdf_where_the_pad_s_inertia_matters(damping):
     """In the scene above the pad is quasi-static (its free mode rings at ~41 us), so the inertia term
     rho*H*dV/dt could be 100x too large or too small and the comparison above still passed (a
     mutation audit). With the density raised 1e6-fold (mode period ~41 ms, on the scale of the
-    detachment) the gate-less law's mu_s moves 3.6e-5 from the quasi-static one, 36x this test's
-    tolerance, and warpfric must follow the reference there (measured: 3.5e-9). The damping term,
-    checked before only through a member's status, is too: damping = 1e8 Pa s/m moves mu_s 1.9e-5
-    from the undamped pad's (measured agreement 1.6e-8)."""
+    detachment) the gate-less law's mu_s moves 1.7e-5 from the quasi-static one, 17x this test's
+    tolerance, and warpfric must follow the reference there (measured: 8.6e-9). The damping term,
+    checked before only through a member's status, is too: damping = 3e8 Pa s/m moves mu_s 1.8e-5
+    from the undamped pad's (measured agreement 3.8e-9). The protocol is ten times shorter than the
+    paper's (the force ramped over 1 s, the disc started at 2 s): the undamped heavy pad rings all
+    through it, and scipy's BDF at rtol 1e-8 takes 14 s for the short protocol against 78 s for the
+    paper's 20 s (2-core CPU), where the inertia moved mu_s 3.6e-5 and a damping of 1e8 Pa s/m 1.9e-5
+    (9.2e-6 in the short protocol)."""
     n = 9
     model = wf.Model(relaxation_gate="none")
-    heavy = wf.Parameters(end_time=20.4, eccentricity=0.2, normal_force=2000.0, density=1.2e9, damping=damping)
+    heavy = wf.Parameters(force_ramp_time=1.0, rest_until=2.0, end_time=2.4, eccentricity=0.2, normal_force=2000.0,
+                          density=1.2e9, damping=damping)
     ref = run_scipy(heavy, n, 1e-8, model)
     # the term matters here: without it (quasi-static pad; undamped) mu_s is elsewhere
     without = dataclasses_replace(heavy, density=1200.0) if damping == 0 else dataclasses_replace(heavy, damping=0.0)
