@@ -6,6 +6,7 @@
     python studies/known_limits.py stop-lift-off # a sudden stop of eccentric pads that lift off, with damping
     python studies/known_limits.py fronts-wide   # the contact front of 300 wide-range members at rtol 1e-5
     python studies/known_limits.py soft-interface  # steps of loaded pads with a soft interface (mu0/h)
+    python studies/known_limits.py soft-interface-conditioning  # its ill-conditioned member against the width
     python studies/known_limits.py all
     (also: python studies/bench.py limits vibration|float32|all)
 """
@@ -258,11 +259,42 @@ def soft_interface():
           f"{(peak - start) * 1e3:.1f} ms)")
 
 
+def soft_interface_conditioning():
+    """Whether the ill-conditioning of soft_interface's member 73 (2e/L -0.578, F 196 kN, v -0.075
+    m/s, mu0/h 8.2e13 Pa/m: the member whose mu_s moves most from rtol 1e-7 to 1e-8 there) is the
+    regularised sliding gate's or the sharp law's: its normal force times 1, 1 + 1e-10, 1 + 1e-8,
+    1 + 1e-6 at rtol 1e-7 (no straggler limit), against Solver.sliding_width from 1e-2 to 1e-4 at
+    N = 30 and at two widths at N = 60: mu_s, their spread (largest less smallest, relative to their
+    mean), accepted steps,
+    the wall time of the four (~4-5 minutes in all on a 2-core CPU)."""
+    import warnings
+
+    import numpy as np
+
+    members = soft_interface_members()
+    factors = np.array([1.0, 1 + 1e-10, 1 + 1e-8, 1 + 1e-6])
+    perturbed = {key: np.full(4, value[73]) for key, value in members.items()}
+    perturbed["normal_force"] = members["normal_force"][73] * factors
+    print("  N  width   mu_s at F times 1, 1 + 1e-10, 1 + 1e-8, 1 + 1e-6                spread (rel.)  accepted "
+          "steps                     wall s")
+    for nodes, width in ((30, 1e-2), (30, 3e-3), (30, 1e-3), (30, 3e-4), (30, 1e-4), (60, 3e-3), (60, 3e-4)):
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            run = wf.simulate(perturbed, solver=wf.Solver(nodes=nodes, rtol=1e-7, sliding_width=width,
+                                                          stall_factor=float("inf"), max_steps=3_000_000),
+                              device="cpu", progress=False, fronts=None)
+        mu = run.mu_s.values
+        print(f"  {nodes:2d}  {width:.0e}  {np.round(mu, 7).tolist()}  {(mu.max() - mu.min()) / mu.mean():.2e}       "
+              f"{run.steps_accepted.values.tolist()}  {time.perf_counter() - t0:.0f}")
+
+
 def main(argv=None):
     import argparse
 
     checks = {"vibration": vibration, "float32": float32, "float32-wide": float32_wide,
-              "stop-lift-off": stop_lift_off, "fronts-wide": fronts_wide, "soft-interface": soft_interface}
+              "stop-lift-off": stop_lift_off, "fronts-wide": fronts_wide, "soft-interface": soft_interface,
+              "soft-interface-conditioning": soft_interface_conditioning}
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("check", nargs="?", default="all", choices=[*checks, "all"], help="which measurement (default all)")
     name = ap.parse_args(sys.argv[1:] if argv is None else argv).check
