@@ -418,8 +418,8 @@ class Solver:
                       implicitly; its limit 0 is the sharp equivalent gate (docs/model.md, "Gate switches").
                       The steps of nodes sliding there grow about as 1/sliding_width: loaded pads with a
                       soft interface (mu0/h 1e13-1e14 Pa/m) took 10x the median's steps at 1e-3, 2-3.5x
-                      more at 1e-4, and 5-10x fewer at 1e-2, mu_s moving by up to 4.3e-3 (docs/performance.md,
-                      "Known limits").
+                      more at 1e-4, and 5-10x fewer at 1e-2, mu_s moving about as much as the width
+                      (1e-2: 1.0e-2 in the median member against 1e-3; docs/performance.md, "Known limits").
     error_filter_nodes: the pad velocity's error estimate is filtered by the diagonal of (I - gamma h J)^-1
                       (docs/model.md, "Time integration"), whose elastic part 2 M H / dx^2 grows as N^2:
                       a coarse grid's filter hides less of the pad's lowest modes' ringing (kicked by
