@@ -161,6 +161,30 @@ def soft_interface_members():
             "interface_stiffness": np.exp(rng.uniform(np.log(1e12), np.log(1e14), m))}
 
 
+F_FACTORS = (1.0, 1 + 1e-10, 1 + 1e-8, 1 + 1e-6)  # the normal force perturbed (relative) in the conditioning rows
+
+
+def unlimited(values, width, rtol, nodes=30, max_steps=1_000_000, **options):
+    """wf.simulate of ``values`` on the CPU without the straggler limit, its warnings silenced (the
+    soft-interface checks: N = ``nodes``, sliding width ``width``, fronts off; ``options`` to simulate)."""
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return wf.simulate(values, solver=wf.Solver(nodes=nodes, rtol=rtol, sliding_width=width, stall_factor=float("inf"),
+                                                    max_steps=max_steps),
+                           device="cpu", progress=False, fronts=None, **options)
+
+
+def with_force_factors(values, k):
+    """Member ``k`` of ``values`` four times, its normal force times each of F_FACTORS."""
+    import numpy as np
+
+    perturbed = {key: np.full(len(F_FACTORS), value[k]) for key, value in values.items()}
+    perturbed["normal_force"] = values["normal_force"][k] * np.array(F_FACTORS)
+    return perturbed
+
+
 def soft_interface():
     """Steps of 120 loaded random members with a soft interface (seed 11: 2e/L uniform in [-0.6, 0.6],
     F log-uniform in 30-300 kN, |v| log-uniform in 1e-5-0.3 m/s with a random sign, interface_stiffness
@@ -205,52 +229,34 @@ def soft_interface():
     three = {key: value[top] for key, value in members.items()}
     print(f"  members {top} against the sliding gate's width (Solver.sliding_width; no straggler limit): "
           f"status, accepted steps, mu_s")
-    def unlimited(width, rtol):  # the three, no straggler limit
-        return wf.simulate(three, solver=wf.Solver(nodes=30, rtol=rtol, sliding_width=width, stall_factor=float("inf"),
-                                                   max_steps=1_000_000), device="cpu", progress=False, fronts=None)
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        by_width = {width: unlimited(width, 1e-5) for width in (1e-2, 1e-3, 1e-4)}
+    by_width = {width: unlimited(three, width, 1e-5) for width in (1e-2, 1e-3, 1e-4)}
     for width, run in by_width.items():
         print(f"    {width:.0e}: {run.status.values.tolist()} {run.steps_accepted.values.tolist()} "
               f"{np.round(run.mu_s.values, 6).tolist()}")
     print(f"  the same members against rtol (width 1e-3, no straggler limit): status, accepted steps, mu_s")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        by_rtol = {}
-        for rtol in (1e-5, 1e-6, 1e-7, 1e-8):
-            run = by_width[1e-3] if rtol == 1e-5 else unlimited(1e-3, rtol)  # rtol 1e-5: the width row's run
-            by_rtol[rtol] = run.mu_s.values
-            print(f"    {rtol:.0e}: {run.status.values.tolist()} {run.steps_accepted.values.tolist()} "
-                  f"{np.round(run.mu_s.values, 6).tolist()}")
+    by_rtol = {}
+    for rtol in (1e-5, 1e-6, 1e-7, 1e-8):
+        run = by_width[1e-3] if rtol == 1e-5 else unlimited(three, 1e-3, rtol)  # rtol 1e-5: the width row's run
+        by_rtol[rtol] = run.mu_s.values
+        print(f"    {rtol:.0e}: {run.status.values.tolist()} {run.steps_accepted.values.tolist()} "
+              f"{np.round(run.mu_s.values, 6).tolist()}")
     # the conditioning of the member whose mu_s moves most from rtol 1e-7 to 1e-8: its normal force
     # perturbed by 1e-10, 1e-8 and 1e-6 (relative), at two widths
     k = int(np.argmax(np.abs(by_rtol[1e-8] / by_rtol[1e-7] - 1)))
-    factors = np.array([1.0, 1 + 1e-10, 1 + 1e-8, 1 + 1e-6])
-    perturbed = {key: np.full(4, value[k]) for key, value in three.items()}
-    perturbed["normal_force"] = three["normal_force"][k] * factors
+    perturbed = with_force_factors(three, k)
     print(f"  member {top[k]} with F times 1, 1 + 1e-10, 1 + 1e-8, 1 + 1e-6 (no straggler limit): mu_s, "
           f"accepted steps")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        for width, rtol in ((1e-3, 1e-7), (1e-3, 1e-8), (1e-2, 1e-7), (1e-2, 1e-8)):
-            run = wf.simulate(perturbed, solver=wf.Solver(nodes=30, rtol=rtol, sliding_width=width,
-                                                          stall_factor=float("inf"), max_steps=1_000_000),
-                              device="cpu", progress=False, fronts=None)
-            print(f"    width {width:.0e}, rtol {rtol:.0e}: {np.round(run.mu_s.values, 7).tolist()} "
-                  f"{run.steps_accepted.values.tolist()}")
-            if width == 1e-3 and rtol == 1e-7:
-                peak = float(run.mu_s_time.values[0])
+    for width, rtol in ((1e-3, 1e-7), (1e-3, 1e-8), (1e-2, 1e-7), (1e-2, 1e-8)):
+        run = unlimited(perturbed, width, rtol)
+        print(f"    width {width:.0e}, rtol {rtol:.0e}: {np.round(run.mu_s.values, 7).tolist()} "
+              f"{run.steps_accepted.values.tolist()}")
+        if width == 1e-3 and rtol == 1e-7:
+            peak = float(run.mu_s_time.values[0])
     # where the two runs of F and F (1 + 1e-10) part: their friction stress fields recorded from the
     # disc start to the peak; a flip of a discrete decision would jump, an unstable mode grows
     pair = {key: value[:2] for key, value in perturbed.items()}
     times = wf.Record.window(start - 1e-3, peak, 2000, members=(0, 1))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        run = wf.simulate(pair, scene=wf.Parameters(end_time=peak + 1e-4),
-                          solver=wf.Solver(nodes=30, rtol=1e-7, stall_factor=float("inf"), max_steps=1_000_000),
-                          device="cpu", progress=False, fronts=None, record=times)
+    run = unlimited(pair, 1e-3, 1e-7, scene=wf.Parameters(end_time=peak + 1e-4), record=times)
     stress = run.friction_stress_history.values
     apart = np.abs(stress[0] - stress[1]).max(axis=1) / np.abs(stress[0]).max()
     when = ", ".join(f"{level:.0e} at {(run.time.values[np.argmax(apart > level)] - start) * 1e3:.1f} ms"
@@ -268,33 +274,22 @@ def soft_interface_conditioning():
     N = 30 and at two widths at N = 60: mu_s, their spread (largest less smallest, relative to their
     mean), accepted steps, the wall time of the four; then soft_interface's three costliest members
     (113, 73, 85) at the width 3e-3 and rtol 1e-5 and 1e-7 (~4-5 minutes in all on a 2-core CPU)."""
-    import warnings
-
     import numpy as np
 
     members = soft_interface_members()
-    factors = np.array([1.0, 1 + 1e-10, 1 + 1e-8, 1 + 1e-6])
-    perturbed = {key: np.full(4, value[73]) for key, value in members.items()}
-    perturbed["normal_force"] = members["normal_force"][73] * factors
+    perturbed = with_force_factors(members, 73)
     print("  N  width   mu_s at F times 1, 1 + 1e-10, 1 + 1e-8, 1 + 1e-6                spread (rel.)  accepted "
           "steps                     wall s")
     for nodes, width in ((30, 1e-2), (30, 3e-3), (30, 1e-3), (30, 3e-4), (30, 1e-4), (60, 3e-3), (60, 3e-4)):
         t0 = time.perf_counter()
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            run = wf.simulate(perturbed, solver=wf.Solver(nodes=nodes, rtol=1e-7, sliding_width=width,
-                                                          stall_factor=float("inf"), max_steps=3_000_000),
-                              device="cpu", progress=False, fronts=None)
+        run = unlimited(perturbed, width, 1e-7, nodes=nodes, max_steps=3_000_000)
         mu = run.mu_s.values
         print(f"  {nodes:2d}  {width:.0e}  {np.round(mu, 7).tolist()}  {(mu.max() - mu.min()) / mu.mean():.2e}       "
               f"{run.steps_accepted.values.tolist()}  {time.perf_counter() - t0:.0f}")
     three = {key: value[[113, 73, 85]] for key, value in members.items()}
     print("  members [113, 73, 85] at the width 3e-3, N = 30 (no straggler limit): rtol, status, accepted steps, mu_s")
     for rtol in (1e-5, 1e-7):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            run = wf.simulate(three, solver=wf.Solver(nodes=30, rtol=rtol, sliding_width=3e-3, stall_factor=float("inf"),
-                                                      max_steps=1_000_000), device="cpu", progress=False, fronts=None)
+        run = unlimited(three, 3e-3, rtol)
         print(f"    {rtol:.0e}: {run.status.values.tolist()} {run.steps_accepted.values.tolist()} "
               f"{np.round(run.mu_s.values, 6).tolist()}")
 
@@ -306,18 +301,10 @@ def soft_interface_widths(widths=(1e-2, 3e-3, 1e-3)):
     1e-7 and its change under the perturbation (both relative: median, 90th percentile, largest,
     members above 1e-5 and 1e-4), and mu_s at rtol 1e-7 against the narrowest width's (its bias:
     median and largest). ~8 minutes on a 2-core CPU."""
-    import warnings
-
     import numpy as np
 
     members = soft_interface_members()
     nudged = dict(members, normal_force=members["normal_force"] * (1 + 1e-10))
-
-    def run(values, width, rtol):
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            return wf.simulate(values, solver=wf.Solver(nodes=30, rtol=rtol, sliding_width=width, stall_factor=float("inf"),
-                                                        max_steps=3_000_000), device="cpu", progress=False, fronts=None)
 
     def spread(x):
         x = x[np.isfinite(x)]
@@ -327,7 +314,8 @@ def soft_interface_widths(widths=(1e-2, 3e-3, 1e-3)):
     fine = {}
     for width in widths:
         t0 = time.perf_counter()
-        coarse, ref, other = run(members, width, 1e-5), run(members, width, 1e-7), run(nudged, width, 1e-7)
+        coarse, ref, other = (unlimited(values, width, rtol, max_steps=3_000_000)
+                              for values, rtol in ((members, 1e-5), (members, 1e-7), (nudged, 1e-7)))
         steps = coarse.steps_accepted.values
         ok = [int((r.status.values == 0).sum()) for r in (coarse, ref, other)]
         fine[width] = ref.mu_s.values
