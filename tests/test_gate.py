@@ -328,8 +328,9 @@ def test_the_automatic_end_waits_for_edge_nodes_that_slide_since_the_loading_pha
     6 ms before the last edge nodes of these members opened, and their yield_time was NaN. Their
     openings converge as the gate's width w shrinks (the margin's crossing of 0; node 0 of the second
     member opens 37 us later at w = 1e-3 than at 1e-4 and 1e-5, which agree within 10 us at rtol
-    1e-5 to 1e-7: the regularisation's own O(w) effect on the node's stress), and mu_s does not move. Members of a random sample (N = 30; 2e/L 0.189 and -0.155, F 156 and 93 kN, v 0.0132
-    and -0.0030 m/s), whose edge nodes 28-29 and 0-1 slide since the loading phase."""
+    1e-5 to 1e-7: the regularisation's own O(w) effect on the node's stress), and mu_s does not move.
+    Members of a random sample (N = 30; 2e/L 0.189 and -0.155, F 156 and 93 kN, v 0.0132 and -0.0030
+    m/s), whose edge nodes 28-29 and 0-1 slide since the loading phase."""
     members = {"eccentricity": [0.18931287604621727, -0.15512064620849692],
                "normal_force": [156122.3158302238, 92813.70192322713],
                "disc_velocity": [0.013186648029815496, -0.003041163051535]}

@@ -437,16 +437,16 @@ class Solver:
                       bit. A very large value takes the velocity out of the error control altogether
                       (the other components still hold the steps).
     viscous_velocity_cap: the pad velocity's error scale (in the error estimate at nodes in contact, and
-                      in the Newton test) is at most this many times hardness/viscous_coefficient
-                      (2e-5 m/s with the defaults: 2e-4 m/s at the default 10), but not below the scale of the disc's velocity
-                      now, u_scale*max(|v_d(t)|, v*)/D (docs/model.md, "Time integration"). A velocity
-                      error dV moves a sticking node's viscous stress by ~eta*(sigma_n/hardness)*dV,
-                      and the member's scale (u_scale*|v_max|/D) let errors of tens to hundreds of kPa
-                      through in loaded pads with fast discs (F = 91 kN, v = 0.107 m/s: a scale 1e4
-                      times the default cap), whose edge nodes then opened microseconds after the disc
-                      started. Members whose scale is below the cap (F*|v| below ~10 times the default
-                      scene's, the benchmark's members among them) run bit for bit as without it. 1:
-                      the stress's own tolerance (largest mu_s error of 300 wide members 1.4e-5
+                      in the Newton test) is at most this many times hardness/viscous_coefficient (2e-5
+                      m/s with the defaults: 2e-4 m/s at the default 10), but not below the scale of the
+                      disc's velocity now, u_scale*max(|v_d(t)|, v*)/D (docs/model.md, "Time
+                      integration"). A velocity error dV moves a sticking node's viscous stress by
+                      ~eta*(sigma_n/hardness)*dV, and the member's scale (u_scale*|v_max|/D) let errors of
+                      tens to hundreds of kPa through in loaded pads with fast discs (F = 91 kN, v = 0.107
+                      m/s: a scale 1e4 times the default cap), whose edge nodes then opened microseconds
+                      after the disc started. Members whose scale is below the cap (F*|v| below ~10 times
+                      the default scene's, the benchmark's members among them) run bit for bit as without
+                      it. 1: the stress's own tolerance (largest mu_s error of 300 wide members 1.4e-5
                       against 7.6e-5 at rtol 1e-5; 10.7 % more Newton iterations on the benchmark's
                       members, their mu_s unchanged); inf: off.
     steps_per_launch: attempted steps per kernel launch (progress granularity; no effect on results).
