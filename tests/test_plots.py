@@ -366,6 +366,31 @@ def test_figures_with_nothing_to_show_say_why(grid):
         ax = fig.axes[0]
         assert "; 15 max_steps_reached" in ax.get_title() and not ax.get_xticks().size
         assert [t.get_text() for t in ax.texts][0].startswith("no ")
+    # quick_look's histogram (no swept parameter) had an empty panel with axes -0.04..0.04
+    ax = plots.mu_s_histogram_figure(failed.assign_attrs(varying_parameters="")).axes[0]
+    assert ax.get_title() == "mu_s of 15 members (0 ok; 15 max_steps_reached)" and not ax.get_xticks().size
+    assert [t.get_text() for t in ax.texts] == ["no member has a mu_s to show"] and not ax.patches
+    ax = plots.mu_s_histogram_figure(grid.assign_attrs(varying_parameters="")).axes[0]
+    assert sum(p.get_height() for p in ax.patches) == 15 and ax.get_title() == "mu_s of 15 members (15 ok)"
+
+
+def test_a_file_opened_with_xarray_itself_plots_by_member_number(contact_run, tmp_path):
+    """xr.open_dataset leaves a file's members as string labels ('<run id>:0000000000') and its
+    recorded fields in the group 'recorded': the arrival-time curves of a file without a swept
+    parameter raised "invalid literal for int()", and the recorded figures said to run with
+    record=. The curves are labelled by member number; the recorded figures say how to open the
+    file."""
+    path = write_ensemble(contact_run.sel(member=[0]).isel(recorded=[0]).assign_attrs(varying_parameters=""),
+                          tmp_path / "one.nc")
+    with xr.open_dataset(path) as raw:
+        assert raw.member.dtype.kind in "OSU"
+        ax = plots.arrival_times_figure(raw).axes[0]
+        assert [line.get_label() for line in ax.get_lines()] == ["member 0", "_meeting"]
+        memory = plots.arrival_times_figure(contact_run.sel(member=[0])).axes[0]
+        np.testing.assert_array_equal(ax.get_lines()[0].get_ydata(), memory.get_lines()[0].get_ydata())
+        for figure in (plots.friction_history_figure, plots.space_time_figure):
+            with pytest.raises(ValueError, match="group 'recorded'; open the file with warpfric.io.open_ensemble"):
+                figure(raw, 0)
 
 
 def test_misuse_is_named(grid, contact_run):

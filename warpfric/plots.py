@@ -144,9 +144,20 @@ def _per_member(ds, name: str) -> np.ndarray:
     return np.broadcast_to(np.asarray(ds[name].values, dtype=float), (ds.sizes["member"],))
 
 
-def _require_ensemble(ds, what: str) -> None:
-    """ValueError unless ``ds`` is an ensemble Dataset (simulate's, open_ensemble's): a Dataset with
-    the dimension member and the status of each member."""
+def _file_layout(ds) -> bool:
+    """Whether ``ds`` is a warpfric file opened with xarray itself (``xr.open_dataset``): members
+    labelled by strings beside their numbers (``member_number``), recorded fields left in the file's
+    group ``recorded``."""
+    from .io import MEMBER_NUMBER
+
+    return "member" in ds.dims and MEMBER_NUMBER in ds.coords and ds.member.dtype.kind in "OSU"
+
+
+def _require_ensemble(ds, what: str):
+    """The ensemble Dataset (simulate's, open_ensemble's layout) of ``ds``: ``ds`` itself, or a file
+    opened with xarray itself in that layout (its member numbers as the member coordinate; its
+    recorded fields, in the file's group ``recorded``, are not there); a ValueError unless ``ds`` is
+    a Dataset with the dimension member and the status of each member."""
     import xarray as xr
 
     if not isinstance(ds, xr.Dataset):
@@ -157,6 +168,11 @@ def _require_ensemble(ds, what: str) -> None:
             f"dimensions {tuple(ds.dims)}"
         raise ValueError(f"{what}: expects an ensemble along the dimension member with each member's status, got "
                          f"{found}; pass the ensemble itself (select members with ds.sel(member=...))")
+    if _file_layout(ds):
+        from .io import _from_file_layout
+
+        return _from_file_layout(ds)
+    return ds
 
 
 def _require_parameters(ds, what: str, *names) -> None:
@@ -320,7 +336,7 @@ def _mixed_note(ds, names, ok: np.ndarray) -> str:
 def mu_s_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     """mu_s against ``pname`` (ok members), coloured by ``colour_by``; the title names the other
     swept parameters ``mixed`` (their members share the axes)."""
-    _require_ensemble(ds, "mu_s_figure")
+    ds = _require_ensemble(ds, "mu_s_figure")
     _require_parameters(ds, "mu_s_figure", pname, colour_by)
     plt = _plt()
     ok = ds.status.values == 0
@@ -367,7 +383,7 @@ def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     """The first front's v_left, v_middle, v_right, and v_second where some member has a second front,
     against ``pname``: one panel, the segments as markers; with ``colour_by``, one panel per segment,
     coloured by it; the title names the other swept parameters ``mixed``."""
-    _require_ensemble(ds, "front_speeds_figure")
+    ds = _require_ensemble(ds, "front_speeds_figure")
     _require_fronts(ds, "front_speeds_figure")
     _require_parameters(ds, "front_speeds_figure", pname, colour_by)
     plt = _plt()
@@ -420,7 +436,7 @@ def arrival_times_figure(ds, max_curves: int = MAX_CURVES):
     """Arrival time minus the first arrival against x for up to ``max_curves`` ok members spread
     over the ensemble, coloured by the first swept parameter, dashed or dotted by the second (where
     it takes at most 4 values among them) and labelled with every swept value."""
-    _require_ensemble(ds, "arrival_times_figure")
+    ds = _require_ensemble(ds, "arrival_times_figure")
     _require_fronts(ds, "arrival_times_figure")
     plt = _plt()
     swept = ds.attrs.get("varying_parameters", "").split()
@@ -465,18 +481,37 @@ def arrival_times_figure(ds, max_curves: int = MAX_CURVES):
     return fig
 
 
+def mu_s_histogram_figure(ds):
+    """The histogram of the ok members' mu_s (quick_look's figure of an ensemble without a swept
+    parameter); the title counts the members by status."""
+    ds = _require_ensemble(ds, "mu_s_histogram_figure")
+    plt = _plt()
+    ok = ds.status.values == 0
+    mu = np.asarray(ds.mu_s.values, dtype=float)[ok & np.isfinite(ds.mu_s.values)]
+    fig, ax = plt.subplots(figsize=(5.6, 3.8))
+    ax.set_title(f"mu_s of {plural(ok.size, 'member')} ({ok.sum()} ok{_status_text(ds, ok)})", fontsize=10)
+    if not mu.size:
+        _nothing_to_plot(ax, "no member has a mu_s to show")
+        return fig
+    edges = np.histogram_bin_edges(mu, bins="auto") if mu.size > 1 else 10
+    ax.hist(mu, bins=edges if np.size(edges) <= 41 else 40, label=plural(mu.size, "ok member"))
+    ax.set_xlabel("static friction coefficient mu_s")
+    ax.set_ylabel("members")
+    ax.legend(fontsize=8)
+    return fig
+
+
 def quick_look(ds, outdir, max_curves: int = MAX_CURVES) -> list:
     """Write PNGs into ``outdir``: mu_s and front speeds against each swept parameter (coloured by
     another swept parameter), arrival-time curves, and the space-time map and mu(t) of every recorded
-    member.
+    member. ``ds``: simulate's or open_ensemble's Dataset (a file opened with xarray.open_dataset has
+    no recorded fields: they are in its group 'recorded').
     Returns the paths written."""
-    _require_ensemble(ds, "quick_look")
-    plt = _plt()
+    ds = _require_ensemble(ds, "quick_look")
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     written = []
     swept = ds.attrs.get("varying_parameters", "").split()
-    ok = ds.status.values == 0
     for pname in swept:
         others = [name for name in swept if name != pname]
         colour_by = others[0] if others else None
@@ -485,14 +520,7 @@ def quick_look(ds, outdir, max_curves: int = MAX_CURVES) -> list:
             _finish(front_speeds_figure(ds, pname, colour_by, others[1:]), outdir / f"front_speeds_vs_{pname}.png",
                     written)
     if not swept and ds.sizes["member"] > 1:
-        fig, ax = plt.subplots(figsize=(5.6, 3.8))
-        mu = ds.mu_s.values[ok & np.isfinite(ds.mu_s.values)]
-        edges = np.histogram_bin_edges(mu, bins="auto") if mu.size > 1 else 10
-        ax.hist(mu, bins=edges if np.size(edges) <= 41 else 40, label=plural(mu.size, "ok member"))
-        ax.set_xlabel("static friction coefficient mu_s")
-        ax.set_ylabel("members")
-        ax.legend(fontsize=8)
-        _finish(fig, outdir / "mu_s_histogram.png", written)
+        _finish(mu_s_histogram_figure(ds), outdir / "mu_s_histogram.png", written)
     if "arrival_time" in ds:
         _finish(arrival_times_figure(ds, max_curves), outdir / "arrival_times.png", written)
     if "velocity_history" in ds:
@@ -506,8 +534,11 @@ def quick_look(ds, outdir, max_curves: int = MAX_CURVES) -> list:
 def _recorded_member(ds, recorded_index: int, what: str) -> tuple[int, int]:
     """(member number, position along member) of the recorded member at ``recorded_index``; a
     ValueError naming ``what`` where there is none."""
-    _require_ensemble(ds, what)
-    if "velocity_history" not in ds:
+    if "velocity_history" not in _require_ensemble(ds, what):
+        if _file_layout(ds):
+            raise ValueError(f"{what}: no recorded fields in this Dataset: xarray.open_dataset reads a file's root "
+                             "group only, and a file keeps its recorded fields in the group 'recorded'; open the "
+                             "file with warpfric.io.open_ensemble(path)")
         raise ValueError(f"{what}: the ensemble has no recorded fields (run with record=warpfric.Record(...); the "
                          "command line: warpfric run -o OUT.nc --record, or [record] in a sweep file)")
     recorded = [int(m) for m in ds.recorded_member.values]
