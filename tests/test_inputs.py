@@ -297,7 +297,7 @@ def test_parameters_held_as_coordinates_of_a_members_dataset_are_used():
 def test_a_runs_outputs_give_its_members_back():
     """simulate(ds) of a run's Dataset (or its file) was refused for its outputs' dims ("variable
     'displacement' has dims ('member', 'x')"), though docs/guide.md says the way back works: it takes
-    the run's parameters (variables along member, or coordinates after set_coords or by_parameters)
+    the run's parameters (variables along member, or coordinates after set_coords, or a by_parameters view)
     and runs the same members again, bit for bit; a selection of members runs those. A Record for a run numbered from K names its members by
     index, and the refusal of a number says so."""
     kw = dict(solver=wf.Solver(nodes=11), fronts=None)
@@ -318,6 +318,13 @@ def test_a_runs_outputs_give_its_members_back():
         order = np.lexsort((rerun.eccentricity.values, rerun.normal_force.values))
         np.testing.assert_array_equal(rerun.mu_s.values[order], grid.mu_s.values[np.lexsort(
             (grid.eccentricity.values, grid.normal_force.values))])
+    # a by_parameters view itself (refused for its dims before): stacked back, its members in the order of their
+    # numbers, a combination that no member ran (NaN there) left out; one swept name too
+    for part in (grid, grid.isel(member=[0, 1, 3]), grid.sel(member=grid.member[grid.eccentricity == 0.1])):
+        rerun = simulate(wf.io.by_parameters(part), **kw)
+        np.testing.assert_array_equal(rerun.normal_force.values, part.normal_force.values)
+        np.testing.assert_array_equal(rerun.eccentricity.values, part.eccentricity.values)
+        np.testing.assert_array_equal(rerun.mu_s.values, part.mu_s.values)
     with pytest.raises(ValueError, match=r"contains 12; valid: member indices 0..2 \(a member's index is its number "
                                          r"less simulate's member_offset.*member_offset=K\)"):
         simulate(first, member_offset=10, record=wf.Record.detachment(first, members=(12,)), **kw)

@@ -16,6 +16,20 @@ from .parameters import PARAMETER_NAMES, Parameters, did_you_mean, resolve_value
 MEMBER_COORDS = ("member", "member_id", "member_number")
 
 
+def _stacked(ds):
+    """A by_parameters view (warpfric/io.py: the swept parameters as dimensions, the member numbers in
+    ``member_number``) back along ``member``, its members in the order of their numbers, the
+    combinations that no member ran (NaN numbers) left out; any other Dataset as it is."""
+    grid = [str(d) for d in ds.dims if str(d) in PARAMETER_NAMES]
+    if "member" in ds.dims or "member_number" not in ds.data_vars or not grid:
+        return ds
+    ds = ds.drop_vars([name for name in ("member", "member_id") if name in ds.coords])  # one swept name: along it
+    ds = ds.stack(member=grid)
+    numbers = np.asarray(ds.member_number.values, dtype=np.float64)
+    ran = np.flatnonzero(np.isfinite(numbers))
+    return ds.isel(member=ran[np.argsort(numbers[ran], kind="stable")])
+
+
 def _member_arrays(members: Any) -> dict[str, np.ndarray]:
     """Mapping name -> array from a mapping or an xarray Dataset with dimension 'member'."""
     if members is None:
@@ -25,13 +39,15 @@ def _member_arrays(members: Any) -> dict[str, np.ndarray]:
     except ImportError:  # pragma: no cover - xarray is a dependency
         xr = None
     if xr is not None and isinstance(members, xr.Dataset):
+        members = _stacked(members)
         if "warpfric_version" in members.attrs:  # a run's outputs (simulate's Dataset, or its file): its members'
             # parameters (variables along member, scalars where its file holds one value for all, or coordinates
-            # after set_coords or by_parameters); its outputs and recorded fields are no input
+            # after set_coords; a by_parameters view is stacked back above); its outputs and recorded fields are no
+            # input
             members = members.drop_vars([name for name in members.data_vars if name not in PARAMETER_NAMES])
         out = {}
         # the parameters among its coordinates too (a grid built with .stack(member=[...]) holds them
-        # there, as by_parameters gives them back): they were ignored, and the default scene ran
+        # there): they were ignored, and the default scene ran
         coords = {name: var for name, var in members.coords.items() if str(name) in PARAMETER_NAMES}
         for name, var in members.coords.items():  # a misspelt parameter as a coordinate: as a variable, refused
             if var.dims == ("member",) and str(name) not in PARAMETER_NAMES and str(name) not in MEMBER_COORDS:
