@@ -121,6 +121,24 @@ def test_a_disc_that_never_moves_has_no_peak_and_no_front():
     assert ds.event_max_velocity.values[1] > 100 * wf.Fronts().min_event_fraction * 1e-4
 
 
+def test_the_advice_for_a_non_finite_state_names_float64_only_to_members_that_ran_in_float32():
+    """A force of 1e300 N makes the state non-finite; the warning's advice was 'a tighter rtol, or
+    float64' to a member that ran in float64. float64 is named where members ran in float32."""
+    import xarray as xr
+
+    from warpfric.simulate import members_not_ok_text
+
+    with pytest.warns(UserWarning, match=r"1 of 2 members: 1 non_finite_state \(the state became NaN or inf: a tighter "
+                                         r"rtol\); their numbers"):
+        ds = run({"normal_force": [1e300, 1000.0]}, nodes=20, rtol=1e-5)
+    assert list(ds.status.values) == [2, 0] and (ds.working_precision.values == 64).all()
+    single = xr.Dataset({"status": ds.status, "disc_velocity": ds.disc_velocity,
+                         "working_precision": ("member", np.array([32, 64], np.int8))})
+    assert members_not_ok_text(single, wf.Solver()).endswith(
+        "1 of 2 members: 1 non_finite_state (the state became NaN or inf: a tighter rtol, or float64 (1 of them ran "
+        "in float32))")
+
+
 def test_float32_members_that_stall_are_rerun_in_float64():
     """Without damping, float32 round-off of the displacement excites the grid's highest elastic mode
     at the end of the force ramp, and the error control then needs ~1e-8 s steps (docs/model.md,

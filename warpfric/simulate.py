@@ -299,8 +299,8 @@ def _short_long_names(ds: xr.Dataset) -> xr.Dataset:
 
 _STATUS_ADVICE = {
     "max_steps_reached": "Solver(max_steps=...) allows more than {max_steps:,} attempted steps",
-    "non_finite_state": "the state became NaN or inf: a tighter rtol, or float64",
-    "step_size_underflow": "the step size fell below its floor: a tighter rtol, or float64",
+    "non_finite_state": "the state became NaN or inf: a tighter rtol",
+    "step_size_underflow": "the step size fell below its floor: a tighter rtol",
     "stalled": ("stopped by the straggler rule after stall_factor = {stall_factor:g} times the attempts of the "
                 "typical member, or stall_min_steps = {stall_min_steps:,} where that is more: "
                 "Solver(stall_factor=float('inf')), in a sweep file [solver] stall_factor = inf, "
@@ -408,6 +408,12 @@ def members_not_ok_text(ds: xr.Dataset, solver: Solver, where: str = "") -> str 
             advice["no_peak"] = _STILL_DISC_ADVICE
         elif still:
             advice["no_peak"] += f"; {still} of them: {_STILL_DISC_ADVICE}"
+    for name in ("non_finite_state", "step_size_underflow"):  # float64 is advice for members that ran in float32
+        if name in failed:
+            single = (np.sum((ds.status.values == meanings.index(name)) & (ds.working_precision.values == 32))
+                      if "working_precision" in ds else failed[name])
+            if single:
+                advice[name] += f", or float64 ({int(single)} of them ran in float32)"
     for name in ("max_steps_reached", "stalled"):
         if name in failed and "lift_off" in ds:
             lifted = int(np.sum((ds.status.values == meanings.index(name)) & (ds.lift_off.values == 1)))
