@@ -974,13 +974,18 @@ def test_slips_a_new_user_makes_are_one_line_errors_that_name_them(tmp_path, cap
 
 def test_a_sweep_file_sets_the_team_size(tmp_path):
     """[solver] lanes had no value a sweep file could give (its default None made every value "expected a
-    string", and "4" failed Solver's own check): an integer is taken, a string is named."""
+    string", and "4" failed Solver's own check): an integer is taken; a string is refused by Solver's
+    own check, which names the valid values (the sweep file's "expected an integer" did not)."""
     from warpfric.sweep_file import SweepError, parse_sweep
 
     assert parse_sweep(TINY_SWEEP.replace("nodes = 11", "nodes = 11\nlanes = 4")).solver.lanes == 4
     assert parse_sweep(TINY_SWEEP).solver.lanes is None
-    with pytest.raises(SweepError, match=r"\[solver\] lanes = '4': expected an integer"):
+    with pytest.raises(SweepError, match=r"\[solver\] solver setting 'lanes' = '4' is invalid; valid: None, 1, or an "
+                                         r"integer in \[2, 5\]"):
         parse_sweep(TINY_SWEEP.replace("nodes = 11", 'nodes = 11\nlanes = "4"'))
+    with pytest.raises(SweepError, match=r"\[solver\] solver setting 'nodes' = '30' is invalid; valid: an integer in "
+                                         r"\[3, 2147483647\]"):
+        parse_sweep(TINY_SWEEP.replace("nodes = 11", 'nodes = "30"'))
 
 
 def test_the_command_line_says_why_a_cut_off_runs_front_is_not_given(capsys):

@@ -25,7 +25,11 @@ INF = math.inf
 
 
 def _p(default, units, long_name, low, high, low_open=False, high_open=False, none_means=None):
-    """Field with its metadata: unit, CF long name and valid range [low, high] (or open ends)."""
+    """Field with its metadata: unit, CF long name and valid range [low, high] (or open ends). An
+    infinite end is open (inf is no value) unless ``none_means`` is that end (stop_time and end_time
+    take inf: no stop, the automatic end)."""
+    low_open = low_open or (math.isinf(low) and none_means != low)
+    high_open = high_open or (math.isinf(high) and none_means != high)
     return field(
         default=default,
         metadata=dict(
@@ -236,8 +240,9 @@ def resolve_value(name: str, value: Any, scene: Parameters | None = None):
             hint = f" (per member, write {meta['none_means']:g} where you mean None)"
         elif name == "torque_arm" and arr.ndim > 0:  # None: the pad height, which may differ per member
             hint = " (per member, write the member's pad height where you mean None, e.g. 0.015 m)"
+        units = units_text(meta["units"])
         raise ValueError(f"parameter {name!r}: value {value!r} is not a real number; valid range "
-                         f"{_range_text(meta)}{hint}")
+                         f"{_range_text(meta)}{' ' + units if units else ' (dimensionless)'}{hint}")
     return arr.astype(np.float64)
 
 

@@ -121,6 +121,18 @@ def _number(value, where: str) -> float:
     return float(value)
 
 
+def _refused_by(cls, key: str, value) -> bool:
+    """Whether ``cls(key=value)`` (its other fields at their defaults) raises ValueError: its own check
+    of ``key``, whose message names the valid range."""
+    try:
+        cls(**{key: value})
+    except ValueError:
+        return True
+    except TypeError:  # a class with required fields
+        return False
+    return False
+
+
 def _dataclass_kwargs(table: dict, cls, where: str, parameters: bool = False) -> dict:
     names = {f.name: f for f in dataclasses.fields(cls)}
     out = {}
@@ -136,9 +148,9 @@ def _dataclass_kwargs(table: dict, cls, where: str, parameters: bool = False) ->
             out[key] = value
         elif (isinstance(default, int) and not isinstance(default, bool)) or (
                 default is None and str(names[key].type).startswith("int")):  # lanes: int | None
-            if isinstance(value, bool) or not isinstance(value, int):
+            if (isinstance(value, bool) or not isinstance(value, int)) and not _refused_by(cls, key, value):
                 raise SweepError(f"{_where(where, key)} = {value!r}: expected an integer")
-            out[key] = value
+            out[key] = value  # a value of another type that the class refuses: its message names the valid range
         elif isinstance(default, float):
             out[key] = _number(value, _where(where, key))
         elif cls is Fronts and key == "event" and isinstance(value, list):  # several events: Fronts' tuple
