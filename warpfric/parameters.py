@@ -691,7 +691,8 @@ class Fronts:
 
 MAX_RECORD_TIMES = 1_000_000
 RECORD_COUNT = 1001  # recording times of Record.detachment and --record: 0.2 ms apart over the default scene's detachment
-_RECORD_TIMES_WHY = "(each time holds 4 fields at every node of each recorded member: 3.2 GB at 100 nodes)"
+_RECORD_TIMES_WHY = ("(each time holds 4 fields at every node of each recorded member: the largest count, 3.2 GB a "
+                     "member at 100 nodes)")
 
 
 @dataclass(frozen=True)
@@ -726,9 +727,10 @@ class Record:
             start, stop = float(start), float(stop)
         except (TypeError, ValueError):
             raise ValueError(f"record window: start {start!r} and stop {stop!r} are invalid; valid: numbers of "
-                             "seconds, start <= stop") from None
-        if start > stop:  # NaN: Record's own check names the times
-            raise ValueError(f"record window: start {start!r} s is after stop {stop!r} s; valid: start <= stop")
+                             "seconds, start < stop") from None
+        if start >= stop:  # NaN: Record's own check names the times (start = stop: count equal times)
+            raise ValueError(f"record window: start {start!r} s is {'after' if start > stop else 'at'} stop {stop!r} s; "
+                             "valid: start < stop")
         return Record(members=tuple(members), times=tuple(np.linspace(float(start), float(stop), int(count))))
 
     @staticmethod
