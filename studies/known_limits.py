@@ -8,6 +8,7 @@
     python studies/known_limits.py soft-interface  # steps of loaded pads with a soft interface (mu0/h)
     python studies/known_limits.py soft-interface-conditioning  # its ill-conditioned member against the width
     python studies/known_limits.py soft-interface-widths  # all 120 members' errors and conditioning by width
+    python studies/known_limits.py soft-interface-flags  # whether outputs flag the ill-conditioned members
     python studies/known_limits.py all
     (also: python studies/bench.py limits vibration|float32|all)
 """
@@ -149,11 +150,12 @@ def fronts_wide():
                   f"({float(ref.v_first[i]):.3g}) m/s")
 
 
-def soft_interface_members():
-    """The 120 members of soft_interface (seed 11), {parameter: (120,) array}."""
+def soft_interface_members(seed=11):
+    """The 120 members of soft_interface (seed 11; another seed: a second sample of the same
+    distribution), {parameter: (120,) array}."""
     import numpy as np
 
-    rng = np.random.default_rng(11)
+    rng = np.random.default_rng(seed)
     m = 120
     return {"eccentricity": rng.uniform(-0.6, 0.6, m),
             "normal_force": np.exp(rng.uniform(np.log(3e4), np.log(3e5), m)),
@@ -333,12 +335,55 @@ def soft_interface_widths(widths=(1e-2, 3e-3, 1e-3)):
                   f"90th {np.percentile(bias, 90):.1e}, largest {bias.max():.1e}")
 
 
+def soft_interface_flags(seeds=(11, 12)):
+    """Whether outputs flag the ill-conditioned soft-interface members: for soft_interface's 120
+    members (seed 11) and 120 more of the same distribution (seed 12), width 1e-3, N = 30, no
+    straggler limit. Labels: mu_s at rtol 1e-7 moving by more than 1e-5 (relative) with the normal
+    force times 1 + 1e-10. Rules read from the run at rtol 1e-5: the accepted steps against the
+    ensemble's median (3x, 4x, 8x), the same perturbation at rtol 1e-5 (a second run), and the status
+    stalled under simulate's straggler limit. Flagged members: caught (ill-conditioned) / false. ~9
+    minutes on a 2-core CPU."""
+    import warnings
+
+    import numpy as np
+
+    for seed in seeds:
+        t0 = time.perf_counter()
+        members = soft_interface_members(seed)
+        nudged = dict(members, normal_force=members["normal_force"] * (1 + 1e-10))
+        fine, fine_nudged, run, run_nudged = (unlimited(values, 1e-3, rtol, max_steps=3_000_000)
+                                              for values, rtol in ((members, 1e-7), (nudged, 1e-7), (members, 1e-5),
+                                                                   (nudged, 1e-5)))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            default = wf.simulate(members, solver=wf.Solver(nodes=30), device="cpu", progress=False, fronts=None)
+        change = np.abs(fine_nudged.mu_s.values / fine.mu_s.values - 1)
+        ill = change > 1e-5
+        order = np.argsort(-change)[:int(ill.sum())]
+        print(f"  seed {seed} ({time.perf_counter() - t0:.0f} s): {int(ill.sum())} of 120 ill-conditioned "
+              f"({int((change > 1e-4).sum())} above 1e-4): members {', '.join(map(str, sorted(order)))}; "
+              f"changes {', '.join(f'{change[k]:.1e}' for k in order)}; the largest below 1e-5: "
+              f"{change[~ill].max():.1e}")
+        steps = run.steps_accepted.values
+        ratio = steps / np.median(steps)
+        probe = np.abs(run_nudged.mu_s.values / run.mu_s.values - 1)
+        meanings = default.status.attrs["flag_meanings"].split()
+        stalled = default.status.values == meanings.index("stalled")
+        rules = [(f"steps >= {k} x the median", ratio >= k) for k in (3, 4, 8)]
+        rules += [("a second run with F x (1 + 1e-10) at rtol 1e-5: mu_s moves >= 3e-6", probe >= 3e-6),
+                  ("status stalled, simulate's straggler limit", stalled)]
+        for text, flagged in rules:
+            print(f"    {text}: {int((flagged & ill).sum())} / {int((flagged & ~ill).sum())}")
+        print(f"    the ill-conditioned members' steps against the median: {', '.join(f'{ratio[k]:.1f}' for k in order)}")
+
+
 def main(argv=None):
     import argparse
 
     checks = {"vibration": vibration, "float32": float32, "float32-wide": float32_wide,
               "stop-lift-off": stop_lift_off, "fronts-wide": fronts_wide, "soft-interface": soft_interface,
-              "soft-interface-conditioning": soft_interface_conditioning, "soft-interface-widths": soft_interface_widths}
+              "soft-interface-conditioning": soft_interface_conditioning, "soft-interface-widths": soft_interface_widths,
+              "soft-interface-flags": soft_interface_flags}
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("check", nargs="?", default="all", choices=[*checks, "all"], help="which measurement (default all)")
     name = ap.parse_args(sys.argv[1:] if argv is None else argv).check
