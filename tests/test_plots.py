@@ -3,6 +3,8 @@ log axes where a parameter spans a decade or more, a legend on every curve plot.
 ensembles (no run): the figures only read the Dataset; the space-time maps read small recorded runs
 (N = 21, through a file, as `warpfric plot` does)."""
 
+import warnings
+
 import numpy as np
 import pytest
 import xarray as xr
@@ -391,6 +393,15 @@ def test_a_file_opened_with_xarray_itself_plots_by_member_number(contact_run, tm
         for figure in (plots.friction_history_figure, plots.space_time_figure):
             with pytest.raises(ValueError, match="group 'recorded'; open the file with warpfric.io.open_ensemble"):
                 figure(raw, 0)
+        # quick_look draws what the root group holds, and says where the recorded fields are
+        with pytest.warns(UserWarning, match="recorded fields are in its group 'recorded'.*open_ensemble"):
+            assert [p.name for p in plots.quick_look(raw, tmp_path / "raw")] == ["arrival_times.png"]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a file without recorded fields: nothing to say
+        plain = write_ensemble(contact_run.sel(member=[0]).drop_dims(["recorded", "time"]).assign_attrs(
+            varying_parameters=""), tmp_path / "plain.nc")
+        with xr.open_dataset(plain) as raw:
+            assert [p.name for p in plots.quick_look(raw, tmp_path / "plain")] == ["arrival_times.png"]
 
 
 def test_misuse_is_named(grid, contact_run):

@@ -12,6 +12,7 @@ friction coefficient mu(t) over the recorded times.
 from __future__ import annotations
 
 import re
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -151,6 +152,18 @@ def _file_layout(ds) -> bool:
     from .io import MEMBER_NUMBER
 
     return "member" in ds.dims and MEMBER_NUMBER in ds.coords and ds.member.dtype.kind in "OSU"
+
+
+def _recorded_group_left_out(ds) -> bool:
+    """Whether the file that ``ds`` (opened with xarray.open_dataset) was read from has recorded
+    fields, which ``ds`` then lacks: the file named in its encoding, where that still exists."""
+    from .io import RECORDED_GROUP, _has_group
+
+    source = ds.encoding.get("source")
+    try:
+        return bool(source) and "velocity_history" not in ds and _has_group(source, RECORDED_GROUP)
+    except OSError:
+        return False
 
 
 def _require_ensemble(ds, what: str):
@@ -507,7 +520,12 @@ def quick_look(ds, outdir, max_curves: int = MAX_CURVES) -> list:
     member. ``ds``: simulate's or open_ensemble's Dataset (a file opened with xarray.open_dataset has
     no recorded fields: they are in its group 'recorded').
     Returns the paths written."""
-    ds = _require_ensemble(ds, "quick_look")
+    ensemble = _require_ensemble(ds, "quick_look")
+    if ensemble is not ds and _recorded_group_left_out(ds):  # a file opened with xarray.open_dataset
+        warnings.warn("quick_look: the file's recorded fields are in its group 'recorded', which "
+                      "xarray.open_dataset does not read: open the file with warpfric.io.open_ensemble(path) to "
+                      "draw them too", stacklevel=2)
+    ds = ensemble
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
     written = []
