@@ -212,6 +212,17 @@ def test_run_record_alone_without_a_detachment_records_the_whole_run(tmp_path, c
            "no detachment (status no_peak) (the last run records; its outputs are those of a run without recording)" in lines
 
 
+def test_the_detachment_window_of_a_run_that_ended_at_its_start_is_its_start():
+    """A member whose state became non-finite at t = 0 (no rest, no ramp, F = 1e300 N) has no
+    detachment, and its run ended where the disc starts: the window is that instant, count equal
+    times (Record takes non-decreasing times), not a refusal of a window the user never wrote."""
+    with pytest.warns(UserWarning, match="non_finite_state"):
+        ds = run({"normal_force": [1e300]}, scene=wf.Parameters(rest_until=0.0, force_ramp_time=0.0), nodes=11)
+    assert float(ds.final_time.values[0]) == 0.0
+    record = wf.Record.detachment(ds, count=5)
+    assert record.times == (0.0,) * 5 and record.members == (0,)
+
+
 def test_run_record_with_a_window(tmp_path, capsys):
     out = tmp_path / "w.nc"
     code, _, err = run_cli(capsys, "run", "--device", DEVICE, "--nodes", "21", "--quiet", "-o", out,

@@ -727,10 +727,10 @@ class Record:
             start, stop = float(start), float(stop)
         except (TypeError, ValueError):
             raise ValueError(f"record window: start {start!r} and stop {stop!r} are invalid; valid: numbers of "
-                             "seconds, start < stop") from None
-        if start >= stop:  # NaN: Record's own check names the times (start = stop: count equal times)
-            raise ValueError(f"record window: start {start!r} s is {'after' if start > stop else 'at'} stop {stop!r} s; "
-                             "valid: start < stop")
+                             "seconds, start <= stop") from None
+        if start > stop:  # NaN: Record's own check names the times; start = stop: count equal times, as Record
+            # takes non-decreasing times (Record.detachment's window of a run that ended at its start is one)
+            raise ValueError(f"record window: start {start!r} s is after stop {stop!r} s; valid: start <= stop")
         return Record(members=tuple(members), times=tuple(np.linspace(float(start), float(stop), int(count))))
 
     @staticmethod
