@@ -934,6 +934,8 @@ def test_the_interrupt_warning_reads_kept_chunks_with_a_parameter_missing(tmp_pa
             var.flag_meanings = meanings
             if velocity is not None:
                 nc.createVariable("disc_velocity", "f8", ("member",))[:] = velocity
+            else:
+                nc.createVariable("working_precision", "i1", ("member",))[:] = [32, 64]
         paths.append(path)
     from warpfric.io import _summary_columns
 
@@ -949,6 +951,9 @@ def test_the_interrupt_warning_reads_kept_chunks_with_a_parameter_missing(tmp_pa
     text = str(caught[0].message)
     assert "3 of 4 members in the 2 finished chunks: 3 no_peak" in text, text
     assert "; 1 of them: disc_velocity = 0: the disc never moves" in text, text  # the one that is known
+    # the precision each member ran in (the advice of float64 reads it), unknown where a file lacks it
+    assert np.isnan(summary_columns(0)["working_precision"]).all()
+    assert summary_columns(1)["working_precision"].tolist() == [32.0, 64.0]
 
 
 def test_slips_a_new_user_makes_are_one_line_errors_that_name_them(tmp_path, capsys, monkeypatch):

@@ -137,6 +137,10 @@ def test_the_advice_for_a_non_finite_state_names_float64_only_to_members_that_ra
     assert members_not_ok_text(single, wf.Solver()).endswith(
         "1 of 2 members: 1 non_finite_state (the state became NaN or inf: a tighter rtol, or float64 (1 of them ran "
         "in float32))")
+    # without working_precision (an interrupted run's kept chunks of an earlier version): the solver's precision
+    unknown = single.drop_vars("working_precision")
+    assert members_not_ok_text(unknown, wf.Solver()).endswith("(the state became NaN or inf: a tighter rtol)")
+    assert members_not_ok_text(unknown, wf.Solver(dtype="float32")).endswith("or float64 (1 of them ran in float32))")
 
 
 def test_float32_members_that_stall_are_rerun_in_float64():

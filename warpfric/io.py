@@ -869,13 +869,13 @@ def sweep_digest(text: str) -> str:
 
 
 def _summary_columns(nc) -> dict:
-    """Of an open chunk (netCDF4): ``status`` (int64), its ``flag_meanings``, and ``disc_velocity`` and
-    ``lift_off`` per member (float; NaN where a file lacks them: an edited one), for the warning of
-    an interrupted run's members not ok (runner._warn_members_not_ok_kept)."""
+    """Of an open chunk (netCDF4): ``status`` (int64), its ``flag_meanings``, and ``disc_velocity``,
+    ``lift_off`` and ``working_precision`` per member (float; NaN where a file lacks them: an edited
+    one), for the warning of an interrupted run's members not ok (runner._warn_members_not_ok_kept)."""
     n = nc["status"].shape[0]
     columns = {"status": np.asarray(nc["status"][:], dtype=np.int64).reshape(-1),
                "flag_meanings": nc["status"].getncattr("flag_meanings")}
-    for name in ("disc_velocity", "lift_off"):
+    for name in ("disc_velocity", "lift_off", "working_precision"):
         values = np.asarray(nc[name][:], dtype=float).reshape(-1) if name in nc.variables else np.nan
         columns[name] = np.broadcast_to(values, (n,))
     return columns
@@ -971,8 +971,9 @@ class ChunkStore:
             return False
 
     def summary_columns(self, index: int) -> dict:
-        """A finished chunk's status (with its flag meanings), disc_velocity and lift_off per member
-        (:func:`_summary_columns`), from the reading of ``is_done`` where the file is unchanged."""
+        """A finished chunk's status (with its flag meanings), disc_velocity, lift_off and
+        working_precision per member (:func:`_summary_columns`), from the reading of ``is_done`` where
+        the file is unchanged."""
         if not self.is_done(index):
             raise ValueError(f"{self.chunk_path(index)}: not a finished chunk of this run")
         return self._done[index][1]

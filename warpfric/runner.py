@@ -839,7 +839,7 @@ def _warn_members_not_ok_kept(store, kept: list, solver, out: Path) -> None:
 
     from .simulate import members_not_ok_text
 
-    names = ("status", "disc_velocity", "lift_off")
+    names = ("status", "disc_velocity", "lift_off", "working_precision")
     columns: dict = {name: [] for name in names}
     meanings = ""
     for i in kept:  # read when is_done counted them (netCDF4: xarray's open takes ~10x as long a file)

@@ -410,8 +410,10 @@ def members_not_ok_text(ds: xr.Dataset, solver: Solver, where: str = "") -> str 
             advice["no_peak"] += f"; {still} of them: {_STILL_DISC_ADVICE}"
     for name in ("non_finite_state", "step_size_underflow"):  # float64 is advice for members that ran in float32
         if name in failed:
-            single = (np.sum((ds.status.values == meanings.index(name)) & (ds.working_precision.values == 32))
-                      if "working_precision" in ds else failed[name])
+            ran = (np.asarray(ds.working_precision.values, dtype=float) if "working_precision" in ds else
+                   np.full(ds.sizes["member"], np.nan))  # unknown (NaN): the precision the solver asked for
+            ran = np.where(np.isnan(ran), 32.0 if solver.dtype == "float32" else 64.0, ran)
+            single = np.sum((ds.status.values == meanings.index(name)) & (ran == 32))
             if single:
                 advice[name] += f", or float64 ({int(single)} of them ran in float32)"
     for name in ("max_steps_reached", "stalled"):
