@@ -985,9 +985,15 @@ def test_a_sweep_file_sets_the_team_size(tmp_path):
 
     assert parse_sweep(TINY_SWEEP.replace("nodes = 11", "nodes = 11\nlanes = 4")).solver.lanes == 4
     assert parse_sweep(TINY_SWEEP).solver.lanes is None
-    with pytest.raises(SweepError, match=r"\[solver\] solver setting 'lanes' = '4' is invalid; valid: None, 1, or an "
-                                         r"integer in \[2, 5\]"):
-        parse_sweep(TINY_SWEEP.replace("nodes = 11", 'nodes = 11\nlanes = "4"'))
+    for value in ('"4"', '"auto"'):  # (the files' solver_lanes attribute reads "auto"; TOML cannot write None)
+        with pytest.raises(SweepError, match=rf"\[solver\] lanes = '{value[1:-1]}': expected an integer; leave the key "
+                                             "out for the default"):
+            parse_sweep(TINY_SWEEP.replace("nodes = 11", f'nodes = 11\nlanes = {value}'))
+    # [record] windows and times that Record refuses name their table, as the sweep file's other errors do
+    with pytest.raises(SweepError, match=r"^\[record\] record window: start 21.0 s is after stop 20.0 s"):
+        parse_sweep(TINY_SWEEP + "[record]\nstart = 21.0\nstop = 20.0\n")
+    with pytest.raises(SweepError, match=r"^\[record\] record setting 'times' = \[20, 19\] s is invalid"):
+        parse_sweep(TINY_SWEEP + "[record]\ntimes = [20.0, 19.0]\n")
     with pytest.raises(SweepError, match=r"\[solver\] solver setting 'nodes' = '30' is invalid; valid: an integer in "
                                          r"\[3, 2147483647\]"):
         parse_sweep(TINY_SWEEP.replace("nodes = 11", 'nodes = "30"'))

@@ -302,12 +302,14 @@ def test_parameters_held_as_coordinates_of_a_members_dataset_are_used():
         resolve_members(xr.Dataset(coords={"member": [0, 1, 2]}), wf.Parameters())
 
 
-def test_a_runs_outputs_give_its_members_back():
+def test_a_runs_outputs_give_its_members_back(tmp_path):
     """simulate(ds) of a run's Dataset (or its file) was refused for its outputs' dims ("variable
     'displacement' has dims ('member', 'x')"), though docs/guide.md says the way back works: it takes
     the run's parameters (variables along member, or coordinates after set_coords, or a by_parameters view)
     and runs the same members again, bit for bit; a selection of members runs those. A Record for a run numbered from K names its members by
     index, and the refusal of a number says so."""
+    import xarray as xr
+
     kw = dict(solver=wf.Solver(nodes=11), fronts=None)
     first = simulate({"eccentricity": [0.0, 0.1, -0.1]}, scene=wf.Parameters(disc_velocity=2e-4), member_offset=10,
                      **kw)
@@ -328,11 +330,23 @@ def test_a_runs_outputs_give_its_members_back():
             (grid.eccentricity.values, grid.normal_force.values))])
     # a by_parameters view itself (refused for its dims before): stacked back, its members in the order of their
     # numbers, a combination that no member ran (NaN there) left out; one swept name too
-    for part in (grid, grid.isel(member=[0, 1, 3]), grid.sel(member=grid.member[grid.eccentricity == 0.1])):
-        rerun = simulate(wf.io.by_parameters(part), **kw)
+    views = [(part, wf.io.by_parameters(part)) for part in (grid, grid.isel(member=[0, 1, 3]),
+                                                             grid.sel(member=grid.member[grid.eccentricity == 0.1]))]
+    views.append((grid, wf.io.by_parameters(grid, ["eccentricity", "normal_force"])))  # stacks as numbers 0, 2, 1, 3
+    path = tmp_path / "grid.nc"
+    wf.io.write_ensemble(grid, path)
+    with xr.open_dataset(path) as raw:  # a file's view: member_number a coordinate, the members string labels
+        views.append((grid, wf.io.by_parameters(raw.load())))
+    for part, view in views:
+        rerun = simulate(view, **kw)
         np.testing.assert_array_equal(rerun.normal_force.values, part.normal_force.values)
         np.testing.assert_array_equal(rerun.eccentricity.values, part.eccentricity.values)
         np.testing.assert_array_equal(rerun.mu_s.values, part.mu_s.values)
+    hole = wf.io.by_parameters(grid.isel(member=[0, 1, 3]))
+    with pytest.raises(ValueError, match="this cell of a by_parameters view was run by no member"):
+        simulate(hole.sel(normal_force=1000.0, eccentricity=0.0), **kw)
+    np.testing.assert_array_equal(simulate(hole.sel(normal_force=1000.0, eccentricity=0.1), **kw).mu_s.values,
+                                  grid.mu_s.values[3:4])
     with pytest.raises(ValueError, match=r"contains 12; valid: member indices 0..2 \(a member's index is its number "
                                          r"less simulate's member_offset.*member_offset=K\)"):
         simulate(first, member_offset=10, record=wf.Record.detachment(first, members=(12,)), **kw)

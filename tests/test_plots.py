@@ -394,8 +394,15 @@ def test_a_file_opened_with_xarray_itself_plots_by_member_number(contact_run, tm
             with pytest.raises(ValueError, match="group 'recorded'; open the file with warpfric.io.open_ensemble"):
                 figure(raw, 0)
         # quick_look draws what the root group holds, and says where the recorded fields are
-        with pytest.warns(UserWarning, match="recorded fields are in its group 'recorded'.*open_ensemble"):
+        with pytest.warns(UserWarning, match="recorded fields are not drawn .*group 'recorded'.*open_ensemble"):
             assert [p.name for p in plots.quick_look(raw, tmp_path / "raw")] == ["arrival_times.png"]
+        # the group merged in by hand: still the file's string labels, refused with the same advice
+        with xr.open_dataset(path, group="recorded") as group:
+            merged = xr.merge([raw, group])
+            with pytest.raises(ValueError, match="a file opened with xarray itself.*open_ensemble"):
+                plots.friction_history_figure(merged, 0)
+            with pytest.warns(UserWarning, match="recorded fields are not drawn"):
+                plots.quick_look(merged, tmp_path / "merged")
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # a file without recorded fields: nothing to say
         plain = write_ensemble(contact_run.sel(member=[0]).drop_dims(["recorded", "time"]).assign_attrs(
@@ -409,6 +416,8 @@ def test_misuse_is_named(grid, contact_run):
     index raised KeyError, AttributeError or IndexError without naming the problem."""
     with pytest.raises(ValueError, match="a by_parameters view"):
         plots.mu_s_figure(wf.io.by_parameters(grid), "normal_force")
+    with pytest.raises(ValueError, match=r"got dimensions \('member', 'x'\) without the variable status"):
+        plots.mu_s_figure(grid.drop_vars("status").assign(member_number=grid.member), "normal_force")
     with pytest.raises(ValueError, match="quick_look: expects the ensemble's xarray Dataset .* got DataArray"):
         plots.quick_look(grid.mu_s, "unused")
     with pytest.raises(ValueError, match=r"'ecc' is not a parameter of the ensemble; valid: .* normal_force, eccentricity"):

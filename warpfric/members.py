@@ -21,7 +21,12 @@ def _stacked(ds):
     ``member_number``) back along ``member``, its members in the order of their numbers, the
     combinations that no member ran (NaN numbers) left out; any other Dataset as it is."""
     grid = [str(d) for d in ds.dims if str(d) in PARAMETER_NAMES]
-    if "member" in ds.dims or "member_number" not in ds.data_vars or not grid:
+    if "member" in ds.dims or "member_number" not in ds.variables:  # (a file's view holds it as a coordinate)
+        return ds
+    if not grid:  # one cell of a view, selected: a member, unless no member ran it
+        if ds.member_number.ndim == 0 and not np.isfinite(float(ds.member_number)):
+            raise ValueError("members: this cell of a by_parameters view was run by no member (its member_number is "
+                             "NaN: a combination missing from the grid); select a combination that a member ran")
         return ds
     ds = ds.drop_vars([name for name in ("member", "member_id") if name in ds.coords])  # one swept name: along it
     ds = ds.stack(member=grid)

@@ -156,12 +156,13 @@ def _file_layout(ds) -> bool:
 
 def _recorded_group_left_out(ds) -> bool:
     """Whether the file that ``ds`` (opened with xarray.open_dataset) was read from has recorded
-    fields, which ``ds`` then lacks: the file named in its encoding, where that still exists."""
+    fields (its group 'recorded', which ``ds`` then lacks): the file named in its encoding, where
+    that still exists."""
     from .io import RECORDED_GROUP, _has_group
 
     source = ds.encoding.get("source")
     try:
-        return bool(source) and "velocity_history" not in ds and _has_group(source, RECORDED_GROUP)
+        return bool(source) and _has_group(source, RECORDED_GROUP)
     except OSError:
         return False
 
@@ -177,8 +178,8 @@ def _require_ensemble(ds, what: str):
         raise ValueError(f"{what}: expects the ensemble's xarray Dataset (from simulate or open_ensemble), got "
                          f"{type(ds).__name__}")
     if "member" not in ds.dims or "status" not in ds:
-        found = "a by_parameters view (its members are dimensions)" if "member_number" in ds else \
-            f"dimensions {tuple(ds.dims)}"
+        found = ("a by_parameters view (its members are dimensions)" if "member" not in ds.dims and "member_number" in ds
+                 else f"dimensions {tuple(ds.dims)}" + ("" if "status" in ds else " without the variable status"))
         raise ValueError(f"{what}: expects an ensemble along the dimension member with each member's status, got "
                          f"{found}; pass the ensemble itself (select members with ds.sel(member=...))")
     if _file_layout(ds):
@@ -521,10 +522,10 @@ def quick_look(ds, outdir, max_curves: int = MAX_CURVES) -> list:
     no recorded fields: they are in its group 'recorded').
     Returns the paths written."""
     ensemble = _require_ensemble(ds, "quick_look")
-    if ensemble is not ds and _recorded_group_left_out(ds):  # a file opened with xarray.open_dataset
-        warnings.warn("quick_look: the file's recorded fields are in its group 'recorded', which "
-                      "xarray.open_dataset does not read: open the file with warpfric.io.open_ensemble(path) to "
-                      "draw them too", stacklevel=2)
+    if ensemble is not ds and ("velocity_history" in ds or _recorded_group_left_out(ds)):  # a file opened with xarray
+        warnings.warn("quick_look: a file opened with xarray itself: its recorded fields are not drawn (they are in "
+                      "the file's group 'recorded', which xarray.open_dataset does not read); open the file with "
+                      "warpfric.io.open_ensemble(path) to draw them too", stacklevel=2)
     ds = ensemble
     outdir = Path(outdir)
     outdir.mkdir(parents=True, exist_ok=True)
@@ -552,11 +553,11 @@ def quick_look(ds, outdir, max_curves: int = MAX_CURVES) -> list:
 def _recorded_member(ds, recorded_index: int, what: str) -> tuple[int, int]:
     """(member number, position along member) of the recorded member at ``recorded_index``; a
     ValueError naming ``what`` where there is none."""
-    if "velocity_history" not in _require_ensemble(ds, what):
-        if _file_layout(ds):
-            raise ValueError(f"{what}: no recorded fields in this Dataset: xarray.open_dataset reads a file's root "
-                             "group only, and a file keeps its recorded fields in the group 'recorded'; open the "
-                             "file with warpfric.io.open_ensemble(path)")
+    if _require_ensemble(ds, what) is not ds:  # a file's layout (even with its group merged in: string labels)
+        raise ValueError(f"{what}: a file opened with xarray itself: xarray.open_dataset reads a file's root group "
+                         "only, and a file keeps its recorded fields in the group 'recorded'; open the file with "
+                         "warpfric.io.open_ensemble(path)")
+    if "velocity_history" not in ds:
         raise ValueError(f"{what}: the ensemble has no recorded fields (run with record=warpfric.Record(...); the "
                          "command line: warpfric run -o OUT.nc --record, or [record] in a sweep file)")
     recorded = [int(m) for m in ds.recorded_member.values]

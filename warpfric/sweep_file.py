@@ -148,8 +148,11 @@ def _dataclass_kwargs(table: dict, cls, where: str, parameters: bool = False) ->
             out[key] = value
         elif (isinstance(default, int) and not isinstance(default, bool)) or (
                 default is None and str(names[key].type).startswith("int")):  # lanes: int | None
-            if (isinstance(value, bool) or not isinstance(value, int)) and not _refused_by(cls, key, value):
-                raise SweepError(f"{_where(where, key)} = {value!r}: expected an integer")
+            if (isinstance(value, bool) or not isinstance(value, int)) and (default is None or
+                                                                            not _refused_by(cls, key, value)):
+                # (a setting whose default is None, lanes: the class's message offers None, which TOML cannot write)
+                leave_out = "; leave the key out for the default (automatic)" if default is None else ""
+                raise SweepError(f"{_where(where, key)} = {value!r}: expected an integer{leave_out}")
             out[key] = value  # a value of another type that the class refuses: its message names the valid range
         elif isinstance(default, float):
             out[key] = _number(value, _where(where, key))
@@ -489,13 +492,13 @@ def _record(spec: dict) -> Record | RecordDetachment:
             raise SweepError(f"[record] times has {count:,} times; valid: at most {MAX_RECORD_TIMES:,} "
                              f"{_RECORD_TIMES_WHY}")
         times = _values(spec["times"], "[record] times")
-        return Record(members=tuple(members), times=tuple(times))
+        return _said_in("[record] ", Record, members=tuple(members), times=tuple(times))
     for key in ("start", "stop"):
         if key not in spec:
             raise SweepError(f"[record]: missing key {key!r} (give times = [...], start, stop and optionally "
                              f"count, default {RECORD_COUNT}, or window = \"detachment\")")
-    return Record.window(_number(spec["start"], "[record] start"), _number(spec["stop"], "[record] stop"), count,
-                         members=tuple(members))
+    return _said_in("[record] ", Record.window, _number(spec["start"], "[record] start"),
+                    _number(spec["stop"], "[record] stop"), count, members=tuple(members))
 
 
 def _dataclass_like(table: dict, kinds: dict, where: str) -> dict:
