@@ -69,6 +69,14 @@ def test_cpu_workers_is_refused_on_a_dask_cluster(tmp_path, capsys, no_simulatio
     code, _, err = run_cli(capsys, "run", sweep, "--cpu-workers", 2, "--local-cluster")
     assert code == 2
     one_line_error(err, "--cpu-workers", "Dask")
+    # the sweep file's own cluster: it started, and each chunk failed on its worker ("daemonic processes are not
+    # allowed to have children"; --cpu-workers 1 was taken without a word); refused before anything runs
+    sweep.write_text(TINY_SWEEP + '[run]\nscheduler = "local"\n')
+    for n in (1, 2):
+        code, _, err = run_cli(capsys, "run", sweep, "--cpu-workers", n)
+        assert code == 2
+        one_line_error(err, f"--cpu-workers {n}", "the sweep file's [run] scheduler = 'local'", "leave it out")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.toml"]
 
 
 @pytest.mark.parametrize("words, expected", [

@@ -657,6 +657,11 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         raise RunError(f"[run] workers = {sweep.run['workers']}: the number of workers of a new local Dask cluster, "
                        "which this run does not start (it runs in this process); add [run] scheduler = \"local\" "
                        "or run with --local-cluster, or leave workers out")
+    if cpu_workers is not None and use_cluster:  # a worker's daemonic process cannot start processes of its own
+        cluster = (f"the sweep file's [run] scheduler = {where!r}" if client is None and not scheduler and not local
+                   else "--scheduler, --local-cluster or a client")
+        raise RunError(f"--cpu-workers {cpu_workers}: splits a run in this process; on a Dask cluster ({cluster}) each "
+                       "worker runs its chunk in one process: leave it out")
     workers = workers or sweep.run.get("workers")
     if device is None and previous is not None:
         device = previous.manifest.get("device")  # a resumed run keeps its device: one file, one device
