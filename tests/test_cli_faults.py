@@ -614,6 +614,10 @@ def test_resume_with_other_settings_names_the_one_that_differs(tmp_path, sweep, 
     _error_line(err, f"another sweep file (its text changed); resume with the interrupted run's settings (the "
                      f"interrupted run's sweep file is kept as '{kept}': `cp {kept} {sweep}` puts it back)")
     assert kept.read_text() == original
+    # info's command to finish the run puts the run's own text back first (it printed one that was refused)
+    code, lines, _ = run_cli(capsys, "info", out)
+    assert code == 1 and lines[0].split("`")[1].startswith(f"cp {kept} {sweep} && warpfric run {sweep} -o {out} "
+                                                         "--resume")
     sweep.write_text(kept.read_text())
     code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE)
     assert code == 0 and out.exists() and not kept.exists(), err

@@ -794,11 +794,21 @@ class _NotAnEnsemble(ValueError):
 
 def resume_command(store, path) -> str:
     """The command that finishes an interrupted chunked run (chunk size and member offset come
-    from the manifest)."""
-    words = ["warpfric", "run", store.manifest.get("sweep_file", "SWEEP.toml"), "-o", str(path), "--resume"]
+    from the manifest), led by the copy that puts the run's sweep file back where the file has
+    changed or gone since (--resume refuses another text; the run keeps its own in the parts)."""
+    from .runner import SWEEP_COPY
+
+    sweep_file = store.manifest.get("sweep_file", "SWEEP.toml")
+    words = ["warpfric", "run", sweep_file, "-o", str(path), "--resume"]
     if store.manifest.get("device"):
         words += ["--device", store.manifest["device"]]
-    return shlex.join(words)
+    kept = store.directory / SWEEP_COPY
+    try:
+        changed = kept.exists() and Path(sweep_file).read_text() != kept.read_text()
+    except OSError:  # the sweep file gone (or unreadable)
+        changed = kept.exists()
+    put_back = f"cp {shlex.quote(str(kept))} {shlex.quote(sweep_file)} && " if changed else ""
+    return put_back + shlex.join(words)
 
 
 def open_ensemble(path) -> xr.Dataset:
