@@ -2,16 +2,20 @@
 # The Sobol study of studies/README.md ("Sensitivity") on a GPU host: a 163,840-member Saltelli
 # design (studies/sweeps/sensitivity_gpu.toml, the default front event: the contact front, read front
 # by front), then the indices of mu_s, mu_s_time and the front speeds. Needs warpfric and SALib
-# importable (here from /tmp/site, the repository and ./.salib, for a host without a package index:
-# a copy of SALib, multiprocess and dill from a venv with the [sensitivity] extra). Results under $OUT;
+# importable by $PYTHON (e.g. PYTHON=.venv/bin/python with the [sensitivity] extra); where they are
+# not, from /tmp/site, the repository and ./.salib (a host without a package index, as the lent GPU
+# hosts: a copy of SALib, multiprocess and dill from a venv with the [sensitivity] extra). Results under $OUT;
 # sensitivity_members.nc keeps every member's inputs and scalar outputs (the design's rows), so that
 # `warpfric sensitivity` can be run again elsewhere without the simulation.
 #   bash studies/sensitivity_study.sh
 set -uo pipefail
 OUT=$(realpath -m "${OUT:-out}")  # where it was started (default ./out), before the cd
 cd "$(dirname "$0")/.."  # the repository root: the sweep file's path below is relative to it
-export PYTHONPATH=/tmp/site:$PWD:$PWD/.salib:/tmp/salib${PYTHONPATH:+:$PYTHONPATH} PYTHONUNBUFFERED=1
 PYTHON=${PYTHON:-python3}  # e.g. PYTHON=.venv/bin/python where warpfric[sensitivity] is installed
+if ! $PYTHON -c "import warpfric, SALib" 2>/dev/null; then  # the copies of a host without a package index
+  export PYTHONPATH=/tmp/site:$PWD:$PWD/.salib:/tmp/salib${PYTHONPATH:+:$PYTHONPATH}
+fi
+export PYTHONUNBUFFERED=1
 mkdir -p "$OUT"
 start=$SECONDS
 $PYTHON -m warpfric run studies/sweeps/sensitivity_gpu.toml -o /tmp/sens.nc --device cuda:0 --overwrite 2>&1 \

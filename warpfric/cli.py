@@ -13,11 +13,13 @@ speeds. Negative values may follow their option: --disc-velocity -1e-4.
 
 Exit codes (one line on stderr for each fault):
   0    success
-  1    some members failed (status not ok), or `info` on an incomplete run
-  2    bad input, or an output folder that cannot be written (checked before anything runs;
-       nothing is written)
-  3    an output could not be written during the run: disk full or another I/O error (no partial
-       file stays; a sweep's finished chunks are kept for --resume)
+  1    some members failed (status not ok), chunks failed on a Dask cluster (the finished ones are
+       kept for --resume), or `info` on an incomplete run
+  2    bad input, an output folder that cannot be written, or a --scheduler that does not answer
+       (checked before anything runs; nothing is written)
+  3    an output could not be written: disk full (before the run when the free space is below
+       half the estimated size) or another I/O error (no partial file stays; a sweep's finished
+       chunks are kept for --resume)
   4    another run is writing the same output (its OUT.nc.lock exists)
   130  interrupted (Ctrl-C, or SIGTERM)
 """
