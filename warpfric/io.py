@@ -78,6 +78,7 @@ from .parameters import PARAMETER_NAMES
 
 COMPLETE_ATTR = "warpfric_complete"
 PARTS_SUFFIX = ".parts"
+SWEEP_COPY = "sweep.toml"  # in OUT.nc.parts/: the sweep file's text the run started with (for --resume)
 MANIFEST = "manifest.json"
 FILE_TIME = "record_time"  # on-disk name of the recording-time coordinate (``time`` in memory)
 RECORDED_GROUP = "recorded"  # netCDF4 group of the recorded fields
@@ -796,8 +797,6 @@ def resume_command(store, path) -> str:
     """The command that finishes an interrupted chunked run (chunk size and member offset come
     from the manifest), led by the copy that puts the run's sweep file back where the file has
     changed or gone since (--resume refuses another text; the run keeps its own in the parts)."""
-    from .runner import SWEEP_COPY
-
     sweep_file = store.manifest.get("sweep_file", "SWEEP.toml")
     words = ["warpfric", "run", sweep_file, "-o", str(path), "--resume"]
     if store.manifest.get("device"):

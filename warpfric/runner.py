@@ -69,7 +69,6 @@ class ChunkJob:
     parent_pid: int | None = None
 
 
-SWEEP_COPY = "sweep.toml"  # in OUT.nc.parts/: the sweep file's text the run started with
 
 
 def _members(start: int, stop: int) -> str:
@@ -628,8 +627,8 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
                 workers, quiet, command, check_space, cpu_workers) -> RunReport:
     import shutil
 
-    from .io import (ChunkStore, ChunksDoNotCombine, OutputWriteError, free_bytes, history_time, new_run_id, parts_dir,
-                     sweep_digest, write_failure)
+    from .io import (SWEEP_COPY, ChunkStore, ChunksDoNotCombine, OutputWriteError, free_bytes, history_time, new_run_id,
+                     parts_dir, sweep_digest, write_failure)
     from .device import check_device
     from .sweep_file import RecordDetachment, check_member_offset
 
