@@ -311,7 +311,7 @@ class Model:
     poisson_coupling:   the -lambda*eps_xx term of the interface normal stress (SPEC section 4).
     viscous_friction:   the viscous (velocity-strengthening) friction stress tau_vis.
     relaxation_gate:    what gates the relaxation of tau_el and the rejuvenation of the contact age
-                        (SPEC v2 section 5, docs/model.md "Friction law"):
+                        (SPEC v2 section 5, docs/model.md "Equations"):
                         'stress' (default): Heaviside theta(|tau_f|/A - tau_c) of Bar-Sinai, Brener &
                         Bouchbinder, GRL 39 L03308 (2012), tau_c = ``shear_strength``;
                         'none': no gate, |s| always (the SPEC v1 law of earlier results);
@@ -371,8 +371,9 @@ def check_precision(model: "Model", solver: "Solver") -> None:
 
 
 def check_fronts_method(fronts: "Fronts | None", solver: "Solver") -> None:
-    """ValueError for the velocity front with a method other than TR-BDF2 (docs/model.md, "ESDIRK4":
-    its arrival times read TR-BDF2's second stage), before anything runs or is written."""
+    """ValueError for the velocity front with a method other than TR-BDF2 (docs/model.md, "Time
+    integration", ESDIRK4: its arrival times read TR-BDF2's second stage), before anything runs or
+    is written."""
     if fronts is not None and "velocity" in fronts.events and solver.method != "tr_bdf2":
         raise ValueError(
             f"fronts setting 'event' = {fronts.event!r} is invalid with solver setting 'method' = {solver.method!r}; "
@@ -441,8 +442,10 @@ class Solver:
                       "Work-precision"); grids of 800 nodes and more keep their own filter, bit for
                       bit. A very large value takes the velocity out of the error control altogether
                       (the other components still hold the steps).
-    viscous_velocity_cap: the pad velocity's error scale (in the error estimate at nodes in contact, and
-                      in the Newton test) is at most this many times hardness/viscous_coefficient (2e-5
+    viscous_velocity_cap: float64 with viscous friction (Model(viscous_friction=True), the default; float32
+                      and the law without it keep the member's scale): the pad velocity's error scale
+                      (in the error estimate at nodes in contact, and in the Newton test) is at most
+                      this many times hardness/viscous_coefficient (2e-5
                       m/s with the defaults: 2e-4 m/s at the default 10), but not below the scale of the
                       disc's velocity now, u_scale*max(|v_d(t)|, v*)/D (docs/model.md, "Time
                       integration"). A velocity error dV moves a sticking node's viscous stress by
@@ -590,7 +593,8 @@ class Fronts:
                            'contact' (default): each node's stick-to-slip transition, its first gate
                            opening after the disc starts, when its real contact area starts to fall
                            (relaxation_gate='stress' only: the other laws have no yield threshold, and
-                           every output of this event is NaN there, with a warning);
+                           this event's outputs say none there, speeds and positions NaN,
+                           nucleation_edge -2, detached_fraction 0, with a warning);
                            'strength': each node's peak of tau_f/sigma_n (its own static friction),
                            under every law;
                            'velocity': the pad velocity against the disc reaches threshold * its event

@@ -68,7 +68,7 @@ def simulate(
     attrs), ``lift_off``, ``steps_accepted``, ``steps_rejected`` (by cause: ``rejected_error_test``,
     ``rejected_newton``, ``rejected_switch``; and ``missed_predictions``), ``newton_iterations``,
     ``final_time`` (s), ``detachment_end_time`` (s: when the automatic end's conditions first held,
-    NaN where the run ended before them), ``plate_compression`` (m), ``plate_tilt`` (rad), ``mu_final``,
+    NaN where the run ended before them or the member's status is not ok), ``plate_compression`` (m), ``plate_tilt`` (rad), ``mu_final``,
     ``working_precision`` (bits), ``gate_switches`` and ``unlocated_switches``, and the final
     state along (member, x): ``displacement`` (m), ``velocity`` (m/s), ``elastic_stress`` (Pa),
     ``contact_age`` (s), ``normal_stress`` (Pa), ``friction_stress`` (Pa); the stress gate adds
@@ -755,7 +755,7 @@ _OUTPUT_ATTRS = {
     "final_time": ("s", "time reached"),
     "detachment_end_time": ("s", "time at which the detachment was over (the automatic end's criterion: mu fallen "
                             "below its peak, the fronts passed); NaN where the run ended before it, whose front "
-                            "outputs are then NaN"),
+                            "outputs are then NaN, and for a member whose status is not ok"),
     "plate_compression": ("m", "mean compression delta0 of the pad at the final time"),
     "plate_tilt": ("rad", "tilt a of the backing plate at the final time"),
     "displacement": ("m", "height-averaged x-displacement u of the pad at the final time"),
