@@ -69,8 +69,6 @@ class ChunkJob:
     parent_pid: int | None = None
 
 
-
-
 def _members(start: int, stop: int) -> str:
     """The members of a chunk, as a person reads them: 'members 0..1199', 'member 7'."""
     return f"members {start}..{stop - 1}" if stop - start != 1 else f"member {start}"
