@@ -374,7 +374,8 @@ def soft_interface_flags(seeds=(11, 12)):
                   ("status stalled, simulate's straggler limit", stalled)]
         for text, flagged in rules:
             print(f"    {text}: {int((flagged & ill).sum())} / {int((flagged & ~ill).sum())}")
-        print(f"    the ill-conditioned members' steps against the median: {', '.join(f'{ratio[k]:.1f}' for k in order)}")
+        ratios = ", ".join(f"{ratio[k]:.1f}" for k in order)
+        print(f"    the ill-conditioned members' steps against the median: {ratios}")
 
 
 def main(argv=None):
@@ -382,8 +383,8 @@ def main(argv=None):
 
     checks = {"vibration": vibration, "float32": float32, "float32-wide": float32_wide,
               "stop-lift-off": stop_lift_off, "fronts-wide": fronts_wide, "soft-interface": soft_interface,
-              "soft-interface-conditioning": soft_interface_conditioning, "soft-interface-widths": soft_interface_widths,
-              "soft-interface-flags": soft_interface_flags}
+              "soft-interface-conditioning": soft_interface_conditioning,
+              "soft-interface-widths": soft_interface_widths, "soft-interface-flags": soft_interface_flags}
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("check", nargs="?", default="all", choices=[*checks, "all"], help="which measurement (default all)")
     name = ap.parse_args(sys.argv[1:] if argv is None else argv).check

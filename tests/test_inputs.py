@@ -219,13 +219,15 @@ def test_the_ends_that_take_inf_say_so_and_a_per_member_none_points_to_inf():
     unit with the range."""
     meta = {f.name: f.metadata for f in dataclasses.fields(wf.Parameters)}
     assert not meta["stop_time"]["high_open"] and not meta["end_time"]["high_open"]
-    assert all(m["high_open"] for name, m in meta.items() if np.isinf(m["high"]) and name not in ("stop_time", "end_time"))
+    takes_inf = ("stop_time", "end_time")
+    assert all(m["high_open"] for name, m in meta.items() if np.isinf(m["high"]) and name not in takes_inf)
     assert meta["disc_velocity"]["low_open"] and not meta["eccentricity"]["high_open"]
     with pytest.raises(ValueError, match=r"'stop_time' = -1.0 s is out of range; valid range \(0, inf\] s"):
         simulate({"stop_time": [-1.0]})
     with pytest.raises(ValueError, match=r"valid range \(0, inf\] s \(per member, write inf where you mean None\)"):
         simulate({"end_time": [None, 21.0]})
-    with pytest.raises(ValueError, match=r"'normal_force': value \[None, 2.0\] is not a real number; valid range \(0, inf\) N$"):
+    with pytest.raises(ValueError, match=r"'normal_force': value \[None, 2.0\] is not a real number; valid range "
+                                         r"\(0, inf\) N$"):
         simulate({"normal_force": [None, 2.0]})
     with pytest.raises(ValueError, match=r"'torque_arm'.*\(per member, write the member's pad height where you mean None"):
         simulate({"torque_arm": [None, 0.01]})

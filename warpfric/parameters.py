@@ -447,8 +447,9 @@ class Solver:
                       (in the error estimate at nodes in contact, and in the Newton test) is at most
                       this many times hardness/viscous_coefficient (2e-5 m/s with the defaults: 2e-4
                       m/s at the default 10), but not below the scale of the disc's velocity now,
-                      u_scale*max(|v_d(t)|, v*)/D (docs/model.md, "Time integration"). A velocity error dV moves a sticking node's viscous stress by
-                      ~eta*(sigma_n/hardness)*dV, and the member's scale (u_scale*|v_max|/D) let errors of
+                      u_scale*max(|v_d(t)|, v*)/D (docs/model.md, "Time integration"). A velocity
+                      error dV moves a sticking node's viscous stress by ~eta*(sigma_n/hardness)*dV,
+                      and the member's scale (u_scale*|v_max|/D) let errors of
                       tens to hundreds of kPa through in loaded pads with fast discs (F = 91 kN, v = 0.107
                       m/s: a scale 1e4 times the default cap), whose edge nodes then opened microseconds
                       after the disc started. Members whose scale is below the cap (F*|v| below ~10 times

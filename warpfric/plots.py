@@ -178,8 +178,9 @@ def _require_ensemble(ds, what: str):
         raise ValueError(f"{what}: expects the ensemble's xarray Dataset (from simulate or open_ensemble), got "
                          f"{type(ds).__name__}")
     if "member" not in ds.dims or "status" not in ds:
-        found = ("a by_parameters view (its members are dimensions)" if "member" not in ds.dims and "member_number" in ds
-                 else f"dimensions {tuple(ds.dims)}" + ("" if "status" in ds else " without the variable status"))
+        view = "member" not in ds.dims and "member_number" in ds
+        found = ("a by_parameters view (its members are dimensions)" if view else
+                 f"dimensions {tuple(ds.dims)}" + ("" if "status" in ds else " without the variable status"))
         raise ValueError(f"{what}: expects an ensemble along the dimension member with each member's status, got "
                          f"{found}; pass the ensemble itself (select members with ds.sel(member=...))")
     if _file_layout(ds):

@@ -68,8 +68,9 @@ def simulate(
     attrs), ``lift_off``, ``steps_accepted``, ``steps_rejected`` (by cause: ``rejected_error_test``,
     ``rejected_newton``, ``rejected_switch``; and ``missed_predictions``), ``newton_iterations``,
     ``final_time`` (s), ``detachment_end_time`` (s: when the automatic end's conditions first held,
-    NaN where the run ended before them or the member's status is not ok), ``plate_compression`` (m), ``plate_tilt`` (rad), ``mu_final``,
-    ``working_precision`` (bits), ``gate_switches`` and ``unlocated_switches``, and the final
+    NaN where the run ended before them or the member's status is not ok), ``plate_compression`` (m),
+    ``plate_tilt`` (rad), ``mu_final``, ``working_precision`` (bits), ``gate_switches`` and
+    ``unlocated_switches``, and the final
     state along (member, x): ``displacement`` (m), ``velocity`` (m/s), ``elastic_stress`` (Pa),
     ``contact_age`` (s), ``normal_stress`` (Pa), ``friction_stress`` (Pa); the stress gate adds
     ``yield_time`` (s) and ``yield_gate`` (member, x). With fronts, for the first event (others
