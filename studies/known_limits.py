@@ -9,6 +9,7 @@
     python studies/known_limits.py soft-interface-conditioning  # its ill-conditioned member against the width
     python studies/known_limits.py soft-interface-widths  # all 120 members' errors and conditioning by width
     python studies/known_limits.py soft-interface-flags  # whether outputs flag the ill-conditioned members
+    python studies/known_limits.py default-stiffness-widths  # the sliding width at the default interface stiffness
     python studies/known_limits.py all
     (also: python studies/bench.py limits vibration|float32|all)
 """
@@ -378,13 +379,62 @@ def soft_interface_flags(seeds=(11, 12)):
         print(f"    the ill-conditioned members' steps against the median: {ratios}")
 
 
+def default_stiffness_widths(widths=(1e-4, 1e-3, 3e-3, 1e-2)):
+    """The sliding width at the default interface stiffness (3e14 Pa/m): the engine benchmark's first
+    60 members (2e/L in [-0.2, 0.2], F 500-5000 N, seed 0) and 60 wide loaded members (seed 21:
+    soft_interface's distribution of 2e/L, F and v without its interface stiffness), N = 30, rtol
+    1e-7, no straggler limit. Per width: accepted steps (median, sum) and mu_s against the narrowest
+    width (relative: median, 90th percentile, largest); the members whose mu_s and steps are the
+    same at every width; mu_s's change under F times 1 + 1e-10 at the default width; the wide
+    members' grid error (N = 100 against N = 30, 12 members) beside the width's. ~2 minutes on a
+    2-core CPU."""
+    import numpy as np
+
+    rng = np.random.default_rng(21)
+    samples = {
+        "benchmark": {"eccentricity": np.random.default_rng([0, 0]).uniform(-0.2, 0.2, 60),  # bench_engine.members
+                      "normal_force": np.exp(np.random.default_rng([0, 1]).uniform(np.log(500.0), np.log(5000.0), 60))},
+        "wide loaded": {"eccentricity": rng.uniform(-0.6, 0.6, 60),
+                        "normal_force": np.exp(rng.uniform(np.log(3e4), np.log(3e5), 60)),
+                        "disc_velocity": np.exp(rng.uniform(np.log(1e-5), np.log(0.3), 60)) * rng.choice([-1, 1], 60)}}
+    narrow, default = min(widths), wf.Solver().sliding_width
+
+    def spread(x):
+        return f"median {np.median(x):.1e}, 90th {np.percentile(x, 90):.1e}, largest {x.max():.1e}"
+
+    for name, members in samples.items():
+        t0 = time.perf_counter()
+        runs = {width: unlimited(members, width, 1e-7, max_steps=3_000_000) for width in widths}
+        nudged = unlimited(dict(members, normal_force=members["normal_force"] * (1 + 1e-10)), default, 1e-7,
+                           max_steps=3_000_000)
+        ok = [int((run.status.values == 0).sum()) for run in runs.values()]
+        print(f"  {name} ({time.perf_counter() - t0:.0f} s): ok {' / '.join(map(str, ok))} of 60 at widths "
+              f"{' / '.join(f'{w:.0e}' for w in widths)}")
+        same = np.ones(60, bool)
+        for width, run in runs.items():
+            steps = run.steps_accepted.values
+            same &= (steps == runs[narrow].steps_accepted.values) & (run.mu_s.values == runs[narrow].mu_s.values)
+            bias = "" if width == narrow else \
+                f"; mu_s against {narrow:.0e}: {spread(np.abs(run.mu_s.values / runs[narrow].mu_s.values - 1))}"
+            print(f"    width {width:.0e}: accepted steps median {np.median(steps):.0f}, sum {steps.sum()}{bias}")
+        change = np.abs(nudged.mu_s.values / runs[default].mu_s.values - 1)
+        print(f"    the same mu_s and steps at every width: {int(same.sum())} of 60; F times 1 + 1e-10 at "
+              f"{default:.0e}: mu_s moves {spread(change)}")
+        if name == "wide loaded":
+            first = {key: value[:12] for key, value in members.items()}
+            fine = unlimited(first, default, 1e-7, nodes=100, max_steps=3_000_000)
+            grid = np.abs(fine.mu_s.values / runs[default].mu_s.values[:12] - 1)
+            print(f"    its first 12 at N = 100 against N = 30 (width {default:.0e}): {spread(grid)}")
+
+
 def main(argv=None):
     import argparse
 
     checks = {"vibration": vibration, "float32": float32, "float32-wide": float32_wide,
               "stop-lift-off": stop_lift_off, "fronts-wide": fronts_wide, "soft-interface": soft_interface,
               "soft-interface-conditioning": soft_interface_conditioning,
-              "soft-interface-widths": soft_interface_widths, "soft-interface-flags": soft_interface_flags}
+              "soft-interface-widths": soft_interface_widths, "soft-interface-flags": soft_interface_flags,
+              "default-stiffness-widths": default_stiffness_widths}
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("check", nargs="?", default="all", choices=[*checks, "all"], help="which measurement (default all)")
     name = ap.parse_args(sys.argv[1:] if argv is None else argv).check

@@ -426,6 +426,9 @@ class Solver:
                       soft interface (mu0/h 1e13-1e14 Pa/m) took 10x the median's steps at 1e-3, 2-3.5x
                       more at 1e-4, and 5-10x fewer at 1e-2, mu_s moving about as much as the width
                       (1e-2: 1.0e-2 in the median member against 1e-3; docs/performance.md, "Known limits").
+                      At the default interface stiffness the width matters little: 1e-3 moved mu_s by
+                      1.8e-5 at most against 1e-4 in 60 loaded members (30-300 kN), and 58 of the
+                      engine benchmark's first 60 members not at all.
     error_filter_nodes: the pad velocity's error estimate is filtered by the diagonal of (I - gamma h J)^-1
                       (docs/model.md, "Time integration"), whose elastic part 2 M H / dx^2 grows as N^2:
                       a coarse grid's filter hides less of the pad's lowest modes' ringing (kicked by
