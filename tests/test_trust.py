@@ -1,5 +1,6 @@
 """Outputs a user can trust: stragglers are stopped and flagged, inputs that cannot run are refused."""
 
+import re
 import warnings
 
 import numpy as np
@@ -123,14 +124,20 @@ def test_a_disc_that_never_moves_has_no_peak_and_no_front():
 
 def test_the_advice_for_a_non_finite_state_names_float64_only_to_members_that_ran_in_float32():
     """A force of 1e300 N makes the state non-finite; the warning's advice was 'a tighter rtol, or
-    float64' to a member that ran in float64. float64 is named where members ran in float32."""
+    float64' to a member that ran in float64. float64 is named where members ran in float32, and a
+    warning before the run says why such a force fails."""
     import xarray as xr
 
     from warpfric.simulate import members_not_ok_text
 
-    with pytest.warns(UserWarning, match=r"1 of 2 members: 1 non_finite_state \(the state became NaN or inf: a tighter "
-                                         r"rtol\); their numbers"):
+    with pytest.warns(UserWarning) as caught:
         ds = run({"normal_force": [1e300, 1000.0]}, nodes=20, rtol=1e-5)
+    said = [str(w.message) for w in caught]
+    assert any(re.search(r"1 of 2 members: 1 non_finite_state \(the state became NaN or inf: a tighter rtol\); their "
+                         "numbers", text) for text in said), said
+    # and why, before the run: the mean normal stress F/(L p) far above the hardness (it passed the range (0, inf))
+    assert any(text.startswith("normal_force / (length * depth) reaches the hardness in 1 of 2 members (member index "
+                               "0: 4.17e+301 Pa against 5.4e+08 Pa)") for text in said), said
     assert list(ds.status.values) == [2, 0] and (ds.working_precision.values == 64).all()
     single = xr.Dataset({"status": ds.status, "disc_velocity": ds.disc_velocity,
                          "working_precision": ("member", np.array([32, 64], np.int8))})

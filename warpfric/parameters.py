@@ -864,8 +864,10 @@ DISC_BEFORE_FULL_LOAD = ("the disc starts to move (rest_until) before the normal
                          "rising, below normal_force (docs/model.md, \"Equations\": protocol)")
 # how simulate's warning of members whose run ended before their detachment was over begins (the same)
 DETACHMENT_NOT_OVER = "runs ended before the detachment was over"
+# how simulate's warning of members whose mean normal stress reaches the hardness begins (the same)
+LOAD_ABOVE_HARDNESS = "normal_force / (length * depth) reaches the hardness"
 ENSEMBLE_WARNINGS = (RECORD_PAST_END, MEMBERS_NOT_OK, DETACHMENT_NOT_OVER, DISC_BEFORE_FULL_LOAD, FRONTS_SETTINGS_UNUSED,
-                     PARAMETERS_UNUSED, CONTACT_WITHOUT_GATE)
+                     PARAMETERS_UNUSED, CONTACT_WITHOUT_GATE, LOAD_ABOVE_HARDNESS)
 
 
 def _with_named_keywords(cls):

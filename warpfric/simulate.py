@@ -17,7 +17,7 @@ from . import __version__
 from .device import check_device, init_warp
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
-from .parameters import (CONTACT_WITHOUT_GATE, DETACHMENT_NOT_OVER, DISC_BEFORE_FULL_LOAD, ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, MEMBERS_NOT_OK,
+from .parameters import (CONTACT_WITHOUT_GATE, DETACHMENT_NOT_OVER, DISC_BEFORE_FULL_LOAD, ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, LOAD_ABOVE_HARDNESS, MEMBERS_NOT_OK,
                          MEMBER_NUMBER_LIMIT, MEMBERS_NOT_OK_HINT, PARAMETERS_UNUSED, RECORD_PAST_END, Fronts, Model,
                          Parameters, Record, Solver, check_fronts_method, check_precision, parameter_long_name, parameter_units)
 from .progress import first_few
@@ -137,6 +137,7 @@ def simulate(
                       "nothing in this model", stacklevel=2)
     if np.any(values["rest_until"] < values["force_ramp_time"]):  # allowed, but rarely meant
         warnings.warn(DISC_BEFORE_FULL_LOAD, stacklevel=2)
+    _warn_load_above_hardness(values)
     device = check_device(device, n_members, solver)
     from . import pool  # a CPU ensemble large enough to pay: its members split over worker processes
 
@@ -378,6 +379,23 @@ def warn_detachment_not_over(ds: xr.Dataset, stacklevel: int = 3) -> None:
     total = int(sum(which.sum() for which in groups.values()))
     warnings.warn(f"{DETACHMENT_NOT_OVER} (detachment_end_time NaN) in {total} of {n:,} "
                   f"member{'' if n == 1 else 's'}: {'; '.join(parts)}{fronts}", stacklevel=stacklevel)
+
+
+def _warn_load_above_hardness(values: dict) -> None:
+    """One warning where a member's mean normal stress F/(L p) reaches the hardness: its real contact
+    area A = sigma_n/hardness * (1 + b ln(1 + phi/phi*)) would exceed the apparent one from the start,
+    outside the friction law's validity (a force of 1e300 N passed the range check, (0, inf), and
+    ended non_finite_state without a word on why). Allowed: with the defaults 1.4e7 and 3e7 N (the
+    hardness at 1.3e7 N) end ok, 1e9 N max_steps_reached (N = 30)."""
+    stress = values["normal_force"] / (values["length"] * values["depth"])
+    above = np.flatnonzero(stress >= values["hardness"])
+    if above.size:
+        k = int(above[0])
+        warnings.warn(f"{LOAD_ABOVE_HARDNESS} in {above.size} of {stress.size:,} member"
+                      f"{'' if stress.size == 1 else 's'} (member index {k}: {stress[k]:.3g} Pa against "
+                      f"{values['hardness'][k]:.3g} Pa): their real contact area would exceed the apparent one, "
+                      "outside the friction law's validity, so their mu_s is the model's, not a material's; runs "
+                      "far above it fail (max_steps_reached, non_finite_state)", stacklevel=3)
 
 
 def _warn_members_not_ok(ds: xr.Dataset, solver: Solver) -> None:
