@@ -151,13 +151,12 @@ def fronts_wide():
                   f"({float(ref.v_first[i]):.3g}) m/s")
 
 
-def soft_interface_members(seed=11):
-    """The 120 members of soft_interface (seed 11; another seed: a second sample of the same
-    distribution), {parameter: (120,) array}."""
+def soft_interface_members(seed=11, m=120):
+    """The 120 members of soft_interface (seed 11; another seed or count: another sample of the same
+    distribution), {parameter: (m,) array}."""
     import numpy as np
 
     rng = np.random.default_rng(seed)
-    m = 120
     return {"eccentricity": rng.uniform(-0.6, 0.6, m),
             "normal_force": np.exp(rng.uniform(np.log(3e4), np.log(3e5), m)),
             "disc_velocity": np.exp(rng.uniform(np.log(1e-5), np.log(0.3), m)) * rng.choice([-1, 1], m),
@@ -186,6 +185,21 @@ def with_force_factors(values, k):
     perturbed = {key: np.full(len(F_FACTORS), value[k]) for key, value in values.items()}
     perturbed["normal_force"] = values["normal_force"][k] * np.array(F_FACTORS)
     return perturbed
+
+
+def with_force_nudged(values, factor=1 + 1e-10):
+    """``values`` with every member's normal force times ``factor`` (the conditioning probe)."""
+    return dict(values, normal_force=values["normal_force"] * factor)
+
+
+def spread(x, above=()):
+    """'median ..., 90th ..., largest ...' of the finite values of ``x``, then for each threshold of
+    ``above`` how many lie above it ('3 above 1e-05' written as '3 above 1e-5')."""
+    import numpy as np
+
+    x = x[np.isfinite(x)]
+    counts = "".join(f", {int((x > level).sum())} above {level:.0e}".replace("e-0", "e-") for level in above)
+    return f"median {np.median(x):.1e}, 90th {np.percentile(x, 90):.1e}, largest {x.max():.1e}{counts}"
 
 
 def soft_interface():
@@ -307,13 +321,7 @@ def soft_interface_widths(widths=(1e-2, 3e-3, 1e-3)):
     import numpy as np
 
     members = soft_interface_members()
-    nudged = dict(members, normal_force=members["normal_force"] * (1 + 1e-10))
-
-    def spread(x):
-        x = x[np.isfinite(x)]
-        return (f"median {np.median(x):.1e}, 90th {np.percentile(x, 90):.1e}, largest {x.max():.1e}, "
-                f"{int((x > 1e-5).sum())} above 1e-5, {int((x > 1e-4).sum())} above 1e-4")
-
+    nudged = with_force_nudged(members)
     fine = {}
     for width in widths:
         t0 = time.perf_counter()
@@ -325,8 +333,10 @@ def soft_interface_widths(widths=(1e-2, 3e-3, 1e-3)):
         print(f"  width {width:.0e} ({time.perf_counter() - t0:.0f} s): ok {ok[0]} / {ok[1]} / {ok[2]} of 120 "
               f"(rtol 1e-5 / 1e-7 / 1e-7 nudged); accepted steps at 1e-5: median {np.median(steps):.0f}, largest "
               f"{steps.max()}, sum {steps.sum()}")
-        print(f"    mu_s at rtol 1e-5 against 1e-7: {spread(np.abs(coarse.mu_s.values / ref.mu_s.values - 1))}")
-        print(f"    mu_s at rtol 1e-7, F times 1 + 1e-10: {spread(np.abs(other.mu_s.values / ref.mu_s.values - 1))}")
+        print(f"    mu_s at rtol 1e-5 against 1e-7: "
+              f"{spread(np.abs(coarse.mu_s.values / ref.mu_s.values - 1), above=(1e-5, 1e-4))}")
+        print(f"    mu_s at rtol 1e-7, F times 1 + 1e-10: "
+              f"{spread(np.abs(other.mu_s.values / ref.mu_s.values - 1), above=(1e-5, 1e-4))}")
     narrow = min(widths)
     for width in widths:
         if width != narrow:
@@ -351,7 +361,7 @@ def soft_interface_flags(seeds=(11, 12)):
     for seed in seeds:
         t0 = time.perf_counter()
         members = soft_interface_members(seed)
-        nudged = dict(members, normal_force=members["normal_force"] * (1 + 1e-10))
+        nudged = with_force_nudged(members)
         fine, fine_nudged, run, run_nudged = (unlimited(values, 1e-3, rtol, max_steps=3_000_000)
                                               for values, rtol in ((members, 1e-7), (nudged, 1e-7), (members, 1e-5),
                                                                    (nudged, 1e-5)))
@@ -389,24 +399,17 @@ def default_stiffness_widths(widths=(1e-4, 1e-3, 3e-3, 1e-2)):
     members' grid error (N = 100 against N = 30, 12 members) beside the width's. ~2 minutes on a
     2-core CPU."""
     import numpy as np
+    from bench_engine import members as bench_members  # (studies/, the script's folder, is on the path)
 
-    rng = np.random.default_rng(21)
-    samples = {
-        "benchmark": {"eccentricity": np.random.default_rng([0, 0]).uniform(-0.2, 0.2, 60),  # bench_engine.members
-                      "normal_force": np.exp(np.random.default_rng([0, 1]).uniform(np.log(500.0), np.log(5000.0), 60))},
-        "wide loaded": {"eccentricity": rng.uniform(-0.6, 0.6, 60),
-                        "normal_force": np.exp(rng.uniform(np.log(3e4), np.log(3e5), 60)),
-                        "disc_velocity": np.exp(rng.uniform(np.log(1e-5), np.log(0.3), 60)) * rng.choice([-1, 1], 60)}}
+    wide = soft_interface_members(seed=21, m=60)
+    del wide["interface_stiffness"]  # drawn last: the other draws are as without it
+    samples = {"benchmark": bench_members(60), "wide loaded": wide}
     narrow, default = min(widths), wf.Solver().sliding_width
-
-    def spread(x):
-        return f"median {np.median(x):.1e}, 90th {np.percentile(x, 90):.1e}, largest {x.max():.1e}"
 
     for name, members in samples.items():
         t0 = time.perf_counter()
         runs = {width: unlimited(members, width, 1e-7, max_steps=3_000_000) for width in widths}
-        nudged = unlimited(dict(members, normal_force=members["normal_force"] * (1 + 1e-10)), default, 1e-7,
-                           max_steps=3_000_000)
+        nudged = unlimited(with_force_nudged(members), default, 1e-7, max_steps=3_000_000)
         ok = [int((run.status.values == 0).sum()) for run in runs.values()]
         print(f"  {name} ({time.perf_counter() - t0:.0f} s): ok {' / '.join(map(str, ok))} of 60 at widths "
               f"{' / '.join(f'{w:.0e}' for w in widths)}")
