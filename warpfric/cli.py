@@ -345,10 +345,7 @@ def _run(args) -> int:
         where = ", or change the values where the file sweeps the parameter" if swept else ""
         raise UsageError(f"{flags}: for the default scene only; a sweep file sets its own (write {keys} in "
                          f"{args.sweep}{where}), so that the file it writes can be run again from its sweep_toml")
-    if args.cpu_workers is not None and (args.scheduler or args.local_cluster):
-        raise UsageError("--cpu-workers splits a run in this process; on a Dask cluster (--scheduler, "
-                         "--local-cluster) each worker runs its chunk in one process: leave it out")
-    return _run_sweep(args)
+    return _run_sweep(args)  # (--cpu-workers on a Dask cluster: refused by run_sweep, whatever names the cluster)
 
 
 # what `warpfric info` and `plot` read of every file, and of a file with front outputs (its varying

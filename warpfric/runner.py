@@ -655,8 +655,8 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
                        "which this run does not start (it runs in this process); add [run] scheduler = \"local\" "
                        "or run with --local-cluster, or leave workers out")
     if cpu_workers is not None and use_cluster:  # a worker's daemonic process cannot start processes of its own
-        cluster = (f"the sweep file's [run] scheduler = {where!r}" if client is None and not scheduler and not local
-                   else "--scheduler, --local-cluster or a client")
+        cluster = ("--scheduler" if scheduler else "--local-cluster" if local else "a client" if client is not None
+                   else f"the sweep file's [run] scheduler = {where!r}")
         raise RunError(f"--cpu-workers {cpu_workers}: splits a run in this process; on a Dask cluster ({cluster}) each "
                        "worker runs its chunk in one process: leave it out")
     workers = workers or sweep.run.get("workers")
