@@ -595,6 +595,30 @@ def test_ctrl_c_in_a_sweep_says_what_was_kept(tmp_path, sweep, capsys, monkeypat
     assert not list(tmp_path.rglob("*.tmp")) and not (tmp_path / "s.nc.lock").exists()
 
 
+def test_the_printed_resume_command_is_quoted_for_the_shell(tmp_path, capsys, monkeypatch):
+    """Paths with a space printed `warpfric run my sweep.toml -o my results.nc --resume`, which a
+    shell splits into other words; the words of the printed command, split as a shell does, finish
+    the run into the file an uninterrupted run writes."""
+    import shlex
+
+    folder = tmp_path / "my study"
+    folder.mkdir()
+    sweep = folder / "my sweep.toml"
+    sweep.write_text(TINY_SWEEP)
+    out = folder / "my results.nc"
+    code, err = _interrupted_run(folder, sweep, capsys, monkeypatch, out, interrupt_at=3)
+    printed = err[-1].split("`")[1]
+    assert code == 130 and printed == (f"warpfric run '{sweep}' -o '{out}' --resume --device {DEVICE}"), err
+    words = shlex.split(printed)
+    assert words[:2] == ["warpfric", "run"] and words[2] == str(sweep) and words[4] == str(out)
+    code, _, err = run_cli(capsys, *words[1:], "--quiet")
+    assert code == 0, err
+    whole = tmp_path / "whole.nc"
+    assert run_cli(capsys, "run", sweep, "-o", whole, "--device", DEVICE, "--quiet")[0] == 0
+    with open_ensemble(out) as resumed, open_ensemble(whole) as uninterrupted:
+        np.testing.assert_array_equal(resumed.mu_s.values, uninterrupted.mu_s.values)
+
+
 def test_resume_with_other_settings_names_the_one_that_differs(tmp_path, sweep, capsys, monkeypatch):
     """It said 'a different sweep, chunk size (1) or member offset (0)' whichever differed."""
     out = tmp_path / "s.nc"

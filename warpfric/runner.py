@@ -728,7 +728,9 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
     tornado_log = logging.getLogger("tornado.application")
     if use_cluster:
         tornado_log.addFilter(drop_sync_cancel_error)
-    resume_command = f"warpfric run {sweep_file} -o {out} --resume" + (f" --device {device}" if device else "")
+    # quoted as a shell reads it (a path with spaces); a plain path prints as given
+    resume_command = shlex.join(["warpfric", "run", str(sweep_file), "-o", str(out), "--resume"]
+                                + (["--device", device] if device else []))
     store = previous
     try:
         if store is None:
