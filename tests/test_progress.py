@@ -95,6 +95,75 @@ def test_quiet_where_stderr_is_no_terminal(clock):
     assert lines[0].startswith("warpfric chunk 2/2: 50 members in 50.0 s (1 members/s)")
 
 
+def test_the_time_left_is_unknown_while_the_fraction_stands_still(clock):
+    """Members past their expected steps (held at RUNNING_CAP) stopped the fraction at 93 %, and the
+    line said 00:00 left for the 40 s the run still took (tqdm's rate never saw the pause). The time
+    left reads the fraction's growth over the last rate_window s: '?' where it has not grown."""
+    out = FakeTerminal()
+    line = progress.Line(50, "slow", stream=out, clock=clock)
+    shown = []
+    for k in range(1, 121):  # 0.1 s apart: 0.93 at 4 s, then nothing until 11 s, then 0.95 at 12 s
+        clock.now += 0.1
+        fraction = min(0.93, 0.2325 * k / 10) if k <= 110 else 0.93 + 0.02 * (k - 110) / 10
+        line.show(fraction, 0)
+        shown.append((round(k / 10, 1), line.left_text()))
+    left = dict(shown)
+    assert left[2.0] == "00:02" and left[4.0] == "00:00"  # 0.465 at 2 s: 2.3 s left at its rate
+    assert left[9.5] == "?" and left[11.0] == "?", shown  # stood still for over 5 s
+    # growing again, 0.02 in the last 1 s of the window read (the redraw 5.0-5.5 s ago, the redraws
+    # being 0.5 s apart): 0.05 left at 0.02 per 5.0-5.5 s, 12.5-13.75 s
+    assert left[12.0] in ("00:12", "00:13", "00:14"), shown
+    line.close()
+    assert any("<?, " in text for _, text in drawn(out))
+
+
+def test_a_log_gets_a_plain_line_a_minute_and_the_summary(clock):
+    """A batch job's log showed nothing for hours until the run ended: now one line every
+    log_interval s (60), with the percentage, the counts and the time left."""
+    out = io.StringIO()
+    line = progress.Line(100, "chunk 1/1", stream=out, clock=clock)
+    for k in range(1, 301):  # 0.5 s apart for 150 s, steadily to 75 %
+        clock.now += 0.5
+        line.show(k / 400, k // 4)
+    line.close()
+    lines = out.getvalue().splitlines()
+    assert len(lines) == 3 and "\r" not in out.getvalue(), lines
+    assert lines[0] == "warpfric chunk 1/1: 30.0 % after 60 s, 0.5 members/s, 30/100 done, time left 02:20", lines
+    assert lines[1].startswith("warpfric chunk 1/1: 60.0 % after 2 min, ") and lines[1].endswith("time left 01:20")
+    assert lines[2].startswith("warpfric chunk 1/1: 100 members in 150.0 s")
+
+
+def test_a_notebooks_output_is_watched_as_a_terminal(monkeypatch):
+    """In Jupyter stderr is ipykernel's OutStream, no tty: the default showed no progress at all. A
+    notebook shows a redrawn line as one line, so it gets the bar."""
+    OutStream = type("OutStream", (io.StringIO,), {"__module__": "ipykernel.iostream"})
+    notebook = OutStream()
+    assert progress.interactive(notebook) and not progress.interactive(io.StringIO())
+    monkeypatch.setattr(sys, "stderr", notebook)
+    assert progress.shown(None) and not progress.shown(False) and progress.shown("label")
+    line = progress.Line(10, "nb", stream=notebook)
+    line.close()
+    assert drawn(notebook)[-1][0] == 100 and "10/10 done" in drawn(notebook)[-1][1]
+
+
+def test_a_long_kernel_load_is_said_before_the_line_starts(monkeypatch):
+    """A first run compiled its kernels for ~8 s (CPU) or ~15 s (GPU) without a word before the line
+    started at 0 %. A load longer than its threshold is now said, once; a quick one (from Warp's
+    cache), a run without progress and a pool worker (whose parent draws the line) say nothing."""
+    import time
+
+    out = io.StringIO()
+    with progress.building_note(True, stream=out, after=0.05) as note:
+        time.sleep(0.3)  # a compilation
+    assert note.written and out.getvalue().startswith("warpfric: compiling the kernels") and out.getvalue().count("\n") == 1
+    for show, sink in ((True, None), (False, None), (True, lambda *a: None)):
+        quiet = io.StringIO()
+        monkeypatch.setattr(progress, "SINK", sink)
+        with progress.building_note(show, stream=quiet, after=0.05 if show and sink is None else 0.0) as note:
+            time.sleep(0.01 if sink is None and show else 0.2)  # quick, or long but not to be said
+        assert quiet.getvalue() == "" and not note.written
+
+
 def test_percentage_moves_steadily_through_both_passes():
     """Members in lockstep (each launch advances every running member by the same attempts) with a
     spread of needed attempts: the fraction rises in small steps through pass 1 (to 1/2) and pass 2

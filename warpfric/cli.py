@@ -245,7 +245,10 @@ def _run_default(args) -> int:
             run = dict(scene=scene, model=model, solver=solver, device=args.device, progress=not args.quiet,
                        member_offset=offset, workers=args.cpu_workers)
             if args.record is not None and record is None:  # --record alone: find the detachment first
-                found, final_time = detachment_runs(None, fronts=fronts, **run)
+                # two runs, two progress lines: each says which it is
+                found, final_time = detachment_runs(None, fronts=fronts,
+                                                    **{**run, "progress": not args.quiet and "first run"})
+                run["progress"] = not args.quiet and "recording"
                 record = Record.detachment(found, member_offset=offset, final_time=final_time)
                 what = ("the detachment found by a first run" if detachment_start(found, 0, final_time[0]) is not None
                         else "the disc's start to the end: a first run found no detachment (status "

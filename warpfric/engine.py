@@ -21,7 +21,7 @@ import warnings
 import numpy as np
 
 from .parameters import Fronts, Model, Record, Solver
-from .progress import Progress, end_time_attempts, launch_steps
+from .progress import Progress, building_note, end_time_attempts, launch_steps
 
 
 @dataclasses.dataclass
@@ -725,7 +725,8 @@ def run(values: dict, model: Model, solver: Solver, fronts: Fronts | None, recor
     t_build = time.perf_counter()
     kern = get_integrator(solver.dtype, model, lanes, solver.method, cuda=cuda, observed=observer_set(fronts),
                           shared_work=layout.shared_work)
-    with cpu_blocks(team):  # compile or load now, so that it is timed apart
+    # compile or load now, so that it is timed apart (and said, where it takes long: a compilation)
+    with cpu_blocks(team), building_note(show_progress):
         block_dim = block_threads(lanes, kern["blocked"])
         wp.load_module(kern["integrate"].module, device=device, block_dim=block_dim if team else None)
         wp.load_module(kern["evaluate_fields"].module, device=device)

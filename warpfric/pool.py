@@ -297,7 +297,7 @@ def run(n_workers: int, values: dict, *, scene, model, solver, fronts, record, d
     n = values["normal_force"].shape[0]
     bounds = chunk_bounds(n, n_workers)
     sizes = np.array([stop - start for start, stop in bounds])
-    show = sys.stderr.isatty() if progress is None else bool(progress)
+    show = progress_module.shown(progress)
     line = progress_module.Line(n, progress if isinstance(progress, str) else "") if show else None
     run_id = next(_RUN_IDS)
     common = dict(scene=scene, model=model, solver=solver, fronts=fronts, device=device)

@@ -1,11 +1,15 @@
 """warpfric.progress: the progress line of a run, the launch size that keeps it moving on the CPU,
 and the warning before a run far beyond the usual size.
 
-The line (stderr; drawn by tqdm in a terminal) shows a percentage, members done, members per
-second and the time left; it is redrawn at most every ``Line.interval`` s and at least after every
-launch, which on the CPU lasts ~0.1 s (``launch_steps``). Where stderr is no terminal (a log, a
-pipe) nothing is drawn while the run goes; a run with progress on writes one summary line at its
-end.
+The line (stderr; drawn by tqdm in a terminal or a Jupyter notebook) shows a percentage, members
+done, members per second and the time left; it is redrawn at most every ``Line.interval`` s and at
+least after every launch, which on the CPU lasts ~0.1 s (``launch_steps``). The time left comes
+from the fraction's growth over the last ``Line.rate_window`` s (at least; a fifth of the run's
+time where that is longer); where the fraction has not grown in that window (members that need more
+steps than expected, held at ``RUNNING_CAP``) the time left is unknown and shown as "?". Where
+stderr is neither (a log, a pipe), a run with progress on writes one plain line every
+``Line.log_interval`` s while it goes, and one summary line at its end; a run shorter than that
+interval writes the summary only.
 
 The percentage: a member that is done counts 1; a running member counts its attempted steps over
 the steps a member is expected to need (``expected_attempts``; in the second pass of the front
@@ -263,6 +267,19 @@ def _isatty(stream) -> bool:
         return False
 
 
+def interactive(stream) -> bool:
+    """Whether a person watches ``stream`` as it is written: a terminal, or a Jupyter kernel's output
+    (ipykernel's OutStream, which is no tty but shows a redrawn line as one line)."""
+    kind = type(stream)
+    return _isatty(stream) or (kind.__name__ == "OutStream" and kind.__module__.startswith("ipykernel"))
+
+
+def shown(progress) -> bool:
+    """Whether a run shows progress: ``progress`` as simulate takes it (None: where stderr is
+    ``interactive``; a string: on, with that label)."""
+    return interactive(sys.stderr) if progress is None else bool(progress)
+
+
 FALLBACK_COLUMNS, FALLBACK_ROWS = 80, 24
 
 
@@ -300,12 +317,14 @@ def stop_open_lines() -> None:
 
 
 class Line:
-    """One progress line for n members on ``stream`` (default stderr). In a terminal: a tqdm bar
-    (percentage, members done, members/s, time left), redrawn by ``show`` at most every
-    ``interval`` s. Elsewhere nothing until ``close``, which writes one summary line. The
-    fraction shown never decreases. ``clock``: seconds (tests pass a fake one)."""
+    """One progress line for n members on ``stream`` (default stderr). In a terminal or a notebook:
+    a tqdm bar (percentage, members done, members/s, time left), redrawn by ``show`` at most every
+    ``interval`` s. Elsewhere a plain line every ``log_interval`` s and one summary line at
+    ``close``. The fraction shown never decreases. ``clock``: seconds (tests pass a fake one)."""
 
-    interval = 0.5
+    interval = 0.5  # s between redraws of the bar
+    log_interval = 60.0  # s between the plain lines of a log
+    rate_window = 5.0  # s (at least) over which the time left reads the fraction's growth
 
     def __init__(self, n_members: int, label: str = "", stream=None, clock=time.monotonic):
         self.stream = stream if stream is not None else sys.stderr
@@ -319,11 +338,20 @@ class Line:
         self.note = ""
         self.closed = False
         self.bar = None
-        if _isatty(self.stream):
+        self.samples = [(self.t0, 0.0)]  # (time, fraction) at each redraw, for the time left
+        self.logged = self.t0  # the last plain line of a log
+        if interactive(self.stream):
             from tqdm import tqdm
+
+            line = weakref.ref(self)  # no cycle: a line left open goes, and its bar with it, as before
 
             class _Bar(tqdm):
                 monitor_interval = 0  # no monitor thread: this class throttles the redraws itself
+
+                @property
+                def format_dict(self):  # the time left as this line reckons it ("{left}")
+                    owner = line()
+                    return {**super().format_dict, "left": owner.left_text() if owner is not None else "?"}
 
             # both given: tqdm does not read the size itself (a terminal of 0 x 0 gave it -1 rows, and then
             # it drew nothing)
@@ -332,7 +360,7 @@ class Line:
             postfix = self._postfix()
             self.bar = _Bar(total=self.n, desc=self._fitted_label(postfix), postfix=postfix, unit=" members",
                             file=self.stream, mininterval=0, miniters=0, smoothing=0.1, ncols=columns, nrows=rows,
-                            leave=True, bar_format="{desc}{percentage:5.1f}%|{bar}| [{elapsed}<{remaining}{postfix}]")
+                            leave=True, bar_format="{desc}{percentage:5.1f}%|{bar}| [{elapsed}<{left}{postfix}]")
             _OPEN_LINES.add(self)
 
     def _set_postfix(self) -> None:
@@ -348,9 +376,11 @@ class Line:
         The room is reckoned for the widest counts of the run (a rate of up to 8 characters, all
         members done), so that the label keeps its length from one redraw to the next."""
         elapsed = self.clock() - self.t0
-        remaining = elapsed * (1.0 - self.fraction) / self.fraction if self.fraction > 0 else 0.0
+        remaining = self.time_left()
+        remaining = elapsed * (1.0 - self.fraction) / self.fraction if remaining is None and self.fraction > 0 else (
+            remaining or 0.0)
         # the rest of the line: "100.0%|", a bar of LINE_MIN_BAR, "| [", elapsed "<" remaining as
-        # tqdm writes them (MM:SS, or H:MM:SS from an hour on), ", " and "]"
+        # tqdm writes them (MM:SS, or H:MM:SS from an hour on; "?" within MM:SS's width), ", " and "]"
         clock_width = sum(5 if t < 3600 else len(f"{int(t // 3600)}:00:00") for t in (elapsed, remaining))
         widest = len(f"1.23e+03 members/s, {self.n}/{self.n} done") + (len(f", {self.note}") if self.note else 0)
         short = self.label.removeprefix("warpfric ")
@@ -371,17 +401,54 @@ class Line:
                 f"{_duration(1 / rate)} per member")
         return f"{pace}, {self.done}/{self.n} done" + (f", {self.note}" if self.note else "")
 
+    def time_left(self) -> float | None:
+        """Seconds left at the fraction's growth over the last ``rate_window`` s (or a fifth of the
+        time so far, where longer), from the redraws' samples; None where it has not grown there."""
+        now = self.clock()
+        window = max(self.rate_window, 0.2 * (now - self.t0))
+        # the latest sample at least a window old (the start where none is)
+        then, before = next(((t, f) for t, f in reversed(self.samples) if now - t >= window), self.samples[0])
+        if self.fraction >= 1.0:
+            return 0.0
+        if self.fraction <= before or now <= then:
+            return None
+        return (1.0 - self.fraction) * (now - then) / (self.fraction - before)
+
+    def left_text(self) -> str:
+        """The time left as tqdm writes a time (MM:SS, H:MM:SS), or "?" where it is unknown."""
+        from tqdm import tqdm
+
+        left = self.time_left()
+        return "?" if left is None else tqdm.format_interval(round(left))
+
+    def _sample(self, now: float) -> None:
+        """Keep (now, fraction) for the time left, and only the samples its window can still read."""
+        self.samples.append((now, self.fraction))
+        window = max(self.rate_window, 0.2 * (now - self.t0))
+        while len(self.samples) > 2 and now - self.samples[1][0] >= window:
+            self.samples.pop(0)
+
     def show(self, fraction: float, done: int, note: str | None = None, force: bool = False) -> bool:
         """Take the latest fraction (0..1) and members done; redraw when ``interval`` s have passed
-        since the last redraw (or ``force``). Returns whether it redrew."""
+        since the last redraw (or ``force``); in a log, a plain line every ``log_interval`` s. Returns
+        whether it drew."""
         self.fraction = max(self.fraction, min(float(fraction), 1.0))
         self.done = max(self.done, int(done))
         if note is not None:
             self.note = note
         now = self.clock()
-        if self.bar is None or self.closed or (not force and now - self.last < self.interval):
+        if self.closed or (not force and now - self.last < self.interval):
             return False
         self.last = now
+        self._sample(now)
+        if self.bar is None:
+            if now - self.logged < self.log_interval:
+                return False
+            self.logged = now
+            self.stream.write(f"{self.label}: {100 * self.fraction:.1f} % after {_duration(now - self.t0)}, "
+                              f"{self._postfix()}, time left {self.left_text()}\n")
+            self.stream.flush()
+            return True
         self._set_postfix()
         self.bar.update(self.fraction * self.n - self.bar.n)
         return True
@@ -411,6 +478,43 @@ class Line:
         self.stream.write(f"{self.label}: {plural(self.n, 'member')} in {seconds_text(elapsed)} s "
                           f"({self.n / elapsed:.3g} members/s){', ' + summary if summary else ''}\n")
         self.stream.flush()
+
+
+BUILD_NOTE_AFTER_S = 1.0  # a kernel load that takes longer than this is a compilation: say so
+
+
+class building_note:
+    """Around the kernels' compile or load: where progress is shown and this process draws the
+    line (no SINK), one line on ``stream`` (default stderr) once the load has taken
+    BUILD_NOTE_AFTER_S, since a first compilation takes seconds (~15 s on a GPU) before the progress
+    line can start. Loading a kernel from Warp's cache says nothing."""
+
+    def __init__(self, show: bool, stream=None, after: float = BUILD_NOTE_AFTER_S):
+        self.show = bool(show) and SINK is None
+        self.stream = stream
+        self.after = after
+        self.timer = None
+        self.written = False
+
+    def _write(self) -> None:
+        stream = self.stream if self.stream is not None else sys.stderr
+        stream.write("warpfric: compiling the kernels for these settings (once: Warp keeps them in its cache) ...\n")
+        stream.flush()
+        self.written = True
+
+    def __enter__(self):
+        if self.show:
+            import threading
+
+            self.timer = threading.Timer(self.after, self._write)
+            self.timer.daemon = True
+            self.timer.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self.timer is not None:
+            self.timer.cancel()
+            self.timer.join()
 
 
 RUNNING_CAP = 0.8  # the most a running member counts (see the module's docstring)

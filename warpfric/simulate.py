@@ -20,7 +20,7 @@ from .fronts import SEGMENT_NAMES
 from .parameters import (CONTACT_WITHOUT_GATE, DETACHMENT_NOT_OVER, DISC_BEFORE_FULL_LOAD, ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, LOAD_ABOVE_HARDNESS, MEMBERS_NOT_OK,
                          MEMBER_NUMBER_LIMIT, MEMBERS_NOT_OK_HINT, PARAMETERS_UNUSED, RECORD_PAST_END, Fronts, Model,
                          Parameters, Record, Solver, check_fronts_method, check_precision, parameter_long_name, parameter_units)
-from .progress import first_few
+from .progress import first_few, shown
 
 
 def simulate(
@@ -190,7 +190,7 @@ def _run_member_blocks(values, varying, scene, model, solver, fronts, record, de
     t0 = time.perf_counter()
     n = values["normal_force"].shape[0]
     bounds = [(start, min(start + CPU_MEMBER_BLOCK, n)) for start in range(0, n, CPU_MEMBER_BLOCK)]
-    show = sys.stderr.isatty() if progress is None else bool(progress)
+    show = progress_module.shown(progress)
     saved_sink = progress_module.SINK  # a worker's: its parent draws the ensemble's line
     line = (progress_module.Line(n, progress if isinstance(progress, str) else "")
             if show and saved_sink is None else None)
@@ -234,7 +234,7 @@ def _run_members(values, varying, scene, model, solver, fronts, record, device, 
     from . import engine
 
     init_warp()
-    show = sys.stderr.isatty() if progress is None else bool(progress)
+    show = shown(progress)
     t_start = time.perf_counter()
     try:
         result = engine.run(values, model, solver, fronts, record, device, show,
