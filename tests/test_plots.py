@@ -488,3 +488,108 @@ def test_members_not_ok_are_in_the_legend_of_a_coloured_mu_s_figure(grid):
     assert texts[-1] == "2 members not ok (no mu_s), on the axis" and len(texts) == 4  # 3 eccentricities + it
     marks = [line for line in ax.get_lines() if line.get_marker() == "x"]
     assert len(marks) == 1 and sorted(marks[0].get_xdata()) == sorted(failed.normal_force.values[[2, 7]])
+
+
+def test_a_second_title_line_sits_above_the_panels_titles(grid):
+    """With a third swept parameter the front-speed figure's two-line title ran over its panels'
+    titles ('also varying, not told apart' over 'middle segment')."""
+    three = grid.assign(disc_velocity=("member", np.tile([1e-4, 1e-3, 1e-2], 5), {"units": "m s-1"}))
+    fig = plots.front_speeds_figure(three, "normal_force", "eccentricity", mixed=("disc_velocity",))
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    foot = fig._suptitle.get_window_extent(renderer).y0
+    tops = [ax.title.get_window_extent(renderer).y1 for ax in fig.axes if ax.get_title()]
+    assert len(tops) == 3 and foot >= max(tops), (foot, tops)
+
+
+def test_a_log_axis_over_many_decades_is_labelled_in_powers_of_ten():
+    """F from 316 N to 1e9 N: every decade was labelled as a plain number up to 1e7 ('10000100000')
+    and then as '1e+07'; now powers of ten, at most MAX_LOG_TICKS of them."""
+    ds = ensemble(np.logspace(2.5, 9, 8), np.zeros(8))
+    ds.attrs["varying_parameters"] = "normal_force"
+    fig = plots.mu_s_figure(ds, "normal_force")
+    ax = fig.axes[0]
+    fig.canvas.draw()
+    lo, hi = ax.get_xlim()
+    labels = [t.get_text() for t in ax.get_xticklabels() if t.get_text() and lo <= t.get_position()[0] <= hi]
+    assert 3 <= len(labels) <= plots.MAX_LOG_TICKS and all("10^{" in t for t in labels), labels
+    assert not any("e+" in t or "0000" in t for t in labels), labels
+
+
+def test_a_series_line_breaks_at_a_member_that_is_not_ok():
+    """The line of the ok members joined 300 N to 3000 N across the member at 1000 N that failed,
+    drawing a trend where there is no value."""
+    ds = ensemble(np.array([100.0, 300.0, 1000.0, 3000.0, 10000.0]), np.zeros(5))
+    ds["status"] = ("member", np.array([0, 0, 1, 0, 0], np.int32), {"flag_values": np.array([0, 1], np.int32),
+                                                                     "flag_meanings": "ok max_steps_reached"})
+    ds.attrs["varying_parameters"] = "normal_force"
+    ax = plots.mu_s_figure(ds, "normal_force").axes[0]
+    line = next(line for line in ax.get_lines() if line.get_label() == "4 ok members")
+    np.testing.assert_array_equal(line.get_xdata(), [100.0, 300.0, np.nan, 3000.0, 10000.0])
+    assert np.isnan(line.get_ydata()[2]) and np.isfinite(np.delete(line.get_ydata(), 2)).all()
+
+
+def test_velocities_of_both_signs_over_decades_get_a_symmetric_log_axis():
+    """+-1e-5, +-1e-4 and +-1e-3 m/s on a linear axis: the four smallest lay on top of each other at 0."""
+    velocity = np.array([-1e-3, -1e-4, -1e-5, 1e-5, 1e-4, 1e-3])
+    ds = ensemble(np.full(6, 1000.0), np.zeros(6)).assign(disc_velocity=("member", velocity, {"units": "m s-1"}))
+    ds.attrs["varying_parameters"] = "disc_velocity"
+    ax = plots.mu_s_figure(ds, "disc_velocity").axes[0]
+    assert ax.get_xscale() == "symlog"
+    shown = ax.transData.transform(np.column_stack([velocity, np.full(6, 0.51)]))[:, 0]
+    assert np.diff(shown).min() > 0.08 * (shown[-1] - shown[0])  # evenly apart, none on top of another
+    small = plots.mu_s_figure(ds.assign(disc_velocity=("member", velocity * 0 + [-2, -1, -0.5, 0.5, 1, 2],
+                                                       {"units": "m s-1"})), "disc_velocity")
+    assert small.axes[0].get_xscale() == "linear"  # less than two decades: linear
+
+
+def test_arrival_curves_that_would_look_alike_get_colours_of_their_own(grid):
+    """Coloured by the first swept parameter and styled by the second only up to four values: a
+    second of more values (or a third) gave curves of the same colour and style."""
+    swapped = grid.copy()
+    swapped.attrs["varying_parameters"] = "eccentricity normal_force"  # 3 colours, F's 5 values no styles
+    ax = plots.arrival_times_figure(swapped).axes[0]
+    looks = [(line.get_color(), line.get_linestyle()) for line in ax.get_lines() if line.get_label() != "_meeting"]
+    assert len(looks) == plots.MAX_CURVES and len(set(looks)) == len(looks), looks
+
+
+def test_one_far_member_runs_off_the_arrival_axis_instead_of_flattening_the_others(grid):
+    arrival = grid.arrival_time.values.copy()
+    arrival[7] = 20.2 + 100 * (arrival[7] - 20.2)  # its front 100 times slower
+    ds = grid.assign(arrival_time=grid.arrival_time.copy(data=arrival))
+    ax = plots.arrival_times_figure(ds, max_curves=15).axes[0]  # every member a curve
+    spans = np.nanmax(arrival, axis=1) - np.nanmin(arrival, axis=1)
+    others = np.delete(spans, 7)
+    assert ax.get_ylim()[1] == pytest.approx(1.1 * others.max() * 1e3)
+    off = [t for t in legend_texts(ax) if "off the axis" in t]
+    assert len(off) == 1 and f"to {spans[7] * 1e3:.3g} ms" in off[0]
+
+
+def test_a_histogram_of_one_value_shows_that_value():
+    """Six equal mu_s: numpy's automatic bins were the value +- 0.5, one bar from 0.01 to 1.01."""
+    ds = ensemble(np.full(6, 1000.0), np.zeros(6)).assign(mu_s=("member", np.full(6, 0.5104), {"units": "1"}))
+    ax = plots.mu_s_histogram_figure(ds).axes[0]
+    (bar,) = ax.patches
+    assert bar.get_x() < 0.5104 < bar.get_x() + bar.get_width() and bar.get_width() < 1e-2 and bar.get_height() == 6
+    assert legend_texts(ax) == ["6 ok members, all at 0.5104"]
+
+
+def test_a_map_with_nothing_recorded_has_no_colour_scale(contact_run):
+    """A member that ended before its recording window got an all-grey map with a colour bar of
+    +-1e9 nm/s, a scale of nothing."""
+    ds = contact_run.assign(velocity_history=contact_run.velocity_history * np.nan)
+    fig = plots.space_time_figure(ds, 0)
+    assert not colour_bar(fig) and any("nothing recorded" in t.get_text() for t in fig.axes[0].texts)
+    assert len(colour_bar(plots.space_time_figure(contact_run, 0))) == 1
+
+
+def test_a_front_has_one_colour_in_both_figures_of_a_member(contact_run):
+    """The contact front was black on the space-time map and green in mu(t), where green is the
+    strength front's colour on the map."""
+    from matplotlib.colors import to_rgb
+
+    span = next(p for p in plots.friction_history_figure(contact_run, 0).axes[0].patches
+                if "contact front" in p.get_label())
+    curve = next(line for line in plots.space_time_figure(contact_run, 0).axes[0].get_lines()
+                 if line.get_label().startswith("contact front: arrival"))
+    assert to_rgb(span.get_facecolor()) == to_rgb(curve.get_color())

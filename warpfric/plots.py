@@ -2,8 +2,10 @@
 
 Against each swept parameter: mu_s, and the front speeds in one panel per segment; a second swept
 parameter is the colour (a legend where it takes at most MAX_LEGEND values, each value's members
-joined along the x axis, else a colour bar). An axis is logarithmic where its positive values span
-a decade or more. Arrival-time curves of up to MAX_CURVES members spread over the ensemble, each
+joined along the x axis, else a colour bar; a line breaks at a member that is not ok). An axis is
+logarithmic where its positive values span a decade or more (its ticks powers of ten where they
+span more than three or leave [1e-3, 1e5)), symmetric-logarithmic where values of both signs span
+two decades or more. Arrival-time curves of up to MAX_CURVES members spread over the ensemble, each
 labelled with its swept values; the space-time map of every recorded member, with its arrival-time
 curve of each front event in the Dataset and, for the velocity event, the threshold contour, and its
 friction coefficient mu(t) over the recorded times.
@@ -21,6 +23,7 @@ from .progress import plural, status_name
 
 MAX_LEGEND = 8  # values of a colour parameter shown in a legend; more: a colour bar
 MAX_CURVES = 8  # arrival-time curves in one figure
+OUTLIER_SPAN = 10.0  # an arrival-time curve spanning more than this x the median curve's time runs off the axis
 # symbols of the parameters most often swept (legend entries "F = 1000 N"; axis labels)
 _SYMBOLS = {"normal_force": "F", "eccentricity": "2e/L", "disc_velocity": "v", "shear_strength": "tau_c",
             "length": "L", "height": "h", "stop_time": "t_stop"}
@@ -28,6 +31,9 @@ _UNITS = {"1": "", "m s-1": "m/s", "s-1": "1/s", "m2": "m^2"}
 # each front event's arrival-time curve on a space-time map: (colour, line style); the velocity
 # event's lies on its black threshold contour
 _ARRIVAL_STYLES = {"contact": ("k", "--"), "strength": ("tab:green", "-."), "velocity": ("w", ":")}
+# each front event's time span in mu(t): the colour of its curve on the map (the white curve's span
+# in blue, which white cannot be on white)
+_SPAN_COLOURS = {"contact": "k", "strength": "tab:green", "velocity": "tab:blue"}
 
 
 def _plt():
@@ -67,28 +73,49 @@ def _number(value: float) -> str:
     return f"{value:.2g}" if abs(value) < 1 else f"{value:.3g}"
 
 
+PLAIN_TICKS_BELOW = 1e5  # a log axis whose values all lie in [1e-3, this) has plain-number ticks (_log_ticks)
+MAX_LOG_TICKS = 7  # labelled ticks of a log axis of powers of ten
+
+
 def _log_ticks(axis, values) -> None:
-    """Plain-number ticks on a log axis (ax.xaxis, ax.yaxis, a colour bar's): 1, 2 and 5 x 10^k over
-    up to 1.5 decades, 1 and 3 x 10^k up to 3, 10^k beyond; no minor labels (they overlap)."""
+    """Ticks on a log axis (ax.xaxis, ax.yaxis, a colour bar's). Within [1e-3, 1e5) and up to three
+    decades plain numbers: 1, 2 and 5 x 10^k over up to 1.5 decades, 1 and 3 x 10^k up to 3.
+    Beyond, powers of ten written as such (10^4, not 10000 beside 1e+07, which ran together on a
+    narrow panel), at most MAX_LOG_TICKS of them (every second or third decade where more). No
+    minor labels (they overlap)."""
     from matplotlib import ticker
 
     v = np.asarray(values, dtype=float)
     v = v[np.isfinite(v) & (v > 0)]
     decades = np.log10(v.max() / v.min()) if v.size else 0.0
-    subs = (1.0, 2.0, 5.0) if decades <= 1.5 else (1.0, 3.0) if decades <= 3.0 else (1.0,)
-    axis.set_major_locator(ticker.LogLocator(base=10, subs=subs))
-    axis.set_major_formatter(ticker.FuncFormatter(lambda tick, _: _number(tick)))
+    plain = v.size and v.min() >= 1e-3 and v.max() < PLAIN_TICKS_BELOW and decades <= 3.0
+    if plain:
+        subs = (1.0, 2.0, 5.0) if decades <= 1.5 else (1.0, 3.0)
+        axis.set_major_locator(ticker.LogLocator(base=10, subs=subs))
+        axis.set_major_formatter(ticker.FuncFormatter(lambda tick, _: _number(tick)))
+    else:
+        axis.set_major_locator(ticker.LogLocator(base=10, subs=(1.0,), numticks=MAX_LOG_TICKS))
+        axis.set_major_formatter(ticker.LogFormatterMathtext())
     axis.set_minor_formatter(ticker.NullFormatter())
 
 
 def _scale(ax, which: str, values) -> str:
     """Axis ``which`` ('x' or 'y') of ``ax``: log where ``values`` span a decade or more (with
-    _log_ticks), else linear, its small or large numbers as a common power of ten beside the axis
+    _log_ticks), symlog where they take both signs and their magnitudes span two decades or more
+    (linear within the smallest magnitude), else linear, its small or large numbers as a common power of ten beside the axis
     (a disc velocity of +-1e-4 m/s as -1, 0, 1 and x 10^-4: written out, its ticks overlapped).
     Returns the scale."""
     from matplotlib import ticker
 
     scale = _axis_scale(values)
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    magnitude = np.abs(v[v != 0])
+    if scale == "linear" and (v < 0).any() and (v > 0).any() and magnitude.max() >= 100 * magnitude.min():
+        scale = "symlog"  # both signs over two decades or more: +-1e-5 and +-1e-4 lay on top of each other at 0
+        getattr(ax, f"set_{which}scale")(scale, linthresh=float(magnitude.min()), linscale=0.5)
+        getattr(ax, f"{which}axis").set_minor_formatter(ticker.NullFormatter())
+        return scale
     getattr(ax, f"set_{which}scale")(scale)
     axis = getattr(ax, f"{which}axis")
     if scale == "log":
@@ -313,22 +340,33 @@ class _Colours:
                 axes[-1].legend(handles=list(extra), fontsize=8)
 
 
-def _series(ax, x: np.ndarray, y: np.ndarray, sel: np.ndarray, marker: str = "o", **kw) -> None:
-    """Members ``sel`` as markers, joined by a line where their x values are distinct (a grid)."""
+def _series(ax, x: np.ndarray, y: np.ndarray, sel: np.ndarray, marker: str = "o", failed=None, **kw) -> None:
+    """Members ``sel`` as markers, joined by a line where their x values are distinct (a grid); the
+    line breaks where a member of ``failed`` (the same series' members that are not ok) lies between
+    two neighbours, so that it draws no trend across a member without a value."""
     sel = sel & np.isfinite(x) & np.isfinite(y)
     xs, ys = x[sel], y[sel]
     order = np.argsort(xs, kind="stable")
+    xs, ys = xs[order], ys[order]
     joined = xs.size > 1 and np.unique(xs).size == xs.size
-    ax.plot(xs[order], ys[order], marker=marker, ms=4, lw=1.2 if joined else 0, ls="-" if joined else "none", **kw)
+    if joined and failed is not None:
+        cut = np.sort(x[failed & np.isfinite(x)])
+        # a failed member strictly between neighbours k and k + 1: a NaN after k (a gap in the line)
+        between = np.searchsorted(cut, xs[:-1], side="right") < np.searchsorted(cut, xs[1:], side="left")
+        at = np.flatnonzero(between) + 1
+        xs, ys = np.insert(xs, at, np.nan), np.insert(ys, at, np.nan)
+    ax.plot(xs, ys, marker=marker, ms=4, lw=1.2 if joined else 0, ls="-" if joined else "none", **kw)
 
 
-def _plot_by(ax, x, y, sel, colours: _Colours | None, ds, marker="o", label=None, colour=None) -> None:
-    """y against x for the members ``sel``: one series per colour value, or a coloured scatter."""
+def _plot_by(ax, x, y, sel, colours: _Colours | None, ds, marker="o", label=None, colour=None, failed=None) -> None:
+    """y against x for the members ``sel``: one series per colour value, or a coloured scatter;
+    ``failed``: the members not ok, where a series' line breaks (_series)."""
     if colours is None:
-        _series(ax, x, y, sel, marker, color=colour, label=label)
+        _series(ax, x, y, sel, marker, failed, color=colour, label=label)
     elif colours.discrete:
         for value, members in colours.groups(sel):
-            _series(ax, x, y, members, marker, color=colours.colour(value), label=_value(ds, colours.name, value))
+            _series(ax, x, y, members, marker, None if failed is None else failed & (colours.values == value),
+                    color=colours.colour(value), label=_value(ds, colours.name, value))
     else:
         use = sel & np.isfinite(x) & np.isfinite(y) & np.isfinite(colours.values)
         ax.scatter(x[use], y[use], c=colours.values[use], cmap=colours.cmap, norm=colours.norm, s=14, marker=marker)
@@ -366,7 +404,7 @@ def mu_s_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     if not shown.any():
         _nothing_to_plot(ax, "no member has a mu_s to show")
         return fig
-    _plot_by(ax, x, mu, ok, colours, ds, label=plural(int(ok.sum()), "ok member"), colour="C0")
+    _plot_by(ax, x, mu, ok, colours, ds, label=plural(int(ok.sum()), "ok member"), colour="C0", failed=~ok)
     # the members not ok have no mu_s: marked on the axis at their x, so that their values are seen
     # (an axis of the ok members' values alone hid them; the title only counted them)
     failed = ~ok & np.isfinite(x)
@@ -422,7 +460,7 @@ def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
         fig, ax = plt.subplots(figsize=(5.6, 3.8))
         for k, (seg, marker) in enumerate(segments):
             _plot_by(ax, x, speeds[seg], shown[seg], None, ds, marker,
-                     label=f"v_{seg} ({plural(int(shown[seg].sum()), 'member')})", colour=f"C{k}")
+                     label=f"v_{seg} ({plural(int(shown[seg].sum()), 'member')})", colour=f"C{k}", failed=~ok)
         axes = [ax]
         ax.legend(fontsize=8)
         ax.set_ylabel("front speed (m/s)")
@@ -430,15 +468,17 @@ def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     else:
         fig, axes = plt.subplots(1, len(segments), figsize=(3.85 * len(segments), 3.6), sharex=True, sharey=True)
         for ax, (seg, marker) in zip(axes, segments):
-            _plot_by(ax, x, speeds[seg], shown[seg], colours, ds, marker)
+            _plot_by(ax, x, speeds[seg], shown[seg], colours, ds, marker, failed=~ok)
             # short panel titles (the first front's segments: the figure's title says so), which
             # did not fit beside each other with a colour bar
             ax.set_title(f"{'second front' if seg == 'second' else seg + ' segment'}, "
                          f"{plural(int(shown[seg].sum()), 'member')}", fontsize=9)
         axes[0].set_ylabel("front speed (m/s)")
         colours.explain(fig, axes)
+        # its foot at the figure's top (the saved figure grows to hold it): a second line (the
+        # parameters not told apart) ran over the panels' titles
         fig.suptitle(title.replace(" speeds (", " speeds, first front's segments (", 1) + _mixed_note(ds, mixed, ok),
-                     fontsize=10)
+                     fontsize=10, y=1.0, va="bottom")
     for ax in axes:
         _scale(ax, "x", x[np.any(list(shown.values()), axis=0)])
         _scale(ax, "y", every)
@@ -466,20 +506,32 @@ def arrival_times_figure(ds, max_curves: int = MAX_CURVES):
         second = _per_member(ds, swept[1])
         levels = np.unique(second[candidates])
         styles = {value: style for value, style in zip(levels, ("-", "--", ":", "-."))} if levels.size <= 4 else {}
+    looks = [(colours.colour(colours.values[m]) if colours is not None else f"C{k % 10}",
+              styles.get(second[m], "-") if styles else "-") for k, m in enumerate(candidates)]
+    if len(set(looks)) < len(looks):  # curves alike (a second parameter of many values, a third): one colour each
+        looks = [(f"C{k % 10}", "-") for k in range(len(candidates))]
     metres = ds.x.attrs.get("units") == "m"
     x = ds.x.values * (1e3 if metres else 1.0)
     fig, ax = plt.subplots(figsize=(7.4, 3.8))
+    # a curve spanning more than OUTLIER_SPAN x the median curve's time (a member far from the others)
+    # runs off the axis, which keeps the others' shapes: it squashed them flat at 0
+    spans = np.array([np.nanmax(ds.arrival_time.values[m]) - np.nanmin(ds.arrival_time.values[m]) for m in candidates])
+    median = float(np.median(spans)) if spans.size >= 3 else 0.0
+    outlier = spans > OUTLIER_SPAN * median if median > 0 else np.zeros(spans.size, bool)
     meetings = 0
     for k, m in enumerate(candidates):
         ta = ds.arrival_time.values[m]
         label = ", ".join(_value(ds, name, _per_member(ds, name)[m]) for name in swept) or f"member {int(ds.member[m])}"
-        colour = colours.colour(colours.values[m]) if colours is not None else f"C{k % 10}"
-        style = styles.get(second[m], "-") if styles else "-"
+        if outlier[k]:
+            label += f" (to {spans[k] * 1e3:.3g} ms, off the axis)"
+        colour, style = looks[k]
         ax.plot(x, (ta - np.nanmin(ta)) * 1e3, lw=1.4, color=colour, ls=style, label=label)
         meet = _meeting_point(ds, "", m, metres)  # where the first front meets another (its segments end there)
         if meet is not None:
             ax.plot(meet[0], (meet[1] - np.nanmin(ta)) * 1e3, "v", color=colour, ms=7, mfc="none", label="_meeting")
             meetings += 1
+    if outlier.any():
+        ax.set_ylim(0.0, 1.1 * spans[~outlier].max() * 1e3)
     ax.set_xlabel("x (mm)" if metres else "x / L")
     ax.set_ylabel("t_a - first arrival (ms)")
     with_front = int((ok & arrived).sum())
@@ -508,8 +560,12 @@ def mu_s_histogram_figure(ds):
     if not mu.size:
         _nothing_to_plot(ax, "no member has a mu_s to show")
         return fig
-    edges = np.histogram_bin_edges(mu, bins="auto") if mu.size > 1 else 10
-    ax.hist(mu, bins=edges if np.size(edges) <= 41 else 40, label=plural(mu.size, "ok member"))
+    if mu.min() == mu.max():  # one value: numpy's bins were value +- 0.5, a bar from 0.01 to 1.01
+        width = max(abs(mu[0]) * 1e-3, 1e-12)
+        ax.hist(mu, bins=[mu[0] - width, mu[0] + width], label=f"{plural(mu.size, 'ok member')}, all at {mu[0]:.6g}")
+    else:
+        edges = np.histogram_bin_edges(mu, bins="auto")
+        ax.hist(mu, bins=edges if np.size(edges) <= 41 else 40, label=plural(mu.size, "ok member"))
     ax.set_xlabel("static friction coefficient mu_s")
     ax.set_ylabel("members")
     ax.legend(fontsize=8)
@@ -604,18 +660,23 @@ def friction_history_figure(ds, recorded_index: int):
         if np.isfinite(value) and window[0] <= at <= window[1]:
             ax.plot([at], [value], marker, color=colour, mfc="none", ms=8, ls="none", label=text.format(value),
                     clip_on=False)  # the end's marker sits on the window's edge
-        elif name == "mu_s":
+        elif name == "mu_s" or np.isfinite(value):  # mu_final is NaN only where mu_s says why
             why = ("not given (status " + status_name(ds, status) + ")" if not np.isfinite(value) else
                    f"{value:.6f} at t = {at:.6g} s, outside the recorded times")
-            ax.plot([], [], ls="none", label=f"mu_s: {why}")
+            ax.plot([], [], ls="none", label=f"{name}: {why}")
     for k, (event, prefix) in enumerate(front_events(ds)):
         start, end = (float(_per_member(ds, f"{prefix}front_{when}_time")[position]) for when in ("start", "end"))
         if np.isfinite(start) and np.isfinite(end) and end >= window[0] and start <= window[1]:
             front = f"{event} front" if event else "front"
-            ax.axvspan(max(start, window[0]), min(end, window[1]), color=f"C{k + 2}", alpha=0.25,
+            ax.axvspan(max(start, window[0]), min(end, window[1]), color=_SPAN_COLOURS.get(event, f"C{k + 4}"),
+                       alpha=0.2,
                        label=f"{front}: t = {start:.5f} .. {end:.5f} s")
-    if not np.isfinite(mu).any():
-        _nothing_to_plot(ax, "no recorded time with a normal force before the member's end")
+    end = float(_per_member(ds, "final_time")[position]) if "final_time" in ds else np.nan
+    if np.isfinite(end) and end < window[1]:  # grey after the member's end, as on its space-time map
+        ax.axvspan(max(end, window[0]), window[1], color="0.8", alpha=0.6, lw=0, label="after the run's end")
+    if np.isfinite(mu).sum() < 2:  # one point draws no curve (and its axis spans a round-off)
+        _nothing_to_plot(ax, "no recorded time with a normal force before the member's end" if not np.isfinite(mu).any()
+                         else "one recorded time before the member's end: no curve to draw")
     ax.set_xlim(window)
     ax.set_xlabel("t (s)")
     ax.set_ylabel("friction coefficient mu")
@@ -662,7 +723,11 @@ def space_time_figure(ds, recorded_index: int):
     cmap = matplotlib.colormaps["RdBu_r"].with_extremes(bad="0.8")  # NaN (after the member's end) grey, not
     # the white of zero velocity
     mesh = ax.pcolormesh(x, t, v * 1e9, cmap=cmap, vmin=-scale * 1e9, vmax=scale * 1e9, shading="nearest")
-    fig.colorbar(mesh, ax=ax, label="pad velocity (nm/s)")
+    if recorded_values.any():  # a colour bar of nothing recorded showed a made-up scale
+        fig.colorbar(mesh, ax=ax, label="pad velocity (nm/s)")
+    else:
+        ax.text(0.5, 0.5, "nothing recorded: the run ended before the recorded times", transform=ax.transAxes,
+                ha="center", va="center", fontsize=9)
     window = ax.get_xlim(), ax.get_ylim()
     handles = []
     if not recorded_values.all():

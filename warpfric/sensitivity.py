@@ -322,20 +322,32 @@ def bar_plot(res, path) -> None:
     import matplotlib.pyplot as plt
 
     outputs = list(res.output.values)
-    fig, axes = plt.subplots(1, len(outputs), figsize=(4.5 * len(outputs), 3.8), squeeze=False)
+    names = [str(name) for name in res.parameter.values]
+    width = max(4.5, 0.6 * len(names) + 1.5)  # inches a panel
+    fig, axes = plt.subplots(1, len(outputs), figsize=(width * len(outputs), 3.8), squeeze=False)
     x = np.arange(res.sizes["parameter"])
+    # names upright where the longest fits its bar pair's width (~0.065 in a character at 8 pt),
+    # else slanted and smaller
+    upright = max(len(name) for name in names) * 0.065 <= 0.85 * width / len(names)
     for ax, out in zip(axes[0], outputs):
         r = res.sel(output=out)
         if "S1" in res:
-            ax.bar(x - 0.2, r.S1, 0.4, yerr=r.S1_conf, label="S1")
-            ax.bar(x + 0.2, r.ST, 0.4, yerr=r.ST_conf, label="ST")
+            ax.bar(x - 0.2, r.S1, 0.4, yerr=r.S1_conf, capsize=2, label="S1 (first order)")
+            ax.bar(x + 0.2, r.ST, 0.4, yerr=r.ST_conf, capsize=2, label="ST (total)")
             ax.set_ylabel("Sobol index")
         else:
-            ax.bar(x - 0.2, r.mu_star, 0.4, yerr=r.mu_star_conf, label="mu*")
-            ax.bar(x + 0.2, r.sigma, 0.4, label="sigma")
-        ax.set_xticks(x, list(res.parameter.values), rotation=60, ha="right", fontsize=7)
-        ax.set_title(("log " if res.attrs.get("output_transform") == "log" else "") + str(out))
-        ax.legend(fontsize=7)
+            ax.bar(x - 0.2, r.mu_star, 0.4, yerr=r.mu_star_conf, capsize=2, label="mu* (mean |elementary effect|)")
+            ax.bar(x + 0.2, r.sigma, 0.4, label="sigma (their spread)")
+        ax.set_xticks(x, names, rotation=0 if upright else 45, ha="center" if upright else "right",
+                      fontsize=8 if upright else 7)
+        ax.set_title(("log " if res.attrs.get("output_transform") == "log" else "") + str(out), fontsize=10)
+        ax.grid(axis="y", alpha=0.3)
+    # one legend for all panels, outside on the right (inside, it covered bars), saying what the
+    # error bars are: SALib's confidence intervals of the indices
+    level = res.attrs.get("conf_level", 0.95)
+    handles, labels = axes[0][-1].get_legend_handles_labels()
+    axes[0][-1].legend(handles, labels, fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False,
+                       title=f"error bars: {float(level):.0%} confidence\n(SALib's bootstrap)", title_fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
     plt.close(fig)
