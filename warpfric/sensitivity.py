@@ -316,6 +316,17 @@ def _warn_unresolved(res, n: int) -> None:
 
 
 def bar_plot(res, path) -> None:
+    """The indices of ``res`` (analyse's Dataset) as bars (bar_figure), written to ``path``."""
+    import matplotlib.pyplot as plt
+
+    fig = bar_figure(res)
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+
+def bar_figure(res):
+    """One panel per output: S1 and ST (Sobol) or mu* and sigma (Morris) per parameter, with their
+    confidence intervals as error bars; one legend, outside the panels, naming the intervals' level."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -349,5 +360,4 @@ def bar_plot(res, path) -> None:
     axes[0][-1].legend(handles, labels, fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False,
                        title=f"error bars: {float(level):.0%} confidence\n(SALib's bootstrap)", title_fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
+    return fig
