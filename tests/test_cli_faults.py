@@ -619,6 +619,33 @@ def test_the_printed_resume_command_is_quoted_for_the_shell(tmp_path, capsys, mo
         np.testing.assert_array_equal(resumed.mu_s.values, uninterrupted.mu_s.values)
 
 
+def test_a_killed_cpu_worker_exits_5_keeping_the_finished_chunks(tmp_path, sweep, capsys, monkeypatch):
+    """A CPU worker killed in a chunk (the out-of-memory killer) ended `warpfric run` with a
+    BrokenProcessPool traceback and exit 1, the code of failed members, and no --resume command."""
+    from warpfric.pool import WorkerDied
+
+    real = SIMULATE_MODULE.simulate
+    calls = []
+
+    def killed(*args, **kwargs):
+        if "member_offset" in kwargs:  # a chunk (not the kernels' warm-up)
+            calls.append(1)
+        if len(calls) == 2:
+            raise WorkerDied("a CPU worker process ended abruptly (pid 123, killed by SIGKILL) while ...")
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(SIMULATE_MODULE, "simulate", killed)
+    out = tmp_path / "s.nc"
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--chunk", 1, "--device", DEVICE, "--quiet")
+    assert code == 5, err
+    assert err[-1].startswith("warpfric: error: a CPU worker process ended abruptly (pid 123, killed by SIGKILL)")
+    assert err[-1].endswith(f"the 1 finished chunk is kept in '{tmp_path / 's.nc.parts'}'; "
+                            f"`warpfric run {sweep} -o {out} --resume --device {DEVICE}` goes on from them"), err
+    monkeypatch.setattr(SIMULATE_MODULE, "simulate", real)
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE, "--quiet")
+    assert code == 0 and _files(tmp_path) == ["s.nc", "s.toml"], err
+
+
 def test_resume_with_other_settings_names_the_one_that_differs(tmp_path, sweep, capsys, monkeypatch):
     """It said 'a different sweep, chunk size (1) or member offset (0)' whichever differed."""
     out = tmp_path / "s.nc"

@@ -248,6 +248,59 @@ def test_ctrl_c_stops_the_workers_at_once(monkeypatch):
     assert not any(exists(p.pid) for p in processes)
 
 
+def test_a_killed_worker_stops_the_run_with_a_message_and_no_hang(monkeypatch):
+    """A worker killed during a run (the out-of-memory killer, kill -9) gave a bare BrokenProcessPool
+    traceback, or, where it died sending its result, a run that hung, and a process that did not
+    end even on SIGTERM: the executor's thread waited for the rest of the half-sent result, and the
+    interpreter joins it at exit. Now the run stops with WorkerDied naming the worker and its signal,
+    the other worker and the executor's thread end, and the next run starts a new pool."""
+    import signal
+    import struct
+
+    pool.shutdown()
+    members = {"eccentricity": np.linspace(-0.2, 0.2, 200)}
+    kw = dict(solver=wf.Solver(nodes=60, rtol=1e-6), fronts=None, device="cpu", progress=False)
+    real_read, calls, seen = pool._read_inbox, [], {}
+
+    def read_then_kill(kept, *args, **kwargs):
+        calls.append(1)
+        if len(calls) == 3:  # the run is going: a half-sent result, then one worker killed
+            seen["processes"] = list(kept.executor._processes.values())
+            seen["thread"] = kept.executor._executor_manager_thread
+            writer = kept.executor._result_queue._writer
+            os.write(writer.fileno(), struct.pack("!i", 1000) + b"x" * 10)  # 10 of 1,000 bytes
+            victim = seen["processes"][0]
+            os.kill(victim.pid, signal.SIGKILL)
+            victim.join(10)
+        return real_read(kept, *args, **kwargs)
+
+    monkeypatch.setattr(pool, "_read_inbox", read_then_kill)
+    t0 = time.monotonic()
+    with pytest.raises(pool.WorkerDied, match=r"a CPU worker process ended abruptly \(pid \d+, killed by SIGKILL\).*"
+                                              r"out-of-memory killer.*workers=1"):
+        wf.simulate(members, workers=2, **kw)
+    assert time.monotonic() - t0 < 30 and pool._POOL is None
+    seen["thread"].join(10)
+    assert not seen["thread"].is_alive()  # it waited in recv for 990 more bytes: the exit would hang
+    assert all(p.exitcode is not None for p in seen["processes"])
+    monkeypatch.setattr(pool, "_read_inbox", real_read)
+    ds = wf.simulate({"eccentricity": [0.0, 0.1]}, workers=2, **{**kw, "solver": wf.Solver(nodes=11)})
+    assert ds.attrs["workers"] == 2 and (ds.status.values == 0).all()
+
+
+def test_a_worker_killed_between_runs_is_replaced():
+    """A kept pool whose worker was killed while idle made the next run fail; it starts a new pool."""
+    import signal
+
+    kw = dict(solver=wf.Solver(nodes=11, rtol=1e-4), fronts=None, device="cpu", progress=False)
+    wf.simulate({"eccentricity": [0.0, 0.1]}, workers=2, **kw)
+    victim = list(pool._POOL.executor._processes.values())[0]
+    os.kill(victim.pid, signal.SIGKILL)
+    victim.join(10)
+    ds = wf.simulate({"eccentricity": [0.0, 0.1]}, workers=2, **kw)
+    assert ds.attrs["workers"] == 2 and (ds.status.values == 0).all()
+
+
 # a split CPU run's warnings and progress line
 def test_a_split_runs_warnings_come_once_from_the_parent():
     """Each worker's warning is raised once, in the parent, at simulate()'s caller (it printed once per

@@ -21,6 +21,8 @@ Exit codes (one line on stderr for each fault):
        half the estimated size) or another I/O error (no partial file stays; a sweep's finished
        chunks are kept for --resume)
   4    another run is writing the same output (its OUT.nc.lock exists)
+  5    a CPU worker process died (killed: the out-of-memory killer, kill -9); a sweep's finished
+       chunks are kept for --resume
   130  interrupted (Ctrl-C, or SIGTERM)
 """
 
@@ -51,6 +53,7 @@ NOT_OK_SHOWN = 10  # members not ok that `info` names, per status
 EXIT_BAD_INPUT = 2
 EXIT_WRITE_FAILED = 3
 EXIT_OUTPUT_BUSY = 4
+EXIT_WORKER_DIED = 5
 EXIT_INTERRUPTED = 130
 
 # options of the default scene -> where a sweep file sets them (refused together with a sweep file)
@@ -628,7 +631,7 @@ def build_parser() -> tuple[argparse.ArgumentParser, set]:
     run = sub.add_parser("run", help="run a sweep file, or the paper's default scene without one",
                          description="Run a sweep file in resumable chunks, or the paper's default scene without "
                                      "one. Exit codes: 0 ok, 1 members failed, 2 bad input (nothing written), "
-                                     "3 output not written (disk full), 4 output busy, 130 interrupted.")
+                                     "3 output not written (disk full), 4 output busy, 5 a CPU worker process died, 130 interrupted.")
     add(run, "sweep", nargs="?", metavar="SWEEP.toml",
         help="sweep file (TOML, see docs/sweeps.md); none: the default scene")
     add(run, "-o", "--output", metavar="OUT.nc", help="netCDF file to write (sweeps: default SWEEP.nc; "
@@ -782,6 +785,7 @@ def _pipe_safe_output():
 
 def main(argv=None) -> int:
     from .io import OutputBusy, OutputWriteError
+    from .pool import WorkerDied
 
     parser, value_options = build_parser()
     argv = sys.argv[1:] if argv is None else [str(a) for a in argv]
@@ -800,6 +804,8 @@ def main(argv=None) -> int:
             return _fail(str(err), EXIT_WRITE_FAILED)
         except OutputBusy as err:
             return _fail(str(err), EXIT_OUTPUT_BUSY)
+        except WorkerDied as err:  # killed (out of memory?): the run stopped, a sweep's finished chunks kept
+            return _fail(str(err), EXIT_WORKER_DIED)
         except KeyboardInterrupt as err:
             message = getattr(err, "message", None) or (str(err) if err.args else "interrupted")
             print(f"warpfric: {message}", file=sys.stderr)

@@ -239,9 +239,41 @@ _POOL: _Pool | None = None
 _RUN_IDS = itertools.count()
 
 
+class WorkerDied(RuntimeError):
+    """A worker process ended abruptly while the pool ran an ensemble (killed: by the system's
+    out-of-memory killer where memory ran short, or by kill -9). The ensemble's run is stopped, its
+    workers with it; ``warpfric run`` keeps a sweep's finished chunks and exits with code 5."""
+
+
+def _dead_workers(pool: _Pool) -> list[tuple[int, int]]:
+    """(pid, exit code) of each worker process of ``pool`` that has ended (a worker ends only with
+    the pool, so any that has during a run died)."""
+    processes = list((getattr(pool.executor, "_processes", None) or {}).values())  # CPython keeps its workers here
+    return [(process.pid, process.exitcode) for process in processes if process.exitcode is not None]
+
+
+def _worker_died_text(dead: list) -> str:
+    """What a user reads where a worker died: which, how, why that happens and what to do."""
+    # the executor stops the other workers with SIGTERM once it sees one die: name the one that died
+    dead = [(pid, code) for pid, code in dead if code != -signal.SIGTERM] or dead
+    how = []
+    for pid, code in dead:
+        try:
+            cause = f"killed by {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
+        except ValueError:
+            cause = f"exit code {code}"
+        how.append(f"pid {pid}, {cause}")
+    which = f" ({'; '.join(how)})" if how else ""
+    return (f"a CPU worker process ended abruptly{which} while it ran its part of the ensemble, so the run is "
+            "stopped (the system's out-of-memory killer ends a process this way where memory runs short): run "
+            "fewer members at a time (smaller chunks: --chunk), or in one process (workers=1, --cpu-workers 1)")
+
+
 def _get_pool(n_workers: int) -> tuple[_Pool, bool]:
     """(the kept pool of n_workers processes, True where it was created in this call)."""
     global _POOL
+    if _POOL is not None and _dead_workers(_POOL):  # a kept worker killed between runs: a new pool
+        shutdown(terminate=True)
     if _POOL is not None and _POOL.workers != n_workers:
         shutdown()
     if _POOL is not None:
@@ -260,13 +292,24 @@ def shutdown(terminate: bool = False) -> None:
     pool, _POOL = _POOL, None
     if pool is None:
         return
-    processes = list(getattr(pool.executor, "_processes", {}).values())  # CPython keeps its workers here
+    processes = list((getattr(pool.executor, "_processes", None) or {}).values())  # CPython keeps its workers here
+    results = getattr(pool.executor, "_result_queue", None)  # (shutdown forgets it)
     if terminate:
         for process in processes:
             process.terminate()
     pool.executor.shutdown(wait=not terminate, cancel_futures=True)
     for process in processes:
         process.join(5)
+        if process.exitcode is None:  # a worker that did not end on SIGTERM
+            process.kill()
+            process.join(5)
+    if terminate and results is not None:
+        # a worker killed while it sent its result left half a message in the result pipe; the executor's
+        # thread then waited in recv for the rest, forever, and the interpreter, which joins that thread
+        # at exit, hung after the run (SIGTERM said "interrupted" and nothing ended). With every worker
+        # gone, closing this process's own write end gives that read end-of-file, and the thread ends
+        with contextlib.suppress(AttributeError, OSError):
+            results._writer.close()
 
 
 # The kept pool is stopped before the interpreter tears its modules down: left to the teardown, the
@@ -314,10 +357,18 @@ def run(n_workers: int, values: dict, *, scene, model, solver, fronts, record, d
                    for k, (start, stop) in enumerate(bounds)]
         while True:
             _read_inbox(pool, run_id, fractions, done, timeout=0.25)
+            # a worker that died: said here, also where the executor did not notice (it waited for the rest
+            # of a result that the worker was sending when it was killed, and the run hung)
+            dead = _dead_workers(pool)
+            if dead:
+                raise WorkerDied(_worker_died_text(dead))
             finished = 0
             for k, future in enumerate(futures):
                 if future.done():
-                    future.result()  # a chunk that raised: raise here
+                    try:
+                        future.result()  # a chunk that raised: raise here
+                    except cf.process.BrokenProcessPool:
+                        raise WorkerDied(_worker_died_text(_dead_workers(pool))) from None
                     fractions[k], done[k] = 1.0, sizes[k]
                     finished += 1
             if line is not None:

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from .parameters import DETACHMENT_NOT_OVER, MEMBERS_NOT_OK, RECORD_PAST_END, recording_text
-from .pool import chunk_record, cpu_cores, warn_once, warning_pairs
+from .pool import WorkerDied, chunk_record, cpu_cores, warn_once, warning_pairs
 from .progress import (SizeWarning, check_memory, first_few, front_passes, member_range, plural, seconds_text,
                        size_warning, status_name)
 
@@ -791,7 +791,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
                 pass  # the line is still said) may still write chunks: said below
         late_writes = interrupted and client is not None and not cluster_stopped
         kept = _keep_or_remove(store, previous is None)
-        if not isinstance(err, (OutputWriteError, KeyboardInterrupt)):
+        if not isinstance(err, (OutputWriteError, KeyboardInterrupt, WorkerDied)):
             raise
         if interrupted and kept:  # a run to its end warns of them once, from its file
             _warn_members_not_ok_kept(store, kept, sweep.solver, out)
@@ -806,6 +806,8 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         if interrupted:
             stopped = "the local cluster is stopped, so no chunk is written after this; " if cluster_stopped else ""
             raise RunInterrupted(f"interrupted; {stopped}{what}") from None
+        if isinstance(err, WorkerDied):
+            raise WorkerDied(f"{err}; {what}") from None
         raise OutputWriteError(f"{err}; {what}", err.disk_full) from None
     finally:
         if own_client is not None:  # the run is written here (the except block closes and forgets it first)
