@@ -262,6 +262,27 @@ def test_a_run_beyond_the_machines_memory_is_refused(monkeypatch):
         simulate(None, device="cpu", solver=wf.Solver(nodes=10**8))
 
 
+def test_a_broadcasting_slip_is_refused_before_its_arrays_are_built(monkeypatch):
+    """(100000, 1) x (1000,) members, a slip of the broadcasting rules: simulate built 28 arrays of
+    1e8 members (22 GB) before its memory check, and numpy's MemoryError or the system's killer came
+    first. The check now comes with the broadcast shape, before any array of that size."""
+    import tracemalloc
+
+    from warpfric import progress
+
+    monkeypatch.setattr(progress, "machine_memory_bytes", lambda: 25 * 10**9)
+    members = {"normal_force": np.full((100_000, 1), 1000.0), "eccentricity": np.zeros(1000)}
+    tracemalloc.start()
+    try:
+        with pytest.raises(ValueError, match=r"^the members' arrays broadcast to shape \(100000, 1000\): this run "
+                                             r"\(100000000 members x 20 nodes at once\) needs about 1.1 TB of memory"):
+            simulate(members, device="cpu", solver=wf.Solver(nodes=20))
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    assert peak < 50e6, peak  # one (1e8,) float64 array alone is 800 MB
+
+
 def test_a_disc_that_starts_before_the_full_load_is_run_with_a_warning():
     """rest_until = 0 starts the disc at t = 0, while the normal force ramps over 10 s: the default
     scene peaks at ~0.16 s under ~16 N, a mu_s under a force still rising, while the output's

@@ -78,12 +78,14 @@ def _member_arrays(members: Any) -> dict[str, np.ndarray]:
     )
 
 
-def resolve_members(members: Any, scene: Parameters,
-                    first_member: int = 0) -> tuple[dict[str, np.ndarray], tuple[str, ...]]:
+def resolve_members(members: Any, scene: Parameters, first_member: int = 0,
+                    before_building=None) -> tuple[dict[str, np.ndarray], tuple[str, ...]]:
     """Return (values, varying): every parameter as a float64 array of shape (M,), and the names
     of the parameters given per member. Raises ValueError naming the parameter, value and range;
     ``first_member``: the number of the first member in such messages (a slice of a larger
-    ensemble validated slice by slice)."""
+    ensemble validated slice by slice); ``before_building(M, shape)``: called with the member count
+    and the arrays' broadcast shape once it is known, before any (M,) array is built (a memory check: a
+    broadcasting slip of 1e8 members raised numpy's MemoryError, or met the system's killer)."""
     if not isinstance(scene, Parameters):
         raise ValueError(f"scene: expected a warpfric.Parameters, got {type(scene).__name__}")
     given = _member_arrays(members)
@@ -104,6 +106,8 @@ def resolve_members(members: Any, scene: Parameters,
     n_members = int(np.prod(shape)) if shape else 1
     if n_members == 0:
         raise ValueError("members: the ensemble is empty (a per-member array has length 0)")
+    if before_building is not None:
+        before_building(n_members, shape)
     values: dict[str, np.ndarray] = {}
     for f in dataclasses.fields(Parameters):
         name = f.name

@@ -20,7 +20,7 @@ from .fronts import SEGMENT_NAMES
 from .parameters import (CONTACT_WITHOUT_GATE, DETACHMENT_NOT_OVER, DISC_BEFORE_FULL_LOAD, ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, LOAD_ABOVE_HARDNESS, MEMBERS_NOT_OK,
                          MEMBER_NUMBER_LIMIT, MEMBERS_NOT_OK_HINT, PARAMETERS_UNUSED, RECORD_PAST_END, Fronts, Model,
                          Parameters, Record, Solver, check_fronts_method, check_precision, parameter_long_name, parameter_units)
-from .progress import first_few, shown
+from .progress import check_memory, first_few, shown
 
 
 def simulate(
@@ -126,7 +126,12 @@ def simulate(
     if fronts is not None and fronts.grid_check and solver.nodes < GRID_CHECK_MIN_NODES:
         raise ValueError(f"fronts setting 'grid_check' needs solver setting 'nodes' >= "
                          f"{GRID_CHECK_MIN_NODES} (got {solver.nodes}): the check compares with (nodes + 1)//2 nodes")
-    values, varying = resolve_members(members, scene)
+    # the memory a run of that many members needs, checked before their arrays are built (on the
+    # host, and the kernels' arrays too where the device is the CPU; pool.plan checks again once the
+    # device is chosen)
+    values, varying = resolve_members(members, scene, before_building=lambda n, shape: check_memory(
+        n, solver, device if device is not None and str(device).startswith("cpu") else "host",
+        f"the members' arrays broadcast to shape {shape}: this run" if len(shape) > 1 else "this run"))
     n_members = values["normal_force"].shape[0]
     if member_offset > MEMBER_NUMBER_LIMIT - n_members:  # as a sweep's check_member_offset
         raise ValueError(f"member_offset = {member_offset} is invalid for {n_members} members; valid: an integer in "
