@@ -646,6 +646,15 @@ def test_a_killed_cpu_worker_exits_5_keeping_the_finished_chunks(tmp_path, sweep
     assert code == 0 and _files(tmp_path) == ["s.nc", "s.toml"], err
 
 
+def test_resume_with_nothing_to_resume_says_so_and_runs_the_sweep(tmp_path, sweep, capsys):
+    """A mistyped -o with --resume ran the whole sweep without a word (20 s where 2 chunks were left)."""
+    out = tmp_path / "typo.nc"
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE, "--quiet")
+    assert code == 0 and out.exists(), err
+    assert f"warpfric: no interrupted run to resume: '{tmp_path / 'typo.nc.parts'}' does not exist, so the whole " \
+           "sweep runs now" in err, err
+
+
 def test_resume_with_other_settings_names_the_one_that_differs(tmp_path, sweep, capsys, monkeypatch):
     """It said 'a different sweep, chunk size (1) or member offset (0)' whichever differed."""
     out = tmp_path / "s.nc"
