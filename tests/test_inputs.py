@@ -470,3 +470,54 @@ def test_a_sweep_files_fronts_and_scheduler_faults_use_the_files_words(tmp_path,
     sweep.write_text('[solver]\nnodes = 11\n[grid]\neccentricity = [0.0]\n')
     code, _, err = run_cli(capsys, "run", sweep, "-o", tmp_path / "g.nc", "--scheduler", "locl", "--device", "cpu")
     assert code == 2 and "expected a scheduler's address such as 'tcp://host:8786'" in err[-1], err
+
+
+def test_a_new_users_slips_are_named(tmp_path):
+    """Slips a review found accepted without a word, or answered from inside numpy, xarray or
+    pathlib: each now a one-line error naming what is wrong, or taken as meant."""
+    import xarray as xr
+
+    with pytest.raises(TypeError, match=r"^Parameters takes keyword arguments only, as Parameters\(normal_force="
+                                        r"1000.0\); got 1 positional value: 1000$"):
+        wf.Parameters(1000)  # set the shear modulus, the first field, to 1000 Pa
+    with pytest.raises(ValueError, match=r"progress = 5 is invalid; valid: None .*True, False or a string"):
+        wf.simulate(device=DEVICE, progress=5)
+    with pytest.raises(ValueError, match=r"^Record.detachment: ds is invalid; .* got a Dataset without member, "
+                                         r"final_time$"):
+        wf.Record.detachment(xr.Dataset())  # xarray's AttributeError: 'Dataset' object has no attribute 'member'
+    ds = simulate(solver=wf.Solver(nodes=11))
+    with pytest.raises(ValueError, match=r"^write_ensemble: path = 5 is invalid; valid: a file name"):
+        wf.io.write_ensemble(ds, 5)  # pathlib's TypeError
+    path = wf.io.write_ensemble(ds, tmp_path / "one.nc")
+    one = wf.io.open_ensembles(str(path))  # a string was iterated: "o: no such file"
+    assert one.sizes["member"] == 1 and float(one.mu_s[0]) == float(ds.mu_s[0])
+    with pytest.raises(ValueError, match=r"the same file is given twice"):
+        wf.io.open_ensembles([path, tmp_path / "." / "one.nc"])  # (read as a selection written apart)
+
+
+def test_settings_take_zero_d_arrays_as_parameters_do():
+    """Parameters took np.array(1000.0); Solver refused np.array(1e-5) as 'array(1e-05)'."""
+    solver = wf.Solver(rtol=np.array(1e-5), nodes=np.array(40))
+    assert solver.rtol == 1e-5 and type(solver.nodes) is int and solver.nodes == 40
+    assert wf.Model(inertia=np.array(False)).inertia is False
+    assert wf.Fronts(threshold=np.array(0.3)).threshold == 0.3
+    with pytest.raises(ValueError, match=r"solver setting 'nodes' = 2 is invalid"):
+        wf.Solver(nodes=np.array(2))  # checked as the value it holds
+
+
+def test_value_messages_name_the_unit_and_stay_short():
+    with pytest.raises(ValueError, match=r"^parameter 'normal_force': value None is not allowed; valid range \(0, inf\) "
+                                         r"N$"):
+        wf.Parameters(normal_force=None)
+    with pytest.raises(ValueError) as caught:
+        wf.Parameters(normal_force=10**400)  # its 401 digits were the message
+    assert len(str(caught.value)) < 200 and "(401 characters) is out of range (beyond float64" in str(caught.value)
+
+
+def test_a_raised_step_floor_is_named_as_the_cause_of_step_size_underflow():
+    """min_step = initial_step = 1e-2 s ends step_size_underflow, whose advice said 'a tighter rtol',
+    which lowers the steps further; the floor that was set is what to change."""
+    with pytest.warns(UserWarning, match=r"1 step_size_underflow \(the step size fell below its floor, min_step = "
+                                         r"0.01 s, set above its default 1e-14 s: a smaller min_step\)"):
+        ds = simulate(solver=wf.Solver(nodes=11, min_step=1e-2, initial_step=1e-2))
+    assert int(ds.status[0]) == 3 and np.isnan(float(ds.mu_s[0]))

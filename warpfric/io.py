@@ -633,6 +633,8 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
         raise ValueError("write_ensemble: the members are labels (the file's layout, as xr.open_dataset or "
                          "xr.open_mfdataset read it); read the files with warpfric.io.open_ensemble or open_ensembles "
                          "to write them again")
+    if not isinstance(path, (str, os.PathLike)):
+        raise ValueError(f"write_ensemble: path = {path!r} is invalid; valid: a file name (str or pathlib.Path)")
     if isinstance(complevel, bool) or not isinstance(complevel, (int, np.integer)) or not 1 <= complevel <= 9:
         raise ValueError(f"write_ensemble: complevel = {complevel!r} is invalid; valid: an integer in [1, 9] (zlib)")
     if started is not None and not re.fullmatch(r"\d{4}-\d\d-\d\dT\d\d:\d\d:\d\dZ", str(started)):
@@ -843,9 +845,16 @@ def open_ensembles(paths) -> xr.Dataset:
     along ``recorded``). Raises ValueError when member numbers repeat (runs made without distinct
     ``--member-offset``), naming the files and the numbers, instead of mixing them up, and when the
     files are not one ensemble (:func:`concat_members`: settings, node counts or outputs differ)."""
+    if isinstance(paths, (str, os.PathLike)):  # one path: iterated, a string gave its characters ("n: no such file")
+        paths = [paths]
     paths = [Path(p) for p in paths]
     if not paths:
         raise ValueError("open_ensembles: no files given")
+    first_named = {}
+    for path in paths:  # one file twice: its members repeat, which read as a selection written apart
+        same = first_named.setdefault(path.resolve(), path)
+        if same is not path:
+            raise ValueError(f"{path}: the same file is given twice ({same} and {path}); give each file once")
     datasets = [open_ensemble(p) for p in paths]
     # in member order whatever order the files came in (["b.nc", "a.nc"] gave members 3 4 5 0 1 2: an
     # index that is not monotonic), with every file's history

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from .progress import first_few
+from .progress import first_few, plural
 
 INF = math.inf
 
@@ -44,9 +44,10 @@ def _p(default, units, long_name, low, high, low_open=False, high_open=False, no
     )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)  # Parameters(1000) set the first field, the shear modulus, without a word
 class Parameters:
     """The scene: material, friction law, geometry and load protocol of one pad (SI units).
+    Keyword arguments only: ``Parameters(normal_force=1000.0)``.
 
     Defaults are the paper's (Papangelo et al. 2014, Table 1, PMMA) and the protocol of its Fig. 2:
     the normal force ramps 0 -> ``normal_force`` over ``force_ramp_time``, rests until
@@ -216,7 +217,9 @@ def resolve_value(name: str, value: Any, scene: Parameters | None = None):
             return None  # resolved against height by the caller
         meta = _FIELDS[name].metadata
         if meta["none_means"] is None:
-            raise ValueError(f"parameter {name!r}: value None is not allowed; valid range {_range_text(meta)}")
+            units = units_text(meta["units"])
+            raise ValueError(f"parameter {name!r}: value None is not allowed; valid range {_range_text(meta)}"
+                             f"{' ' + units if units else ' (dimensionless)'}")
         return np.asarray(meta["none_means"], dtype=np.float64)
     if np.ma.isMaskedArray(value):  # np.asarray drops the mask: the data under it would run as a value
         mask = np.ma.getmaskarray(value)
@@ -241,9 +244,17 @@ def resolve_value(name: str, value: Any, scene: Parameters | None = None):
         elif name == "torque_arm" and arr.ndim > 0:  # None: the pad height, which may differ per member
             hint = " (per member, write the member's pad height where you mean None, e.g. 0.015 m)"
         units = units_text(meta["units"])
-        raise ValueError(f"parameter {name!r}: value {value!r} is not a real number; valid range "
+        what = ("is out of range (beyond float64's 1.8e308)" if isinstance(value, int) and not isinstance(value, bool)
+                else "is not a real number")  # an int too large for float64 (10**400) is an object array
+        raise ValueError(f"parameter {name!r}: value {_short_repr(value)} {what}; valid range "
                          f"{_range_text(meta)}{' ' + units if units else ' (dimensionless)'}{hint}")
     return arr.astype(np.float64)
+
+
+def _short_repr(value, limit: int = 60) -> str:
+    """repr(value), its middle left out beyond ``limit`` characters (10**400 printed 401 digits)."""
+    text = repr(value)
+    return text if len(text) <= limit else f"{text[:limit // 2]}...{text[-10:]} ({len(text)} characters)"
 
 
 def bound_outside_range(name: str, key: str, value: float, takes_high: bool = False) -> str | None:
@@ -292,6 +303,15 @@ def validate_value(name: str, value: np.ndarray, first_member: int = 0) -> None:
 RELAXATION_GATES = ("stress", "none", "velocity")
 
 
+def _zero_d_as_scalars(settings) -> None:
+    """0-d numpy arrays among a settings dataclass's fields (np.array(1e-5)) as their values, before
+    its checks: they were refused as 'array(1e-05)', where Parameters takes them."""
+    for f in dataclasses.fields(settings):
+        value = getattr(settings, f.name)
+        if isinstance(value, np.ndarray) and value.ndim == 0:
+            object.__setattr__(settings, f.name, value.item())
+
+
 def _plain_settings(settings) -> None:
     """numpy scalars among a validated settings dataclass's fields (np.True_, np.int64(100)) as Python's
     bool, int and float: they reach the Dataset's attributes, where netCDF refuses np.bool_."""
@@ -331,6 +351,7 @@ class Model:
     relaxation_gate: str = "stress"
 
     def __post_init__(self):
+        _zero_d_as_scalars(self)
         for f in dataclasses.fields(self):
             v = getattr(self, f.name)
             if f.name == "relaxation_gate":
@@ -512,6 +533,8 @@ class Solver:
     lanes: int | None = None
 
     def __post_init__(self):
+        _zero_d_as_scalars(self)
+
         def need(cond, name, value, valid):
             if not cond:
                 raise ValueError(f"solver setting {name!r} = {value!r} is invalid; valid: {valid}")
@@ -653,6 +676,8 @@ class Fronts:
     grid_check: bool = False
 
     def __post_init__(self):
+        _zero_d_as_scalars(self)
+
         def need(cond, name, value, valid):
             if not cond:
                 raise ValueError(f"fronts setting {name!r} = {value!r} is invalid; valid: {valid}")
@@ -760,6 +785,13 @@ class Record:
         (final_time), to that end; the window spans those members'. Members without one (not ok, or
         ended before it) are recorded over that window too (times after their end are NaN); where
         none has one, from the disc's start (rest_until) to the latest end."""
+        needed = ["member"] + (["final_time"] if final_time is None else [])
+        variables = getattr(ds, "variables", None)  # (an xarray Dataset; this module imports no xarray)
+        if variables is None or "member" not in getattr(ds, "dims", ()) or any(n not in variables for n in needed):
+            found = (type(ds).__name__ if variables is None else
+                     "a Dataset without " + ", ".join(n for n in needed if n not in variables))
+            raise ValueError(f"Record.detachment: ds is invalid; valid: the outputs of a run (simulate's or "
+                             f"open_ensemble's Dataset, along member), got {found}")
         numbers_there = np.asarray(ds.member.values).reshape(-1)
         numbers = numbers_there if members is None else np.asarray(members).reshape(-1)
         if isinstance(member_offset, bool) or not isinstance(member_offset, (int, np.integer)) or member_offset < 0:
@@ -875,8 +907,12 @@ def _with_named_keywords(cls):
     valid ones and the closest match (the default message names neither)."""
     init = cls.__init__
     names = [f.name for f in dataclasses.fields(cls)]
+    keywords_only = all(f.kw_only for f in dataclasses.fields(cls))
 
     def __init__(self, *args, **kwargs):
+        if args and keywords_only:
+            raise TypeError(f"{cls.__name__} takes keyword arguments only, as {cls.__name__}(normal_force=1000.0); "
+                            f"got {plural(len(args), 'positional value')}: {', '.join(map(repr, args))}")
         unknown = [k for k in kwargs if k not in names]
         if unknown:
             raise TypeError(f"{cls.__name__}: unknown parameter {unknown[0]!r}{did_you_mean(unknown[0], names)}; "

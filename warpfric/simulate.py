@@ -98,6 +98,9 @@ def simulate(
     """
     if not isinstance(model, Model):
         raise ValueError(f"model: expected a warpfric.Model, got {type(model).__name__}")
+    if progress is not None and not isinstance(progress, (bool, np.bool_, str)):
+        raise ValueError(f"progress = {progress!r} is invalid; valid: None (a line where stderr is a terminal or a "
+                         "notebook), True, False or a string (on, with that label)")
     if not isinstance(solver, Solver):
         raise ValueError(f"solver: expected a warpfric.Solver, got {type(solver).__name__}")
     check_precision(model, solver)
@@ -432,6 +435,11 @@ def members_not_ok_text(ds: xr.Dataset, solver: Solver, where: str = "") -> str 
             advice["no_peak"] = _STILL_DISC_ADVICE
         elif still:
             advice["no_peak"] += f"; {still} of them: {_STILL_DISC_ADVICE}"
+    default_floor = Solver.__dataclass_fields__["min_step"].default
+    if "step_size_underflow" in failed and solver.min_step > default_floor:  # the floor set: a tighter rtol lowers
+        # the steps further; the floor is what to change
+        advice["step_size_underflow"] = (f"the step size fell below its floor, min_step = {solver.min_step:g} s, "
+                                         f"set above its default {default_floor:g} s: a smaller min_step")
     for name in ("non_finite_state", "step_size_underflow"):  # float64 is advice for members that ran in float32
         if name in failed:
             ran = (np.asarray(ds.working_precision.values, dtype=float) if "working_precision" in ds else
