@@ -706,7 +706,8 @@ def test_a_parts_folder_without_a_manifest(tmp_path, sweep, capsys):
     code, _, err = run_cli(capsys, "run", sweep, "-o", other, "--resume", "--device", DEVICE)
     assert code == 2
     _error_line(err, "unreadable chunk manifest (no such file or directory); nothing can be resumed from it: "
-                     "--overwrite starts the run again")
+                     "--overwrite starts the run again; its chunk file is a whole ensemble, which "
+                     "warpfric.io.open_ensembles reads (copy it elsewhere first: --overwrite removes it)")
 
 
 def test_info_on_a_run_still_going_says_so(tmp_path, sweep, capsys, monkeypatch):

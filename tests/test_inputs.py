@@ -477,15 +477,20 @@ def test_a_new_users_slips_are_named(tmp_path):
     pathlib: each now a one-line error naming what is wrong, or taken as meant."""
     import xarray as xr
 
-    with pytest.raises(TypeError, match=r"^Parameters takes keyword arguments only, as Parameters\(normal_force="
-                                        r"1000.0\); got 1 positional value: 1000$"):
+    with pytest.raises(TypeError, match=r"^Parameters takes keyword arguments only, as Parameters\(shear_modulus="
+                                        r"\.\.\.\); got 1 positional value: 1000$"):
         wf.Parameters(1000)  # set the shear modulus, the first field, to 1000 Pa
+    for cls in (wf.Solver, wf.Model, wf.Fronts, wf.Record):  # Solver(60) set nodes, Model(True) inertia
+        with pytest.raises(TypeError, match=rf"^{cls.__name__} takes keyword arguments only"):
+            cls(60)
     with pytest.raises(ValueError, match=r"progress = 5 is invalid; valid: None .*True, False or a string"):
         wf.simulate(device=DEVICE, progress=5)
     with pytest.raises(ValueError, match=r"^Record.detachment: ds is invalid; .* got a Dataset without member, "
                                          r"final_time$"):
         wf.Record.detachment(xr.Dataset())  # xarray's AttributeError: 'Dataset' object has no attribute 'member'
     ds = simulate(solver=wf.Solver(nodes=11))
+    with pytest.raises(ValueError, match=r"whose member is no dimension .* isel\(member=\[0\]\) keeps it"):
+        wf.Record.detachment(ds.isel(member=0))
     with pytest.raises(ValueError, match=r"^write_ensemble: path = 5 is invalid; valid: a file name"):
         wf.io.write_ensemble(ds, 5)  # pathlib's TypeError
     path = wf.io.write_ensemble(ds, tmp_path / "one.nc")
@@ -512,6 +517,8 @@ def test_value_messages_name_the_unit_and_stay_short():
     with pytest.raises(ValueError) as caught:
         wf.Parameters(normal_force=10**400)  # its 401 digits were the message
     assert len(str(caught.value)) < 200 and "(401 characters) is out of range (beyond float64" in str(caught.value)
+    # an int beyond int64 but within float64 is a value (numpy made an object array of it: "not a real number")
+    assert wf.Parameters(shear_modulus=10**20).shear_modulus == 1e20
 
 
 def test_a_raised_step_floor_is_named_as_the_cause_of_step_size_underflow():

@@ -90,7 +90,7 @@ def test_one_file_given_twice_is_an_error_not_a_duplicate(tmp_path, capsys):
     a = _run(tmp_path, capsys, "a", "[-0.2, 0.0, 0.2]")
     with pytest.raises(ValueError, match="Could not find any dimension coordinates"):
         _open_defaults([a, a], False)
-    with pytest.raises(ValueError, match="occur more than once"):
+    with pytest.raises(ValueError, match="the same file is given twice"):
         open_ensembles([a, a])
 
 

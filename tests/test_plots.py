@@ -541,6 +541,9 @@ def test_velocities_of_both_signs_over_decades_get_a_symmetric_log_axis():
     small = plots.mu_s_figure(ds.assign(disc_velocity=("member", velocity * 0 + [-2, -1, -0.5, 0.5, 1, 2],
                                                        {"units": "m s-1"})), "disc_velocity")
     assert small.axes[0].get_xscale() == "linear"  # less than two decades: linear
+    grid = ensemble(np.full(7, 1000.0), np.arange(-0.3, 0.31, 0.1))  # its "0" is 5.6e-17: round-off, not a decade
+    grid.attrs["varying_parameters"] = "eccentricity"
+    assert plots.mu_s_figure(grid, "eccentricity").axes[0].get_xscale() == "linear"
 
 
 def test_arrival_curves_that_would_look_alike_get_colours_of_their_own(grid):
@@ -593,3 +596,21 @@ def test_a_front_has_one_colour_in_both_figures_of_a_member(contact_run):
     curve = next(line for line in plots.space_time_figure(contact_run, 0).axes[0].get_lines()
                  if line.get_label().startswith("contact front: arrival"))
     assert to_rgb(span.get_facecolor()) == to_rgb(curve.get_color())
+
+
+def test_figures_leave_pyplot_and_its_backend_alone(grid, contact_run):
+    """The figures chose pyplot's Agg backend, which in a notebook switched its inline display off for
+    the session; they are Figures of their own now, with no pyplot figure to close."""
+    import matplotlib
+    import matplotlib.pyplot as plt
+
+    before = matplotlib.get_backend()
+    plt.close("all")
+    matplotlib.use("pdf")  # a backend of the user's, not Agg
+    try:
+        figures = [plots.mu_s_figure(grid, "normal_force", "eccentricity"), plots.arrival_times_figure(grid),
+                   plots.space_time_figure(contact_run, 0), plots.friction_history_figure(contact_run, 0)]
+        assert matplotlib.get_backend() == "pdf" and plt.get_fignums() == []
+        assert all(type(fig.canvas).__name__ == "FigureCanvasAgg" for fig in figures)
+    finally:
+        matplotlib.use(before)

@@ -288,6 +288,19 @@ def test_a_killed_worker_stops_the_run_with_a_message_and_no_hang(monkeypatch):
     assert ds.attrs["workers"] == 2 and (ds.status.values == 0).all()
 
 
+def test_a_dead_workers_message_says_what_its_end_points_to():
+    """The out-of-memory killer was blamed for every end, a worker that failed on its own (exit code 0)
+    and a crash (SIGSEGV) too, and the executor's own SIGTERM to the others was listed as a death."""
+    oom = pool._worker_died_text([(11, -9), (12, -15)])
+    assert oom.startswith("a CPU worker process ended abruptly (pid 11, killed by SIGKILL) while") and "pid 12" not in oom
+    assert "out-of-memory killer" in oom and "workers=1" in oom
+    crash = pool._worker_died_text([(11, -11), (12, -11)])
+    assert crash.startswith("2 CPU worker processes ended abruptly (pid 11, killed by SIGSEGV; pid 12, killed by "
+                            "SIGSEGV)") and "a crash" in crash and "out-of-memory" not in crash
+    own = pool._worker_died_text([(11, 0)])
+    assert "(pid 11, exit code 0)" in own and "it ended on its own" in own and "out-of-memory" not in own
+
+
 def test_a_worker_killed_between_runs_is_replaced():
     """A kept pool whose worker was killed while idle made the next run fail; it starts a new pool."""
     import signal

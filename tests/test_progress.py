@@ -164,6 +164,30 @@ def test_a_long_kernel_load_is_said_before_the_line_starts(monkeypatch):
         assert quiet.getvalue() == "" and not note.written
 
 
+@pytest.mark.parametrize("members", [10, 40])
+def test_the_compilation_note_comes_also_where_the_members_run_in_blocks(monkeypatch, members):
+    """Above 32 members a CPU run goes in member blocks, whose progress sink made the note think
+    another process drew the line: it never came. Both sizes say it (the load made slow here)."""
+    import time
+
+    import warp as wp
+
+    real = wp.load_module
+
+    def slow_load(*args, **kwargs):
+        time.sleep(0.1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(wp, "load_module", slow_load)
+    monkeypatch.setattr(progress, "BUILD_NOTE_AFTER_S", 0.02)
+    terminal = FakeTerminal()
+    monkeypatch.setattr(sys, "stderr", terminal)
+    wf.simulate({"eccentricity": np.linspace(-0.1, 0.1, members)}, solver=wf.Solver(nodes=11, rtol=1e-4), fronts=None,
+                device="cpu", progress=True, workers=1)
+    text = terminal.getvalue()
+    assert progress.COMPILING_NOTE in text and text.count(progress.COMPILING_NOTE) == (1 if members <= 32 else 2)
+
+
 def test_percentage_moves_steadily_through_both_passes():
     """Members in lockstep (each launch advances every running member by the same attempts) with a
     spread of needed attempts: the fraction rises in small steps through pass 1 (to 1/2) and pass 2

@@ -46,8 +46,6 @@ def test_ishigami_sobol_indices_within_confidence():
 def test_the_bar_figure_keeps_its_legend_off_the_bars_and_names_the_error_bars():
     """The legend sat inside the last panel, over its bars, and nothing said what the error bars
     were."""
-    import matplotlib.pyplot as plt
-
     from warpfric.sensitivity import bar_figure
 
     fig = bar_figure(analyse(ishigami_dataset(n=256), ("y",), num_resamples=50, conf_level=0.9))
@@ -58,7 +56,6 @@ def test_the_bar_figure_keeps_its_legend_off_the_bars_and_names_the_error_bars()
     assert legend.get_window_extent(renderer).x0 > ax.get_window_extent(renderer).x1
     assert "90% confidence" in legend.get_title().get_text()
     assert [t.get_text() for t in legend.get_texts()] == ["S1 (first order)", "ST (total)"]
-    plt.close(fig)
 
 
 def test_a_ctrl_c_inside_the_sampling_is_raised_after_it(monkeypatch):

@@ -940,8 +940,14 @@ class ChunkStore:
             return cls(directory, manifest["digest"], manifest["n_members"], manifest["chunk"], manifest)
         except (OSError, ValueError, KeyError, TypeError) as err:
             reason = os_error_reason(err) if isinstance(err, OSError) else f"{type(err).__name__}: {err}"
+            kept = sorted(directory.glob("chunk-*.nc")) if directory.is_dir() else []
+            one = len(kept) == 1
+            what, them = (("its chunk file is a whole ensemble", "it") if one else
+                          (f"its {len(kept)} chunk files are whole ensembles each", "them"))
+            files = (f"; {what}, which warpfric.io.open_ensembles reads (copy {them} elsewhere first: --overwrite "
+                     f"removes {them})" if kept else "")
             raise ValueError(f"{directory}: unreadable chunk manifest ({reason}); nothing can be resumed from it: "
-                             "--overwrite starts the run again") from None
+                             f"--overwrite starts the run again{files}") from None
 
     def chunk_path(self, index: int) -> Path:
         return self.directory / f"chunk-{index:06d}.nc"

@@ -231,6 +231,15 @@ def resolve_value(name: str, value: Any, scene: Parameters | None = None):
                              f"returns it){more}; valid range {_range_text(_FIELDS[name].metadata)}"
                              f"{' ' + units if units else ' (dimensionless)'}; give every member a value")
         value = np.ma.getdata(value)
+    if isinstance(value, int) and not isinstance(value, bool):  # beyond int64 numpy makes an object array of it
+        try:
+            value = float(value)
+        except OverflowError:  # 10**400
+            meta = _FIELDS[name].metadata
+            units = units_text(meta["units"])
+            raise ValueError(f"parameter {name!r}: value {_short_repr(value)} is out of range (beyond float64's "
+                             f"1.8e308); valid range {_range_text(meta)}{' ' + units if units else ' (dimensionless)'}"
+                             ) from None
     try:
         arr = np.asarray(value)
     except ValueError:  # nested lists of different lengths
@@ -244,9 +253,7 @@ def resolve_value(name: str, value: Any, scene: Parameters | None = None):
         elif name == "torque_arm" and arr.ndim > 0:  # None: the pad height, which may differ per member
             hint = " (per member, write the member's pad height where you mean None, e.g. 0.015 m)"
         units = units_text(meta["units"])
-        what = ("is out of range (beyond float64's 1.8e308)" if isinstance(value, int) and not isinstance(value, bool)
-                else "is not a real number")  # an int too large for float64 (10**400) is an object array
-        raise ValueError(f"parameter {name!r}: value {_short_repr(value)} {what}; valid range "
+        raise ValueError(f"parameter {name!r}: value {_short_repr(value)} is not a real number; valid range "
                          f"{_range_text(meta)}{' ' + units if units else ' (dimensionless)'}{hint}")
     return arr.astype(np.float64)
 
@@ -321,7 +328,7 @@ def _plain_settings(settings) -> None:
             object.__setattr__(settings, f.name, value.item())
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Model:
     """Model switches. Each combination compiles its own specialised kernel, so a term that is off
     costs nothing at run time.
@@ -412,7 +419,7 @@ MEMBER_NUMBER_LIMIT = 2**31 - 2**24
 MAX_LANES = 256  # threads per block: the cooperative kernel takes 255 registers per thread on the H100, and a block has 65,536
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Solver:
     """Numerical settings.
 
@@ -608,7 +615,7 @@ _FRONT_DIRECTIONS = ("against_disc", "with_disc", "absolute")
 FRONT_EVENTS = ("contact", "strength", "velocity")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Fronts:
     """Which detachment front is read, and how it is segmented (docs/model.md, "Fronts").
 
@@ -727,7 +734,7 @@ _RECORD_TIMES_WHY = ("(each time holds 4 fields at every node of each recorded m
                      "member at 100 nodes)")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Record:
     """Field recording for chosen members (off unless given): pad velocity (m/s), slip rate (m/s),
     contact pressure (Pa) and friction stress (Pa) at every node, sampled at ``times`` (s) by linear
@@ -788,8 +795,11 @@ class Record:
         needed = ["member"] + (["final_time"] if final_time is None else [])
         variables = getattr(ds, "variables", None)  # (an xarray Dataset; this module imports no xarray)
         if variables is None or "member" not in getattr(ds, "dims", ()) or any(n not in variables for n in needed):
+            missing = [n for n in needed if n not in variables] if variables is not None else []
             found = (type(ds).__name__ if variables is None else
-                     "a Dataset without " + ", ".join(n for n in needed if n not in variables))
+                     "a Dataset without " + ", ".join(missing) if missing else
+                     "a Dataset whose member is no dimension (one member selected with isel(member=0)? "
+                     "isel(member=[0]) keeps it)")
             raise ValueError(f"Record.detachment: ds is invalid; valid: the outputs of a run (simulate's or "
                              f"open_ensemble's Dataset, along member), got {found}")
         numbers_there = np.asarray(ds.member.values).reshape(-1)
@@ -911,7 +921,7 @@ def _with_named_keywords(cls):
 
     def __init__(self, *args, **kwargs):
         if args and keywords_only:
-            raise TypeError(f"{cls.__name__} takes keyword arguments only, as {cls.__name__}(normal_force=1000.0); "
+            raise TypeError(f"{cls.__name__} takes keyword arguments only, as {cls.__name__}({names[0]}=...); "
                             f"got {plural(len(args), 'positional value')}: {', '.join(map(repr, args))}")
         unknown = [k for k in kwargs if k not in names]
         if unknown:

@@ -31,18 +31,27 @@ _UNITS = {"1": "", "m s-1": "m/s", "s-1": "1/s", "m2": "m^2"}
 # each front event's arrival-time curve on a space-time map: (colour, line style); the velocity
 # event's lies on its black threshold contour
 _ARRIVAL_STYLES = {"contact": ("k", "--"), "strength": ("tab:green", "-."), "velocity": ("w", ":")}
-# each front event's time span in mu(t): the colour of its curve on the map (the white curve's span
-# in blue, which white cannot be on white)
-_SPAN_COLOURS = {"contact": "k", "strength": "tab:green", "velocity": "tab:blue"}
+_OTHER_ARRIVAL = ("k", ":")  # an event the table lacks
 
 
-def _plt():
-    import matplotlib
+def _span_colour(event) -> str:
+    """A front event's time span in mu(t): the colour of its curve on the space-time map (a white
+    curve's span blue, which white cannot be on white)."""
+    colour = _ARRIVAL_STYLES.get(event, _OTHER_ARRIVAL)[0]
+    return "tab:blue" if colour == "w" else colour
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
 
-    return plt
+def _subplots(*args, **kwargs):
+    """(figure, axes) as pyplot.subplots gives them, on a Figure of matplotlib's object interface
+    with an Agg canvas of its own: no pyplot figure manager and no backend chosen, so that a
+    notebook's inline display stays as it was (pyplot's Agg, chosen here before, switched it off for
+    the session) and nothing needs closing."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=kwargs.pop("figsize", None))
+    FigureCanvasAgg(fig)  # its own canvas (text extents, savefig), the global backend untouched
+    return fig, fig.subplots(*args, **kwargs)
 
 
 def _axis_scale(values) -> str:
@@ -110,7 +119,9 @@ def _scale(ax, which: str, values) -> str:
     scale = _axis_scale(values)
     v = np.asarray(values, dtype=float)
     v = v[np.isfinite(v)]
-    magnitude = np.abs(v[v != 0])
+    largest = float(np.abs(v).max()) if v.size else 0.0
+    v = v[np.abs(v) > 1e-9 * largest]  # a round-off zero (np.arange(-0.3, 0.31, 0.1) has 5.6e-17) is zero
+    magnitude = np.abs(v)
     if scale == "linear" and (v < 0).any() and (v > 0).any() and magnitude.max() >= 100 * magnitude.min():
         scale = "symlog"  # both signs over two decades or more: +-1e-5 and +-1e-4 lay on top of each other at 0
         getattr(ax, f"set_{which}scale")(scale, linthresh=float(magnitude.min()), linscale=0.5)
@@ -374,7 +385,6 @@ def _plot_by(ax, x, y, sel, colours: _Colours | None, ds, marker="o", label=None
 
 def _finish(fig, path, written: list) -> None:
     fig.savefig(path, dpi=130, bbox_inches="tight")
-    _plt().close(fig)
     written.append(Path(path))
 
 
@@ -391,12 +401,11 @@ def mu_s_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     swept parameters ``mixed`` (their members share the axes)."""
     ds = _require_ensemble(ds, "mu_s_figure")
     _require_parameters(ds, "mu_s_figure", pname, colour_by)
-    plt = _plt()
     ok = ds.status.values == 0
     x, xlabel, off_axis = _axis_values(ds, pname, ok)
     mu = np.asarray(ds.mu_s.values, dtype=float)
     colours = _Colours(ds, colour_by, ok) if colour_by else None
-    fig, ax = plt.subplots(figsize=(5.6, 3.8))
+    fig, ax = _subplots(figsize=(5.6, 3.8))
     ax.set_title(f"mu_s against {pname.replace('_', ' ')} ({ok.sum()} of {plural(ok.size, 'member')} ok"
                  f"{_status_text(ds, ok)}{off_axis}{colours.note if colours else ''})" + _mixed_note(ds, mixed, ok),
                  fontsize=10)
@@ -439,7 +448,6 @@ def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     ds = _require_ensemble(ds, "front_speeds_figure")
     _require_fronts(ds, "front_speeds_figure")
     _require_parameters(ds, "front_speeds_figure", pname, colour_by)
-    plt = _plt()
     ok = ds.status.values == 0
     x, xlabel, off_axis = _axis_values(ds, pname, ok)
     segments = _SEGMENTS
@@ -452,12 +460,12 @@ def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     title = (f"{_front_name(ds)} speeds ({plural(int(ok.sum()), 'ok member')}{_status_text(ds, ok)}{off_axis}"
              f"{colours.note if colours else ''})")
     if not every.size:
-        fig, ax = plt.subplots(figsize=(5.6, 3.8))
+        fig, ax = _subplots(figsize=(5.6, 3.8))
         ax.set_title(title, fontsize=10)
         _nothing_to_plot(ax, _no_front_reason(ds, ok)[0])
         return fig
     if colours is None:
-        fig, ax = plt.subplots(figsize=(5.6, 3.8))
+        fig, ax = _subplots(figsize=(5.6, 3.8))
         for k, (seg, marker) in enumerate(segments):
             _plot_by(ax, x, speeds[seg], shown[seg], None, ds, marker,
                      label=f"v_{seg} ({plural(int(shown[seg].sum()), 'member')})", colour=f"C{k}", failed=~ok)
@@ -466,7 +474,7 @@ def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
         ax.set_ylabel("front speed (m/s)")
         ax.set_title(title, fontsize=10)
     else:
-        fig, axes = plt.subplots(1, len(segments), figsize=(3.85 * len(segments), 3.6), sharex=True, sharey=True)
+        fig, axes = _subplots(1, len(segments), figsize=(3.85 * len(segments), 3.6), sharex=True, sharey=True)
         for ax, (seg, marker) in zip(axes, segments):
             _plot_by(ax, x, speeds[seg], shown[seg], colours, ds, marker, failed=~ok)
             # short panel titles (the first front's segments: the figure's title says so), which
@@ -487,13 +495,21 @@ def front_speeds_figure(ds, pname: str, colour_by: str | None = None, mixed=()):
     return fig
 
 
+def _curve_colour(k: int, n: int):
+    """Curve k of n its own colour: matplotlib's ten cycle colours, tab20's twenty, else viridis."""
+    import matplotlib
+
+    if n <= 10:
+        return f"C{k}"
+    return matplotlib.colormaps["tab20"](k) if n <= 20 else matplotlib.colormaps["viridis"](k / (n - 1))
+
+
 def arrival_times_figure(ds, max_curves: int = MAX_CURVES):
     """Arrival time minus the first arrival against x for up to ``max_curves`` ok members spread
     over the ensemble, coloured by the first swept parameter, dashed or dotted by the second (where
     it takes at most 4 values among them) and labelled with every swept value."""
     ds = _require_ensemble(ds, "arrival_times_figure")
     _require_fronts(ds, "arrival_times_figure")
-    plt = _plt()
     swept = ds.attrs.get("varying_parameters", "").split()
     ok = ds.status.values == 0
     arrived = np.isfinite(ds.arrival_time.values).any(axis=1)
@@ -506,13 +522,13 @@ def arrival_times_figure(ds, max_curves: int = MAX_CURVES):
         second = _per_member(ds, swept[1])
         levels = np.unique(second[candidates])
         styles = {value: style for value, style in zip(levels, ("-", "--", ":", "-."))} if levels.size <= 4 else {}
-    looks = [(colours.colour(colours.values[m]) if colours is not None else f"C{k % 10}",
+    looks = [(colours.colour(colours.values[m]) if colours is not None else _curve_colour(k, len(candidates)),
               styles.get(second[m], "-") if styles else "-") for k, m in enumerate(candidates)]
     if len(set(looks)) < len(looks):  # curves alike (a second parameter of many values, a third): one colour each
-        looks = [(f"C{k % 10}", "-") for k in range(len(candidates))]
+        looks = [(_curve_colour(k, len(candidates)), "-") for k in range(len(candidates))]
     metres = ds.x.attrs.get("units") == "m"
     x = ds.x.values * (1e3 if metres else 1.0)
-    fig, ax = plt.subplots(figsize=(7.4, 3.8))
+    fig, ax = _subplots(figsize=(7.4, 3.8))
     # a curve spanning more than OUTLIER_SPAN x the median curve's time (a member far from the others)
     # runs off the axis, which keeps the others' shapes: it squashed them flat at 0
     spans = np.array([np.nanmax(ds.arrival_time.values[m]) - np.nanmin(ds.arrival_time.values[m]) for m in candidates])
@@ -552,10 +568,9 @@ def mu_s_histogram_figure(ds):
     """The histogram of the ok members' mu_s (quick_look's figure of an ensemble without a swept
     parameter); the title counts the members by status."""
     ds = _require_ensemble(ds, "mu_s_histogram_figure")
-    plt = _plt()
     ok = ds.status.values == 0
     mu = np.asarray(ds.mu_s.values, dtype=float)[ok & np.isfinite(ds.mu_s.values)]
-    fig, ax = plt.subplots(figsize=(5.6, 3.8))
+    fig, ax = _subplots(figsize=(5.6, 3.8))
     ax.set_title(f"mu_s of {plural(ok.size, 'member')} ({ok.sum()} ok{_status_text(ds, ok)})", fontsize=10)
     if not mu.size:
         _nothing_to_plot(ax, "no member has a mu_s to show")
@@ -644,12 +659,11 @@ def friction_history_figure(ds, recorded_index: int):
     from .simulate import friction_coefficient_history
 
     member, position = _recorded_member(ds, recorded_index, "friction_history_figure")
-    plt = _plt()
     mu_all = ds["friction_coefficient_history"] if "friction_coefficient_history" in ds else \
         friction_coefficient_history(ds)
     mu = np.asarray(mu_all.values[recorded_index], dtype=float)
     t = np.asarray(ds.time.values, dtype=float)
-    fig, ax = plt.subplots(figsize=(6, 3.6))
+    fig, ax = _subplots(figsize=(6, 3.6))
     ax.plot(t, mu, color="k", lw=1.3, label="mu(t), recorded fields")
     window = (t.min(), t.max())
     status = int(ds.status.values[position])
@@ -664,11 +678,11 @@ def friction_history_figure(ds, recorded_index: int):
             why = ("not given (status " + status_name(ds, status) + ")" if not np.isfinite(value) else
                    f"{value:.6f} at t = {at:.6g} s, outside the recorded times")
             ax.plot([], [], ls="none", label=f"{name}: {why}")
-    for k, (event, prefix) in enumerate(front_events(ds)):
+    for event, prefix in front_events(ds):
         start, end = (float(_per_member(ds, f"{prefix}front_{when}_time")[position]) for when in ("start", "end"))
         if np.isfinite(start) and np.isfinite(end) and end >= window[0] and start <= window[1]:
             front = f"{event} front" if event else "front"
-            ax.axvspan(max(start, window[0]), min(end, window[1]), color=_SPAN_COLOURS.get(event, f"C{k + 4}"),
+            ax.axvspan(max(start, window[0]), min(end, window[1]), color=_span_colour(event),
                        alpha=0.2,
                        label=f"{front}: t = {start:.5f} .. {end:.5f} s")
     end = float(_per_member(ds, "final_time")[position]) if "final_time" in ds else np.nan
@@ -692,7 +706,6 @@ def space_time_map(ds, recorded_index: int, path) -> Path:
     """:func:`space_time_figure` of one recorded member, written to ``path``."""
     fig = space_time_figure(ds, recorded_index)
     fig.savefig(path, dpi=130)
-    _plt().close(fig)
     return Path(path)
 
 
@@ -711,12 +724,11 @@ def space_time_figure(ds, recorded_index: int):
     from matplotlib.patches import Patch
 
     member, position = _recorded_member(ds, recorded_index, "space_time_figure")
-    plt = _plt()
     v = ds.velocity_history.values[recorded_index]
     t = ds.time.values
     metres = ds.x.attrs.get("units") == "m"
     x = ds.x.values * (1e3 if metres else 1.0)
-    fig, ax = plt.subplots(figsize=(6, 4))
+    fig, ax = _subplots(figsize=(6, 4))
     recorded_values = np.isfinite(v)
     scale = float(np.abs(v[recorded_values]).max()) if recorded_values.any() else 0.0
     scale = scale or 1.0
@@ -761,7 +773,7 @@ def space_time_figure(ds, recorded_index: int):
             handles.append(Line2D([], [], ls="none", label=text))
             continue
         gaps = np.flatnonzero(np.diff(reached) > 1) + 1  # no line across nodes the front did not reach
-        colour, style = _ARRIVAL_STYLES.get(event, ("k", ":"))
+        colour, style = _ARRIVAL_STYLES.get(event, _OTHER_ARRIVAL)
         seen = (ta[reached] >= t.min()) & (ta[reached] <= t.max())
         # a white curve (the velocity event's, on its black contour) is outlined, so that its legend
         # entry shows on the legend's white

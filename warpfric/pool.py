@@ -60,6 +60,9 @@ MIN_CPU_SECONDS = 2.5
 # chunks per worker (so that a worker whose chunks run faster takes more of them) and the fewest
 # members in a chunk
 CHUNKS_PER_WORKER = 4
+# a parent whose workers have reported nothing this long after the start says why (their start, ~1.5 s
+# on this project's CPU, and the kernels' load, or once their compilation, ~8 s)
+WORKERS_QUIET_NOTE_S = 5.0
 MIN_CHUNK_MEMBERS = 4
 
 
@@ -253,27 +256,36 @@ def _dead_workers(pool: _Pool) -> list[tuple[int, int]]:
 
 
 def _worker_died_text(dead: list) -> str:
-    """What a user reads where a worker died: which, how, why that happens and what to do."""
+    """What a user reads where workers died: which, how, why that happens and what to do."""
     # the executor stops the other workers with SIGTERM once it sees one die: name the one that died
     dead = [(pid, code) for pid, code in dead if code != -signal.SIGTERM] or dead
-    how = []
+    how, signals = [], set()
     for pid, code in dead:
-        try:
-            cause = f"killed by {signal.Signals(-code).name}" if code < 0 else f"exit code {code}"
-        except ValueError:
-            cause = f"exit code {code}"
-        how.append(f"pid {pid}, {cause}")
-    which = f" ({'; '.join(how)})" if how else ""
-    return (f"a CPU worker process ended abruptly{which} while it ran its part of the ensemble, so the run is "
-            "stopped (the system's out-of-memory killer ends a process this way where memory runs short): run "
-            "fewer members at a time (smaller chunks: --chunk), or in one process (workers=1, --cpu-workers 1)")
+        if code < 0:
+            try:
+                name = signal.Signals(-code).name
+            except ValueError:
+                name = f"signal {-code}"
+            signals.add(name)
+            how.append(f"pid {pid}, killed by {name}")
+        else:
+            how.append(f"pid {pid}, exit code {code}")
+    which = (f"{len(dead)} CPU worker processes ended" if len(dead) > 1 else "a CPU worker process ended") + (
+        f" abruptly ({'; '.join(how)})" if how else " abruptly")
+    why = ("; the system's out-of-memory killer ends a process so where memory runs short" if "SIGKILL" in signals
+           else "; a crash (its error, if any, is printed above)" if signals - {"SIGTERM"}
+           else "; something outside the pool sent it SIGTERM" if signals
+           else "; it ended on its own (its error, if any, is printed above)")
+    return (f"{which} while the pool ran the ensemble, so the run is stopped{why}. Fewer worker processes at once "
+            "hold less memory and show a worker's error: workers=1 (warpfric run --cpu-workers 1, which --resume "
+            "takes too)")
 
 
 def _get_pool(n_workers: int) -> tuple[_Pool, bool]:
     """(the kept pool of n_workers processes, True where it was created in this call)."""
     global _POOL
-    if _POOL is not None and _dead_workers(_POOL):  # a kept worker killed between runs: a new pool
-        shutdown(terminate=True)
+    if _POOL is not None and (_dead_workers(_POOL) or getattr(_POOL.executor, "_broken", False)):
+        shutdown(terminate=True)  # a kept worker killed between runs (or the pool broken): a new pool
     if _POOL is not None and _POOL.workers != n_workers:
         shutdown()
     if _POOL is not None:
@@ -346,36 +358,43 @@ def run(n_workers: int, values: dict, *, scene, model, solver, fronts, record, d
     common = dict(scene=scene, model=model, solver=solver, fronts=fronts, device=device)
     records = [chunk_record(record, start, stop) for start, stop in bounds]
     fractions, done = np.zeros(len(bounds)), np.zeros(len(bounds), dtype=np.int64)
+    noted = False  # the note of workers quiet at the start (WORKERS_QUIET_NOTE_S)
     try:
         # started here: the processes of a pool created in this call (a kept pool's worker may still
         # say it is ready in a later call, when its first call ended before its message was read:
         # that is no start of this call's); inside the try, so that a Ctrl-C before the first
         # submit stops the new pool instead of keeping it without processes
         pool, started_here = _get_pool(n_workers)
-        futures = [pool.executor.submit(_run_chunk, runner, run_id, k, {name: v[start:stop] for name, v in values.items()},
-                                        records[k][0], member_offset + start, show, common)
-                   for k, (start, stop) in enumerate(bounds)]
-        while True:
-            _read_inbox(pool, run_id, fractions, done, timeout=0.25)
-            # a worker that died: said here, also where the executor did not notice (it waited for the rest
-            # of a result that the worker was sending when it was killed, and the run hung)
-            dead = _dead_workers(pool)
-            if dead:
-                raise WorkerDied(_worker_died_text(dead))
-            finished = 0
-            for k, future in enumerate(futures):
-                if future.done():
-                    try:
+        try:
+            futures = [pool.executor.submit(_run_chunk, runner, run_id, k,
+                                            {name: v[start:stop] for name, v in values.items()},
+                                            records[k][0], member_offset + start, show, common)
+                       for k, (start, stop) in enumerate(bounds)]
+            while True:
+                _read_inbox(pool, run_id, fractions, done, timeout=0.25)
+                finished = 0
+                for k, future in enumerate(futures):
+                    if future.done():
                         future.result()  # a chunk that raised: raise here
-                    except cf.process.BrokenProcessPool:
-                        raise WorkerDied(_worker_died_text(_dead_workers(pool))) from None
-                    fractions[k], done[k] = 1.0, sizes[k]
-                    finished += 1
-            if line is not None:
-                line.show(float(fractions @ sizes) / n, int(done.sum()), f"{n_workers} workers")
-            if finished == len(futures):
-                break
-        results = [future.result() for future in futures]
+                        fractions[k], done[k] = 1.0, sizes[k]
+                        finished += 1
+                if line is not None:
+                    line.show(float(fractions @ sizes) / n, int(done.sum()), f"{n_workers} workers")
+                    if not noted and not fractions.any() and time.perf_counter() - t0 > WORKERS_QUIET_NOTE_S:
+                        noted = True  # the workers compile where Warp's cache lacks the kernels: seconds at 0 %
+                        progress_module.write_note("warpfric: the worker processes start and load the kernels "
+                                                   "(the first time, they compile them; Warp keeps them in its cache) ...")
+                if finished == len(futures):
+                    break
+                # a worker that died while chunks are left: said here, also where the executor did not
+                # notice (it waited for the rest of a result that the worker was sending when it was
+                # killed, and the run hung)
+                dead = _dead_workers(pool)
+                if dead:
+                    raise WorkerDied(_worker_died_text(dead))
+            results = [future.result() for future in futures]
+        except cf.process.BrokenProcessPool:
+            raise WorkerDied(_worker_died_text(_dead_workers(pool))) from None
     except BaseException:
         if line is not None:
             line.stop()

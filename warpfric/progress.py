@@ -483,23 +483,33 @@ class Line:
 BUILD_NOTE_AFTER_S = 1.0  # a kernel load that takes longer than this is a compilation: say so
 
 
+COMPILING_NOTE = "warpfric: compiling the kernels for these settings (once: Warp keeps them in its cache) ..."
+
+
+def write_note(text: str, stream=None) -> None:
+    """One line on ``stream`` (default stderr) above any progress bar drawn there (tqdm clears and
+    redraws it)."""
+    from tqdm import tqdm
+
+    tqdm.write(text, file=stream if stream is not None else sys.stderr)
+
+
 class building_note:
     """Around the kernels' compile or load: where progress is shown and this process draws the
-    line (no SINK), one line on ``stream`` (default stderr) once the load has taken
-    BUILD_NOTE_AFTER_S, since a first compilation takes seconds (~15 s on a GPU) before the progress
-    line can start. Loading a kernel from Warp's cache says nothing."""
+    line (no SINK, or a SINK of this process's own line: ``draws_here``), COMPILING_NOTE on
+    ``stream`` (default stderr) once the load has taken BUILD_NOTE_AFTER_S, since a first
+    compilation takes seconds (~15 s on a GPU) before the progress line can move. Loading a kernel
+    from Warp's cache says nothing."""
 
-    def __init__(self, show: bool, stream=None, after: float = BUILD_NOTE_AFTER_S):
-        self.show = bool(show) and SINK is None
+    def __init__(self, show: bool, stream=None, after: float | None = None):
+        self.show = bool(show) and (SINK is None or getattr(SINK, "draws_here", False))
         self.stream = stream
-        self.after = after
+        self.after = BUILD_NOTE_AFTER_S if after is None else after
         self.timer = None
         self.written = False
 
     def _write(self) -> None:
-        stream = self.stream if self.stream is not None else sys.stderr
-        stream.write("warpfric: compiling the kernels for these settings (once: Warp keeps them in its cache) ...\n")
-        stream.flush()
+        write_note(COMPILING_NOTE, self.stream)
         self.written = True
 
     def __enter__(self):

@@ -632,9 +632,6 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
 
     parts = parts_dir(out)
     previous = ChunkStore.load(parts) if resume and parts.exists() else None
-    if resume and previous is None:  # a mistyped output ran the whole sweep without a word: said, even with
-        # --quiet (a script that always passes --resume still gets its run)
-        _say(f"no interrupted run to resume: {str(parts)!r} does not exist, so the whole sweep runs now", False)
     # an omitted option takes, in this order: the interrupted run's value (resume), the sweep's [run]
     chunk = chunk or (previous.chunk if previous else None) or sweep.run.get("chunk") or sweep.n_members
     offset = next(v for v in (member_offset, previous and previous.member_offset, sweep.run.get("member_offset"), 0)
@@ -737,6 +734,9 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
     store = previous
     try:
         if store is None:
+            if resume:  # a mistyped output ran the whole sweep without a word: said (after every check that
+                # could refuse the run), even with --quiet: a script that always passes --resume gets its run
+                _say(f"no interrupted run to resume: {str(parts)!r} does not exist, so the whole sweep runs now", False)
             try:
                 store = ChunkStore.create(parts, digest, sweep.n_members, chunk, member_offset=offset,
                                           sweep_file=str(Path(sweep_file).resolve()), device=device,

@@ -317,25 +317,18 @@ def _warn_unresolved(res, n: int) -> None:
 
 def bar_plot(res, path) -> None:
     """The indices of ``res`` (analyse's Dataset) as bars (bar_figure), written to ``path``."""
-    import matplotlib.pyplot as plt
-
-    fig = bar_figure(res)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
+    bar_figure(res).savefig(path, dpi=110, bbox_inches="tight")
 
 
 def bar_figure(res):
     """One panel per output: S1 and ST (Sobol) or mu* and sigma (Morris) per parameter, with their
     confidence intervals as error bars; one legend, outside the panels, naming the intervals' level."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from .plots import _subplots  # a Figure without pyplot: a notebook's display stays as it was
 
     outputs = list(res.output.values)
     names = [str(name) for name in res.parameter.values]
     width = max(4.5, 0.6 * len(names) + 1.5)  # inches a panel
-    fig, axes = plt.subplots(1, len(outputs), figsize=(width * len(outputs), 3.8), squeeze=False)
+    fig, axes = _subplots(1, len(outputs), figsize=(width * len(outputs), 3.8), squeeze=False)
     x = np.arange(res.sizes["parameter"])
     # names upright where the longest fits its bar pair's width (~0.065 in a character at 8 pt),
     # else slanted and smaller

@@ -208,8 +208,10 @@ def _run_member_blocks(values, varying, scene, model, solver, fronts, record, de
     try:
         for start, stop in bounds:
             if show:  # the block's engine reports its fraction of the whole, not on a line of its own
-                progress_module.SINK = (lambda fraction, done, final, start=start, size=stop - start, last=stop == n:
-                                        ensemble_sink((start + fraction * size) / n, start + done, final and last))
+                sink = (lambda fraction, done, final, start=start, size=stop - start, last=stop == n:
+                        ensemble_sink((start + fraction * size) / n, start + done, final and last))
+                sink.draws_here = line is not None  # this process's line (progress.building_note speaks)
+                progress_module.SINK = sink
             block_record, block_chosen = pool.chunk_record(record, start, stop)
             with warnings.catch_warnings(record=True) as caught:
                 warnings.simplefilter("always")
