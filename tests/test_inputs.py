@@ -111,9 +111,9 @@ def test_unknown_keyword_names_the_valid_ones(cls, typo, right):
 
 
 @pytest.mark.parametrize("line, words", [
-    ("normal_force = ['500']", ["[grid] normal_force = '500'", "expected a number in (0, inf) N"]),
-    ("eccentricity = [true]", ["[grid] eccentricity = True", "expected a number in [-0.6, 0.6]"]),
-    ("normal_force = {start = '1', stop = 5000, num = 3}", ["[grid] normal_force.start = '1'", "(0, inf) N"]),
+    ("normal_force = ['500']", ["[grid] normal_force = \"500\"", "expected a number in (0, inf) N"]),
+    ("eccentricity = [true]", ["[grid] eccentricity = true", "expected a number in [-0.6, 0.6]"]),
+    ("normal_force = {start = '1', stop = 5000, num = 3}", ["[grid] normal_force.start = \"1\"", "(0, inf) N"]),
 ])
 def test_a_sweep_files_non_number_names_the_parameters_range_and_units(tmp_path, line, words):
     from warpfric.sweep_file import SweepError, load_sweep

@@ -26,6 +26,7 @@ adding a parameter does not change the others' draws.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 import tomllib
 import warnings
@@ -111,13 +112,26 @@ def _accepted(key: str, names) -> str:
     return f"{did_you_mean(key, names)}; accepted: {', '.join(names)}"
 
 
+def _toml(value) -> str:
+    """``value`` as a sweep file spells it (true, "text", [1, 2]), for messages that quote it."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k} = {_toml(v)}" for k, v in value.items()) + "}"
+    return repr(value)
+
+
 def _number(value, where: str) -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         key, _, part = where.split("] ")[-1].partition(".")  # '[grid] normal_force.start' -> normal_force, start
         value_of_parameter = key in PARAMETER_NAMES and part in ("", "start", "stop", "mean", "low", "high")
         valid = (f" in {parameter_range_text(key)} {units_text(parameter_units(key))}".rstrip()
                  if value_of_parameter else "")  # a spread (std, ...) is no value of the parameter
-        raise SweepError(f"{where} = {value!r}: expected a number{valid}")
+        raise SweepError(f"{where} = {_toml(value)}: expected a number{valid}")
     return float(value)
 
 
