@@ -626,7 +626,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
     import shutil
 
     from .io import (SWEEP_COPY, ChunkStore, ChunksDoNotCombine, OutputWriteError, free_bytes, history_time, new_run_id,
-                     parts_dir, sweep_digest, write_failure)
+                     parts_dir, resume_command, sweep_digest, write_failure)
     from .device import check_device
     from .sweep_file import RecordDetachment, check_member_offset
 
@@ -728,9 +728,6 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
     tornado_log = logging.getLogger("tornado.application")
     if use_cluster:
         tornado_log.addFilter(drop_sync_cancel_error)
-    # quoted as a shell reads it (a path with spaces); a plain path prints as given
-    resume_command = shlex.join(["warpfric", "run", str(sweep_file), "-o", str(out), "--resume"]
-                                + (["--device", device] if device else []))
     store = previous
     try:
         if store is None:
@@ -753,7 +750,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         if errors or missing:
             ranges = ", ".join(_members(offset + store.members(i).start, offset + store.members(i).stop) for i in missing)
             kept = len(_keep_or_remove(store, previous is None))  # none finished: no parts folder to block the next run
-            what = (f"the finished chunks are kept in {parts}: `{resume_command}` runs the rest" if kept else
+            what = (f"the finished chunks are kept in {parts}: `{resume_command(store, out)}` runs the rest" if kept else
                     "no chunk finished, nothing was kept")
             _say(f"{plural(len(missing), 'chunk')} missing ({ranges}; {len(errors)} raised, see above); {what}", False)
             return RunReport(chunks=reports, errors=errors, output=None, wall_s=wall)
@@ -801,7 +798,7 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         first = "free some space, then " if getattr(err, "disk_full", False) else ""
         late = ", and chunks that were running on the cluster's workers may still be written there" if late_writes else ""
         what = (f"the {plural(len(kept), 'finished chunk')} {'is' if len(kept) == 1 else 'are'} kept in "
-                f"{str(parts)!r}{late}; {first}`{resume_command}` goes on from them"
+                f"{str(parts)!r}{late}; {first}`{resume_command(store, out)}` goes on from them"
                 if kept else "nothing was kept")
         if interrupted and not kept and store is not None and store.n_chunks == 1 and sweep.n_members > 1:
             what += (f" (the sweep ran as one chunk of {sweep.n_members:,} members: with --chunk N, or [run] chunk = N, "
