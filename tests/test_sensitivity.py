@@ -355,3 +355,23 @@ def test_a_misspelt_output_and_values_the_log_cannot_take_are_named():
     with pytest.raises(ValueError, match=r"output 'y': \d+ of 160 members failed or lack it \(members .*; \d+ of them "
                                          r"ok with a value <= 0, which the log \(--log\) cannot take\)"):
         analyse(ds, ("y",), log=True)  # the Ishigami function takes negative values
+
+
+def test_many_outputs_and_parameters_wrap_into_rows():
+    """20 parameters x 6 outputs made one row ~9,000 px wide: the panels now wrap, at most three a
+    row and one a row where a panel is wide, each panel at most 14 inches."""
+    from warpfric.sensitivity import bar_figure
+
+    def indices(n_parameters, n_outputs):
+        values = np.random.default_rng(0).random((n_outputs, n_parameters))
+        return xr.Dataset({k: (("output", "parameter"), values) for k in ("S1", "S1_conf", "ST", "ST_conf")},
+                          coords={"output": [f"y{i}" for i in range(n_outputs)],
+                                  "parameter": [f"x{i}" for i in range(n_parameters)]})
+
+    for n_parameters, n_outputs, shape in ((20, 6, (6, 1)), (6, 5, (2, 3)), (3, 2, (1, 2))):
+        fig = bar_figure(indices(n_parameters, n_outputs))
+        shown = [ax for ax in fig.axes if ax.get_visible()]
+        rows = len({round(ax.get_position().y0, 3) for ax in shown})
+        columns = len({round(ax.get_position().x0, 3) for ax in shown})
+        assert len(shown) == n_outputs and (rows, columns) == shape, (n_parameters, n_outputs, rows, columns)
+        assert fig.get_size_inches()[0] <= 3 * 7.0 + 1e-9 or columns == 1

@@ -315,6 +315,9 @@ def _warn_unresolved(res, n: int) -> None:
                       "at least (a power of two; the estimate of a small design is itself rough)", stacklevel=3)
 
 
+BAR_PANELS_PER_ROW = 3  # panels of bar_figure side by side (each up to 7 inches wide)
+
+
 def bar_plot(res, path) -> None:
     """The indices of ``res`` (analyse's Dataset) as bars (bar_figure), written to ``path``."""
     bar_figure(res).savefig(path, dpi=110, bbox_inches="tight")
@@ -327,8 +330,14 @@ def bar_figure(res):
 
     outputs = list(res.output.values)
     names = [str(name) for name in res.parameter.values]
-    width = max(4.5, 0.6 * len(names) + 1.5)  # inches a panel
-    fig, axes = _subplots(1, len(outputs), figsize=(width * len(outputs), 3.8), squeeze=False)
+    width = min(max(4.5, 0.6 * len(names) + 1.5), 14.0)  # inches a panel
+    # at most BAR_PANELS_PER_ROW panels a row (20 parameters x 6 outputs made one row of ~9,000 px)
+    columns = min(len(outputs), max(1, BAR_PANELS_PER_ROW if width <= 7 else 1))
+    rows = -(-len(outputs) // columns)
+    fig, grid = _subplots(rows, columns, figsize=(width * columns, 3.8 * rows), squeeze=False)
+    axes = [[ax for ax in grid.flat][:len(outputs)]]
+    for ax in list(grid.flat)[len(outputs):]:
+        ax.set_visible(False)
     x = np.arange(res.sizes["parameter"])
     # names upright where the longest fits its bar pair's width (~0.065 in a character at 8 pt),
     # else slanted and smaller
@@ -349,8 +358,8 @@ def bar_figure(res):
     # one legend for all panels, outside on the right (inside, it covered bars), saying what the
     # error bars are: SALib's confidence intervals of the indices
     level = res.attrs.get("conf_level", 0.95)
-    handles, labels = axes[0][-1].get_legend_handles_labels()
-    axes[0][-1].legend(handles, labels, fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False,
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    grid[0][-1].legend(handles, labels, fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False,
                        title=f"error bars: {float(level):.0%} confidence\n(SALib's bootstrap)", title_fontsize=7)
     fig.tight_layout()
     return fig
