@@ -306,6 +306,11 @@ def test_contact_front_without_a_yield_threshold_is_nan_and_says_so():
         ds = run({"eccentricity": [0.0]}, nodes=20, rtol=1e-5, model=wf.Model(relaxation_gate="none"), fronts=wf.Fronts())
     assert np.isnan(ds.arrival_time.values).all() and np.isnan(ds.v_main.values).all()
     assert ds.nucleation_edge.values[0] == -2 and ds.detached_fraction.values[0] == 0 and ds.status.values[0] == 0
+    # no front: none counted (NaN, "unknown", left the member out of (ds.front_count == 2).mean() and of means)
+    assert ds.front_count.values[0] == 0 and "0: it reached no node" in ds.front_count.attrs["comment"]
+    with pytest.warns(UserWarning, match="max_steps_reached"):  # and unknown stays NaN
+        failed = run({"eccentricity": [0.0]}, nodes=20, rtol=1e-5, max_steps=20, fronts=wf.Fronts())
+    assert failed.status.values[0] == 1 and np.isnan(failed.front_count.values[0])
     # once, also with the grid check's coarse run (it said so twice)
     with pytest.warns(UserWarning) as caught:
         run({"eccentricity": [0.0]}, nodes=20, rtol=1e-5, model=wf.Model(relaxation_gate="none"),
@@ -616,3 +621,23 @@ def test_a_members_fronts_do_not_depend_on_the_other_members_lengths():
     for name in ("nucleation_edge", "v_precursor", "precursor_front_start", "v_far", "far_front_end"):
         np.testing.assert_array_equal(again[name][0], float(alone[name].values[0]), err_msg=name)
         np.testing.assert_array_equal(again[name], beside[name].values.astype(float), err_msg=name)
+
+
+def test_segment_reads_a_dataarrays_own_grid_and_refuses_another():
+    """fronts.segment took any (member, node) array as the pad's evenly spaced nodes: half the nodes
+    (isel) gave speeds 2x too high, and open_mfdataset's union grid of two node counts (NaN-padded)
+    gave detached_fraction 0.58 for members that detached whole, without a word."""
+    ds = run({"eccentricity": [0.0, 0.1]}, nodes=24, rtol=1e-5, fronts=wf.Fronts())
+    from warpfric import fronts
+
+    again = fronts.segment(ds.arrival_time, ds.length.values)
+    np.testing.assert_array_equal(again["v_first"], ds.v_first.values)
+    np.testing.assert_array_equal(fronts.segment(ds.arrival_time.T, ds.length.values)["v_first"], ds.v_first.values)
+    with pytest.raises(ValueError, match=r"x \(12 positions from -0.1 to .* m\) is not the pad's own grid"):
+        fronts.segment(ds.arrival_time.isel(x=slice(0, 12)), ds.length.values)
+    union = np.union1d(ds.x.values, np.linspace(-0.1, 0.1, 15))
+    padded = ds.arrival_time.reindex(x=union)
+    with pytest.raises(ValueError, match=r"x \(37 positions .*open_mfdataset"):
+        fronts.segment(padded, ds.length.values)
+    np.testing.assert_array_equal(fronts.segment(ds.arrival_time.values, ds.length.values)["v_first"],
+                                  ds.v_first.values)  # a plain array is taken as the grid, as documented

@@ -294,8 +294,12 @@ def test_files_of_an_earlier_version_get_mu_t_on_reading(recorded, tmp_path):
 
     new = write_ensemble(later_run(wf.Record(members=(0,), times=tuple(recorded.time.values[1:-1]))), tmp_path / "new.nc")
     for files in ((old, new), (new, old)):  # the recording times differ: refused in one line, either order
-        with pytest.raises(ValueError, match="recorded their fields at different times"):
+        with pytest.raises(ValueError, match="recorded their fields at different times.*recorded=False"):
             open_ensembles(list(files))
+        # without the recorded fields they combine (two sweeps' own detachment windows were refused whole)
+        rest = open_ensembles(list(files), recorded=False)
+        assert rest.sizes["member"] == 4 and "recorded" not in rest.dims and "time" not in rest.dims
+        np.testing.assert_array_equal(rest.mu_s.sel(member=[2, 3]).values, open_ensemble(new).mu_s.values)
     same_times = write_ensemble(later_run(wf.Record(members=(1,), times=tuple(recorded.time.values))),
                                 tmp_path / "same.nc")
     for files in ((old, same_times), (same_times, old)):

@@ -66,10 +66,34 @@ def segment(arrival_time, length, fronts: Fronts = Fronts(), device: str | None 
     length:       pad length L in m, scalar or (members,).
     Returns {name: (members,) float64 array} for FRONT_METRIC_NAMES and the segments named from the
     start (:func:`name_from_start`; positions and lengths in m, times in s, speeds in m/s;
-    nucleation_edge -1 left, 0 interior, +1 right, NaN none).
+    nucleation_edge -1 left, 0 interior, +1 right, NaN none). An xarray DataArray with the
+    dimension ``x`` is checked to be on that grid (its x in m, or in units of L where "1"): the union
+    of other files' grids (xarray.open_mfdataset of runs with other node counts), or a selection of
+    nodes, gave speeds and fractions of a pad that is not the member's, without a word.
     """
+    if hasattr(arrival_time, "dims") and "x" in arrival_time.dims:
+        arrival_time = arrival_time.transpose(..., "x")
+        _check_pad_grid(arrival_time.x, length)
     ta = np.atleast_2d(np.asarray(arrival_time, dtype=np.float64))
     return segment_nodes_first(np.ascontiguousarray(ta.T), length, fronts, device)
+
+
+def _check_pad_grid(x, length) -> None:
+    """ValueError where the positions ``x`` (an xarray coordinate: m, or units "1" for x/L) are not
+    evenly spaced nodes from -L/2 to +L/2 of every length in ``length`` (m)."""
+    pos = np.asarray(x.values, dtype=np.float64)
+    scaled = x.attrs.get("units") == "1"
+    halves = [0.5] if scaled else 0.5 * np.unique(np.asarray(length, dtype=np.float64))
+    n = pos.size
+    even = n >= 2 and np.allclose(np.diff(pos), (pos[-1] - pos[0]) / (n - 1), rtol=1e-9, atol=0.0)
+    # one length where x is in m (a swept length puts x in units of L)
+    ends = n >= 2 and len(halves) == 1 and np.allclose([pos[0], pos[-1]], [-halves[0], halves[0]], rtol=1e-9, atol=0.0)
+    if not (even and ends):
+        unit = "L" if scaled else "m"
+        raise ValueError(f"segment: arrival_time's x ({n} positions from {pos[0]:.6g} to {pos[-1]:.6g} {unit}) is not "
+                         "the pad's own grid of evenly spaced nodes from -L/2 to +L/2; the union of the grids of files "
+                         "of other node counts (xarray.open_mfdataset) or a selection of nodes gives the front metrics "
+                         "of another pad: segment each file's own arrival_time")
 
 
 def segment_nodes_first(arrival_nodes_first, length, fronts: Fronts = Fronts(), device: str | None = "cpu") -> dict:

@@ -840,11 +840,13 @@ def open_ensemble(path) -> xr.Dataset:
     return ds
 
 
-def open_ensembles(paths) -> xr.Dataset:
+def open_ensembles(paths, recorded: bool = True) -> xr.Dataset:
     """Open several complete warpfric files and concatenate them along ``member`` (recorded fields
     along ``recorded``). Raises ValueError when member numbers repeat (runs made without distinct
     ``--member-offset``), naming the files and the numbers, instead of mixing them up, and when the
-    files are not one ensemble (:func:`concat_members`: settings, node counts or outputs differ)."""
+    files are not one ensemble (:func:`concat_members`: settings, node counts or outputs differ).
+    ``recorded=False`` leaves the recorded fields out: files recorded at different times (two
+    sweeps' own detachment windows) combine then."""
     if isinstance(paths, (str, os.PathLike)):  # one path: iterated, a string gave its characters ("n: no such file")
         paths = [paths]
     paths = [Path(p) for p in paths]
@@ -856,6 +858,8 @@ def open_ensembles(paths) -> xr.Dataset:
         if same is not path:
             raise ValueError(f"{path}: the same file is given twice ({same} and {path}); give each file once")
     datasets = [open_ensemble(p) for p in paths]
+    if not recorded:
+        datasets = [ds.drop_dims([d for d in ("recorded", "time") if d in ds.dims]) for ds in datasets]
     # in member order whatever order the files came in (["b.nc", "a.nc"] gave members 3 4 5 0 1 2: an
     # index that is not monotonic), with every file's history
     order = sorted(range(len(paths)), key=lambda i: int(np.min(datasets[i].member.values)))
@@ -1184,8 +1188,9 @@ def concat_members(datasets, names=None) -> xr.Dataset:
         if times.shape != first_times.shape or not np.array_equal(times, first_times):
             raise ValueError(f"{recorded[0][0]} and {name} recorded their fields at different times ({first_times.size} "
                              f"and {times.size} times in [{first_times.min():g}, {first_times.max():g}] and "
-                             f"[{times.min():g}, {times.max():g}] s): open_ensembles needs one recording grid; open "
-                             "the recorded groups with xr.open_mfdataset(files, group='recorded') (times joined)")
+                             f"[{times.min():g}, {times.max():g}] s): open_ensembles needs one recording grid; "
+                             "open_ensembles(files, recorded=False) combines the rest, and xr.open_mfdataset(files, "
+                             "group='recorded') the recorded groups (times joined)")
     if recorded:
         _check_variables([(name, [v for v in ds.data_vars if "recorded" in ds[v].dims]) for name, ds in recorded],
                          "recorded fields")

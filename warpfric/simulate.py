@@ -616,7 +616,8 @@ _EVENT_WORDS = {
 # {words}: its description (_EVENT_WORDS)
 _FRONT_ATTRS = {
     "arrival_time": ("s", "arrival time t_a of the {front} at each node", "{words}; NaN: never reached"),
-    "arrival_time_error": ("s", "interpolation error of t_a", "the error of t_a inside its step: a lower bound, the "
+    "arrival_time_error": ("s", "interpolation error of t_a of the {front}", "the error of t_a inside its step: a "
+                           "lower bound, the "
                            "trajectory's error at rtol and the grid's move t_a further"),
     "event_max_velocity": ("m s-1", "maximum of the detachment velocity w over the pad and the event window", None),
     "strength_peak": ("1", "peak of tau_f/sigma_n at each node", "each node's own static friction coefficient; NaN: "
@@ -627,7 +628,8 @@ _FRONT_ATTRS = {
     "detached_fraction": ("1", "fraction of the nodes the {front} reached", "{words}"),
     "front_count": ("1", "separate fronts of the {front}", "local minima of t_a(x) over the run of nodes it reached "
                     "(a flat run of equal times once), each a nucleation (2: a second front, e.g. from the other "
-                    "edge, meets the first); {words}"),
+                    "edge, meets the first); 0: it reached no node; NaN: unknown (the member did not end ok or "
+                    "ended before its detachment was over); {words}"),
     "collision_position": ("m", "where the first front of the {front} meets another", "the maximum of t_a(x) at an "
                            "end of the first front, the middle of a flat top; the earlier end where both are "
                            "meetings; NaN: the first front meets none; {words}"),
@@ -658,7 +660,8 @@ for _seg, (_short, _definition) in _SEGMENT_WORDS.items():
     _FRONT_ATTRS[f"v_{_seg}"] = ("m s-1", f"speed of {_short} of the {{front}}",
                                  f"mean speed, 1/|slope| of t_a(x); {_short[4:]}: {_definition}; inf: its nodes "
                                  f"arrived at one time (not resolved, v_{_seg}_error inf); {{words}}")
-    _FRONT_ATTRS[f"v_{_seg}_error"] = ("m s-1", f"interpolation error of v_{_seg}", "from the arrival_time_error of "
+    _FRONT_ATTRS[f"v_{_seg}_error"] = ("m s-1", f"interpolation error of v_{_seg} of the {{front}}",
+                                       "from the arrival_time_error of "
                                        "its end (and nucleation) nodes: a lower bound, not the speed's error "
                                        "(v_*_grid_error from Fronts(grid_check=True) is usually far larger); inf: "
                                        "not resolved")
@@ -714,6 +717,9 @@ def _front_variables(front: dict, fronts: Fronts, failed: np.ndarray) -> dict:
                 "flag_meanings": "unknown none left interior right",
             })
             continue
+        if base == "front_count":  # 0 where the member saw its detachment through and no node was reached
+            # (NaN read as "unknown" left those members out of counts and means); NaN stays for the unknown
+            arr = np.where(np.isnan(arr) & ~failed, 0.0, arr)
         units, long_name, comment = _FRONT_ATTRS[base]
         dims = ("member", "x") if arr.ndim == 2 else ("member",)
         attrs = {"units": units, "long_name": long_name.format(front=f"{event} front")}
