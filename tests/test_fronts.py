@@ -641,3 +641,5 @@ def test_segment_reads_a_dataarrays_own_grid_and_refuses_another():
         fronts.segment(padded, ds.length.values)
     np.testing.assert_array_equal(fronts.segment(ds.arrival_time.values, ds.length.values)["v_first"],
                                   ds.v_first.values)  # a plain array is taken as the grid, as documented
+    bare = ds.arrival_time.drop_vars("x")  # a dimension x without positions: taken as the grid too
+    np.testing.assert_array_equal(fronts.segment(bare, ds.length.values)["v_first"], ds.v_first.values)

@@ -73,7 +73,8 @@ def segment(arrival_time, length, fronts: Fronts = Fronts(), device: str | None 
     """
     if hasattr(arrival_time, "dims") and "x" in arrival_time.dims:
         arrival_time = arrival_time.transpose(..., "x")
-        _check_pad_grid(arrival_time.x, length)
+        if "x" in arrival_time.coords:  # (a dimension without positions is taken as the grid, as an array is)
+            _check_pad_grid(arrival_time.x, length)
     ta = np.atleast_2d(np.asarray(arrival_time, dtype=np.float64))
     return segment_nodes_first(np.ascontiguousarray(ta.T), length, fronts, device)
 
