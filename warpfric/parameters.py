@@ -157,6 +157,13 @@ def _range_text(meta) -> str:
     return f"{lo}{meta['low']:g}, {meta['high']:g}{hi}"
 
 
+def _valid_range(name: str) -> str:
+    """'valid range (0, inf) N', or '... (dimensionless)': parameter ``name``'s range and unit, as the
+    messages of a bad value end."""
+    units = units_text(parameter_units(name))
+    return f"valid range {_range_text(_FIELDS[name].metadata)}{' ' + units if units else ' (dimensionless)'}"
+
+
 def parameter_range_text(name: str) -> str:
     """The valid range of parameter ``name`` as the error messages write it, e.g. '(0, inf)' (N)."""
     return _range_text(_FIELDS[name].metadata)
@@ -217,29 +224,22 @@ def resolve_value(name: str, value: Any, scene: Parameters | None = None):
             return None  # resolved against height by the caller
         meta = _FIELDS[name].metadata
         if meta["none_means"] is None:
-            units = units_text(meta["units"])
-            raise ValueError(f"parameter {name!r}: value None is not allowed; valid range {_range_text(meta)}"
-                             f"{' ' + units if units else ' (dimensionless)'}")
+            raise ValueError(f"parameter {name!r}: value None is not allowed; {_valid_range(name)}")
         return np.asarray(meta["none_means"], dtype=np.float64)
     if np.ma.isMaskedArray(value):  # np.asarray drops the mask: the data under it would run as a value
         mask = np.ma.getmaskarray(value)
         if mask.any():
             where = f"[{int(np.flatnonzero(mask.ravel())[0])}]" if mask.ndim else ""
-            units = units_text(parameter_units(name))
             more = f" ({int(mask.sum())} members masked)" if mask.sum() > 1 else ""
             raise ValueError(f"parameter {name}{where} is masked (no value: a missing or fill value, as netCDF4 "
-                             f"returns it){more}; valid range {_range_text(_FIELDS[name].metadata)}"
-                             f"{' ' + units if units else ' (dimensionless)'}; give every member a value")
+                             f"returns it){more}; {_valid_range(name)}; give every member a value")
         value = np.ma.getdata(value)
     if isinstance(value, int) and not isinstance(value, bool):  # beyond int64 numpy makes an object array of it
         try:
             value = float(value)
         except OverflowError:  # 10**400
-            meta = _FIELDS[name].metadata
-            units = units_text(meta["units"])
             raise ValueError(f"parameter {name!r}: value {_short_repr(value)} is out of range (beyond float64's "
-                             f"1.8e308); valid range {_range_text(meta)}{' ' + units if units else ' (dimensionless)'}"
-                             ) from None
+                             f"1.8e308); {_valid_range(name)}") from None
     try:
         arr = np.asarray(value)
     except ValueError:  # nested lists of different lengths
@@ -252,9 +252,8 @@ def resolve_value(name: str, value: Any, scene: Parameters | None = None):
             hint = f" (per member, write {meta['none_means']:g} where you mean None)"
         elif name == "torque_arm" and arr.ndim > 0:  # None: the pad height, which may differ per member
             hint = " (per member, write the member's pad height where you mean None, e.g. 0.015 m)"
-        units = units_text(meta["units"])
-        raise ValueError(f"parameter {name!r}: value {_short_repr(value)} is not a real number; valid range "
-                         f"{_range_text(meta)}{' ' + units if units else ' (dimensionless)'}{hint}")
+        raise ValueError(f"parameter {name!r}: value {_short_repr(value)} is not a real number; "
+                         f"{_valid_range(name)}{hint}")
     return arr.astype(np.float64)
 
 
@@ -301,10 +300,8 @@ def validate_value(name: str, value: np.ndarray, first_member: int = 0) -> None:
         # a per-member array: name the member, e.g. eccentricity[1234] = nan
         what = f"{name}[{first_member + index}]" if arr.size > 1 or first_member else repr(name)
         more = f" ({int(flat.sum())} members out of range)" if flat.sum() > 1 else ""
-        raise ValueError(
-            f"parameter {what} = {first!r}{' ' + units if units else ''} is out of range; valid range "
-            f"{_range_text(meta)}{' ' + units if units else ' (dimensionless)'}{more}"
-        )
+        raise ValueError(f"parameter {what} = {first!r}{' ' + units if units else ''} is out of range; "
+                         f"{_valid_range(name)}{more}")
 
 
 RELAXATION_GATES = ("stress", "none", "velocity")

@@ -248,11 +248,16 @@ class WorkerDied(RuntimeError):
     workers with it; ``warpfric run`` keeps a sweep's finished chunks and exits with code 5."""
 
 
+def _worker_processes(pool: _Pool) -> list:
+    """The worker processes of ``pool``'s executor (CPython keeps them in ``_processes``; none where
+    it does not)."""
+    return list((getattr(pool.executor, "_processes", None) or {}).values())
+
+
 def _dead_workers(pool: _Pool) -> list[tuple[int, int]]:
     """(pid, exit code) of each worker process of ``pool`` that has ended (a worker ends only with
     the pool, so any that has during a run died)."""
-    processes = list((getattr(pool.executor, "_processes", None) or {}).values())  # CPython keeps its workers here
-    return [(process.pid, process.exitcode) for process in processes if process.exitcode is not None]
+    return [(process.pid, process.exitcode) for process in _worker_processes(pool) if process.exitcode is not None]
 
 
 def _worker_died_text(dead: list) -> str:
@@ -304,7 +309,7 @@ def shutdown(terminate: bool = False) -> None:
     pool, _POOL = _POOL, None
     if pool is None:
         return
-    processes = list((getattr(pool.executor, "_processes", None) or {}).values())  # CPython keeps its workers here
+    processes = _worker_processes(pool)
     results = getattr(pool.executor, "_result_queue", None)  # (shutdown forgets it)
     if terminate:
         for process in processes:

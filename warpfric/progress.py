@@ -401,11 +401,16 @@ class Line:
                 f"{_duration(1 / rate)} per member")
         return f"{pace}, {self.done}/{self.n} done" + (f", {self.note}" if self.note else "")
 
+    def _window(self, now: float) -> float:
+        """The span (s) whose growth the time left reads: ``rate_window``, or a fifth of the time so far
+        where longer."""
+        return max(self.rate_window, 0.2 * (now - self.t0))
+
     def time_left(self) -> float | None:
-        """Seconds left at the fraction's growth over the last ``rate_window`` s (or a fifth of the
-        time so far, where longer), from the redraws' samples; None where it has not grown there."""
+        """Seconds left at the fraction's growth over the last ``_window`` s, from the redraws'
+        samples; None where it has not grown there."""
         now = self.clock()
-        window = max(self.rate_window, 0.2 * (now - self.t0))
+        window = self._window(now)
         # the latest sample at least a window old (the start where none is)
         then, before = next(((t, f) for t, f in reversed(self.samples) if now - t >= window), self.samples[0])
         if self.fraction >= 1.0:
@@ -424,7 +429,7 @@ class Line:
     def _sample(self, now: float) -> None:
         """Keep (now, fraction) for the time left, and only the samples its window can still read."""
         self.samples.append((now, self.fraction))
-        window = max(self.rate_window, 0.2 * (now - self.t0))
+        window = self._window(now)
         while len(self.samples) > 2 and now - self.samples[1][0] >= window:
             self.samples.pop(0)
 

@@ -335,14 +335,14 @@ def bar_figure(res):
     columns = min(len(outputs), max(1, BAR_PANELS_PER_ROW if width <= 7 else 1))
     rows = -(-len(outputs) // columns)
     fig, grid = _subplots(rows, columns, figsize=(width * columns, 3.8 * rows), squeeze=False)
-    axes = [[ax for ax in grid.flat][:len(outputs)]]
-    for ax in list(grid.flat)[len(outputs):]:
+    panels = list(grid.flat)
+    for ax in panels[len(outputs):]:
         ax.set_visible(False)
     x = np.arange(res.sizes["parameter"])
     # names upright where the longest fits its bar pair's width (~0.065 in a character at 8 pt),
     # else slanted and smaller
     upright = max(len(name) for name in names) * 0.065 <= 0.85 * width / len(names)
-    for ax, out in zip(axes[0], outputs):
+    for ax, out in zip(panels, outputs):
         r = res.sel(output=out)
         if "S1" in res:
             ax.bar(x - 0.2, r.S1, 0.4, yerr=r.S1_conf, capsize=2, label="S1 (first order)")
@@ -358,7 +358,7 @@ def bar_figure(res):
     # one legend for all panels, outside on the right (inside, it covered bars), saying what the
     # error bars are: SALib's confidence intervals of the indices
     level = res.attrs.get("conf_level", 0.95)
-    handles, labels = axes[0][0].get_legend_handles_labels()
+    handles, labels = panels[0].get_legend_handles_labels()
     grid[0][-1].legend(handles, labels, fontsize=7, loc="upper left", bbox_to_anchor=(1.02, 1.0), frameon=False,
                        title=f"error bars: {float(level):.0%} confidence\n(SALib's bootstrap)", title_fontsize=7)
     fig.tight_layout()

@@ -198,7 +198,7 @@ def _run_member_blocks(values, varying, scene, model, solver, fronts, record, de
     t0 = time.perf_counter()
     n = values["normal_force"].shape[0]
     bounds = [(start, min(start + CPU_MEMBER_BLOCK, n)) for start in range(0, n, CPU_MEMBER_BLOCK)]
-    show = progress_module.shown(progress)
+    show = shown(progress)
     saved_sink = progress_module.SINK  # a worker's: its parent draws the ensemble's line
     line = (progress_module.Line(n, progress if isinstance(progress, str) else "")
             if show and saved_sink is None else None)
