@@ -614,3 +614,13 @@ def test_figures_leave_pyplot_and_its_backend_alone(grid, contact_run):
         assert all(type(fig.canvas).__name__ == "FigureCanvasAgg" for fig in figures)
     finally:
         matplotlib.use(before)
+
+
+def test_a_map_of_round_off_velocities_says_so(contact_run):
+    """A member that failed before the disc moved recorded velocities of +-2e-23 m/s; the colour bar
+    stretched to +-2e-14 nm/s, true but read as structure. The map says they are round-off; a real
+    run's map does not."""
+    ds = contact_run.assign(velocity_history=contact_run.velocity_history * 1e-20)
+    texts = [t.get_text() for t in plots.space_time_figure(ds, 0).axes[0].texts]
+    assert any(t.startswith("round-off only: |v| <= ") for t in texts), texts
+    assert not any("round-off" in t.get_text() for t in plots.space_time_figure(contact_run, 0).axes[0].texts)

@@ -24,6 +24,8 @@ from .progress import plural, status_name
 MAX_LEGEND = 8  # values of a colour parameter shown in a legend; more: a colour bar
 MAX_CURVES = 8  # arrival-time curves in one figure
 OUTLIER_SPAN = 10.0  # an arrival-time curve spanning more than this x the median curve's time runs off the axis
+ROUND_OFF_VELOCITY = 1e-12  # a recorded field whose largest |v| stays below this fraction of the disc's
+# velocity is round-off: the space-time map says so instead of stretching its colours over it
 # symbols of the parameters most often swept (legend entries "F = 1000 N"; axis labels)
 _SYMBOLS = {"normal_force": "F", "eccentricity": "2e/L", "disc_velocity": "v", "shear_strength": "tau_c",
             "length": "L", "height": "h", "stop_time": "t_stop"}
@@ -737,6 +739,12 @@ def space_time_figure(ds, recorded_index: int):
     mesh = ax.pcolormesh(x, t, v * 1e9, cmap=cmap, vmin=-scale * 1e9, vmax=scale * 1e9, shading="nearest")
     if recorded_values.any():  # a colour bar of nothing recorded showed a made-up scale
         fig.colorbar(mesh, ax=ax, label="pad velocity (nm/s)")
+        disc = abs(float(_per_member(ds, "disc_velocity")[position])) if "disc_velocity" in ds else 0.0
+        if disc > 0 and scale < ROUND_OFF_VELOCITY * disc:  # (a member that failed before the disc moved)
+            # the colour scale stretches to whatever is there: +-2e-14 nm/s of round-off read as structure
+            ax.text(0.5, 0.5, f"round-off only: |v| <= {scale:.2g} m/s, {scale / disc:.1g} x the disc's "
+                    "velocity", transform=ax.transAxes, ha="center", va="center", fontsize=9,
+                    bbox={"facecolor": "w", "alpha": 0.8, "lw": 0})
     else:
         ax.text(0.5, 0.5, "nothing recorded: the run ended before the recorded times", transform=ax.transAxes,
                 ha="center", va="center", fontsize=9)
