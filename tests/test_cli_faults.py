@@ -1280,3 +1280,38 @@ def test_a_parts_name_that_holds_no_run_is_said_as_such(tmp_path, sweep, capsys,
         code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--chunk", 1, "--device", DEVICE, *option)
         assert code == 2, (option, err)
         _error_line(err, "unreadable chunk manifest", "nothing can be resumed from it: --overwrite starts the run again")
+
+
+def test_a_ctrl_c_during_a_chunks_write_keeps_that_chunk(tmp_path, sweep, capsys, monkeypatch):
+    """A Ctrl-C while a chunk's file was written waited for the write, then removed the file: its
+    members (for a GPU chunk, minutes of work) ran again on --resume. The whole chunk is kept now,
+    counted in the line, and --resume runs only the chunk after it; the combined file's write still
+    leaves the output as it was (its chunks are still there)."""
+    import signal
+
+    real = xr.Dataset.to_netcdf
+
+    def to_netcdf(self, path=None, *args, **kwargs):
+        done = real(self, path, *args, **kwargs)
+        if path is not None and Path(path).name.startswith("chunk-000001.nc") and kwargs.get("mode", "w") == "w":
+            os.kill(os.getpid(), signal.SIGINT)  # Ctrl-C in the middle of the chunk's write (its group follows)
+        return done
+
+    out = tmp_path / "s.nc"
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", to_netcdf)
+    inherited = signal.signal(signal.SIGINT, signal.default_int_handler)  # Python's own Ctrl-C, as in a terminal
+    try:
+        code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--chunk", 1, "--device", DEVICE, "--quiet")
+    finally:
+        signal.signal(signal.SIGINT, inherited)
+    monkeypatch.undo()
+    assert code == 130 and "the 2 finished chunks are kept" in err[-1], err
+    assert _files(tmp_path) == ["s.nc.parts", "s.nc.parts/chunk-000000.nc", "s.nc.parts/chunk-000001.nc",
+                                "s.nc.parts/manifest.json", "s.nc.parts/sweep.toml", "s.toml"]
+    ran = []
+    real_simulate = SIMULATE_MODULE.simulate
+    monkeypatch.setattr(SIMULATE_MODULE, "simulate", lambda *a, **k: ran.append(k.get("member_offset"))
+                        or real_simulate(*a, **k))
+    code, _, err = run_cli(capsys, "run", sweep, "-o", out, "--resume", "--device", DEVICE, "--quiet")
+    assert code == 0 and [offset for offset in ran if offset is not None] == [2], (err, ran)  # (None: the warm-up)
+    assert open_ensemble(out).member.values.tolist() == [0, 1, 2]

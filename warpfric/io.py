@@ -596,7 +596,7 @@ def _integer_outputs_restored(ds: xr.Dataset) -> xr.Dataset:
 
 
 def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, command: str | None = None,
-                   run_id: str | None = None, started: str | None = None) -> Path:
+                   run_id: str | None = None, started: str | None = None, keep_interrupted: bool = False) -> Path:
     """Write ``ds`` (from :func:`warpfric.simulate`) to netCDF4 at ``path``, atomically; an existing
     file there is replaced (the command line asks for --overwrite first).
 
@@ -613,6 +613,10 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
     run_id:    the id in the member labels (coordinate ``member`` of the file, ``<run id>:<number>``;
                the chunks of one sweep share it). None: the labels ``ds`` was read with
                (``member_id``), else a new id (:func:`new_run_id`).
+    keep_interrupted: a Ctrl-C (or the command line's SIGTERM) during the write is held until the
+               write ends (always); True: the whole file is then moved into place before
+               KeyboardInterrupt is raised (a sweep's chunk, whose members then need not run again);
+               False: ``path`` is left as it was (a combined file, whose chunks are still there).
     ``recorded_member`` must hold member numbers (values of ``member``). The file holds the members
     in the order of their numbers (a selection out of order is sorted).
     Raises OutputWriteError when the file cannot be written (its temporary file removed), and
@@ -676,7 +680,7 @@ def write_ensemble(ds: xr.Dataset, path, *, varying=None, complevel: int = 4, co
                                    encoding=_encoding(recorded, complevel))
         refuse_if_locked(path)  # again: a run may have started on this output during the write
 
-    return replace_atomically(path, write)
+    return replace_atomically(path, write, keep_interrupted=keep_interrupted)
 
 
 def _require_folder(path: Path) -> None:
@@ -724,7 +728,7 @@ def sigint_held():
             signal.signal(signum, handler)
 
 
-def replace_atomically(path, write, suffix: str = "") -> Path:
+def replace_atomically(path, write, suffix: str = "", keep_interrupted: bool = False) -> Path:
     """Write ``path`` through ``write(tmp)`` into a temporary file beside it, then move that over
     ``path``: a write that fails or is interrupted leaves ``path`` as it was and no temporary file.
     The temporary's name is ``PATH.<pid>.<hex>.tmp`` (a name of its own per writer: two writers of
@@ -732,16 +736,19 @@ def replace_atomically(path, write, suffix: str = "") -> Path:
     finds those that killed writers left), with ``suffix`` after it where the writer needs one (a
     figure's ``.png``). A Ctrl-C during the write is held until the write ends (a netCDF write
     interrupted halfway could hang: sigint_held), then raised as KeyboardInterrupt, ``path`` as
-    it was. Raises OutputWriteError for an I/O error (a full disk, a folder that does not exist)."""
+    it was (``keep_interrupted``: the written file moved into place first). Raises
+    OutputWriteError for an I/O error (a full disk, a folder that does not exist)."""
     path = Path(path)
     _require_folder(path)
     tmp = path.with_name(f"{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp{suffix}")
     try:
         with sigint_held() as interrupted:
             write(tmp)
-        if interrupted:  # Ctrl-C during the write: raised now, the file not moved into place
+        if interrupted and not keep_interrupted:  # Ctrl-C during the write: raised now, the file not moved
             raise KeyboardInterrupt
         os.replace(tmp, path)
+        if interrupted:  # the whole file kept (a chunk that then need not run again), then stopped
+            raise KeyboardInterrupt
     except BaseException as err:  # a full disk, an I/O error, Ctrl-C: no temporary file stays behind
         free = free_bytes(path.parent)
         with contextlib.suppress(OSError):

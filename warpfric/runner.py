@@ -146,7 +146,9 @@ def run_chunk(job: ChunkJob) -> dict:
     failed = int((ds.status.values != 0).sum())
     if not sweep.run.get("final_fields", True):
         ds = ds.drop_vars([v for v in FINAL_FIELDS if v in ds])
-    write_ensemble(ds, job.path, varying=sweep.varying, command=job.command, run_id=job.run_id, started=job.started)
+    # a Ctrl-C during the write keeps the whole chunk (for a GPU chunk, minutes of work), then stops
+    write_ensemble(ds, job.path, varying=sweep.varying, command=job.command, run_id=job.run_id, started=job.started,
+                   keep_interrupted=True)
     return dict(index=job.index, members=job.stop - job.start, failed=failed, device=device,
                 wall_s=time.perf_counter() - t0, pid=os.getpid(),
                 warnings=warning_pairs(caught) if collect else [])
