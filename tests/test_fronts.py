@@ -643,3 +643,53 @@ def test_segment_reads_a_dataarrays_own_grid_and_refuses_another():
                                   ds.v_first.values)  # a plain array is taken as the grid, as documented
     bare = ds.arrival_time.drop_vars("x")  # a dimension x without positions: taken as the grid too
     np.testing.assert_array_equal(fronts.segment(bare, ds.length.values)["v_first"], ds.v_first.values)
+
+
+def _same_variables(new, ds):
+    """Every variable of ``new`` equals ds's (values, NaN where NaN, dtype and attributes)."""
+    assert len(new.data_vars) > 40
+    for name in new.data_vars:
+        a, b = new[name], ds[name]
+        assert a.dtype == b.dtype and a.dims == b.dims, name
+        np.testing.assert_array_equal(a.values, b.values, err_msg=name)
+        assert a.attrs.keys() == b.attrs.keys() and all(np.array_equal(a.attrs[k], b.attrs[k]) for k in a.attrs), name
+
+
+def test_resegment_gives_an_ensembles_front_outputs_back_and_a_new_setting_as_a_run_with_it(tmp_path):
+    """fronts.segment returned bare arrays (the edge as float NaN, the Dataset's int8 -2/-3), which a
+    user wrapped by hand to compare with or replace the ensemble's outputs. resegment gives the
+    Dataset's own variables: with the ensemble's settings its outputs bit for bit (from a file too);
+    with another speed_ratio those of a run with it; members not ok as simulate flags them."""
+    from warpfric import fronts
+
+    members = {"eccentricity": [0.0, 0.15, -0.2]}
+    events = ("contact", "strength")
+    ds = run(members, nodes=40, rtol=1e-5, fronts=wf.Fronts(event=events))
+    new = fronts.resegment(ds)
+    assert sorted(n for n in ds.data_vars if n in new) == sorted(new.data_vars)
+    _same_variables(new, ds)
+    assert new.attrs == {k: v for k, v in ds.attrs.items() if k.startswith("fronts_")}
+    wf.io.write_ensemble(ds, tmp_path / "e.nc")
+    _same_variables(fronts.resegment(wf.io.open_ensemble(tmp_path / "e.nc")), ds)
+
+    other = wf.Fronts(event=events, speed_ratio=3.0, edge_zone_fraction=0.2)
+    ran = run(members, nodes=40, rtol=1e-5, fronts=other)
+    np.testing.assert_array_equal(ran.arrival_time.values, ds.arrival_time.values)  # (settings of the segments)
+    again = fronts.resegment(ds, other)
+    _same_variables(again, ran)
+    assert any(not np.array_equal(again[n].values, new[n].values, equal_nan=True) for n in new.data_vars)
+    ds.update(again)
+    ds.attrs.update(again.attrs)
+    _same_variables(fronts.resegment(ds), ran)
+
+    broken = ds.copy()
+    broken["status"] = ds.status.copy(data=np.array([0, 2, 0], dtype=ds.status.dtype))
+    flagged = fronts.resegment(broken)
+    assert flagged.nucleation_edge.values[1] == -3 and np.isnan(flagged.front_count.values[1])
+    assert np.isnan(flagged.v_first.values[1]) and np.isfinite(ds.v_first.values[1])
+    with pytest.raises(ValueError, match=r"fronts.threshold = 0.5, but .* threshold = 0.4; valid: the same"):
+        fronts.resegment(ds, wf.Fronts(event=events, threshold=0.5))
+    with pytest.raises(ValueError, match=r"fronts.event = \('contact',\), but .*\('contact', 'strength'\)"):
+        fronts.resegment(ds, wf.Fronts(speed_ratio=2.0))
+    with pytest.raises(ValueError, match="no front outputs"):
+        fronts.resegment(run({"eccentricity": [0.0]}, nodes=20, rtol=1e-4))

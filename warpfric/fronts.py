@@ -1,9 +1,10 @@
 """warpfric.fronts: detachment-front metrics from arrival times (docs/model.md, "Fronts").
 
-simulate() computes the arrival times in the integrator and calls :func:`segment`; both functions
-here are public so that a stored ensemble can be re-segmented with other settings without
-re-simulating (``segment(ds.arrival_time, ds.length, Fronts(speed_ratio=2))``) and so that the rule
-can be checked on sampled velocity fields (:func:`arrival_times_from_history`).
+simulate() computes the arrival times in the integrator and segments them here; the functions are
+public so that a stored ensemble can be re-segmented with other settings without re-simulating
+(:func:`resegment`: ``ds.update(resegment(ds, Fronts(event=..., speed_ratio=2)))``; :func:`segment`
+for bare arrays) and so that the rule can be checked on sampled velocity fields
+(:func:`arrival_times_from_history`).
 """
 
 from __future__ import annotations
@@ -77,6 +78,82 @@ def segment(arrival_time, length, fronts: Fronts = Fronts(), device: str | None 
             _check_pad_grid(arrival_time.x, length)
     ta = np.atleast_2d(np.asarray(arrival_time, dtype=np.float64))
     return segment_nodes_first(np.ascontiguousarray(ta.T), length, fronts, device)
+
+
+# the Fronts settings that decide the arrival times (stored in the ensemble): re-segmenting keeps them
+ARRIVAL_SETTINGS = ("event", "threshold", "direction", "min_event_fraction")
+
+
+def ensemble_fronts(ds) -> Fronts:
+    """The Fronts settings an ensemble ran with, from its fronts_* attributes (ValueError where it
+    has none: a run without fronts)."""
+    import dataclasses
+
+    if "fronts_event" not in ds.attrs:
+        raise ValueError("the ensemble has no front outputs (it ran with fronts=None, or fronts = false): nothing "
+                         "to segment")
+    given = {}
+    for f in dataclasses.fields(Fronts):
+        if f"fronts_{f.name}" in ds.attrs:
+            value = ds.attrs[f"fronts_{f.name}"]
+            value = tuple(str(value).split()) if f.name == "event" else value
+            given[f.name] = bool(value) if f.name == "grid_check" else value.item() if hasattr(value, "item") \
+                else value
+    return Fronts(**given)
+
+
+def resegment(ds, fronts: Fronts | None = None, device: str | None = "cpu"):
+    """The front outputs of an ensemble (from :func:`warpfric.simulate` or a file) segmented again
+    from its stored arrival times, as an xarray.Dataset of the same variables, dtypes and attributes
+    that ``simulate`` gives them, for every front event of ``ds``: ``ds.update(new)`` (and
+    ``ds.attrs.update(new.attrs)``, the fronts_* settings used) puts them in place without
+    re-simulating.
+
+    fronts: the segmentation settings (min_segment_fraction, fast_fraction, speed_ratio,
+            edge_zone_fraction); None: the ensemble's own (:func:`ensemble_fronts`), which gives
+            its outputs back. Its event, threshold, direction and min_event_fraction decided the
+            arrival times and must be the ensemble's (ValueError otherwise: re-simulate to change
+            them); grid_check is not read (the v_*_grid_error outputs need a second run and are
+            not in the result: they belong to the settings the ensemble ran with).
+    Returns a Dataset along ``member`` (the ensemble's member coordinate): nucleation_edge int8 with
+    -3 (unknown) and front_count NaN for the members not ok or ended before their detachment was
+    over, as in ``simulate``; positions in m, times in s, speeds in m/s.
+    """
+    import dataclasses
+
+    import xarray as xr
+
+    from .simulate import _front_variables, _fronts_attrs
+
+    own = ensemble_fronts(ds)
+    fronts = own if fronts is None else fronts
+    if not isinstance(fronts, Fronts):
+        raise TypeError(f"resegment: fronts = {fronts!r}; valid: a warpfric.Fronts or None (the ensemble's own)")
+    for name in ARRIVAL_SETTINGS:
+        wanted, ran = (getattr(f, "events" if name == "event" else name) for f in (fronts, own))
+        if wanted != ran:
+            raise ValueError(f"resegment: fronts.{name} = {wanted!r}, but the ensemble's arrival times were found with "
+                             f"{name} = {ran!r}; valid: the same (re-simulate to change it), e.g. "
+                             f"Fronts({name}={ran!r}, ...)")
+    status = np.asarray(ds.status.values)
+    failed = status != 0
+    if "detachment_end_time" in ds:  # (a file of an earlier version lacks it)
+        failed = failed | ~np.isfinite(np.broadcast_to(np.asarray(ds.detachment_end_time.values, float),
+                                                       status.shape))
+    length = np.broadcast_to(np.asarray(ds.length.values, dtype=np.float64), status.shape)
+    variables = {}
+    for k, event in enumerate(fronts.events):
+        prefix = "" if k == 0 else f"{event}_"
+        arrival_time = ds[prefix + "arrival_time"].transpose("member", "x")
+        metrics = segment(arrival_time, length, fronts, device)
+        errors = speed_errors(metrics, arrival_time.values, ds[prefix + "arrival_time_error"].transpose(
+            "member", "x").values, length)
+        metrics.update({name: value for name, value in errors.items() if name != "arrival_time_error"})
+        variables.update({prefix + name: value for name, value in metrics.items()})
+    out = xr.Dataset({name: xr.Variable(*spec) for name, spec in _front_variables(variables, fronts, failed).items()},
+                     coords={name: coord for name, coord in ds.member.coords.items() if coord.dims == ("member",)})
+    out.attrs.update(_fronts_attrs(dataclasses.replace(fronts, grid_check=own.grid_check)))
+    return out
 
 
 def _check_pad_grid(x, length) -> None:
