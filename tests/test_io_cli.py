@@ -221,14 +221,14 @@ BAD = [
     ("[sample]\nn = 4\neccentricity = {distribution = 'uniform', low = 0.0, high = 0.9}\n",
      ["[sample] eccentricity.high = 0.9 is outside eccentricity's valid range"]),  # named, not a drawn value
     ("[sample]\nn = 4\neccentricity = {distribution = 'unifrom', low = 0.0, high = 0.1}\n",
-     ["'unifrom' (did you mean 'uniform'?)"]),
+     ['"unifrom" (did you mean "uniform"?)']),
     ("[sample]\nn = 4\neccentricity = {distribution = 'uniform', lo = 0.0, high = 0.1}\n",
      ["eccentricity.lo for uniform (did you mean 'low'?)"]),
     ("[zip]\neccentricity = [0.0, 0.1]\nnormal_force = [500.0]\n", ["zip", "length"]),
     ("[grid]\neccentricity = [0.0]\n[zip]\neccentricity = [0.1]\n", ["eccentricity", "twice"]),
     ("[scene]\nnormal_force = -5.0\n", ["normal_force", "-5.0", "valid range"]),
     ("[fronts]\nthreshold = 2.0\n", ["threshold", "(0, 1)"]),
-    ("[fronts]\nevent = ['contact', 3]\n", ["[fronts] event = ['contact', 3]: expected an event name or a list"]),
+    ("[fronts]\nevent = ['contact', 3]\n", ['[fronts] event = ["contact", 3]: expected an event name or a list']),
     # refused at load, not after the run's first line (inside its first chunk)
     ("[solver]\ndtype = 'float32'\n[grid]\neccentricity = [0.0]\n", ["'float32' is invalid with relaxation_gate='stress'"]),
     ("[fronts]\nevent = ['contact', 'strenght']\n", ["strenght"]),

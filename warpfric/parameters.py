@@ -185,18 +185,19 @@ def _fields_text() -> str:
 Parameters.__doc__ = (Parameters.__doc__ or "").rstrip() + _fields_text()
 
 
-def did_you_mean(name, names) -> str:
+def did_you_mean(name, names, spell=repr) -> str:
     """" (did you mean 'x'?)" with the closest of ``names`` to ``name``, or "" where none is close; a
-    name that is one word of a single one of ``names`` is close to it ('gate': 'relaxation_gate')."""
+    name that is one word of a single one of ``names`` is close to it ('gate': 'relaxation_gate').
+    ``spell``: how the suggestion is written (a sweep file's value: as TOML spells it)."""
     import difflib
 
     names = list(names)
     by_lower = {str(n).lower(): n for n in reversed(names)}  # a name's case alone wrong (mu_S) is close too
     close = difflib.get_close_matches(str(name).lower(), list(by_lower), n=1)
     if close:
-        return f" (did you mean {by_lower[close[0]]!r}?)"
+        return f" (did you mean {spell(by_lower[close[0]])}?)"
     holding = [n for n in names if str(name).lower() in str(n).lower().split("_")]
-    return f" (did you mean {holding[0]!r}?)" if len(holding) == 1 else ""
+    return f" (did you mean {spell(holding[0])}?)" if len(holding) == 1 else ""
 
 
 def unknown_parameter(name: str) -> str:

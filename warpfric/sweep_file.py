@@ -107,9 +107,10 @@ def _where(table: str, key: str | None = None) -> str:
     return f"[{table}] {key}" if key else f"[{table}]"
 
 
-def _accepted(key: str, names) -> str:
-    """'(did you mean 'x'?); accepted: a, b, ...' for a key that is not one of ``names``."""
-    return f"{did_you_mean(key, names)}; accepted: {', '.join(names)}"
+def _accepted(key: str, names, value: bool = False) -> str:
+    """'(did you mean 'x'?); accepted: a, b, ...' for a key that is not one of ``names``; ``value``:
+    for a string value, the suggestion as TOML spells it ("x")."""
+    return f"{did_you_mean(key, names, spell=_toml if value else repr)}; accepted: {', '.join(names)}"
 
 
 def _toml(value) -> str:
@@ -158,7 +159,7 @@ def _dataclass_kwargs(table: dict, cls, where: str, parameters: bool = False) ->
             out[key] = _number(value, _where(where, key)) if value is not None else None
         elif isinstance(default, bool):
             if not isinstance(value, bool):
-                raise SweepError(f"{_where(where, key)} = {value!r}: expected true or false")
+                raise SweepError(f"{_where(where, key)} = {_toml(value)}: expected true or false")
             out[key] = value
         elif (isinstance(default, int) and not isinstance(default, bool)) or (
                 default is None and str(names[key].type).startswith("int")):  # lanes: int | None
@@ -166,17 +167,17 @@ def _dataclass_kwargs(table: dict, cls, where: str, parameters: bool = False) ->
                                                                             not _refused_by(cls, key, value)):
                 # (a setting whose default is None, lanes: the class's message offers None, which TOML cannot write)
                 leave_out = "; leave the key out for the default (automatic)" if default is None else ""
-                raise SweepError(f"{_where(where, key)} = {value!r}: expected an integer{leave_out}")
+                raise SweepError(f"{_where(where, key)} = {_toml(value)}: expected an integer{leave_out}")
             out[key] = value  # a value of another type that the class refuses: its message names the valid range
         elif isinstance(default, float):
             out[key] = _number(value, _where(where, key))
         elif cls is Fronts and key == "event" and isinstance(value, list):  # several events: Fronts' tuple
             if not value or not all(isinstance(v, str) for v in value):
-                raise SweepError(f"{_where(where, key)} = {value!r}: expected an event name or a list of them")
+                raise SweepError(f"{_where(where, key)} = {_toml(value)}: expected an event name or a list of them")
             out[key] = tuple(value)
         else:
             if not isinstance(value, str):
-                raise SweepError(f"{_where(where, key)} = {value!r}: expected a string")
+                raise SweepError(f"{_where(where, key)} = {_toml(value)}: expected a string")
             out[key] = value
     return out
 
@@ -206,12 +207,12 @@ def _range(spec: dict, where: str) -> tuple:
     start, stop = _number(spec["start"], f"{where}.start"), _number(spec["stop"], f"{where}.stop")
     num = spec["num"]
     if isinstance(num, bool) or not isinstance(num, int) or num < 1:
-        raise SweepError(f"{where}.num = {num!r}: expected an integer >= 1")
+        raise SweepError(f"{where}.num = {_toml(num)}: expected an integer >= 1")
     spacing = spec.get("spacing", "linear")
     if spacing not in ("linear", "log"):
-        raise SweepError(f"{where}.spacing = {spacing!r}; accepted: linear, log")
+        raise SweepError(f"{where}.spacing = {_toml(spacing)}; accepted: linear, log")
     if spacing == "log" and (start <= 0 or stop <= 0):
-        raise SweepError(f"{where}: log spacing needs start > 0 and stop > 0, got {start!r}, {stop!r}")
+        raise SweepError(f"{where}: log spacing needs start > 0 and stop > 0, got {_toml(start)}, {_toml(stop)}")
     return start, stop, num, spacing
 
 
@@ -223,7 +224,7 @@ def _length(spec, where: str) -> int:
         return len(spec)
     if isinstance(spec, dict):
         return _range(spec, where)[2]
-    raise SweepError(f"{where} = {spec!r}: expected a list of numbers or a table {{start, stop, num, spacing}}")
+    raise SweepError(f"{where} = {_toml(spec)}: expected a list of numbers or a table {{start, stop, num, spacing}}")
 
 
 def _values(spec, where: str) -> np.ndarray:
@@ -238,10 +239,11 @@ def _values(spec, where: str) -> np.ndarray:
 
 def _draw(name: str, spec, n: int, seed: int, where: str) -> np.ndarray:
     if not isinstance(spec, dict) or "distribution" not in spec:
-        raise SweepError(f"{where} = {spec!r}: expected {{distribution = 'uniform' | 'normal' | 'loguniform', ...}}")
+        raise SweepError(f"{where} = {_toml(spec)}: expected "
+                         '{distribution = "uniform" | "normal" | "loguniform", ...}')
     dist = spec["distribution"]
     if dist not in DISTRIBUTIONS:
-        raise SweepError(f"{where}.distribution = {dist!r}{_accepted(dist, DISTRIBUTIONS)}")
+        raise SweepError(f"{where}.distribution = {_toml(dist)}{_accepted(dist, DISTRIBUTIONS, value=True)}")
     keys = DISTRIBUTIONS[dist]
     unknown = set(spec) - set(keys) - {"distribution"}
     if unknown:
@@ -258,14 +260,14 @@ def _draw(name: str, spec, n: int, seed: int, where: str) -> np.ndarray:
     rng = np.random.default_rng([seed, zlib.crc32(name.encode())])
     if dist == "uniform":
         if not a < b:
-            raise SweepError(f"{where}: low = {a!r} must be below high = {b!r}")
+            raise SweepError(f"{where}: low = {_toml(a)} must be below high = {_toml(b)}")
         return rng.uniform(a, b, n)
     if dist == "loguniform":
         if not 0 < a < b:
-            raise SweepError(f"{where}: loguniform needs 0 < low < high, got low = {a!r}, high = {b!r}")
+            raise SweepError(f"{where}: loguniform needs 0 < low < high, got low = {_toml(a)}, high = {_toml(b)}")
         return np.exp(rng.uniform(math.log(a), math.log(b), n))
     if not b > 0:
-        raise SweepError(f"{where}.std = {b!r}: expected a number > 0")
+        raise SweepError(f"{where}.std = {_toml(b)}: expected a number > 0")
     return rng.normal(a, b, n)
 
 
@@ -293,10 +295,10 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
             raise SweepError(f"unknown key {key!r} in {name}{_accepted(key, TOP_KEYS)}")
     for key in ("scene", "model", "solver", "record", "grid", "zip", "sample", "design", "run"):
         if key in doc and not isinstance(doc[key], dict):
-            raise SweepError(f"{key} = {doc[key]!r}: expected a table [{key}]")
+            raise SweepError(f"{key} = {_toml(doc[key])}: expected a table [{key}]")
     title = doc.get("title", "")
     if not isinstance(title, str):
-        raise SweepError(f"title = {title!r}: expected a string")
+        raise SweepError(f"title = {_toml(title)}: expected a string")
     try:
         scene = _said_in(f"{name}: [scene] ", Parameters,
                          **_dataclass_kwargs(doc.get("scene", {}), Parameters, "scene", parameters=True))
@@ -313,7 +315,7 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
                 raise SweepError(f"{name}: [fronts] " + str(err).replace(
                     "simulate(..., fronts=None)", "write `fronts = false` at the file's top level")) from None
         else:
-            raise SweepError(f"fronts = {fronts_spec!r}: expected a table [fronts] or false")
+            raise SweepError(f"fronts = {_toml(fronts_spec)}: expected a table [fronts] or false")
         check_fronts_method(fronts, solver)
     except TypeError as err:  # pragma: no cover - unknown keys are caught above
         raise SweepError(str(err)) from None
@@ -350,10 +352,10 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
         n = sample.pop("n", None)
         seed = sample.pop("seed", 0)
         if isinstance(n, bool) or not isinstance(n, int) or not 1 <= n <= MEMBER_NUMBER_LIMIT:
-            raise SweepError(f"[sample] n = {n!r}: expected an integer in [1, {MEMBER_NUMBER_LIMIT}] (the number of "
-                             "samples; member numbers are int32)")
+            raise SweepError(f"[sample] n = {_toml(n)}: expected an integer in [1, {MEMBER_NUMBER_LIMIT}] (the number "
+                             "of samples; member numbers are int32)")
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
-            raise SweepError(f"[sample] seed = {seed!r}: expected an integer >= 0")
+            raise SweepError(f"[sample] seed = {_toml(seed)}: expected an integer >= 0")
         if not sample:
             raise SweepError("[sample] has no parameters to sample")
         for pname in sample:
@@ -479,18 +481,18 @@ def _record(spec: dict) -> Record | RecordDetachment:
             raise SweepError(f"unknown key [record] {key}{_accepted(key, keys)}")
     members = spec.get("members", [0])
     if not isinstance(members, list) or not all(isinstance(i, int) and not isinstance(i, bool) for i in members):
-        raise SweepError(f"[record] members = {members!r}: expected a list of member indices")
+        raise SweepError(f"[record] members = {_toml(members)}: expected a list of member indices")
     # ascending: the chunks give the combined file its recorded members in their order, so a listed
     # order would hold only where the members share a chunk (the file's order would depend on --chunk)
     members = sorted(members)
     count = spec.get("count", RECORD_COUNT)  # as --record START STOP [COUNT]
     if "count" in spec and (isinstance(count, bool) or not isinstance(count, int)):
-        raise SweepError(f"[record] count = {count!r}: expected an integer >= 2")
+        raise SweepError(f"[record] count = {_toml(count)}: expected an integer >= 2")
     if "window" in spec:
         window = spec["window"]
         if window != "detachment":
-            raise SweepError(f"[record] window = {window!r}: expected \"detachment\" (the recorded members' detachment, "
-                             "found by a first run), or give start and stop (s) instead")
+            raise SweepError(f"[record] window = {_toml(window)}: expected \"detachment\" (the recorded members' "
+                             "detachment, found by a first run), or give start and stop (s) instead")
         if any(k in spec for k in ("times", "start", "stop")):
             raise SweepError("[record]: give either window = \"detachment\", times, or start/stop/count, not two of them")
         try:  # the members and the count checked now, as a Record of one placeholder time would
@@ -523,7 +525,7 @@ def _dataclass_like(table: dict, kinds: dict, where: str) -> dict:
         kind = kinds[key]
         if (isinstance(value, bool) and kind is not bool) or not isinstance(value, kind):
             expected = {int: "an integer", str: "a string", bool: "true or false"}[kind]
-            raise SweepError(f"{_where(where, key)} = {value!r}: expected {expected}")
+            raise SweepError(f"{_where(where, key)} = {_toml(value)}: expected {expected}")
         out[key] = value
     return out
 
