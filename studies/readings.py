@@ -378,8 +378,8 @@ def compact(x):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--design", choices=("factorial", "oat"), default="factorial",
-                    help="factorial: all 192 readings (~30 s on this project's 2 cores: simulate uses every core); oat: one "
-                         "factor at a time (24, ~6 s)")
+                    help="factorial: all 192 readings (~30-55 s on this project's 2 cores: simulate uses every core); oat: "
+                         "one factor at a time (24, ~6-10 s)")
     ap.add_argument("--nodes", type=int, default=60, help="grid nodes of every member (default 60)")
     ap.add_argument("--device", default="cpu", help="Warp device: cpu (default), cuda:0")
     ap.add_argument("--out", default=None, help="result file (default ./readings_<design>.json; the committed "

@@ -1051,7 +1051,7 @@ def test_a_sweep_file_sets_the_team_size(tmp_path):
     assert parse_sweep(TINY_SWEEP.replace("nodes = 11", "nodes = 11\nlanes = 4")).solver.lanes == 4
     assert parse_sweep(TINY_SWEEP).solver.lanes is None
     for value in ('"4"', '"auto"'):  # (the files' solver_lanes attribute reads "auto"; TOML cannot write None)
-        with pytest.raises(SweepError, match=rf"\[solver\] lanes = '{value[1:-1]}': expected an integer; leave the key "
+        with pytest.raises(SweepError, match=rf"\[solver\] lanes = {value}: expected an integer; leave the key "
                                              "out for the default"):
             parse_sweep(TINY_SWEEP.replace("nodes = 11", f'nodes = 11\nlanes = {value}'))
     # [record] windows and times that Record refuses name their table, as the sweep file's other errors do

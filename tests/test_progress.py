@@ -374,3 +374,15 @@ def test_the_expected_attempts_follow_an_explicit_end_time():
         assert abs(expected / attempts - 1) < 0.1, (end, attempts, expected)
     assert end_time_attempts([np.inf, np.inf], [20.0, 20.0]) == 0.0
     assert end_time_attempts([20.1], [20.0]) == 0.0  # before the detachment: no more than the automatic end
+
+
+def test_the_runs_of_a_recording_say_which_they_are(tmp_path, capsys):
+    """`warpfric run --record` with the velocity front runs three times (the detachment, its end, the
+    recording): its first two lines both said "first run"; each run's line names it."""
+    from conftest import run_cli
+
+    code, _, err = run_cli(capsys, "run", "--record", "--front-event", "velocity", "--nodes", 30, "--device", "cpu",
+                           "-o", tmp_path / "v.nc")
+    assert code == 0, err
+    labels = [line.split(":")[0] for line in err if line.startswith("warpfric ") and " member in " in line]
+    assert labels == ["warpfric first run", "warpfric second run (its end)", "warpfric recording"], err

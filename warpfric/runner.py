@@ -211,6 +211,8 @@ def detachment_runs(members, *, fronts, model, **run) -> tuple:
     found = simulate(members, fronts=located, model=model, **run)
     if _automatic_end_reads(fronts) == _automatic_end_reads(located):
         return found, found.final_time.values
+    if isinstance(run.get("progress"), str):  # a labelled line: the second run says it is the second
+        run = {**run, "progress": "second run (its end)"}
     own = simulate(members, fronts=None if fronts is None else dataclasses.replace(fronts, grid_check=False),
                    model=model, **run)
     return found, own.final_time.values
