@@ -427,7 +427,7 @@ def test_a_detachment_all_at_once_has_an_infinite_speed_and_says_so():
     assert metrics["nucleation_position"][0] == -L / 2 and metrics["front_count"][0] == 1
     assert np.isnan(metrics["collision_position"][0])
     assert metrics["first_front_length"][0] == pytest.approx(L, rel=1e-12)
-    from warpfric.simulate import _FRONT_ATTRS
+    from warpfric.front_outputs import FRONT_ATTRS as _FRONT_ATTRS
     assert "inf: its nodes arrived at one time" in _FRONT_ATTRS["v_first"][2]
 
 
@@ -658,38 +658,75 @@ def _same_variables(new, ds):
 def test_resegment_gives_an_ensembles_front_outputs_back_and_a_new_setting_as_a_run_with_it(tmp_path):
     """fronts.segment returned bare arrays (the edge as float NaN, the Dataset's int8 -2/-3), which a
     user wrapped by hand to compare with or replace the ensemble's outputs. resegment gives the
-    Dataset's own variables: with the ensemble's settings its outputs bit for bit (from a file too);
-    with another speed_ratio those of a run with it; members not ok as simulate flags them."""
+    Dataset's own variables: with the ensemble's settings its outputs bit for bit (from a file, and
+    from a file of an earlier version without detachment_end_time, too); with another speed_ratio
+    those of a run with it; members not ok as simulate flags them; the grid check's speed errors
+    NaN (unknown) for other settings."""
+    import xarray as xr
+
     from warpfric import fronts
 
     members = {"eccentricity": [0.0, 0.15, -0.2]}
     events = ("contact", "strength")
     ds = run(members, nodes=40, rtol=1e-5, fronts=wf.Fronts(event=events))
-    new = fronts.resegment(ds)
+    new = fronts.resegment(ds, device=DEVICE)
     assert sorted(n for n in ds.data_vars if n in new) == sorted(new.data_vars)
     _same_variables(new, ds)
     assert new.attrs == {k: v for k, v in ds.attrs.items() if k.startswith("fronts_")}
     wf.io.write_ensemble(ds, tmp_path / "e.nc")
-    _same_variables(fronts.resegment(wf.io.open_ensemble(tmp_path / "e.nc")), ds)
+    _same_variables(fronts.resegment(wf.io.open_ensemble(tmp_path / "e.nc"), device=DEVICE), ds)
+    with xr.open_dataset(tmp_path / "e.nc") as raw:  # an earlier version's file: no detachment_end_time (read as NaN)
+        raw.load().drop_vars("detachment_end_time").to_netcdf(tmp_path / "old.nc")
+    old = wf.io.open_ensemble(tmp_path / "old.nc")
+    assert np.isnan(old.detachment_end_time.values).all()
+    _same_variables(fronts.resegment(old, device=DEVICE), ds)
 
     other = wf.Fronts(event=events, speed_ratio=3.0, edge_zone_fraction=0.2)
     ran = run(members, nodes=40, rtol=1e-5, fronts=other)
     np.testing.assert_array_equal(ran.arrival_time.values, ds.arrival_time.values)  # (settings of the segments)
-    again = fronts.resegment(ds, other)
+    again = fronts.resegment(ds, speed_ratio=3.0, edge_zone_fraction=0.2, device=DEVICE)
     _same_variables(again, ran)
     assert any(not np.array_equal(again[n].values, new[n].values, equal_nan=True) for n in new.data_vars)
     ds.update(again)
     ds.attrs.update(again.attrs)
-    _same_variables(fronts.resegment(ds), ran)
+    _same_variables(fronts.resegment(ds, device=DEVICE), ran)
 
     broken = ds.copy()
     broken["status"] = ds.status.copy(data=np.array([0, 2, 0], dtype=ds.status.dtype))
-    flagged = fronts.resegment(broken)
+    flagged = fronts.resegment(broken, device=DEVICE)
     assert flagged.nucleation_edge.values[1] == -3 and np.isnan(flagged.front_count.values[1])
     assert np.isnan(flagged.v_first.values[1]) and np.isfinite(ds.v_first.values[1])
-    with pytest.raises(ValueError, match=r"fronts.threshold = 0.5, but .* threshold = 0.4; valid: the same"):
-        fronts.resegment(ds, wf.Fronts(event=events, threshold=0.5))
-    with pytest.raises(ValueError, match=r"fronts.event = \('contact',\), but .*\('contact', 'strength'\)"):
-        fronts.resegment(ds, wf.Fronts(speed_ratio=2.0))
+
+
+def test_resegment_of_a_grid_check_run_and_its_refusals():
+    """With other segment settings the grid check's speed errors, computed for the old segments, are
+    NaN (v_middle_grid_error 83 m/s stayed where the new segments' was 0.55); mu_s's stays. The
+    settings that decided the arrival times, a misspelt setting, a single member and a Dataset
+    without arrival times are each named."""
+    from warpfric import fronts
+
+    ds = run({"eccentricity": [0.0, 0.15]}, nodes=30, rtol=1e-5, fronts=wf.Fronts(grid_check=True))
+    same = fronts.resegment(ds, device=DEVICE)
+    assert not any(name.endswith("_grid_error") for name in same.data_vars)
+    assert np.isfinite(ds.v_first_grid_error.values).all()
+    other = fronts.resegment(ds, speed_ratio=3.0, device=DEVICE)
+    grid = sorted(name for name in other.data_vars if name.endswith("_grid_error"))
+    assert grid == sorted(n for n in ds.data_vars if n.startswith("v_") and n.endswith("_grid_error"))
+    assert all(np.isnan(other[name].values).all() for name in grid) and "mu_s_grid_error" not in other
+    assert other.attrs["fronts_speed_ratio"] == 3.0 and other.attrs["fronts_grid_check"] == 1
+    with pytest.raises(TypeError, match=r"threshold = 0.5 cannot be set: it decided the stored arrival times"):
+        fronts.resegment(ds, threshold=0.5)
+    with pytest.raises(TypeError, match=r"speed_ration = 2 cannot be set \(did you mean 'speed_ratio'\?\)"):
+        fronts.resegment(ds, speed_ration=2)
+    with pytest.raises(ValueError, match=r"speed_ratio"):
+        fronts.resegment(ds, speed_ratio=-1.0)
+    with pytest.raises(ValueError, match=r"isel\(member=\[0\]\) keeps it"):
+        fronts.resegment(ds.isel(member=0))
+    with pytest.raises(ValueError, match=r"lacks arrival_time, arrival_time_error \(dropped with the dimension x"):
+        fronts.resegment(ds.drop_dims("x"))
+    bare = ds.copy()
+    bare.attrs = {}
+    with pytest.raises(ValueError, match="has arrival_time but not the fronts_"):
+        fronts.resegment(bare)
     with pytest.raises(ValueError, match="no front outputs"):
         fronts.resegment(run({"eccentricity": [0.0]}, nodes=20, rtol=1e-4))

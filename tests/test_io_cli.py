@@ -228,6 +228,8 @@ BAD = [
     ("[grid]\neccentricity = [0.0]\n[zip]\neccentricity = [0.1]\n", ["eccentricity", "twice"]),
     ("[scene]\nnormal_force = -5.0\n", ["normal_force", "-5.0", "valid range"]),
     ("[fronts]\nthreshold = 2.0\n", ["threshold", "(0, 1)"]),
+    ("[fronts]\nthreshold = \"0.4\"\n", [': [fronts] threshold = "0.4": expected a number']),  # the table once
+    ("[run]\nchunk = 1979-05-27\n[grid]\neccentricity = [0.0]\n", ["[run] chunk = 1979-05-27: expected an integer"]),  # a TOML date as written
     ("[fronts]\nevent = ['contact', 3]\n", ['[fronts] event = ["contact", 3]: expected an event name or a list']),
     # refused at load, not after the run's first line (inside its first chunk)
     ("[solver]\ndtype = 'float32'\n[grid]\neccentricity = [0.0]\n", ["'float32' is invalid with relaxation_gate='stress'"]),

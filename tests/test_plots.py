@@ -623,4 +623,6 @@ def test_a_map_of_round_off_velocities_says_so(contact_run):
     ds = contact_run.assign(velocity_history=contact_run.velocity_history * 1e-20)
     texts = [t.get_text() for t in plots.space_time_figure(ds, 0).axes[0].texts]
     assert any(t.startswith("round-off only: |v| <= ") for t in texts), texts
+    ds = contact_run.assign(velocity_history=contact_run.velocity_history * 0.0)  # (its colours: +-1 m/s)
+    assert "round-off only: v = 0" in [t.get_text() for t in plots.space_time_figure(ds, 0).axes[0].texts]
     assert not any("round-off" in t.get_text() for t in plots.space_time_figure(contact_run, 0).axes[0].texts)

@@ -340,7 +340,7 @@ def test_a_sweep_file_s_detachment_window(tmp_path):
     assert load_sweep(sweep).record == RecordDetachment(members=(1,), count=RECORD_COUNT)
     sweep.write_text('[record]\nwindow = "detachment"\ncount = 7\n' + grid)
     assert load_sweep(sweep).record == RecordDetachment(members=(0,), count=7)
-    for table, words in (('window = "peak"', "window = 'peak': expected \"detachment\""),
+    for table, words in (('window = "peak"', 'window = "peak": expected "detachment"'),
                          ('window = "detachment"\nstart = 20.1\nstop = 20.3', "not two of them"),
                          ('window = "detachment"\ntimes = [20.1]', "not two of them"),
                          ('window = "detachment"\ncount = 1', "'count' = 1 is invalid"),

@@ -2,9 +2,9 @@
 
 simulate() computes the arrival times in the integrator and segments them here; the functions are
 public so that a stored ensemble can be re-segmented with other settings without re-simulating
-(:func:`resegment`: ``ds.update(resegment(ds, Fronts(event=..., speed_ratio=2)))``; :func:`segment`
-for bare arrays) and so that the rule can be checked on sampled velocity fields
-(:func:`arrival_times_from_history`).
+(:func:`resegment`: ``new = resegment(ds, speed_ratio=2)``, then ``ds.update(new)`` and
+``ds.attrs.update(new.attrs)``; :func:`segment` for bare arrays) and so that the rule can be checked
+on sampled velocity fields (:func:`arrival_times_from_history`).
 """
 
 from __future__ import annotations
@@ -80,17 +80,20 @@ def segment(arrival_time, length, fronts: Fronts = Fronts(), device: str | None 
     return segment_nodes_first(np.ascontiguousarray(ta.T), length, fronts, device)
 
 
-# the Fronts settings that decide the arrival times (stored in the ensemble): re-segmenting keeps them
+# the Fronts settings that decide the arrival times (stored in an ensemble), and those that segment them
 ARRIVAL_SETTINGS = ("event", "threshold", "direction", "min_event_fraction")
+SEGMENT_SETTINGS = ("min_segment_fraction", "fast_fraction", "speed_ratio", "edge_zone_fraction")
 
 
 def ensemble_fronts(ds) -> Fronts:
-    """The Fronts settings an ensemble ran with, from its fronts_* attributes (ValueError where it
-    has none: a run without fronts)."""
+    """The Fronts settings an ensemble ran with, from its fronts_* attributes."""
     import dataclasses
 
     if "fronts_event" not in ds.attrs:
-        raise ValueError("the ensemble has no front outputs (it ran with fronts=None, or fronts = false): nothing "
+        has = "arrival_time" in ds
+        raise ValueError("the ensemble has arrival_time but not the fronts_* attributes that say how it ran (were its "
+                         "attributes dropped? ds.attrs of the file that holds it has them)" if has else
+                         "the ensemble has no front outputs (it ran with fronts=None, or fronts = false): nothing "
                          "to segment")
     given = {}
     for f in dataclasses.fields(Fronts):
@@ -102,45 +105,55 @@ def ensemble_fronts(ds) -> Fronts:
     return Fronts(**given)
 
 
-def resegment(ds, fronts: Fronts | None = None, device: str | None = "cpu"):
+def resegment(ds, *, device: str | None = "cpu", **settings):
     """The front outputs of an ensemble (from :func:`warpfric.simulate` or a file) segmented again
-    from its stored arrival times, as an xarray.Dataset of the same variables, dtypes and attributes
-    that ``simulate`` gives them, for every front event of ``ds``: ``ds.update(new)`` (and
-    ``ds.attrs.update(new.attrs)``, the fronts_* settings used) puts them in place without
-    re-simulating.
+    from its stored arrival times with other segmentation ``settings``, without re-simulating: an
+    xarray.Dataset of the variables, dtypes and attributes that ``simulate`` gives them, for every
+    front event of ``ds``. Put them in place with ``ds.update(new)`` and ``ds.attrs.update(new.attrs)``
+    (the fronts_* settings used).
 
-    fronts: the segmentation settings (min_segment_fraction, fast_fraction, speed_ratio,
-            edge_zone_fraction); None: the ensemble's own (:func:`ensemble_fronts`), which gives
-            its outputs back. Its event, threshold, direction and min_event_fraction decided the
-            arrival times and must be the ensemble's (ValueError otherwise: re-simulate to change
-            them); grid_check is not read (the v_*_grid_error outputs need a second run and are
-            not in the result: they belong to the settings the ensemble ran with).
-    Returns a Dataset along ``member`` (the ensemble's member coordinate): nucleation_edge int8 with
+    settings: min_segment_fraction, fast_fraction, speed_ratio, edge_zone_fraction (docs/model.md,
+              "Fronts"); those not given are the ensemble's own, so that ``resegment(ds)`` gives its
+              outputs back. The event, threshold, direction and min_event_fraction decided the
+              stored arrival times: a run with other values is a new run.
+    Returns a Dataset along ``member`` (the ensemble's member coordinate): nucleation_edge int8,
     -3 (unknown) and front_count NaN for the members not ok or ended before their detachment was
-    over, as in ``simulate``; positions in m, times in s, speeds in m/s.
+    over, as in ``simulate``; positions in m, times in s, speeds in m/s. The segment speeds' grid
+    errors of a run with ``Fronts(grid_check=True)`` (v_*_grid_error) need a second run: with other
+    settings they are NaN here (unknown), so that ``update`` does not leave the old segments' values.
     """
     import dataclasses
 
     import xarray as xr
 
-    from .simulate import _front_variables, _fronts_attrs
+    from .front_outputs import detachment_not_over, front_variables, fronts_attrs
 
+    unknown = sorted(set(settings) - set(SEGMENT_SETTINGS))
+    if unknown:
+        from .parameters import did_you_mean
+
+        which = unknown[0]
+        why = (": it decided the stored arrival times, so another value needs a new run (warpfric.simulate)"
+               if which in ARRIVAL_SETTINGS else did_you_mean(which, SEGMENT_SETTINGS))
+        raise TypeError(f"resegment: {which} = {settings[which]!r} cannot be set{why}; valid: "
+                        f"{', '.join(SEGMENT_SETTINGS)}")
+    if not isinstance(ds, xr.Dataset) or "member" not in ds.dims:
+        got = type(ds).__name__ if not isinstance(ds, xr.Dataset) else f"a Dataset with dimensions {tuple(ds.dims)}"
+        raise ValueError(f"resegment: expects an ensemble along the dimension member, got {got} (ds.isel(member=0) "
+                         "drops the dimension, ds.isel(member=[0]) keeps it; a by_parameters view: the Dataset it "
+                         "was made from)")
     own = ensemble_fronts(ds)
-    fronts = own if fronts is None else fronts
-    if not isinstance(fronts, Fronts):
-        raise TypeError(f"resegment: fronts = {fronts!r}; valid: a warpfric.Fronts or None (the ensemble's own)")
-    for name in ARRIVAL_SETTINGS:
-        wanted, ran = (getattr(f, "events" if name == "event" else name) for f in (fronts, own))
-        if wanted != ran:
-            raise ValueError(f"resegment: fronts.{name} = {wanted!r}, but the ensemble's arrival times were found with "
-                             f"{name} = {ran!r}; valid: the same (re-simulate to change it), e.g. "
-                             f"Fronts({name}={ran!r}, ...)")
-    status = np.asarray(ds.status.values)
-    failed = status != 0
-    if "detachment_end_time" in ds:  # (a file of an earlier version lacks it)
-        failed = failed | ~np.isfinite(np.broadcast_to(np.asarray(ds.detachment_end_time.values, float),
-                                                       status.shape))
-    length = np.broadcast_to(np.asarray(ds.length.values, dtype=np.float64), status.shape)
+    fronts = dataclasses.replace(own, **settings)  # (checks the values, naming the setting and its range)
+    missing = [name for k, event in enumerate(own.events) for name in
+               ((f"{event}_" if k else "") + "arrival_time", (f"{event}_" if k else "") + "arrival_time_error")
+               if name not in ds]
+    if missing:
+        raise ValueError(f"resegment: the ensemble lacks {', '.join(missing)} (dropped with the dimension x, as "
+                         "ds.drop_dims(['x', ...]) does?): the stored arrival times are what it segments")
+    n = ds.sizes["member"]
+    capped, cut = detachment_not_over(ds)
+    failed = (np.broadcast_to(np.asarray(ds.status.values), (n,)) != 0) | capped | cut
+    length = np.broadcast_to(np.asarray(ds.length.values, dtype=np.float64), (n,))
     variables = {}
     for k, event in enumerate(fronts.events):
         prefix = "" if k == 0 else f"{event}_"
@@ -150,9 +163,14 @@ def resegment(ds, fronts: Fronts | None = None, device: str | None = "cpu"):
             "member", "x").values, length)
         metrics.update({name: value for name, value in errors.items() if name != "arrival_time_error"})
         variables.update({prefix + name: value for name, value in metrics.items()})
-    out = xr.Dataset({name: xr.Variable(*spec) for name, spec in _front_variables(variables, fronts, failed).items()},
+    out = xr.Dataset({name: xr.Variable(*spec) for name, spec in front_variables(variables, fronts, failed).items()},
                      coords={name: coord for name, coord in ds.member.coords.items() if coord.dims == ("member",)})
-    out.attrs.update(_fronts_attrs(dataclasses.replace(fronts, grid_check=own.grid_check)))
+    if fronts != own:  # the grid check's speed changes were the old segments': unknown for these
+        for name in [f"v_{seg}_grid_error" for seg in SEGMENT_NAMES if f"v_{seg}_grid_error" in ds]:
+            attrs = {**ds[name].attrs, "comment": "NaN: not known for the segment settings of "
+                     "warpfric.fronts.resegment (a run with Fronts(grid_check=True) and these settings gives it)"}
+            out[name] = xr.Variable(("member",), np.full(n, np.nan), attrs)
+    out.attrs.update(fronts_attrs(fronts))
     return out
 
 

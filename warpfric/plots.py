@@ -24,8 +24,9 @@ from .progress import plural, status_name
 MAX_LEGEND = 8  # values of a colour parameter shown in a legend; more: a colour bar
 MAX_CURVES = 8  # arrival-time curves in one figure
 OUTLIER_SPAN = 10.0  # an arrival-time curve spanning more than this x the median curve's time runs off the axis
-ROUND_OFF_VELOCITY = 1e-12  # a recorded field whose largest |v| stays below this fraction of the disc's
-# velocity is round-off: the space-time map says so instead of stretching its colours over it
+ROUND_OFF_VELOCITY = 1e-9  # a recorded field whose largest |v| stays below this fraction of the disc's
+# velocity (1e-13 m/s at the default 0.1 mm/s: 1e-12 m in 10 s) is round-off: the space-time map says so
+# instead of stretching its colours over it
 # symbols of the parameters most often swept (legend entries "F = 1000 N"; axis labels)
 _SYMBOLS = {"normal_force": "F", "eccentricity": "2e/L", "disc_velocity": "v", "shear_strength": "tau_c",
             "length": "L", "height": "h", "stop_time": "t_stop"}
@@ -732,19 +733,20 @@ def space_time_figure(ds, recorded_index: int):
     x = ds.x.values * (1e3 if metres else 1.0)
     fig, ax = _subplots(figsize=(6, 4))
     recorded_values = np.isfinite(v)
-    scale = float(np.abs(v[recorded_values]).max()) if recorded_values.any() else 0.0
-    scale = scale or 1.0
+    largest = float(np.abs(v[recorded_values]).max()) if recorded_values.any() else 0.0
+    scale = largest or 1.0
     cmap = matplotlib.colormaps["RdBu_r"].with_extremes(bad="0.8")  # NaN (after the member's end) grey, not
     # the white of zero velocity
     mesh = ax.pcolormesh(x, t, v * 1e9, cmap=cmap, vmin=-scale * 1e9, vmax=scale * 1e9, shading="nearest")
     if recorded_values.any():  # a colour bar of nothing recorded showed a made-up scale
         fig.colorbar(mesh, ax=ax, label="pad velocity (nm/s)")
         disc = abs(float(_per_member(ds, "disc_velocity")[position])) if "disc_velocity" in ds else 0.0
-        if disc > 0 and scale < ROUND_OFF_VELOCITY * disc:  # (a member that failed before the disc moved)
-            # the colour scale stretches to whatever is there: +-2e-14 nm/s of round-off read as structure
-            ax.text(0.5, 0.5, f"round-off only: |v| <= {scale:.2g} m/s, {scale / disc:.1g} x the disc's "
-                    "velocity", transform=ax.transAxes, ha="center", va="center", fontsize=9,
-                    bbox={"facecolor": "w", "alpha": 0.8, "lw": 0})
+        if disc > 0 and largest < ROUND_OFF_VELOCITY * disc:  # (a member that failed before the disc moved,
+            # a window before the disc starts) the colours stretch to whatever is there: +-2e-14 nm/s of
+            # round-off read as structure
+            size = f"|v| <= {largest:.2g} m/s, {largest / disc:.1g} x the disc's velocity" if largest else "v = 0"
+            ax.text(0.5, 0.5, f"round-off only: {size}", transform=ax.transAxes, ha="center", va="center",
+                    fontsize=9, bbox={"facecolor": "w", "alpha": 0.8, "lw": 0})
     else:
         ax.text(0.5, 0.5, "nothing recorded: the run ended before the recorded times", transform=ax.transAxes,
                 ha="center", va="center", fontsize=9)

@@ -17,6 +17,7 @@ from . import __version__
 from .device import check_device, init_warp
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
+from .front_outputs import detachment_not_over, front_variables, fronts_attrs
 from .parameters import (CONTACT_WITHOUT_GATE, DETACHMENT_NOT_OVER, DISC_BEFORE_FULL_LOAD, ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, LOAD_ABOVE_HARDNESS, MEMBERS_NOT_OK,
                          MEMBER_NUMBER_LIMIT, MEMBERS_NOT_OK_HINT, PARAMETERS_UNUSED, RECORD_PAST_END, Fronts, Model,
                          Parameters, Record, Solver, check_fronts_method, check_precision, parameter_long_name, parameter_units)
@@ -268,7 +269,7 @@ def _run_members(values, varying, scene, model, solver, fronts, record, device, 
     if front is not None:
         # a front is measured only where the run saw the detachment through (an explicit end_time
         # may cut it off: a part of the front, or for the velocity and strength fronts another event)
-        extra.update(_front_variables(front, fronts, (status != 0) | ~np.isfinite(st["detachment_end"])))
+        extra.update(front_variables(front, fronts, (status != 0) | ~np.isfinite(st["detachment_end"])))
     ds = _to_dataset(values, varying, st, status, result.fields, result.normal_stress, result.friction_stress, model,
                      solver, device, wall, STATUS_MEANINGS, member_offset, extra)
     ds.attrs["kernel_build_time_s"] = result.kernel_build_s
@@ -280,7 +281,7 @@ def _run_members(values, varying, scene, model, solver, fronts, record, device, 
     ds.attrs["member_order"] = result.member_order
     ds.attrs["integration_passes"] = result.passes
     if front is not None:
-        ds.attrs.update(_fronts_attrs(fronts))
+        ds.attrs.update(fronts_attrs(fronts))
     if record is not None:
         _add_record(ds, record, result.record, ds.x, member_offset)
     if solver.dtype == "float32" and solver.float32_fallback:
@@ -324,28 +325,6 @@ _STATUS_ADVICE = {
 _STILL_DISC_ADVICE = "disc_velocity = 0: the disc never moves, so there is no friction peak to find"
 _LIFTED_OFF_ADVICE = ("part of the pad lifted off, where nothing damps its shear vibration (a sudden stop excites "
                       "it): a small damping, e.g. 1e6 Pa s/m, lets the steps grow again (docs/model.md, \"Open choices\": lift-off)")
-
-
-def detachment_not_over(ds: xr.Dataset) -> tuple[np.ndarray, np.ndarray]:
-    """(capped, cut), (member,) bool each: the members ok whose run ended before their detachment was
-    over, at max_end_time, the automatic end's cap (end_time None: its conditions never all held;
-    :func:`capped_reason` tells which), or, with fronts, at an explicit end_time (detachment_end_time NaN and their
-    front outputs NaN; detached_fraction is 0, not NaN, for a member that saw its detachment through
-    without a front). Neither rule needs detachment_end_time of a file of an earlier version, which
-    is unknown (NaN) for every member."""
-    n = ds.sizes["member"]
-    ok = ds.status.values == 0
-
-    def per_member(name):
-        return np.broadcast_to(np.asarray(ds[name].values, dtype=float), (n,))
-
-    automatic = ~np.isfinite(per_member("end_time")) if "end_time" in ds else np.ones(n, bool)
-    capped = ok & automatic & (per_member("final_time") >= per_member("max_end_time")) if "max_end_time" in ds \
-        else np.zeros(n, bool)
-    cut = np.zeros(n, bool)
-    if "fronts_event" in ds.attrs and "detachment_end_time" in ds and "detached_fraction" in ds:
-        cut = ok & ~capped & ~np.isfinite(per_member("detachment_end_time")) & np.isnan(per_member("detached_fraction"))
-    return capped, cut
 
 
 def not_over_groups(ds: xr.Dataset) -> dict[str, np.ndarray]:
@@ -606,67 +585,6 @@ def _front_metrics(fronts: Fronts, model: Model, values, result, device: str) ->
     return out
 
 
-_EVENT_WORDS = {
-    "contact": "contact front (each node's first gate opening after the disc starts: its stick-to-slip transition)",
-    "strength": "strength front (each node's peak of tau_f/sigma_n)",
-    "velocity": "velocity front (the pad velocity against the disc reaches threshold times its event maximum)",
-}
-# each front output: (units, long_name, comment or None). The long_name is short (xarray labels plots
-# with it); the comment says exactly what the value is. {front}: the event's name ("contact front"),
-# {words}: its description (_EVENT_WORDS)
-_FRONT_ATTRS = {
-    "arrival_time": ("s", "arrival time t_a of the {front} at each node", "{words}; NaN: never reached"),
-    "arrival_time_error": ("s", "interpolation error of t_a of the {front}", "the error of t_a inside its step: a "
-                           "lower bound, the "
-                           "trajectory's error at rtol and the grid's move t_a further"),
-    "event_max_velocity": ("m s-1", "maximum of the detachment velocity w over the pad and the event window", None),
-    "strength_peak": ("1", "peak of tau_f/sigma_n at each node", "each node's own static friction coefficient; NaN: "
-                      "no confirmed peak in the run"),
-    "nucleation_position": ("m", "position of the node that the {front} reaches first", "{words}"),
-    "front_start_time": ("s", "first arrival time of the {front}", "{words}"),
-    "front_end_time": ("s", "last arrival time of the {front}", "over the nodes it reached; {words}"),
-    "detached_fraction": ("1", "fraction of the nodes the {front} reached", "{words}"),
-    "front_count": ("1", "separate fronts of the {front}", "local minima of t_a(x) over the run of nodes it reached "
-                    "(a flat run of equal times once), each a nucleation (2: a second front, e.g. from the other "
-                    "edge, meets the first); 0: it reached no node; NaN: unknown (the member did not end ok or "
-                    "ended before its detachment was over); {words}"),
-    "collision_position": ("m", "where the first front of the {front} meets another", "the maximum of t_a(x) at an "
-                           "end of the first front, the middle of a flat top; the earlier end where both are "
-                           "meetings; NaN: the first front meets none; {words}"),
-    "collision_time": ("s", "when the first front of the {front} meets another", "NaN: it meets none; {words}"),
-    "second_nucleation_position": ("m", "position where the second front of the {front} starts", "the earliest "
-                                   "arrival outside the nodes the first front reaches first; NaN: one front; {words}"),
-    "second_front_start_time": ("s", "time the second front of the {front} starts", "NaN: one front; {words}"),
-}
-# each segment and whole front: (short words, its definition)
-_SEGMENT_WORDS = {"left": ("the first front's left segment", "the segment at smaller x"),
-                  "middle": ("the first front's middle segment", "between its left and right segments"),
-                  "right": ("the first front's right segment", "the segment at larger x"),
-                  "precursor": ("the first front's precursor", "its slow segment at the nucleation edge"),
-                  "main": ("the first front's main segment", "its middle segment"),
-                  "far": ("the first front's far segment", "its slow segment at the end opposite the nucleation "
-                          "edge"),
-                  "first": ("the first front", "whole: the nodes it reaches before any other front"),
-                  "second": ("the second front", "whole: from where it starts to where it meets another front")}
-for _seg, (_short, _definition) in _SEGMENT_WORDS.items():
-    # a position, not where the front starts (nucleation_position): the name's start/end is smaller/larger x
-    _FRONT_ATTRS[f"{_seg}_front_start"] = ("m", f"smaller x of {_short} of the {{front}}",
-                                           f"the name's start: its smaller x, not where it starts; {_short[4:]}: "
-                                           f"{_definition}; {{words}}")
-    _FRONT_ATTRS[f"{_seg}_front_end"] = ("m", f"larger x of {_short} of the {{front}}",
-                                         f"the name's end: its larger x; {_short[4:]}: {_definition}; {{words}}")
-    _FRONT_ATTRS[f"{_seg}_front_length"] = ("m", f"length of {_short} of the {{front}}",
-                                            f"{_short[4:]}: {_definition}; {{words}}")
-    _FRONT_ATTRS[f"v_{_seg}"] = ("m s-1", f"speed of {_short} of the {{front}}",
-                                 f"mean speed, 1/|slope| of t_a(x); {_short[4:]}: {_definition}; inf: its nodes "
-                                 f"arrived at one time (not resolved, v_{_seg}_error inf); {{words}}")
-    _FRONT_ATTRS[f"v_{_seg}_error"] = ("m s-1", f"interpolation error of v_{_seg} of the {{front}}",
-                                       "from the arrival_time_error of "
-                                       "its end (and nucleation) nodes: a lower bound, not the speed's error "
-                                       "(v_*_grid_error from Fronts(grid_check=True) is usually far larger); inf: "
-                                       "not resolved")
-
-
 def _yield_variables(status: np.ndarray, yield_time: np.ndarray, yield_gate: np.ndarray, meanings) -> dict:
     """The gates' outputs as Dataset variables, {name: (dims, values, attrs)}: yield_time (s) and
     yield_gate (1), (member, node). yield_time, the engine's read-back array, is changed in place:
@@ -683,50 +601,6 @@ def _yield_variables(status: np.ndarray, yield_time: np.ndarray, yield_gate: np.
             "units": "1", "long_name": "yield gate at the final time: 0 closed (stuck, ageing), 1 open "
             "(sliding, rejuvenating), in between: held on the yield surface |tau_f|/A = tau_c"}),
     }
-
-
-def _fronts_attrs(fronts: Fronts) -> dict:
-    """The Fronts settings as Dataset attributes (fronts_*)."""
-    attrs = {}
-    for f in dataclasses.fields(fronts):
-        value = getattr(fronts, f.name)
-        if f.name == "event":
-            value = " ".join(fronts.events)  # netCDF: one string, the primary event first
-        attrs[f"fronts_{f.name}"] = int(value) if isinstance(value, bool) else value  # netCDF has no bool
-    return attrs
-
-
-def _front_variables(front: dict, fronts: Fronts, failed: np.ndarray) -> dict:
-    """The front outputs (_front_metrics) as Dataset variables, {name: (dims, values, attrs)}, NaN
-    for the failed members (member,) bool."""
-    new = {}
-    for name, arr in front.items():
-        arr = np.where(failed[:, None] if arr.ndim == 2 else failed, np.nan, arr)
-        event = next((e for e in fronts.events[1:] if name.startswith(e + "_")), fronts.events[0])
-        base = name[len(event) + 1:] if event != fronts.events[0] else name
-        words = _EVENT_WORDS[event]
-        if base == "nucleation_edge":
-            # -3 where the front is not known (a member not ok, or cut off before its detachment was over),
-            # -2 where the member saw its detachment through and no node was reached: "none" only there (a
-            # failed member read as "none" made a category of its own in a groupby)
-            edge = np.where(np.isfinite(arr), arr, np.where(failed, -3, -2)).astype(np.int8)
-            new[name] = (("member",), edge, {
-                "long_name": f"edge where the {event} front nucleates",
-                "comment": f"{words}; unknown: the member did not end ok or ended before its detachment was over",
-                "flag_values": np.array([-3, -2, -1, 0, 1], dtype=np.int8),
-                "flag_meanings": "unknown none left interior right",
-            })
-            continue
-        if base == "front_count":  # 0 where the member saw its detachment through and no node was reached
-            # (NaN read as "unknown" left those members out of counts and means); NaN stays for the unknown
-            arr = np.where(np.isnan(arr) & ~failed, 0.0, arr)
-        units, long_name, comment = _FRONT_ATTRS[base]
-        dims = ("member", "x") if arr.ndim == 2 else ("member",)
-        attrs = {"units": units, "long_name": long_name.format(front=f"{event} front")}
-        if comment:
-            attrs["comment"] = comment.format(words=words)
-        new[name] = (dims, arr, attrs)
-    return new
 
 
 def _add_record(ds: xr.Dataset, record: Record, recorded: np.ndarray, x, member_offset: int = 0) -> None:

@@ -26,6 +26,7 @@ adding a parameter does not change the others' draws.
 from __future__ import annotations
 
 import dataclasses
+import datetime
 import json
 import math
 import tomllib
@@ -118,7 +119,9 @@ def _toml(value) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, str):
-        return json.dumps(value)
+        return json.dumps(value, ensure_ascii=False)
+    if isinstance(value, (datetime.date, datetime.time)):  # (datetime is a date)
+        return value.isoformat()
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(_toml(v) for v in value) + "]"
     if isinstance(value, dict):
@@ -309,8 +312,9 @@ def parse_sweep(text: str, name: str = "<sweep>") -> Sweep:
         if fronts_spec is False:
             fronts = None
         elif isinstance(fronts_spec, dict):
+            given = _dataclass_kwargs(fronts_spec, Fronts, "fronts")  # (its SweepError names the table once)
             try:
-                fronts = Fronts(**_dataclass_kwargs(fronts_spec, Fronts, "fronts"))
+                fronts = Fronts(**given)
             except ValueError as err:  # the file's words: its table, and no fronts written as a file does
                 raise SweepError(f"{name}: [fronts] " + str(err).replace(
                     "simulate(..., fronts=None)", "write `fronts = false` at the file's top level")) from None
