@@ -429,3 +429,25 @@ def test_an_arrested_partial_slip_does_not_end_the_run_before_the_detachment():
     assert float(auto.final_time[0]) > float(auto.mu_s_time[0])
     assert np.isfinite(auto.yield_time.values).all()
     assert float(auto.detachment_end_time[0]) == pytest.approx(float(fixed.detachment_end_time[0]), abs=2e-3)
+
+
+def test_an_undamped_lift_off_that_rings_is_told_and_damping_settles_it():
+    """2e/L = 0.6 with the disc dragging towards the loaded edge and a high aging coefficient: the
+    lifted part rings undamped during the detachment, and mu_s at the default rtol (0.909) was the
+    integrator's damped answer, 7 % above rtol 1e-7's, status ok without a word. The members that
+    lifted off with no damping are told; with a damping mu_s is one value at every rtol."""
+    import warpfric as wf
+
+    member = {"eccentricity": [0.6, 0.0], "disc_velocity": [-5e-3, -5e-3], "aging_coefficient": [0.2, 0.2]}
+    with pytest.warns(UserWarning, match=r"pad lifted off with no damping \(lift_off 1, damping 0\) in 1 of 2 members: "
+                                         r"member 0: .*depends on rtol"):
+        loose = run(member, nodes=50, rtol=1e-5)
+    tight = run(member, nodes=50, rtol=1e-7, stall_factor=float("inf"))
+    assert list(loose.lift_off.values) == [1, 0] and (loose.status.values == 0).all() and (tight.status.values == 0).all()
+    assert loose.mu_s.values[0] - tight.mu_s.values[0] > 0.03  # the warning's point: far beyond rtol
+    assert abs(loose.mu_s.values[1] - tight.mu_s.values[1]) < 1e-4  # the member that did not lift off
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no warning of the damped members
+        damped = [run(member, scene=wf.Parameters(damping=1e6), nodes=50, rtol=rtol) for rtol in (1e-5, 1e-7)]
+    np.testing.assert_allclose(damped[0].mu_s.values[0], damped[1].mu_s.values[0], rtol=1e-6)
+    np.testing.assert_allclose(damped[0].mu_s.values[0], loose.mu_s.values[0], rtol=1e-5)

@@ -906,8 +906,10 @@ DISC_BEFORE_FULL_LOAD = ("the disc starts to move (rest_until) before the normal
 DETACHMENT_NOT_OVER = "runs ended before the detachment was over"
 # how simulate's warning of members whose mean normal stress reaches the hardness begins (the same)
 LOAD_ABOVE_HARDNESS = "normal_force / (length * depth) reaches the hardness"
+# how simulate's warning of ok members whose pad lifted off with no damping begins (the same)
+LIFT_OFF_UNDAMPED = "members whose pad lifted off with no damping"
 ENSEMBLE_WARNINGS = (RECORD_PAST_END, MEMBERS_NOT_OK, DETACHMENT_NOT_OVER, DISC_BEFORE_FULL_LOAD, FRONTS_SETTINGS_UNUSED,
-                     PARAMETERS_UNUSED, CONTACT_WITHOUT_GATE, LOAD_ABOVE_HARDNESS)
+                     PARAMETERS_UNUSED, CONTACT_WITHOUT_GATE, LOAD_ABOVE_HARDNESS, LIFT_OFF_UNDAMPED)
 
 
 def _with_named_keywords(cls):

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .parameters import DETACHMENT_NOT_OVER, MEMBERS_NOT_OK, RECORD_PAST_END, recording_text
+from .parameters import DETACHMENT_NOT_OVER, LIFT_OFF_UNDAMPED, MEMBERS_NOT_OK, RECORD_PAST_END, recording_text
 from .pool import WorkerDied, chunk_record, cpu_cores, warn_once, warning_pairs
 from .progress import (SizeWarning, check_memory, first_few, front_passes, member_range, plural, seconds_text,
                        size_warning, status_name)
@@ -125,6 +125,7 @@ def run_chunk(job: ChunkJob) -> dict:
             warnings.filterwarnings("ignore", category=SizeWarning)  # said once by run_sweep
             warnings.filterwarnings("ignore", message=re.escape(MEMBERS_NOT_OK))
             warnings.filterwarnings("ignore", message=re.escape(DETACHMENT_NOT_OVER))
+            warnings.filterwarnings("ignore", message=re.escape(LIFT_OFF_UNDAMPED))
             if job.record_times is not None:  # the detachment window: said by find_record_times, and
                 # the warning's advice (a later end_time) would move the window, not fill it
                 warnings.filterwarnings("ignore", message=re.escape(RECORD_PAST_END))
@@ -764,11 +765,12 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
             """The sweep's one warning of its runs ended before the detachment was over and of its
             members not ok, from the combined file (each chunk's own is dropped: a run of many chunks
             printed one per chunk)."""
-            from .simulate import _warn_members_not_ok, warn_detachment_not_over
+            from .simulate import _warn_members_not_ok, warn_detachment_not_over, warn_lift_off_undamped
 
             in_file.append(int((ds.status.values != 0).sum()))
             warn_detachment_not_over(ds, stacklevel=2)
             _warn_members_not_ok(ds, sweep.solver)
+            warn_lift_off_undamped(ds, stacklevel=2)
 
         t_combine = time.perf_counter()
         if store.n_chunks > 1:  # ~0.1 s a chunk file: tens of seconds for hundreds of chunks

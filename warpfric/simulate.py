@@ -18,7 +18,7 @@ from .device import check_device, init_warp
 from .members import resolve_members
 from .fronts import SEGMENT_NAMES
 from .front_outputs import detachment_not_over, front_variables, fronts_attrs
-from .parameters import (CONTACT_WITHOUT_GATE, DETACHMENT_NOT_OVER, DISC_BEFORE_FULL_LOAD, ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, LOAD_ABOVE_HARDNESS, MEMBERS_NOT_OK,
+from .parameters import (CONTACT_WITHOUT_GATE, DETACHMENT_NOT_OVER, DISC_BEFORE_FULL_LOAD, ENSEMBLE_WARNINGS, FRONT_EVENTS, FRONTS_SETTINGS_UNUSED, LIFT_OFF_UNDAMPED, LOAD_ABOVE_HARDNESS, MEMBERS_NOT_OK,
                          MEMBER_NUMBER_LIMIT, MEMBERS_NOT_OK_HINT, PARAMETERS_UNUSED, RECORD_PAST_END, Fronts, Model,
                          Parameters, Record, Solver, check_fronts_method, check_precision, parameter_long_name, parameter_units)
 from .progress import check_memory, first_few, shown
@@ -168,6 +168,7 @@ def simulate(
         _warn_record_past_end(ds, record, member_offset)
     warn_detachment_not_over(ds)
     _warn_members_not_ok(ds, solver)
+    warn_lift_off_undamped(ds)
     return _short_long_names(ds)
 
 
@@ -323,8 +324,8 @@ _STATUS_ADVICE = {
                 "sliding without a static peak, e.g. aging_coefficient = 0): a later end_time or stop_time"),
 }
 _STILL_DISC_ADVICE = "disc_velocity = 0: the disc never moves, so there is no friction peak to find"
-_LIFTED_OFF_ADVICE = ("part of the pad lifted off, where nothing damps its shear vibration (a sudden stop excites "
-                      "it): a small damping, e.g. 1e6 Pa s/m, lets the steps grow again (docs/model.md, \"Open choices\": lift-off)")
+_LIFTED_OFF_ADVICE = ("part of the pad lifted off, where nothing damps its shear vibration (a sudden stop or the "
+                      "detachment excites it): a small damping, e.g. 1e6 Pa s/m, lets the steps grow again (docs/model.md, \"Open choices\": lift-off)")
 
 
 def not_over_groups(ds: xr.Dataset) -> dict[str, np.ndarray]:
@@ -368,6 +369,28 @@ def warn_detachment_not_over(ds: xr.Dataset, stacklevel: int = 3) -> None:
     total = int(sum(which.sum() for which in groups.values()))
     warnings.warn(f"{DETACHMENT_NOT_OVER} (detachment_end_time NaN) in {total} of {n:,} "
                   f"member{'' if n == 1 else 's'}: {'; '.join(parts)}{fronts}", stacklevel=stacklevel)
+
+
+def warn_lift_off_undamped(ds: xr.Dataset, stacklevel: int = 3) -> None:
+    """One warning, once per simulate call, of the members ok whose pad lifted off (lift_off 1) with
+    damping 0: the lifted part's shear vibration is undamped, and where it rings during the
+    detachment the integrator's own damping (L-stable TR-BDF2 at a loose rtol) sets mu_s, which then
+    depends on rtol (docs/performance.md, "Known limits"). Nothing tells the members that ring from
+    those that do not (at the default aging coefficient four such members agreed within 2e-6)."""
+    if "lift_off" not in ds or "damping" not in ds:
+        return
+    n = ds.sizes["member"]
+    undamped = np.broadcast_to(np.asarray(ds.damping.values, dtype=float), (n,)) == 0.0
+    which = (ds.status.values == 0) & (ds.lift_off.values == 1) & undamped
+    if which.any():
+        k = int(which.sum())
+        warnings.warn(f"{LIFT_OFF_UNDAMPED} (lift_off 1, damping 0) in {k} of {n:,} member{'' if n == 1 else 's'}: "
+                      f"member{'' if k == 1 else 's'} {first_few(ds.member.values[which])}: where the lifted part's "
+                      "undamped shear vibration rings during the detachment, the time integrator's own damping sets "
+                      "mu_s, which then depends on rtol (2e/L = 0.6, v_d = -5 mm/s, aging_coefficient 0.2, N = 50: "
+                      "mu_s 0.909 at rtol 1e-5, 0.847 at 1e-6, 0.843 at 1e-7; 0.909 at each with damping 1e6 Pa s/m); "
+                      "check them at a tighter rtol (Solver(rtol=1e-7, stall_factor=float('inf'))), or give the pad "
+                      "a damping (Parameters(damping=...))", stacklevel=stacklevel)
 
 
 def _warn_load_above_hardness(values: dict) -> None:
