@@ -286,7 +286,8 @@ def make_strength_front(ft, terms, team, interface):
                         r_peak = r2 + d1 * (t_peak - st.t2) + curv * (t_peak - st.t2) * (t_peak - t_old)
                         # float32's round-off makes kinks where a fast disc starts, and the parabola
                         # through one reads any value (194 against 0.498): there the vertex passes
-                        # mu_s's test; float64 keeps it unbounded (bounded, a node's discrete maximum
+                        # mu_s's test (its fall to the two other points; mu_s's also reads the point
+                        # before them); float64 keeps it unbounded (bounded, a node's discrete maximum
                         # a step from its peak moved a front by two nodes: docs/model.md, "Outputs")
                         kept = True
                         if wp.static(ft == wp.float32):

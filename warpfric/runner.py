@@ -762,9 +762,9 @@ def _run_locked(sweep, sweep_file, out: Path, *, chunk, member_offset, device, r
         in_file = []
 
         def on_combined(ds):
-            """The sweep's one warning of its runs ended before the detachment was over and of its
-            members not ok, from the combined file (each chunk's own is dropped: a run of many chunks
-            printed one per chunk)."""
+            """The sweep's one warning of its runs ended before the detachment was over, of its
+            members not ok and of its members lifted off undamped, from the combined file (each
+            chunk's own is dropped: a run of many chunks printed one per chunk)."""
             from .simulate import _warn_members_not_ok, warn_detachment_not_over, warn_lift_off_undamped
 
             in_file.append(int((ds.status.values != 0).sum()))
