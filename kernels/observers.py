@@ -244,8 +244,9 @@ def make_strength_front(ft, terms, team, interface):
         in arrival[EV_STRENGTH], refined like mu_s by the parabola through the last three accepted
         points when the middle one is a discrete maximum (in float32 where its vertex passes
         peak_within_falls: a fast disc's start put every node's vertex there, 194 against 0.498;
-        arrival_error: the refinement's shift, or the step for an unrefined maximum). st.strength_rising counts the team's nodes in contact
-        whose r is still within STRENGTH_PEAK_DROP of its maximum. The lane's nodes (after a
+        arrival_error: the refinement's shift, or the step for an unrefined maximum).
+        st.strength_rising counts the team's nodes in contact whose r is still within
+        STRENGTH_PEAK_DROP of its maximum. The lane's nodes (after a
         barrier: the stencil reads the halo's displacement, just advanced by the neighbour)."""
         barrier()
         v_disc = ft(disc_velocity_at(p, t_new, t_old))

@@ -106,6 +106,25 @@ def fronts_attrs(fronts: Fronts) -> dict:
     return attrs
 
 
+def fronts_from_attrs(ds) -> Fronts:
+    """The Fronts settings an ensemble ran with, from its fronts_* attributes (:func:`fronts_attrs`
+    read back; ValueError where it has none)."""
+    if "fronts_event" not in ds.attrs:
+        has = "arrival_time" in ds
+        raise ValueError("the ensemble has arrival_time but not the fronts_* attributes that say how it ran (were its "
+                         "attributes dropped? ds.attrs of the file that holds it has them)" if has else
+                         "the ensemble has no front outputs (it ran with fronts=None, or fronts = false): nothing "
+                         "to segment")
+    given = {}
+    for f in dataclasses.fields(Fronts):
+        if f"fronts_{f.name}" in ds.attrs:
+            value = ds.attrs[f"fronts_{f.name}"]
+            value = tuple(str(value).split()) if f.name == "event" else value
+            given[f.name] = bool(value) if f.name == "grid_check" else value.item() if hasattr(value, "item") \
+                else value
+    return Fronts(**given)
+
+
 def front_variables(front: dict, fronts: Fronts, failed: np.ndarray) -> dict:
     """The front outputs (_front_metrics) as Dataset variables, {name: (dims, values, attrs)}, NaN
     for the failed members (member,) bool."""

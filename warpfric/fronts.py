@@ -85,26 +85,6 @@ ARRIVAL_SETTINGS = ("event", "threshold", "direction", "min_event_fraction")
 SEGMENT_SETTINGS = ("min_segment_fraction", "fast_fraction", "speed_ratio", "edge_zone_fraction")
 
 
-def ensemble_fronts(ds) -> Fronts:
-    """The Fronts settings an ensemble ran with, from its fronts_* attributes."""
-    import dataclasses
-
-    if "fronts_event" not in ds.attrs:
-        has = "arrival_time" in ds
-        raise ValueError("the ensemble has arrival_time but not the fronts_* attributes that say how it ran (were its "
-                         "attributes dropped? ds.attrs of the file that holds it has them)" if has else
-                         "the ensemble has no front outputs (it ran with fronts=None, or fronts = false): nothing "
-                         "to segment")
-    given = {}
-    for f in dataclasses.fields(Fronts):
-        if f"fronts_{f.name}" in ds.attrs:
-            value = ds.attrs[f"fronts_{f.name}"]
-            value = tuple(str(value).split()) if f.name == "event" else value
-            given[f.name] = bool(value) if f.name == "grid_check" else value.item() if hasattr(value, "item") \
-                else value
-    return Fronts(**given)
-
-
 def resegment(ds, *, device: str | None = "cpu", **settings):
     """The front outputs of an ensemble (from :func:`warpfric.simulate` or a file) segmented again
     from its stored arrival times with other segmentation ``settings``, without re-simulating: an
@@ -126,7 +106,7 @@ def resegment(ds, *, device: str | None = "cpu", **settings):
 
     import xarray as xr
 
-    from .front_outputs import detachment_not_over, front_variables, fronts_attrs
+    from .front_outputs import detachment_not_over, front_variables, fronts_attrs, fronts_from_attrs
 
     unknown = sorted(set(settings) - set(SEGMENT_SETTINGS))
     if unknown:
@@ -142,11 +122,11 @@ def resegment(ds, *, device: str | None = "cpu", **settings):
         raise ValueError(f"resegment: expects an ensemble along the dimension member, got {got} (ds.isel(member=0) "
                          "drops the dimension, ds.isel(member=[0]) keeps it; a by_parameters view: the Dataset it "
                          "was made from)")
-    own = ensemble_fronts(ds)
+    own = fronts_from_attrs(ds)
     fronts = dataclasses.replace(own, **settings)  # (checks the values, naming the setting and its range)
-    missing = [name for k, event in enumerate(own.events) for name in
-               ((f"{event}_" if k else "") + "arrival_time", (f"{event}_" if k else "") + "arrival_time_error")
-               if name not in ds]
+    prefixes = ["" if k == 0 else f"{event}_" for k, event in enumerate(own.events)]  # as simulate names them
+    missing = [prefix + name for prefix in prefixes for name in ("arrival_time", "arrival_time_error")
+               if prefix + name not in ds]
     if missing:
         raise ValueError(f"resegment: the ensemble lacks {', '.join(missing)} (dropped with the dimension x, as "
                          "ds.drop_dims(['x', ...]) does?): the stored arrival times are what it segments")
@@ -155,8 +135,7 @@ def resegment(ds, *, device: str | None = "cpu", **settings):
     failed = (np.broadcast_to(np.asarray(ds.status.values), (n,)) != 0) | capped | cut
     length = np.broadcast_to(np.asarray(ds.length.values, dtype=np.float64), (n,))
     variables = {}
-    for k, event in enumerate(fronts.events):
-        prefix = "" if k == 0 else f"{event}_"
+    for prefix in prefixes:
         arrival_time = ds[prefix + "arrival_time"].transpose("member", "x")
         metrics = segment(arrival_time, length, fronts, device)
         errors = speed_errors(metrics, arrival_time.values, ds[prefix + "arrival_time_error"].transpose(

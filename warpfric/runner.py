@@ -123,9 +123,8 @@ def run_chunk(job: ChunkJob) -> dict:
     with warnings.catch_warnings(record=True) if collect else contextlib.nullcontext() as caught:
         with warnings.catch_warnings():  # the size warning and the members not ok are the whole sweep's,
             warnings.filterwarnings("ignore", category=SizeWarning)  # said once by run_sweep
-            warnings.filterwarnings("ignore", message=re.escape(MEMBERS_NOT_OK))
-            warnings.filterwarnings("ignore", message=re.escape(DETACHMENT_NOT_OVER))
-            warnings.filterwarnings("ignore", message=re.escape(LIFT_OFF_UNDAMPED))
+            for said_from_the_file in (MEMBERS_NOT_OK, DETACHMENT_NOT_OVER, LIFT_OFF_UNDAMPED):  # (on_combined)
+                warnings.filterwarnings("ignore", message=re.escape(said_from_the_file))
             if job.record_times is not None:  # the detachment window: said by find_record_times, and
                 # the warning's advice (a later end_time) would move the window, not fill it
                 warnings.filterwarnings("ignore", message=re.escape(RECORD_PAST_END))

@@ -325,7 +325,8 @@ _STATUS_ADVICE = {
 }
 _STILL_DISC_ADVICE = "disc_velocity = 0: the disc never moves, so there is no friction peak to find"
 _LIFTED_OFF_ADVICE = ("part of the pad lifted off, where nothing damps its shear vibration (a sudden stop or the "
-                      "detachment excites it): a small damping, e.g. 1e6 Pa s/m, lets the steps grow again (docs/model.md, \"Open choices\": lift-off)")
+                      "detachment excites it): a small damping, e.g. 1e6 Pa s/m, lets the steps grow again "
+                      "(docs/model.md, \"Open choices\": lift-off)")
 
 
 def not_over_groups(ds: xr.Dataset) -> dict[str, np.ndarray]:
